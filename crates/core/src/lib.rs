@@ -1,0 +1,20 @@
+//! Core types of realitygap, shared by every other crate.
+//!
+//! - [`pose`]: 3-vectors, unit quaternions and rigid poses, with the
+//!   conversions the importers need (rotation matrix, Euler angles) and the
+//!   measures the analysis needs (roll/pitch/yaw, geodesic angle).
+//! - [`trajectory`]: [`Trajectory`], the one shape every source of motion
+//!   (a simulated engine, a motion-capture recording, a recorded simulator
+//!   file) is turned into before it is analysed.
+//!
+//! Units everywhere: metres, radians, seconds, kilograms, unless a name says
+//! otherwise (`_deg`, `_mm`).
+
+pub mod pose;
+pub mod trajectory;
+
+pub use pose::{Pose, Quat, Vec3};
+pub use trajectory::{BodyTrack, Trajectory, TrajectoryError};
+
+/// The version of realitygap, as written into every manifest.
+pub const TOOL_VERSION: &str = env!("CARGO_PKG_VERSION");

@@ -1,0 +1,1 @@
+//! Importers, RunStore, exporters (to be written).
