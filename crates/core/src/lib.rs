@@ -6,14 +6,18 @@
 //! - [`trajectory`]: [`Trajectory`], the one shape every source of motion
 //!   (a simulated engine, a motion-capture recording, a recorded simulator
 //!   file) is turned into before it is analysed.
+//! - [`robot`]: [`RobotModel`], a robot's kinematic tree, inertias and
+//!   geometry read from URDF, with forward kinematics.
 //!
 //! Units everywhere: metres, radians, seconds, kilograms, unless a name says
 //! otherwise (`_deg`, `_mm`).
 
 pub mod pose;
+pub mod robot;
 pub mod trajectory;
 
 pub use pose::{Pose, Quat, Vec3};
+pub use robot::{RobotError, RobotModel};
 pub use trajectory::{BodyTrack, Trajectory, TrajectoryError};
 
 /// The version of realitygap, as written into every manifest.

@@ -1,0 +1,465 @@
+//! URDF text to [`RobotModel`]: parsing through `urdf-rs`, then the checks
+//! and conversions `urdf-rs` leaves to its users (link references, tree
+//! shape, value ranges, mesh and package resolution), with errors that name
+//! the file and, where it can be found, the line.
+
+use super::{
+    Collision, Geometry, Inertial, Joint, JointKind, JointLimits, Link, Mimic, PackageResolver, RobotError,
+    RobotModel, Visual,
+};
+use crate::pose::{Pose, Quat, Vec3};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+/// Parses `xml` and builds the model. `source` names the description in
+/// errors; `base_dir` resolves relative mesh paths.
+pub(super) fn build(
+    xml: &str,
+    source: &Path,
+    base_dir: &Path,
+    resolver: &PackageResolver,
+) -> Result<RobotModel, RobotError> {
+    let robot = urdf_rs::read_from_string(xml).map_err(|e| xml_error(xml, source, &e.to_string()))?;
+    let ctx = Ctx { xml, source, base_dir, resolver };
+
+    let mut link_index: HashMap<&str, usize> = HashMap::new();
+    for (i, l) in robot.links.iter().enumerate() {
+        if link_index.insert(l.name.as_str(), i).is_some() {
+            return Err(RobotError::DuplicateName {
+                source_file: source.to_path_buf(),
+                line: ctx.nth_element_line("link", &l.name, 1),
+                what: "link",
+                name: l.name.clone(),
+            });
+        }
+    }
+    let mut joint_index: HashMap<&str, usize> = HashMap::new();
+    for (i, j) in robot.joints.iter().enumerate() {
+        if joint_index.insert(j.name.as_str(), i).is_some() {
+            return Err(RobotError::DuplicateName {
+                source_file: source.to_path_buf(),
+                line: ctx.nth_element_line("joint", &j.name, 1),
+                what: "joint",
+                name: j.name.clone(),
+            });
+        }
+    }
+
+    let materials: HashMap<&str, [f64; 4]> = robot
+        .materials
+        .iter()
+        .filter_map(|m| m.color.as_ref().map(|c| (m.name.as_str(), c.rgba.0)))
+        .collect();
+
+    let mut links = Vec::with_capacity(robot.links.len());
+    for l in &robot.links {
+        links.push(ctx.link(l, &materials)?);
+    }
+
+    let mut joints = Vec::with_capacity(robot.joints.len());
+    for j in &robot.joints {
+        joints.push(ctx.joint(j, &link_index, &robot.links)?);
+    }
+    // Mimic references need every joint's index and kind.
+    for (i, j) in robot.joints.iter().enumerate() {
+        let Some(m) = &j.mimic else { continue };
+        let line = ctx.element_line("joint", &j.name);
+        let invalid = |message: String| RobotError::InvalidValue {
+            source_file: source.to_path_buf(),
+            line,
+            element: format!("joint \"{}\" <mimic>", j.name),
+            message,
+        };
+        let Some(&leader) = joint_index.get(m.joint.as_str()) else {
+            return Err(invalid(format!("mimics joint \"{}\", which is not defined", m.joint)));
+        };
+        if !joints[leader].kind.is_movable() || robot.joints[leader].mimic.is_some() || leader == i {
+            return Err(invalid(format!(
+                "mimics joint \"{}\", which is fixed or itself a mimic joint (not supported)",
+                m.joint
+            )));
+        }
+        let multiplier = m.multiplier.unwrap_or(1.0);
+        let offset = m.offset.unwrap_or(0.0);
+        if !(multiplier.is_finite() && offset.is_finite()) {
+            return Err(invalid("multiplier and offset must be finite numbers".into()));
+        }
+        if joints[i].kind.is_movable() {
+            joints[i].mimic = Some(Mimic { joint: leader, multiplier, offset });
+        }
+    }
+
+    RobotModel::from_parts(robot.name.clone(), links, joints, source.to_path_buf())
+}
+
+struct Ctx<'a> {
+    xml: &'a str,
+    source: &'a Path,
+    base_dir: &'a Path,
+    resolver: &'a PackageResolver,
+}
+
+impl Ctx<'_> {
+    fn element_line(&self, tag: &str, name: &str) -> Option<usize> {
+        self.nth_element_line(tag, name, 0)
+    }
+
+    fn nth_element_line(&self, tag: &str, name: &str, n: usize) -> Option<usize> {
+        element_lines(self.xml, tag, name).into_iter().nth(n)
+    }
+
+    fn invalid(&self, tag: &str, name: &str, element: String, message: String) -> RobotError {
+        RobotError::InvalidValue {
+            source_file: self.source.to_path_buf(),
+            line: self.element_line(tag, name),
+            element,
+            message,
+        }
+    }
+
+    fn pose(&self, tag: &str, name: &str, what: &str, p: &urdf_rs::Pose) -> Result<Pose, RobotError> {
+        let (xyz, rpy) = (p.xyz.0, p.rpy.0);
+        if !xyz.iter().chain(rpy.iter()).all(|v| v.is_finite()) {
+            return Err(self.invalid(
+                tag,
+                name,
+                format!("{tag} \"{name}\" {what}"),
+                format!("origin xyz {xyz:?} rpy {rpy:?} must be finite numbers"),
+            ));
+        }
+        Ok(Pose::new(Vec3::from_array(xyz), Quat::from_euler_rpy(rpy[0], rpy[1], rpy[2])))
+    }
+
+    fn link(&self, l: &urdf_rs::Link, materials: &HashMap<&str, [f64; 4]>) -> Result<Link, RobotError> {
+        let name = l.name.as_str();
+        let i = &l.inertial;
+        let inertia = [i.inertia.ixx, i.inertia.ixy, i.inertia.ixz, i.inertia.iyy, i.inertia.iyz, i.inertia.izz];
+        let mass = i.mass.value;
+        // urdf-rs gives an all-zero inertial when the element is absent.
+        let inertial = if mass == 0.0 && inertia.iter().all(|&v| v == 0.0) {
+            None
+        } else {
+            if !(mass.is_finite() && mass >= 0.0) {
+                return Err(self.invalid(
+                    "link",
+                    name,
+                    format!("link \"{name}\" <inertial><mass>"),
+                    format!("mass {mass} must be a finite number >= 0 kg"),
+                ));
+            }
+            if !inertia.iter().all(|v| v.is_finite()) || inertia[0] < 0.0 || inertia[3] < 0.0 || inertia[5] < 0.0 {
+                return Err(self.invalid(
+                    "link",
+                    name,
+                    format!("link \"{name}\" <inertial><inertia>"),
+                    format!("inertia {inertia:?} must be finite with ixx, iyy, izz >= 0 kg m^2"),
+                ));
+            }
+            Some(Inertial { mass_kg: mass, origin: self.pose("link", name, "<inertial><origin>", &i.origin)?, inertia })
+        };
+        let mut visuals = Vec::with_capacity(l.visual.len());
+        for v in &l.visual {
+            let rgba = v
+                .material
+                .as_ref()
+                .and_then(|m| m.color.as_ref().map(|c| c.rgba.0).or_else(|| materials.get(m.name.as_str()).copied()));
+            visuals.push(Visual {
+                name: v.name.clone(),
+                origin: self.pose("link", name, "<visual><origin>", &v.origin)?,
+                geometry: self.geometry(name, "<visual>", &v.geometry)?,
+                rgba,
+            });
+        }
+        let mut collisions = Vec::with_capacity(l.collision.len());
+        for c in &l.collision {
+            collisions.push(Collision {
+                name: c.name.clone(),
+                origin: self.pose("link", name, "<collision><origin>", &c.origin)?,
+                geometry: self.geometry(name, "<collision>", &c.geometry)?,
+            });
+        }
+        Ok(Link { name: l.name.clone(), inertial, visuals, collisions })
+    }
+
+    fn geometry(&self, link: &str, what: &str, g: &urdf_rs::Geometry) -> Result<Geometry, RobotError> {
+        let bad = |message: String| self.invalid("link", link, format!("link \"{link}\" {what} <geometry>"), message);
+        let positive = |v: f64| v.is_finite() && v > 0.0;
+        Ok(match g {
+            urdf_rs::Geometry::Box { size } => {
+                if !size.0.iter().all(|&v| positive(v)) {
+                    return Err(bad(format!("box size {:?} must be three numbers > 0 m", size.0)));
+                }
+                Geometry::Box { size_m: Vec3::from_array(size.0) }
+            }
+            urdf_rs::Geometry::Cylinder { radius, length } | urdf_rs::Geometry::Capsule { radius, length } => {
+                let capsule = matches!(g, urdf_rs::Geometry::Capsule { .. });
+                let length_ok = if capsule { length.is_finite() && *length >= 0.0 } else { positive(*length) };
+                if !(positive(*radius) && length_ok) {
+                    return Err(bad(format!("radius {radius} m and length {length} m must be > 0")));
+                }
+                if capsule {
+                    Geometry::Capsule { radius_m: *radius, length_m: *length }
+                } else {
+                    Geometry::Cylinder { radius_m: *radius, length_m: *length }
+                }
+            }
+            urdf_rs::Geometry::Sphere { radius } => {
+                if !positive(*radius) {
+                    return Err(bad(format!("sphere radius {radius} must be > 0 m")));
+                }
+                Geometry::Sphere { radius_m: *radius }
+            }
+            urdf_rs::Geometry::Mesh { filename, scale } => {
+                let scale = scale.map(|s| Vec3::from_array(s.0)).unwrap_or(Vec3::new(1.0, 1.0, 1.0));
+                if !scale.is_finite() {
+                    return Err(bad(format!("mesh scale {scale:?} must be finite")));
+                }
+                Geometry::Mesh { path: self.resolve_mesh(link, filename)?, uri: filename.clone(), scale }
+            }
+        })
+    }
+
+    fn resolve_mesh(&self, link: &str, uri: &str) -> Result<PathBuf, RobotError> {
+        let path = if let Some(rest) = uri.strip_prefix("package://") {
+            let (package, inner) = rest.split_once('/').unwrap_or((rest, ""));
+            match self.resolver.find(package) {
+                Ok(dir) => dir.join(inner),
+                Err(searched) => {
+                    return Err(RobotError::PackageNotFound {
+                        source_file: self.source.to_path_buf(),
+                        link: link.to_string(),
+                        uri: uri.to_string(),
+                        package: package.to_string(),
+                        searched,
+                    })
+                }
+            }
+        } else if let Some(rest) = uri.strip_prefix("file://") {
+            PathBuf::from(rest)
+        } else if uri.contains("://") {
+            return Err(RobotError::UnsupportedUri {
+                source_file: self.source.to_path_buf(),
+                link: link.to_string(),
+                uri: uri.to_string(),
+            });
+        } else {
+            self.base_dir.join(uri)
+        };
+        let path = std::path::absolute(&path).unwrap_or(path);
+        if !path.is_file() {
+            return Err(RobotError::MeshNotFound {
+                source_file: self.source.to_path_buf(),
+                link: link.to_string(),
+                uri: uri.to_string(),
+                looked_at: path,
+            });
+        }
+        Ok(path)
+    }
+
+    fn joint(
+        &self,
+        j: &urdf_rs::Joint,
+        link_index: &HashMap<&str, usize>,
+        urdf_links: &[urdf_rs::Link],
+    ) -> Result<Joint, RobotError> {
+        let name = j.name.as_str();
+        let line = self.element_line("joint", name);
+        let kind = match j.joint_type {
+            urdf_rs::JointType::Revolute => JointKind::Revolute,
+            urdf_rs::JointType::Continuous => JointKind::Continuous,
+            urdf_rs::JointType::Prismatic => JointKind::Prismatic,
+            urdf_rs::JointType::Fixed => JointKind::Fixed,
+            ref other => {
+                return Err(RobotError::UnsupportedJoint {
+                    source_file: self.source.to_path_buf(),
+                    line,
+                    joint: j.name.clone(),
+                    kind: format!("{other:?}").to_lowercase(),
+                })
+            }
+        };
+        let find_link = |role: &'static str, link: &str| {
+            link_index.get(link).copied().ok_or_else(|| RobotError::UnknownLink {
+                source_file: self.source.to_path_buf(),
+                line,
+                joint: j.name.clone(),
+                role,
+                link: link.to_string(),
+                known_links: urdf_links.iter().map(|l| l.name.clone()).collect(),
+            })
+        };
+        let parent = find_link("parent", &j.parent.link)?;
+        let child = find_link("child", &j.child.link)?;
+        if parent == child {
+            return Err(RobotError::Cycle {
+                source_file: self.source.to_path_buf(),
+                links: vec![j.parent.link.clone(), j.child.link.clone()],
+            });
+        }
+        let origin = self.pose("joint", name, "<origin>", &j.origin)?;
+
+        let raw_axis = Vec3::from_array(j.axis.xyz.0);
+        let axis = if !raw_axis.is_finite() {
+            None
+        } else if raw_axis.norm() > 1e-12 {
+            Some(raw_axis.scale(1.0 / raw_axis.norm()))
+        } else {
+            None
+        };
+        let axis = match (axis, kind) {
+            (Some(a), _) => a,
+            (None, JointKind::Fixed) => Vec3::new(1.0, 0.0, 0.0),
+            (None, _) => {
+                return Err(self.invalid(
+                    "joint",
+                    name,
+                    format!("joint \"{name}\" <axis>"),
+                    format!("axis {:?} must be a finite, non-zero vector for a {kind} joint", j.axis.xyz.0),
+                ))
+            }
+        };
+
+        let l = &j.limit;
+        let absent = l.lower == 0.0 && l.upper == 0.0 && l.effort == 0.0 && l.velocity == 0.0;
+        let or_inf = |v: f64| if absent { f64::INFINITY } else { v };
+        let limits = match kind {
+            JointKind::Fixed => None,
+            JointKind::Continuous => Some(JointLimits {
+                lower: f64::NEG_INFINITY,
+                upper: f64::INFINITY,
+                effort: or_inf(l.effort),
+                velocity: or_inf(l.velocity),
+            }),
+            JointKind::Revolute | JointKind::Prismatic => {
+                if absent {
+                    return Err(self.invalid(
+                        "joint",
+                        name,
+                        format!("joint \"{name}\" <limit>"),
+                        format!("a {kind} joint needs <limit lower=.. upper=.. effort=.. velocity=..> (none or all zero given)"),
+                    ));
+                }
+                if l.lower.is_nan() || l.upper.is_nan() || l.lower > l.upper {
+                    return Err(self.invalid(
+                        "joint",
+                        name,
+                        format!("joint \"{name}\" <limit>"),
+                        format!("lower {} must not exceed upper {}", l.lower, l.upper),
+                    ));
+                }
+                Some(JointLimits { lower: l.lower, upper: l.upper, effort: l.effort, velocity: l.velocity })
+            }
+        };
+        if let Some(lim) = &limits {
+            if lim.effort.is_nan() || lim.effort < 0.0 || lim.velocity.is_nan() || lim.velocity < 0.0 {
+                return Err(self.invalid(
+                    "joint",
+                    name,
+                    format!("joint \"{name}\" <limit>"),
+                    format!("effort {} and velocity {} must be >= 0", lim.effort, lim.velocity),
+                ));
+            }
+        }
+        let (damping, friction) = j.dynamics.as_ref().map(|d| (d.damping, d.friction)).unwrap_or((0.0, 0.0));
+        if !(damping.is_finite() && damping >= 0.0 && friction.is_finite() && friction >= 0.0) {
+            return Err(self.invalid(
+                "joint",
+                name,
+                format!("joint \"{name}\" <dynamics>"),
+                format!("damping {damping} and friction {friction} must be finite and >= 0"),
+            ));
+        }
+        Ok(Joint { name: j.name.clone(), kind, parent, child, origin, axis, limits, damping, friction, mimic: None })
+    }
+}
+
+/// Turns an error of `urdf-rs` (from its XML parsers) into
+/// [`RobotError::Xml`], pulling out a line and column when the message
+/// carries one.
+fn xml_error(xml: &str, source: &Path, message: &str) -> RobotError {
+    let (line, column) = line_col_in_message(message);
+    let _ = xml;
+    RobotError::Xml { source_file: source.to_path_buf(), line, column, message: message.trim().to_string() }
+}
+
+/// Finds a `LINE:COL` pair (as RustyXml reports it) at the start of a message.
+fn line_col_in_message(message: &str) -> (Option<usize>, Option<usize>) {
+    let mut parts = message.trim().splitn(3, |c: char| c == ':' || c.is_whitespace());
+    let line = parts.next().and_then(|s| s.parse::<usize>().ok());
+    let column = parts.next().and_then(|s| s.parse::<usize>().ok());
+    match (line, column) {
+        (Some(l), Some(c)) => (Some(l), Some(c)),
+        _ => (None, None),
+    }
+}
+
+/// 1-based lines of every `<tag ... name="NAME" ...>` start tag, skipping
+/// comments, in document order.
+pub(super) fn element_lines(xml: &str, tag: &str, name: &str) -> Vec<usize> {
+    let bytes = xml.as_bytes();
+    let mut lines = Vec::new();
+    let mut i = 0;
+    while let Some(off) = xml[i..].find('<') {
+        let start = i + off;
+        if xml[start..].starts_with("<!--") {
+            match xml[start + 4..].find("-->") {
+                Some(end) => {
+                    i = start + 4 + end + 3;
+                    continue;
+                }
+                None => break,
+            }
+        }
+        let after = start + 1;
+        let end_tag = xml[after..].find('>').map(|e| after + e).unwrap_or(xml.len());
+        if xml[after..].starts_with(tag)
+            && bytes.get(after + tag.len()).is_some_and(|b| b.is_ascii_whitespace())
+            && attribute(&xml[after + tag.len()..end_tag], "name") == Some(name)
+        {
+            lines.push(xml[..start].bytes().filter(|&b| b == b'\n').count() + 1);
+        }
+        i = after;
+    }
+    lines
+}
+
+/// The value of attribute `key` in the text of a start tag.
+fn attribute<'a>(tag_text: &'a str, key: &str) -> Option<&'a str> {
+    let mut rest = tag_text;
+    while let Some(eq) = rest.find('=') {
+        let k = rest[..eq].trim();
+        let k = k.rsplit(|c: char| c.is_ascii_whitespace()).next().unwrap_or(k);
+        let after = rest[eq + 1..].trim_start();
+        let quote = after.chars().next()?;
+        if quote != '"' && quote != '\'' {
+            return None;
+        }
+        let value_end = after[1..].find(quote)?;
+        let value = &after[1..1 + value_end];
+        if k == key {
+            return Some(value);
+        }
+        rest = &after[1 + value_end + 1..];
+    }
+    None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn element_lines_skip_comments_and_match_names() {
+        let xml = "<robot>\n<!-- <joint name=\"a\"> -->\n<!-->\n<joint name=\"x\"/>\n<-->\n<joint type='fixed' name='a'>\n</joint>\n<jointx name=\"a\"/>\n</robot>";
+        assert_eq!(element_lines(xml, "joint", "a"), vec![6]);
+        assert_eq!(element_lines(xml, "joint", "x"), Vec::<usize>::new());
+        assert_eq!(element_lines(xml, "link", "a"), Vec::<usize>::new());
+    }
+
+    #[test]
+    fn line_col_is_read_from_the_start_of_a_message() {
+        assert_eq!(line_col_in_message("3:17 Unexpected token"), (Some(3), Some(17)));
+        assert_eq!(line_col_in_message("missing field `velocity`"), (None, None));
+    }
+}
