@@ -8,16 +8,26 @@
 //!   file) is turned into before it is analysed.
 //! - [`robot`]: [`RobotModel`], a robot's kinematic tree, inertias and
 //!   geometry read from URDF, with forward kinematics.
+//! - [`scene`]: [`Scene`], one scripted experiment read from TOML.
+//! - [`engine`]: the [`Engine`] / [`Simulation`] interface every physics
+//!   engine implements.
+//! - [`controller`]: the controller loop shared by every engine
+//!   ([`controller::run_scene`]) and the seeded per-run perturbations.
 //!
 //! Units everywhere: metres, radians, seconds, kilograms, unless a name says
 //! otherwise (`_deg`, `_mm`).
 
+pub mod controller;
+pub mod engine;
 pub mod pose;
 pub mod robot;
+pub mod scene;
 pub mod trajectory;
 
 pub use pose::{Pose, Quat, Vec3};
+pub use engine::{Engine, EngineError, EngineSettings, Simulation};
 pub use robot::{RobotError, RobotModel};
+pub use scene::{Scene, SceneError};
 pub use trajectory::{BodyTrack, Trajectory, TrajectoryError};
 
 /// The version of realitygap, as written into every manifest.
