@@ -1,1 +1,30 @@
-//! Analysis (to be written).
+//! Analysis of trajectories: the measures of the reality-gap study.
+//!
+//! The pipeline, one module per stage:
+//! 1. [`health`]: per-run checks (non-finite values, divergence, all-zero
+//!    rows, frozen stretches, gaps) that decide whether a run may be averaged.
+//! 2. [`align`]: turning a real recording (capture rate, free-running
+//!    clock) into samples on the control-step grid of the simulations: a
+//!    fixed start frame, the motion onset minus a lead, or an estimated
+//!    offset; then resampling.
+//! 3. [`stats`]: per-step mean and spread of a body's position across the
+//!    runs of one source.
+//! 4. [`metrics`]: distances to a goal and to a reference, accumulated
+//!    error, convergence, overshoot, cube displacement and rotation, contact
+//!    onset, orientation error.
+//! 5. [`compare`]: one scene, one reference and many sources, evaluated
+//!    into a [`compare::SceneReport`]; [`table`] renders reports as
+//!    Markdown, CSV, JSON and LaTeX.
+//!
+//! Everything here is pure computation on [`realitygap_core::Trajectory`];
+//! reading files is the `realitygap-data` crate's job.
+
+pub mod align;
+pub mod compare;
+pub mod health;
+pub mod metrics;
+pub mod stats;
+pub mod table;
+
+pub use compare::{AnalysisMode, SceneReport, SourceRuns, SourceSummary};
+pub use health::{HealthFlag, HealthOptions, RunHealth};
