@@ -1,1 +1,78 @@
-//! Importers, RunStore, exporters (to be written).
+//! Getting trajectories in and out of realitygap's files.
+//!
+//! - [`qualisys`]: the real arm's motion capture, Qualisys Track Manager
+//!   6DOF TSV exports (with or without their header block).
+//! - [`recorded`]: simulator output recorded elsewhere (the study's MuJoCo,
+//!   PyBullet and V-Rep CSV files: 14 numbers per control step).
+//! - [`runstore`]: the results directory, `manifest.json` plus one CSV per
+//!   run, written atomically so an interrupted batch loses no finished run.
+//!
+//! Every importer returns an [`ImportedRun`]: a
+//! [`Trajectory`](realitygap_core::Trajectory) in metres, radians and
+//! seconds, plus what the reader noticed on the way (warnings, lost-marker
+//! gaps, all-zero rows, quaternions off unit norm). Input that cannot be
+//! read gives an [`ImportError`] naming the file, line, column and field;
+//! no input makes a reader panic.
+
+pub mod error;
+pub mod qualisys;
+pub mod recorded;
+pub mod runstore;
+mod text;
+
+pub use error::ImportError;
+pub use qualisys::QualisysOptions;
+pub use recorded::{QuatOrder, RecordedOptions};
+pub use runstore::{
+    discover, format_run_csv, parse_run_csv, read_run_csv, sanitize_run_id, validate_run_id, EngineInfo, Manifest,
+    RunEntry, RunStatus, RunStore, SourceKind, StoreError,
+};
+
+use realitygap_core::Trajectory;
+use std::path::PathBuf;
+
+/// One imported file: its trajectory and what the importer noticed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ImportedRun {
+    /// The motion: time from the first sample (s), poses in metres and unit
+    /// quaternions in the source's own world frame, gaps as `None`.
+    pub trajectory: Trajectory,
+    /// Sampling frequency in Hz (the capture rate, or 1 / control period).
+    pub frequency_hz: f64,
+    /// The file read.
+    pub source_file: PathBuf,
+    /// Names of the bodies as the file calls them, in the order of
+    /// `trajectory.bodies` (for recorded files: the roles themselves).
+    pub body_names: Vec<String>,
+    /// Things a person should know that did not stop the import (gaps,
+    /// header disagreements, a dropped truncated last line, ...).
+    pub warnings: Vec<String>,
+    /// Sample indices (0-based) whose numbers were all exactly zero (a
+    /// simulator that wrote nothing for that step). Their poses are kept as
+    /// read: position at the origin, identity orientation.
+    pub zero_rows: Vec<usize>,
+    /// Sample indices (0-based, not in `zero_rows`) where a quaternion's
+    /// norm differed from 1 by more than the tolerance, or was not finite.
+    /// Finite non-zero quaternions are normalised; others are kept as read.
+    pub bad_norm_rows: Vec<usize>,
+}
+
+impl ImportedRun {
+    /// Number of gaps (samples without a pose) summed over all bodies.
+    pub fn gap_count(&self) -> usize {
+        self.trajectory.bodies.iter().map(|b| b.poses.iter().filter(|p| p.is_none()).count()).sum()
+    }
+}
+
+/// Path of the study's recordings, for tests: `../../../shared/paper-data`
+/// from this crate. `None` (after printing why) when it is absent.
+#[cfg(test)]
+pub(crate) fn paper_data() -> Option<PathBuf> {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/paper-data");
+    if dir.join("MotionCapture").is_dir() && dir.join("Simulation").is_dir() {
+        Some(dir)
+    } else {
+        eprintln!("SKIPPED: paper-data not found at {} (tests on the study's recordings did not run)", dir.display());
+        None
+    }
+}
