@@ -157,8 +157,10 @@ pub struct GoalMeasures {
     pub convergence_time_s: Option<f64>,
     /// Tolerance used, metres.
     pub tolerance_m: f64,
-    /// Overshoot past the goal along the approach, metres.
-    pub overshoot_m: f64,
+    /// Overshoot past the goal along the approach, metres; `None` when the
+    /// motion ends where it started (closer than 5 tolerances), where an
+    /// approach direction is not defined.
+    pub overshoot_m: Option<f64>,
     /// Crossings of the goal plane after first coming near it.
     pub goal_crossings: usize,
 }
@@ -171,7 +173,7 @@ pub fn goal_measures(positions: &[Option<Vec3>], goal_m: Vec3, tolerance_m: f64,
         final_distance_m: last_value(&dist),
         convergence_time_s: convergence_time(&dist, tolerance_m, period_s),
         tolerance_m,
-        overshoot_m: overshoot(positions, start, goal_m),
+        overshoot_m: (start.distance(goal_m) > 5.0 * tolerance_m).then(|| overshoot(positions, start, goal_m)),
         goal_crossings: goal_crossings(positions, start, goal_m, tolerance_m),
     }
 }

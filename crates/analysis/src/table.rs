@@ -193,7 +193,7 @@ fn markdown(reports: &[SceneReport]) -> String {
                 fmt_m(s.final_error_m),
                 fmt_m(g.and_then(|g| g.final_distance_m)),
                 g.and_then(|g| g.convergence_time_s).map_or("never".into(), |t| format!("{t:.2}")),
-                fmt_m(g.map(|g| g.overshoot_m)),
+                fmt_m(g.and_then(|g| g.overshoot_m)),
                 s.orientation_error_deg.map_or("n/a".into(), |v| format!("{v:.1}")),
                 fmt_m(c.and_then(|c| c.final_offset_from_nominal_m.map(|o| o[0]))),
                 c.map_or("n/a".into(), |c| format!("{:.1}", c.max_tilt_deg)),

@@ -1,0 +1,68 @@
+//! Benchmark: import every recording of the reference study (60 capture
+//! files, 420 simulator files) and compute the full comparison, as
+//! `realitygap compare assets/studies/collins2019.toml` does.
+//!
+//! Run: `cargo bench -p realitygap --bench compare [-- PAPER_DATA_DIR]`.
+//! Prints wall time per stage, MB parsed and MB/s, for the default and the
+//! study mode, best of several repetitions.
+
+use realitygap::study::{Roots, Study};
+use realitygap_analysis::compare::{evaluate_scene, AnalysisMode, CompareOptions};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+fn dir_bytes(dir: &Path) -> u64 {
+    let mut total = 0;
+    if let Ok(rd) = std::fs::read_dir(dir) {
+        for e in rd.flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                total += dir_bytes(&p);
+            } else if p.extension().is_some_and(|x| x == "csv" || x == "tsv") && !p.to_string_lossy().contains("Format") {
+                total += e.metadata().map(|m| m.len()).unwrap_or(0);
+            }
+        }
+    }
+    total
+}
+
+fn main() {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let data = std::env::args()
+        .skip(1)
+        .find(|a| !a.starts_with('-'))
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root.join("../shared/paper-data"));
+    if !data.join("MotionCapture").is_dir() {
+        eprintln!("paper-data not found at {}; pass its path as an argument", data.display());
+        std::process::exit(1);
+    }
+    let study = Study::from_file(&root.join("assets/studies/collins2019.toml")).expect("study file");
+    let roots = Roots { data: data.clone(), results: root.clone() };
+    let mb = (dir_bytes(&data.join("MotionCapture")) + dir_bytes(&data.join("Simulation"))) as f64 / 1e6;
+    println!("threads: {}", rayon::current_num_threads());
+    println!("data: {mb:.1} MB in {}", data.display());
+    for mode in [AnalysisMode::Default, AnalysisMode::Study] {
+        let opts = CompareOptions { mode, ..CompareOptions::default() };
+        let mut best = (f64::MAX, f64::MAX);
+        for _ in 0..5 {
+            let t0 = Instant::now();
+            let scenes = study.load(&roots).expect("load");
+            let t1 = Instant::now();
+            let reports: Vec<_> = scenes.iter().map(|s| evaluate_scene(&s.spec, &s.reference, &s.sources, &opts)).collect();
+            let t2 = Instant::now();
+            std::hint::black_box(&reports);
+            let (l, a) = ((t1 - t0).as_secs_f64(), (t2 - t1).as_secs_f64());
+            if l + a < best.0 + best.1 {
+                best = (l, a);
+            }
+        }
+        println!(
+            "{mode:?} mode: total {:.3} s = import {:.3} s ({:.0} MB/s) + analysis {:.3} s   (best of 5)",
+            best.0 + best.1,
+            best.0,
+            mb / best.0,
+            best.1
+        );
+    }
+}
