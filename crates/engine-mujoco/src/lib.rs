@@ -1,0 +1,520 @@
+//! The MuJoCo engine of realitygap, through the `mujoco-rs` bindings
+//! (MuJoCo 3.17).
+//!
+//! [`MujocoEngine`] implements [`realitygap_core::Engine`]. It builds a
+//! MuJoCo model in one of two ways:
+//! - from the scene and its URDF robot ([`mjcf::scene_to_mjcf`]: ground,
+//!   link bodies with URDF inertias and collision shapes, hinge joints for
+//!   the controlled joints, held joints welded, velocity servos with the
+//!   scene's `kv` and force limits, free-floating objects);
+//! - from an MJCF file given as the scene's `robot.mjcf`, loaded as it is
+//!   (the study's own `m1n6s300.xml`): the controlled joints, the tracked
+//!   links and objects are then found by name, each controlled joint must
+//!   have an actuator, and the file's own actuator gains, objects and ground
+//!   are used.
+//!
+//! In both cases the engine settings ([`SETTINGS`]: timestep, integrator,
+//! solver, ...) are applied to the compiled model, then the mass and
+//! friction factors of a [`ModelVariation`].
+//!
+//! MuJoCo ends the process on a fatal error (`mju_error`). Call
+//! [`install_message_handler`] once at the start of a program so that the
+//! message goes to standard error with a clear prefix before that happens;
+//! the `realitygap run` command runs each simulation in a child process so
+//! that such an exit fails only that run. MuJoCo's instability warnings
+//! (it resets the state when accelerations blow up) are turned into
+//! [`EngineError::Unstable`], never silently stepped over.
+
+pub mod mjcf;
+
+use mujoco_rs::mujoco_c;
+use mujoco_rs::prelude::*;
+use realitygap_core::engine::{Engine, EngineError, EngineSettings, ModelVariation, SettingInfo, Simulation};
+use realitygap_core::pose::{Pose, Quat, Vec3};
+use realitygap_core::robot::RobotModel;
+use realitygap_core::scene::{Scene, TrackTarget};
+use std::ffi::CStr;
+use std::sync::Mutex;
+
+/// The engine's name on the command line and in result directories.
+pub const ENGINE_NAME: &str = "mujoco";
+
+/// MuJoCo's own default timestep, s (used when the settings give none and
+/// the model is built from URDF).
+pub const MUJOCO_DEFAULT_TIMESTEP_S: f64 = 0.002;
+
+/// The settings accepted in `[engine.mujoco]` and by `--set`.
+pub const SETTINGS: &[SettingInfo] = &[
+    SettingInfo { key: "timestep_s", help: "integration timestep, s (> 0); default 0.002, or the MJCF file's own" },
+    SettingInfo { key: "integrator", help: "euler | rk4 | implicit | implicitfast; default euler" },
+    SettingInfo { key: "solver", help: "constraint solver: pgs | cg | newton; default newton" },
+    SettingInfo { key: "iterations", help: "maximum solver iterations (>= 1); default 100" },
+    SettingInfo { key: "tolerance", help: "solver tolerance (>= 0); default 1e-8" },
+    SettingInfo { key: "cone", help: "friction cone: pyramidal | elliptic; default pyramidal" },
+    SettingInfo { key: "impratio", help: "frictional-to-normal impedance ratio (> 0); default 1" },
+    SettingInfo { key: "noslip_iterations", help: "no-slip solver iterations (>= 0); default 0" },
+];
+
+/// The messages MuJoCo reported through its log since the last
+/// [`take_messages`] (warnings and errors; at most 64 kept).
+static MESSAGES: Mutex<Vec<String>> = Mutex::new(Vec::new());
+
+fn message_handler(message: &MjLogMessage) {
+    let level = match message.level() {
+        MjtLogLevel::mjLOG_ERROR => "error",
+        MjtLogLevel::mjLOG_WARNING => "warning",
+        MjtLogLevel::mjLOG_INFO => "info",
+        MjtLogLevel::mjLOG_DEBUG => return,
+    };
+    let mut text = message.subject().to_string();
+    if let Some(body) = message.body().filter(|b| !b.is_empty()) {
+        text.push_str(": ");
+        text.push_str(body);
+    }
+    if level == "error" {
+        // MuJoCo exits right after this returns: the parent process reads
+        // this line as the run's failure message.
+        eprintln!("MuJoCo error: {text}");
+    }
+    if let Ok(mut m) = MESSAGES.lock() {
+        if m.len() < 64 {
+            m.push(format!("MuJoCo {level}: {text}"));
+        }
+    }
+}
+
+/// Routes MuJoCo's log messages (warnings, errors) to this crate: errors
+/// are printed to standard error as `MuJoCo error: ...` before MuJoCo ends
+/// the process, warnings are kept for [`EngineError`] messages. Call it
+/// once, early, before other threads use MuJoCo; later calls do nothing.
+pub fn install_message_handler() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        // SAFETY: `Once` runs this at most once; callers are told to call it
+        // before other threads use MuJoCo.
+        unsafe { set_log_handler(message_handler) };
+    });
+}
+
+/// The MuJoCo messages collected since the last call.
+pub fn take_messages() -> Vec<String> {
+    MESSAGES.lock().map(|mut m| std::mem::take(&mut *m)).unwrap_or_default()
+}
+
+/// The linked MuJoCo library's version, e.g. `3.17.0`.
+pub fn mujoco_version() -> String {
+    // SAFETY: mj_versionString returns a pointer to a static NUL-terminated string.
+    unsafe { CStr::from_ptr(mujoco_c::mj_versionString()) }.to_string_lossy().into_owned()
+}
+
+/// The MuJoCo engine.
+#[derive(Debug, Default, Clone, Copy)]
+pub struct MujocoEngine;
+
+/// Engine settings, checked.
+#[derive(Debug, Clone, Default, PartialEq)]
+struct Options {
+    timestep_s: Option<f64>,
+    integrator: Option<i32>,
+    solver: Option<i32>,
+    iterations: Option<i32>,
+    tolerance: Option<f64>,
+    cone: Option<i32>,
+    impratio: Option<f64>,
+    noslip_iterations: Option<i32>,
+}
+
+fn setting_error(key: &str, message: impl Into<String>) -> EngineError {
+    EngineError::Setting { engine: ENGINE_NAME.to_string(), key: key.to_string(), message: message.into() }
+}
+
+fn load_error(message: impl Into<String>) -> EngineError {
+    EngineError::Load { engine: ENGINE_NAME.to_string(), message: message.into() }
+}
+
+fn parse_options(settings: &EngineSettings) -> Result<Options, EngineError> {
+    let mut o = Options::default();
+    for (key, value) in settings {
+        let number = |min: f64, inclusive: bool| -> Result<f64, EngineError> {
+            let v = value.as_f64().ok_or_else(|| setting_error(key, format!("expected a number, found \"{value}\"")))?;
+            let ok = v.is_finite() && if inclusive { v >= min } else { v > min };
+            if ok {
+                Ok(v)
+            } else {
+                Err(setting_error(key, format!("must be {} {min}, found {v}", if inclusive { ">=" } else { ">" })))
+            }
+        };
+        let whole = |min: i64| -> Result<i32, EngineError> {
+            let v = value.as_i64().ok_or_else(|| setting_error(key, format!("expected a whole number, found \"{value}\"")))?;
+            if v >= min && v <= i32::MAX as i64 {
+                Ok(v as i32)
+            } else {
+                Err(setting_error(key, format!("must be a whole number >= {min}, found {v}")))
+            }
+        };
+        let choice = |choices: &[(&str, i32)]| -> Result<i32, EngineError> {
+            let text = value.as_str().map(str::to_ascii_lowercase);
+            choices.iter().find(|(n, _)| Some(*n) == text.as_deref()).map(|(_, v)| *v).ok_or_else(|| {
+                setting_error(
+                    key,
+                    format!(
+                        "\"{value}\" is not one of {}",
+                        choices.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ")
+                    ),
+                )
+            })
+        };
+        match key.as_str() {
+            "timestep_s" => o.timestep_s = Some(number(0.0, false)?),
+            "integrator" => {
+                o.integrator = Some(choice(&[
+                    ("euler", mujoco_c::mjtIntegrator::mjINT_EULER as i32),
+                    ("rk4", mujoco_c::mjtIntegrator::mjINT_RK4 as i32),
+                    ("implicit", mujoco_c::mjtIntegrator::mjINT_IMPLICIT as i32),
+                    ("implicitfast", mujoco_c::mjtIntegrator::mjINT_IMPLICITFAST as i32),
+                ])?)
+            }
+            "solver" => {
+                o.solver = Some(choice(&[
+                    ("pgs", mujoco_c::mjtSolver::mjSOL_PGS as i32),
+                    ("cg", mujoco_c::mjtSolver::mjSOL_CG as i32),
+                    ("newton", mujoco_c::mjtSolver::mjSOL_NEWTON as i32),
+                ])?)
+            }
+            "iterations" => o.iterations = Some(whole(1)?),
+            "tolerance" => o.tolerance = Some(number(0.0, true)?),
+            "cone" => {
+                o.cone = Some(choice(&[
+                    ("pyramidal", mujoco_c::mjtCone::mjCONE_PYRAMIDAL as i32),
+                    ("elliptic", mujoco_c::mjtCone::mjCONE_ELLIPTIC as i32),
+                ])?)
+            }
+            "impratio" => o.impratio = Some(number(0.0, false)?),
+            "noslip_iterations" => o.noslip_iterations = Some(whole(0)?),
+            other => {
+                return Err(setting_error(
+                    other,
+                    format!(
+                        "unknown setting (MuJoCo accepts: {})",
+                        SETTINGS.iter().map(|s| s.key).collect::<Vec<_>>().join(", ")
+                    ),
+                ))
+            }
+        }
+    }
+    Ok(o)
+}
+
+impl Engine for MujocoEngine {
+    fn name(&self) -> &'static str {
+        ENGINE_NAME
+    }
+
+    fn version(&self) -> String {
+        format!("MuJoCo {} (mujoco-rs 7.0.0)", mujoco_version())
+    }
+
+    fn default_timestep_s(&self) -> f64 {
+        MUJOCO_DEFAULT_TIMESTEP_S
+    }
+
+    fn settings_help(&self) -> Vec<SettingInfo> {
+        SETTINGS.to_vec()
+    }
+
+    fn check_settings(&self, settings: &EngineSettings) -> Result<f64, EngineError> {
+        Ok(parse_options(settings)?.timestep_s.unwrap_or(MUJOCO_DEFAULT_TIMESTEP_S))
+    }
+
+    fn load(
+        &self,
+        scene: &Scene,
+        robot: &RobotModel,
+        settings: &EngineSettings,
+        variation: &ModelVariation,
+    ) -> Result<Box<dyn Simulation>, EngineError> {
+        Ok(Box::new(MujocoSimulation::load(scene, robot, settings, variation)?))
+    }
+}
+
+/// A MuJoCo model and its state, driven through [`Simulation`].
+pub struct MujocoSimulation {
+    data: MjData<Box<MjModel>>,
+    /// `qpos` address of each controlled joint.
+    qpos_adr: Vec<usize>,
+    /// `qvel` address of each controlled joint.
+    dof_adr: Vec<usize>,
+    /// Actuator (control) index of each controlled joint.
+    ctrl_index: Vec<usize>,
+    /// Body index of each tracked body.
+    tracked_body: Vec<usize>,
+    /// Warning counters already seen (BADQPOS, BADQVEL, BADQACC).
+    warnings_seen: [i32; 3],
+}
+
+const INSTABILITY_WARNINGS: [(mujoco_c::mjtWarning, &str); 3] = [
+    (mujoco_c::mjtWarning::mjWARN_BADQPOS, "bad joint position (NaN or huge), state reset by MuJoCo"),
+    (mujoco_c::mjtWarning::mjWARN_BADQVEL, "bad joint velocity (NaN or huge), state reset by MuJoCo"),
+    (mujoco_c::mjtWarning::mjWARN_BADQACC, "bad joint acceleration (NaN or huge), state reset by MuJoCo"),
+];
+
+impl MujocoSimulation {
+    /// Builds the model of `scene` (from its MJCF file when it names one,
+    /// else from `robot`), applies `settings` and `variation`, and puts it
+    /// in its initial state.
+    pub fn load(
+        scene: &Scene,
+        robot: &RobotModel,
+        settings: &EngineSettings,
+        variation: &ModelVariation,
+    ) -> Result<MujocoSimulation, EngineError> {
+        let options = parse_options(settings)?;
+        let model = match &scene.robot.mjcf {
+            Some(path) => {
+                if !path.is_file() {
+                    return Err(load_error(format!("MJCF file {} not found", path.display())));
+                }
+                MjModel::from_xml(path).map_err(|e| load_error(format!("MJCF file {}: {e}", path.display())))?
+            }
+            None => {
+                let xml = mjcf::scene_to_mjcf(scene, robot).map_err(|e| load_error(e.0))?;
+                MjModel::from_xml_string(&xml)
+                    .map_err(|e| load_error(format!("MuJoCo rejected the model built from {}: {e}", robot.source.display())))?
+            }
+        };
+        let mut model = Box::new(model);
+        {
+            let opt = model.opt_mut();
+            if let Some(v) = options.timestep_s {
+                opt.timestep = v;
+            } else if scene.robot.mjcf.is_none() {
+                opt.timestep = MUJOCO_DEFAULT_TIMESTEP_S;
+            }
+            if let Some(v) = options.integrator {
+                opt.integrator = v;
+            }
+            if let Some(v) = options.solver {
+                opt.solver = v;
+            }
+            if let Some(v) = options.iterations {
+                opt.iterations = v;
+            }
+            if let Some(v) = options.tolerance {
+                opt.tolerance = v;
+            }
+            if let Some(v) = options.cone {
+                opt.cone = v;
+            }
+            if let Some(v) = options.impratio {
+                opt.impratio = v;
+            }
+            if let Some(v) = options.noslip_iterations {
+                opt.noslip_iterations = v;
+            }
+        }
+        let scaled = !variation.is_identity();
+        if scaled {
+            for m in model.body_mass_mut() {
+                *m *= variation.mass_scale;
+            }
+            for i in model.body_inertia_mut() {
+                for c in i.iter_mut() {
+                    *c *= variation.mass_scale;
+                }
+            }
+            for f in model.geom_friction_mut() {
+                f[0] *= variation.friction_scale;
+            }
+        }
+
+        // Names -> indices.
+        let by_name = |kind: MjtObjBase, name: &str| model.name_to_id(kind, name);
+        let mut qpos_adr = Vec::new();
+        let mut dof_adr = Vec::new();
+        let mut ctrl_index = Vec::new();
+        for a in &scene.actuators {
+            let j = by_name(MjtObjBase::mjOBJ_JOINT, &a.joint).ok_or_else(|| {
+                load_error(format!("the model has no joint named \"{}\"{}", a.joint, mjcf_note(scene)))
+            })?;
+            let jtype = model.jnt_type()[j];
+            if jtype != mujoco_c::mjtJoint::mjJNT_HINGE && jtype != mujoco_c::mjtJoint::mjJNT_SLIDE {
+                return Err(load_error(format!("joint \"{}\" is not a hinge or slide joint in the model", a.joint)));
+            }
+            qpos_adr.push(model.jnt_qposadr()[j] as usize);
+            dof_adr.push(model.jnt_dofadr()[j] as usize);
+            let actuator = (0..model.ffi().nu as usize)
+                .find(|&u| {
+                    model.actuator_trntype()[u] == mujoco_c::mjtTrn::mjTRN_JOINT
+                        && model.actuator_trnid()[u][0] as usize == j
+                })
+                .ok_or_else(|| load_error(format!("no actuator drives joint \"{}\"{}", a.joint, mjcf_note(scene))))?;
+            ctrl_index.push(actuator);
+        }
+        let mut tracked_body = Vec::new();
+        for t in &scene.tracked {
+            let body = match &t.target {
+                TrackTarget::Link(link) => by_name(MjtObjBase::mjOBJ_BODY, &mjcf::body_name(link))
+                    .ok_or_else(|| load_error(format!("tracked link \"{link}\" is not a body of the model{}", mjcf_note(scene))))?,
+                TrackTarget::Object(object) => {
+                    let generated = format!("{}{object}", mjcf::OBJECT_BODY_PREFIX);
+                    by_name(MjtObjBase::mjOBJ_BODY, &generated).or_else(|| by_name(MjtObjBase::mjOBJ_BODY, object)).ok_or_else(|| {
+                        load_error(format!("tracked object \"{object}\" is not a body of the model{}", mjcf_note(scene)))
+                    })?
+                }
+            };
+            tracked_body.push(body);
+        }
+
+        let mut data = MjData::try_new(model).map_err(|e| load_error(format!("cannot allocate the simulation data: {e}")))?;
+        if scaled {
+            // SAFETY: model and data belong together and are not in use elsewhere.
+            unsafe {
+                let d = data.ffi_mut() as *mut mujoco_c::mjData;
+                let m = data.model_mut().ffi_mut() as *mut mujoco_c::mjModel;
+                mujoco_c::mj_setConst(m, d);
+            }
+        }
+        data.forward();
+        let mut sim = MujocoSimulation { data, qpos_adr, dof_adr, ctrl_index, tracked_body, warnings_seen: [0; 3] };
+        sim.warnings_seen = sim.warning_counts();
+        Ok(sim)
+    }
+
+    fn warning_counts(&self) -> [i32; 3] {
+        let w = &self.data.ffi().warning;
+        INSTABILITY_WARNINGS.map(|(kind, _)| w[kind as usize].number)
+    }
+
+    fn check_stability(&mut self) -> Result<(), EngineError> {
+        let counts = self.warning_counts();
+        for (i, (_, what)) in INSTABILITY_WARNINGS.iter().enumerate() {
+            if counts[i] > self.warnings_seen[i] {
+                self.warnings_seen = counts;
+                let mut message = what.to_string();
+                if let Some(m) = take_messages().into_iter().last() {
+                    message.push_str(&format!(" ({m})"));
+                }
+                return Err(EngineError::Unstable { engine: ENGINE_NAME.to_string(), t_s: self.time_s(), message });
+            }
+        }
+        Ok(())
+    }
+
+    /// Steps `n` times with `mj_step` and nothing else: no checks, no
+    /// control. The baseline of the controller-loop benchmark.
+    pub fn step_raw(&mut self, n: u64) {
+        for _ in 0..n {
+            self.data.step();
+        }
+    }
+
+    /// Sets the controls of the controlled joints' servos directly, rad/s.
+    pub fn set_controls(&mut self, rad_s: &[f64]) {
+        let ctrl = self.data.ctrl_mut();
+        for (&u, &v) in self.ctrl_index.iter().zip(rad_s) {
+            ctrl[u] = v;
+        }
+    }
+
+    /// The pairs of bodies in contact now, by MuJoCo body name (one entry
+    /// per contact point), for diagnosing a model.
+    pub fn contacts(&self) -> Vec<(String, String)> {
+        let model = self.data.model();
+        let body_of = |g: i32| {
+            let b = model.geom_bodyid()[g as usize] as usize;
+            model.id_to_name(MjtObjBase::mjOBJ_BODY, b).unwrap_or("world").to_string()
+        };
+        self.data.contact().iter().map(|c| (body_of(c.geom[0]), body_of(c.geom[1]))).collect()
+    }
+
+    /// The MuJoCo model.
+    pub fn model(&self) -> &MjModel {
+        self.data.model()
+    }
+
+    /// World pose of the body of a URDF link, or of any MuJoCo body by its
+    /// MuJoCo name (for tests and tools).
+    pub fn body_pose(&self, name: &str) -> Option<Pose> {
+        let b = self.data.model().name_to_id(MjtObjBase::mjOBJ_BODY, &mjcf::body_name(name))?;
+        Some(self.body_pose_by_index(b))
+    }
+
+    fn body_pose_by_index(&self, b: usize) -> Pose {
+        let p = self.data.xpos()[b];
+        let q = self.data.xquat()[b];
+        Pose::new(Vec3::new(p[0], p[1], p[2]), Quat::new(q[0], q[1], q[2], q[3]))
+    }
+}
+
+fn mjcf_note(scene: &Scene) -> String {
+    match &scene.robot.mjcf {
+        Some(p) => format!(" (MJCF file {})", p.display()),
+        None => String::new(),
+    }
+}
+
+impl Simulation for MujocoSimulation {
+    fn timestep_s(&self) -> f64 {
+        self.data.model().opt().timestep
+    }
+
+    fn time_s(&self) -> f64 {
+        self.data.ffi().time
+    }
+
+    fn joint_count(&self) -> usize {
+        self.qpos_adr.len()
+    }
+
+    fn tracked_count(&self) -> usize {
+        self.tracked_body.len()
+    }
+
+    fn set_joint_angles_rad(&mut self, rad: &[f64]) -> Result<(), EngineError> {
+        if rad.len() != self.qpos_adr.len() {
+            return Err(EngineError::Usage {
+                engine: ENGINE_NAME.to_string(),
+                message: format!("{} joint angles given for {} joints", rad.len(), self.qpos_adr.len()),
+            });
+        }
+        let qpos = self.data.qpos_mut();
+        for (&a, &v) in self.qpos_adr.iter().zip(rad) {
+            qpos[a] = v;
+        }
+        let qvel = self.data.qvel_mut();
+        for &a in &self.dof_adr {
+            qvel[a] = 0.0;
+        }
+        self.data.forward();
+        Ok(())
+    }
+
+    fn set_joint_velocity_targets(&mut self, rad_s: &[f64]) {
+        self.set_controls(rad_s);
+    }
+
+    fn step(&mut self) -> Result<(), EngineError> {
+        self.data.step();
+        self.check_stability()
+    }
+
+    fn step_n(&mut self, n: u64) -> Result<(), EngineError> {
+        for _ in 0..n {
+            self.data.step();
+        }
+        self.check_stability()
+    }
+
+    fn joint_angles_rad(&self, out: &mut [f64]) {
+        let qpos = self.data.qpos();
+        for (o, &a) in out.iter_mut().zip(&self.qpos_adr) {
+            *o = qpos[a];
+        }
+    }
+
+    fn tracked_poses(&self, out: &mut [Pose]) {
+        for (o, &b) in out.iter_mut().zip(&self.tracked_body) {
+            *o = self.body_pose_by_index(b);
+        }
+    }
+}
