@@ -52,7 +52,7 @@
 //! damaged line is an error.
 
 use crate::error::{show_bytes, ImportError};
-use crate::text::{is_blank, parse_f64, Line, Lines};
+use crate::text::{is_blank, parse_f64, split_tab_line, Line, Lines};
 use crate::ImportedRun;
 use realitygap_core::trajectory::{BASE, CUBE, WRIST};
 use realitygap_core::{BodyTrack, Pose, Quat, Trajectory, Vec3};
@@ -174,7 +174,11 @@ pub fn parse(bytes: &[u8], file: &Path, opts: &QualisysOptions) -> Result<Import
     let mut column_line: Option<Line> = None;
     let mut first_data: Option<Line> = None;
     let mut any_content = false;
-    while let Some(line) = lines.next() {
+    // The input from the first data row on.
+    let mut data: &[u8] = &[];
+    loop {
+        let rest = lines.rest();
+        let Some(line) = lines.next() else { break };
         if is_blank(line.bytes) {
             continue;
         }
@@ -184,6 +188,7 @@ pub fn parse(bytes: &[u8], file: &Path, opts: &QualisysOptions) -> Result<Import
         let wordy = first.first().is_some_and(u8::is_ascii_alphabetic) && parse_f64(first).is_none();
         if !wordy || column_line.is_some() {
             first_data = Some(line);
+            data = rest;
             break;
         }
         if first == b"Frame" || first.ends_with(b" X") {
@@ -292,23 +297,28 @@ pub fn parse(bytes: &[u8], file: &Path, opts: &QualisysOptions) -> Result<Import
     let mut fields: Vec<&[u8]> = Vec::with_capacity(columns + 1);
 
     let mut row_cells: Vec<Cells> = Vec::with_capacity(n_bodies);
-    for line in std::iter::once(first_data).chain(lines) {
-        if is_blank(line.bytes) {
+    // Data rows, split in one pass over the bytes.
+    let mut rest = data;
+    let mut number = first_data.number - 1;
+    while !rest.is_empty() {
+        number += 1;
+        fields.clear();
+        let (used, terminated) = split_tab_line(rest, &mut fields);
+        rest = &rest[used..];
+        if fields.len() == 1 && is_blank(fields[0]) {
             continue;
         }
-        fields.clear();
-        fields.extend(line.bytes.split(|&b| b == b'\t'));
         let parsed = if fields.len() != columns {
             Err(ImportError::at_line(
                 file,
-                line.number,
+                number,
                 format!("expected {columns} columns ({}), found {}", layout.describe(), fields.len()),
             ))
         } else {
             parse_row(&fields, layout, &mut row_cells).map_err(|(col, what)| {
                 ImportError::at_line(
                     file,
-                    line.number,
+                    number,
                     format!("expected {what}, found {}", show_bytes(fields[col], 40)),
                 )
                 .with_column(col + 1)
@@ -320,10 +330,10 @@ pub fn parse(bytes: &[u8], file: &Path, opts: &QualisysOptions) -> Result<Import
             Err(e) => {
                 // A last line without a line end that stops early, or whose
                 // last cell is cut, is what an interrupted copy leaves.
-                let cut = !line.terminated
+                let cut = !terminated
                     && (fields.len() < columns || (fields.len() == columns && e.column == Some(columns)));
                 if cut {
-                    warnings.push(format!("line {}: the last line is cut short and was dropped", line.number));
+                    warnings.push(format!("line {}: the last line is cut short and was dropped", number));
                     break;
                 }
                 return Err(e);
@@ -334,7 +344,7 @@ pub fn parse(bytes: &[u8], file: &Path, opts: &QualisysOptions) -> Result<Import
                 if frame <= prev {
                     return Err(ImportError::at_line(
                         file,
-                        line.number,
+                        number,
                         format!("frame numbers must increase, but frame {frame} follows frame {prev}"),
                     )
                     .with_column(1)
@@ -345,10 +355,10 @@ pub fn parse(bytes: &[u8], file: &Path, opts: &QualisysOptions) -> Result<Import
             match time {
                 Some(t) if t.is_finite() && times.last().is_none_or(|&p| t > p) => {}
                 Some(t) if time_problem.is_none() => {
-                    time_problem = Some(format!("line {}: time {t} does not follow the previous one", line.number));
+                    time_problem = Some(format!("line {}: time {t} does not follow the previous one", number));
                 }
                 None if time_problem.is_none() => {
-                    time_problem = Some(format!("line {}: the time cell is empty", line.number));
+                    time_problem = Some(format!("line {}: the time cell is empty", number));
                 }
                 _ => {}
             }

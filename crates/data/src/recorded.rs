@@ -27,7 +27,7 @@
 //! a warning.
 
 use crate::error::{show_bytes, ImportError};
-use crate::text::{parse_f64, Lines};
+use crate::text::{parse_f64_str, Lines};
 use crate::ImportedRun;
 use realitygap_core::trajectory::{CUBE, WRIST};
 use realitygap_core::{BodyTrack, Pose, Quat, Trajectory, Vec3};
@@ -122,34 +122,52 @@ fn field_name(order: QuatOrder, i: usize) -> String {
 
 /// Splits a line into cells: on commas when it has any (cells trimmed of
 /// spaces and tabs; one trailing comma allowed), else on runs of spaces and
-/// tabs. Returns the cell count; fills `out` with the first `out.len()`.
-/// An empty cell between commas is reported as `Err(column, 0-based)`.
-fn split_cells<'a>(line: &'a [u8], out: &mut [&'a [u8]]) -> Result<usize, usize> {
+/// tabs. Returns the cell count and fills `out` with the byte ranges of the
+/// first `out.len()` cells. An empty cell between commas is reported as
+/// `Err(0-based column)`.
+fn split_cells(line: &[u8], out: &mut [(usize, usize)]) -> Result<usize, usize> {
     let mut count = 0;
-    let mut push = |cell: &'a [u8], count: &mut usize| {
-        if let Some(slot) = out.get_mut(*count) {
-            *slot = cell;
+    let mut push = |start: usize, end: usize| {
+        if let Some(slot) = out.get_mut(count) {
+            *slot = (start, end);
         }
-        *count += 1;
+        count += 1;
     };
-    let is_space = |b: &u8| *b == b' ' || *b == b'\t';
+    let is_space = |b: u8| b == b' ' || b == b'\t';
     if line.contains(&b',') {
-        let n = line.split(|&b| b == b',').count();
-        for (i, raw) in line.split(|&b| b == b',').enumerate() {
-            let start = raw.iter().position(|b| !is_space(b)).unwrap_or(raw.len());
-            let end = raw.iter().rposition(|b| !is_space(b)).map_or(start, |e| e + 1);
-            let cell = &raw[start..end];
-            if cell.is_empty() {
+        let n = line.iter().filter(|&&b| b == b',').count() + 1;
+        let mut from = 0;
+        for i in 0..n {
+            let to = line[from..].iter().position(|&b| b == b',').map_or(line.len(), |p| from + p);
+            let mut start = from;
+            let mut end = to;
+            while start < end && is_space(line[start]) {
+                start += 1;
+            }
+            while end > start && is_space(line[end - 1]) {
+                end -= 1;
+            }
+            if start == end {
                 if i + 1 == n && i > 0 {
                     break; // trailing comma
                 }
                 return Err(i);
             }
-            push(cell, &mut count);
+            push(start, end);
+            from = to + 1;
         }
     } else {
-        for cell in line.split(is_space).filter(|c| !c.is_empty()) {
-            push(cell, &mut count);
+        let mut i = 0;
+        while i < line.len() {
+            if is_space(line[i]) {
+                i += 1;
+                continue;
+            }
+            let start = i;
+            while i < line.len() && !is_space(line[i]) {
+                i += 1;
+            }
+            push(start, i);
         }
     }
     Ok(count)
@@ -173,18 +191,29 @@ pub fn parse(bytes: &[u8], file: &Path, opts: &RecordedOptions) -> Result<Import
     let mut non_finite_rows = Vec::new();
     let mut header_lines = 0usize;
     let mut any_content = false;
-    let mut cells: [&[u8]; NUMBERS] = [&[]; NUMBERS];
+    let mut ranges_buf = [(0usize, 0usize); NUMBERS];
 
     for line in Lines::new(bytes) {
         if line.bytes.iter().all(|&b| b == b' ' || b == b'\t') {
             continue;
         }
         any_content = true;
-        let split = split_cells(line.bytes, &mut cells);
+        // Validate the line's UTF-8 once; a damaged line is read lossily so
+        // the bad cell shows up as a non-number at its own column.
+        let lossy;
+        let text: &str = match std::str::from_utf8(line.bytes) {
+            Ok(s) => s,
+            Err(_) => {
+                lossy = String::from_utf8_lossy(line.bytes);
+                &lossy
+            }
+        };
+        let split = split_cells(text.as_bytes(), &mut ranges_buf);
+        let cells: [&str; NUMBERS] = std::array::from_fn(|i| text.get(ranges_buf[i].0..ranges_buf[i].1).unwrap_or(""));
         // A column-name header before the data.
         if wrist.is_empty() && split.is_ok() {
             let first = cells[0];
-            if first.first().is_some_and(u8::is_ascii_alphabetic) && parse_f64(first).is_none() {
+            if first.as_bytes().first().is_some_and(u8::is_ascii_alphabetic) && parse_f64_str(first).is_none() {
                 header_lines += 1;
                 continue;
             }
@@ -194,7 +223,7 @@ pub fn parse(bytes: &[u8], file: &Path, opts: &RecordedOptions) -> Result<Import
                 .with_column(col + 1)
                 .with_field(field_name(order, col.min(NUMBERS - 1)))),
             Ok(n) => parse_numbers(&cells[..n.min(NUMBERS)]).map_err(|i| {
-                ImportError::at_line(file, line.number, format!("expected a number, found {}", show_bytes(cells[i], 40)))
+                ImportError::at_line(file, line.number, format!("expected a number, found {}", show_bytes(cells[i].as_bytes(), 40)))
                     .with_column(i + 1)
                     .with_field(field_name(order, i))
             }).and_then(|v| {
@@ -313,10 +342,10 @@ pub fn parse(bytes: &[u8], file: &Path, opts: &RecordedOptions) -> Result<Import
 }
 
 /// Parses cells as numbers; on failure the index of the first bad cell.
-fn parse_numbers(cells: &[&[u8]]) -> Result<[f64; NUMBERS], usize> {
+fn parse_numbers(cells: &[&str]) -> Result<[f64; NUMBERS], usize> {
     let mut v = [0.0; NUMBERS];
     for (i, (slot, cell)) in v.iter_mut().zip(cells).enumerate() {
-        *slot = parse_f64(cell).ok_or(i)?;
+        *slot = parse_f64_str(cell).ok_or(i)?;
     }
     Ok(v)
 }

@@ -29,7 +29,7 @@
 //! `pandas.read_csv` reads it as is.
 
 use crate::error::{show_bytes, ImportError};
-use crate::text::{parse_f64, Lines};
+use crate::text::{parse_f64_str, Lines};
 use realitygap_core::{Pose, Quat, Trajectory, TrajectoryError, Vec3};
 use serde::{Deserialize, Serialize};
 use std::fmt::{self, Write as _};
@@ -665,11 +665,30 @@ pub fn parse_run_csv(bytes: &[u8], file: &Path) -> Result<Trajectory, ImportErro
     let mut trajectory = Trajectory::with_bodies(&roles);
     let mut angles: Vec<Vec<f64>> = Vec::new();
     let mut velocity_commands: Vec<Vec<f64>> = Vec::new();
-    let mut fields: Vec<&[u8]> = Vec::with_capacity(names.len());
+    let mut ranges: Vec<(usize, usize)> = Vec::with_capacity(names.len());
     let mut body_cells: Vec<[Option<f64>; 7]> = vec![[None; 7]; roles.len()];
     for line in lines {
-        fields.clear();
-        fields.extend(line.bytes.split(|&b| b == b','));
+        // Validate the line's UTF-8 once; a damaged line is read lossily so
+        // the bad cell shows up as a non-number at its own column.
+        let lossy;
+        let text: &str = match std::str::from_utf8(line.bytes) {
+            Ok(s) => s,
+            Err(_) => {
+                lossy = String::from_utf8_lossy(line.bytes);
+                &lossy
+            }
+        };
+        ranges.clear();
+        let mut from = 0;
+        for (i, b) in text.bytes().enumerate() {
+            if b == b',' {
+                ranges.push((from, i));
+                from = i + 1;
+            }
+        }
+        ranges.push((from, text.len()));
+        let cell = |col: usize| text.get(ranges[col].0..ranges[col].1).unwrap_or("");
+        let fields = &ranges;
         let err = |col: usize, message: String| {
             let e = ImportError::at_line(file, line.number, message).with_column(col + 1);
             match names.get(col) {
@@ -685,8 +704,8 @@ pub fn parse_run_csv(bytes: &[u8], file: &Path) -> Result<Trajectory, ImportErro
             ));
         }
         let number = |col: usize| {
-            parse_f64(fields[col])
-                .ok_or_else(|| err(col, format!("expected a number, found {}", show_bytes(fields[col], 40))))
+            parse_f64_str(cell(col))
+                .ok_or_else(|| err(col, format!("expected a number, found {}", show_bytes(cell(col).as_bytes(), 40))))
         };
         let t = number(0)?;
         if !t.is_finite() || trajectory.time_s.last().is_some_and(|&p| t < p) {
@@ -699,7 +718,7 @@ pub fn parse_run_csv(bytes: &[u8], file: &Path) -> Result<Trajectory, ImportErro
             let col = col + 1;
             match *column {
                 Column::Body(b, k) => {
-                    body_cells[b][k] = if fields[col].is_empty() { None } else { Some(number(col)?) };
+                    body_cells[b][k] = if cell(col).is_empty() { None } else { Some(number(col)?) };
                 }
                 Column::Joint => angle_row.push(number(col)?),
                 Column::Command => command_row.push(number(col)?),
