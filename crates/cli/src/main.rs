@@ -6,7 +6,9 @@ use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
 mod cmd_compare;
+mod cmd_engines;
 mod cmd_import;
+mod cmd_run;
 
 /// Measure the reality gap: how far physics engines stray from a real robot
 /// on the same scripted task.
@@ -26,6 +28,15 @@ enum Command {
     /// results directory.
     #[command(subcommand)]
     Import(cmd_import::ImportCommand),
+    /// Simulate scenes in engines, in parallel, into a results directory;
+    /// a rerun skips finished runs.
+    Run(cmd_run::Args),
+    /// List the physics engines compiled in, with their versions.
+    Engines(cmd_engines::Args),
+    /// Internal: run one simulation (a job as JSON on standard input) and
+    /// print its trajectory; `run` starts one such process per run.
+    #[command(name = "__run-one", hide = true)]
+    RunOne,
 }
 
 fn main() -> ExitCode {
@@ -33,6 +44,9 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Compare(args) => cmd_compare::run(args),
         Command::Import(cmd) => cmd_import::run(cmd),
+        Command::Run(args) => cmd_run::run(args),
+        Command::Engines(args) => cmd_engines::run(args),
+        Command::RunOne => cmd_run::run_one(),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,0 +1,64 @@
+//! `realitygap engines`: the physics engines compiled into this binary, and
+//! the registry the other commands find them in.
+
+use anyhow::{bail, Result};
+use realitygap_core::engine::Engine;
+
+/// Arguments of `realitygap engines`.
+#[derive(clap::Args)]
+pub struct Args {
+    /// Also list the settings each engine accepts (`[engine.NAME]` in a
+    /// scene file, or `--set` on `realitygap run`).
+    #[arg(long)]
+    pub settings: bool,
+}
+
+/// Every engine compiled in (cargo features of this crate), by name.
+pub fn compiled() -> Vec<Box<dyn Engine>> {
+    #[allow(unused_mut)]
+    let mut engines: Vec<Box<dyn Engine>> = Vec::new();
+    #[cfg(feature = "mujoco")]
+    engines.push(Box::new(realitygap_engine_mujoco::MujocoEngine));
+    engines
+}
+
+/// The compiled-in engine called `name`.
+pub fn find(name: &str) -> Result<Box<dyn Engine>> {
+    let engines = compiled();
+    let names: Vec<&str> = engines.iter().map(|e| e.name()).collect();
+    if names.is_empty() {
+        bail!("no physics engine is compiled into this binary (build it with a feature such as `--features mujoco`)");
+    }
+    let list = names.join(", ");
+    match engines.into_iter().find(|e| e.name() == name) {
+        Some(e) => Ok(e),
+        None => bail!("unknown engine \"{name}\" (compiled in: {list})"),
+    }
+}
+
+/// Prepares the engines' native libraries for this process (MuJoCo: route
+/// its fatal-error messages to standard error). Call once, early.
+pub fn install_native_handlers() {
+    #[cfg(feature = "mujoco")]
+    realitygap_engine_mujoco::install_message_handler();
+}
+
+/// Prints the compiled-in engines, one per line: name, version, default
+/// timestep.
+pub fn run(args: Args) -> Result<()> {
+    let engines = compiled();
+    if engines.is_empty() {
+        println!("no engine compiled in (build with `--features mujoco`)");
+        return Ok(());
+    }
+    let width = engines.iter().map(|e| e.name().len()).max().unwrap_or(0);
+    for e in &engines {
+        println!("{:<width$}  {}  (default timestep {} s)", e.name(), e.version(), e.default_timestep_s());
+        if args.settings {
+            for s in e.settings_help() {
+                println!("{:<width$}    {:<18} {}", "", s.key, s.help);
+            }
+        }
+    }
+    Ok(())
+}
