@@ -18,8 +18,9 @@
 //! - A quaternion whose norm is off 1 by more than the tolerance, or not
 //!   finite, puts the row in [`ImportedRun::bad_norm_rows`]; finite non-zero
 //!   quaternions are then normalised, others kept as read.
-//! - Huge or non-finite positions (a diverged simulation) are kept as read;
-//!   the analysis decides what diverged means.
+//! - Huge or non-finite positions (a diverged simulation) are kept as read,
+//!   with a warning (beyond 1 km, or NaN/inf); the analysis decides what
+//!   diverged means.
 //!
 //! A row with another count of numbers, or a cell that is not a number, is an
 //! [`ImportError`] with line, column and field; a last line without a line
@@ -38,6 +39,9 @@ use std::str::FromStr;
 
 /// Numbers per row.
 const NUMBERS: usize = 14;
+/// Positions farther than this from the origin (m) get a warning: no lab
+/// robot reaches a kilometre.
+const FAR_M: f64 = 1000.0;
 
 /// Order of a quaternion's four numbers in a recorded file.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -189,6 +193,7 @@ pub fn parse(bytes: &[u8], file: &Path, opts: &RecordedOptions) -> Result<Import
     let mut zero_rows = Vec::new();
     let mut bad_norm_rows = Vec::new();
     let mut non_finite_rows = Vec::new();
+    let mut far_rows: Vec<(usize, f64)> = Vec::new();
     let mut header_lines = 0usize;
     let mut any_content = false;
     let mut ranges_buf = [(0usize, 0usize); NUMBERS];
@@ -270,6 +275,10 @@ pub fn parse(bytes: &[u8], file: &Path, opts: &RecordedOptions) -> Result<Import
         if v.iter().any(|x| !x.is_finite()) {
             non_finite_rows.push(index);
         }
+        let farthest = [v[0], v[1], v[2], v[7], v[8], v[9]].iter().map(|x| x.abs()).fold(0.0, f64::max);
+        if farthest > FAR_M {
+            far_rows.push((index, farthest));
+        }
         let mut norm_off = false;
         for (offset, track) in [(0, &mut wrist), (7, &mut cube)] {
             let position = Vec3::new(v[offset], v[offset + 1], v[offset + 2]);
@@ -313,6 +322,14 @@ pub fn parse(bytes: &[u8], file: &Path, opts: &RecordedOptions) -> Result<Import
             bad_norm_rows.len(),
             opts.norm_tolerance,
             ranges(&bad_norm_rows)
+        ));
+    }
+    if let Some(&(first, _)) = far_rows.first() {
+        let largest = far_rows.iter().map(|r| r.1).fold(0.0, f64::max);
+        warnings.push(format!(
+            "{} rows have positions beyond {FAR_M} m (first at sample {first}, largest {largest:e} m): \
+             the simulation probably diverged",
+            far_rows.len()
         ));
     }
     if !non_finite_rows.is_empty() {

@@ -245,6 +245,7 @@ fn vrep_ode_runs_reach_huge_values() {
     let Some(root) = paper_data() else { return };
     let f = root.join("Simulation/Experiment1/Single_VRepODE_0.csv");
     let run = read(&f, &RecordedOptions::new(QuatOrder::Xyzw)).unwrap();
+    assert!(run.warnings.iter().any(|w| w.contains("beyond 1000 m")), "{:?}", run.warnings);
     let biggest = run
         .trajectory
         .bodies
