@@ -651,6 +651,47 @@ impl RobotModel {
         Some(pose)
     }
 
+    /// The generalised force gravity exerts on each joint (indexed by joint
+    /// index) with the robot at rest in the given configuration: N m about
+    /// a revolute or continuous joint's axis, N along a prismatic joint's
+    /// axis, 0 for fixed joints. `gravity_m_s2` is in the world frame (e.g.
+    /// `(0, 0, -9.81)`). An actuator holding the robot still must apply the
+    /// opposite.
+    pub fn gravity_torques(&self, base: &Pose, joint_positions: &[f64], gravity_m_s2: Vec3) -> Vec<f64> {
+        let poses = self.forward_kinematics(base, joint_positions);
+        // Mass and first moment (mass-weighted centre of mass) of each
+        // link's subtree, accumulated from the leaves up.
+        let mut mass = vec![0.0; self.links.len()];
+        let mut moment = vec![Vec3::ZERO; self.links.len()];
+        for (l, link) in self.links.iter().enumerate() {
+            if let Some(i) = link.inertial {
+                mass[l] = i.mass_kg;
+                moment[l] = poses[l].transform_point(i.origin.position_m).scale(i.mass_kg);
+            }
+        }
+        for &j in self.tree_order.iter().rev() {
+            let (p, c) = (self.joints[j].parent, self.joints[j].child);
+            mass[p] += mass[c];
+            moment[p] = moment[p] + moment[c];
+        }
+        self.joints
+            .iter()
+            .map(|joint| {
+                let child = joint.child;
+                let axis = poses[child].orientation.rotate(joint.axis);
+                match joint.kind {
+                    JointKind::Fixed => 0.0,
+                    JointKind::Prismatic => axis.dot(gravity_m_s2.scale(mass[child])),
+                    JointKind::Revolute | JointKind::Continuous => {
+                        // Sum over the subtree of (c - p) x (m g) = (M c_mean - M p) x g.
+                        let lever = moment[child] - poses[child].position_m.scale(mass[child]);
+                        axis.dot(lever.cross(gravity_m_s2))
+                    }
+                }
+            })
+            .collect()
+    }
+
     /// Total mass of all links, kg.
     pub fn total_mass_kg(&self) -> f64 {
         self.links.iter().filter_map(|l| l.inertial.map(|i| i.mass_kg)).sum()
@@ -690,3 +731,6 @@ fn find_cycle(links: &[Link], joints: &[Joint], parent_joint: &[Option<usize>]) 
     }
     Vec::new()
 }
+
+#[cfg(test)]
+mod mico2_tests;
