@@ -734,3 +734,339 @@ fn find_cycle(links: &[Link], joints: &[Joint], parent_joint: &[Option<usize>]) 
 
 #[cfg(test)]
 mod mico2_tests;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::FRAC_PI_2;
+
+    const ARM: &str = r#"<?xml version="1.0"?>
+<robot name="toy">
+  <material name="red"><color rgba="1 0 0 1"/></material>
+  <link name="base">
+    <visual><geometry><box size="0.2 0.2 0.1"/></geometry><material name="red"/></visual>
+    <collision name="plate"><origin xyz="0 0 0.05"/><geometry><box size="0.2 0.2 0.1"/></geometry></collision>
+  </link>
+  <link name="upper">
+    <inertial>
+      <origin xyz="0.1 0 0" rpy="0 0 0"/>
+      <mass value="2"/>
+      <inertia ixx="0.01" ixy="0" ixz="0" iyy="0.02" iyz="0" izz="0.03"/>
+    </inertial>
+    <collision><origin xyz="0.1 0 0" rpy="0 1.5707963267948966 0"/><geometry><cylinder radius="0.03" length="0.2"/></geometry></collision>
+    <collision><geometry><capsule radius="0.02" length="0.1"/></geometry></collision>
+  </link>
+  <link name="slider">
+    <visual><geometry><sphere radius="0.01"/></geometry><material name="own"><color rgba="0 0 1 0.5"/></material></visual>
+  </link>
+  <link name="tool"/>
+  <link name="twin"/>
+  <joint name="shoulder" type="revolute">
+    <parent link="base"/><child link="upper"/>
+    <origin xyz="0 0 0.1" rpy="0 0 0"/>
+    <axis xyz="0 0 2"/>
+    <limit lower="-1.5" upper="1.5" effort="10" velocity="2"/>
+    <dynamics damping="0.5" friction="0.1"/>
+  </joint>
+  <joint name="slide" type="prismatic">
+    <parent link="upper"/><child link="slider"/>
+    <origin xyz="0.2 0 0"/>
+    <axis xyz="1 0 0"/>
+    <limit lower="0" upper="0.1" effort="50" velocity="0.2"/>
+  </joint>
+  <joint name="mount" type="fixed">
+    <parent link="slider"/><child link="tool"/>
+    <origin xyz="0 0 -0.05" rpy="3.141592653589793 0 0"/>
+  </joint>
+  <joint name="spin" type="continuous">
+    <parent link="base"/><child link="twin"/>
+    <axis xyz="0 0 1"/>
+    <mimic joint="shoulder" multiplier="-2" offset="0.1"/>
+  </joint>
+</robot>
+"#;
+
+    fn toy() -> RobotModel {
+        RobotModel::from_urdf_str(ARM, Path::new("/toy"), &PackageResolver::new()).unwrap()
+    }
+
+    fn close(a: Vec3, b: Vec3) -> bool {
+        a.distance(b) < 1e-12
+    }
+
+    fn temp_dir(tag: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("realitygap-robot-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        dir
+    }
+
+    #[test]
+    fn parses_links_joints_geometry_and_inertia() {
+        let m = toy();
+        assert_eq!(m.name, "toy");
+        assert_eq!(m.links[m.root_link].name, "base");
+        assert_eq!(m.source, PathBuf::from("/toy"));
+        let upper = &m.links[m.link_by_name("upper").unwrap()];
+        let inertial = upper.inertial.unwrap();
+        assert_eq!(inertial.mass_kg, 2.0);
+        assert_eq!(inertial.inertia, [0.01, 0.0, 0.0, 0.02, 0.0, 0.03]);
+        assert_eq!(inertial.inertia_matrix()[4], 0.02);
+        assert!(close(inertial.origin.position_m, Vec3::new(0.1, 0.0, 0.0)));
+        assert_eq!(upper.collisions[0].geometry, Geometry::Cylinder { radius_m: 0.03, length_m: 0.2 });
+        assert_eq!(upper.collisions[1].geometry, Geometry::Capsule { radius_m: 0.02, length_m: 0.1 });
+        let base = &m.links[m.link_by_name("base").unwrap()];
+        assert!(base.inertial.is_none());
+        assert_eq!(base.collisions[0].name.as_deref(), Some("plate"));
+        assert_eq!(base.visuals[0].rgba, Some([1.0, 0.0, 0.0, 1.0]), "robot-level material by name");
+        let slider = &m.links[m.link_by_name("slider").unwrap()];
+        assert_eq!(slider.visuals[0].rgba, Some([0.0, 0.0, 1.0, 0.5]), "inline material colour");
+        assert_eq!(slider.visuals[0].geometry, Geometry::Sphere { radius_m: 0.01 });
+
+        let shoulder = &m.joints[m.joint_by_name("shoulder").unwrap()];
+        assert_eq!(shoulder.kind, JointKind::Revolute);
+        assert!(close(shoulder.axis, Vec3::new(0.0, 0.0, 1.0)), "axis is normalised");
+        assert_eq!(shoulder.limits, Some(JointLimits { lower: -1.5, upper: 1.5, effort: 10.0, velocity: 2.0 }));
+        assert_eq!((shoulder.damping, shoulder.friction), (0.5, 0.1));
+        let mount = &m.joints[m.joint_by_name("mount").unwrap()];
+        assert_eq!((mount.kind, mount.limits, mount.axis), (JointKind::Fixed, None, Vec3::new(1.0, 0.0, 0.0)));
+        let spin = &m.joints[m.joint_by_name("spin").unwrap()];
+        let lim = spin.limits.unwrap();
+        assert!(lim.lower == f64::NEG_INFINITY && lim.upper == f64::INFINITY && lim.effort == f64::INFINITY);
+        assert_eq!(spin.mimic, Some(Mimic { joint: m.joint_by_name("shoulder").unwrap(), multiplier: -2.0, offset: 0.1 }));
+        assert!((m.total_mass_kg() - 2.0).abs() < 1e-15);
+    }
+
+    #[test]
+    fn tree_queries_follow_the_kinematic_tree() {
+        let m = toy();
+        let names = |js: &[usize]| js.iter().map(|&j| m.joints[j].name.clone()).collect::<Vec<_>>();
+        assert_eq!(names(m.joints_in_tree_order()), ["shoulder", "slide", "mount", "spin"]);
+        assert_eq!(names(&m.actuated_joints()), ["shoulder", "slide"], "mimic joints are not actuated");
+        assert_eq!(names(&m.chain_to(m.link_by_name("tool").unwrap())), ["shoulder", "slide", "mount"]);
+        assert!(m.chain_to(m.root_link).is_empty());
+        assert!(m.chain_to(999).is_empty());
+        assert_eq!(m.parent_joint(m.link_by_name("twin").unwrap()), m.joint_by_name("spin"));
+        assert_eq!(names(m.child_joints(m.root_link)), ["shoulder", "spin"]);
+        assert!(m.child_joints(999).is_empty());
+        assert_eq!(m.joint_by_name("nope"), None);
+        assert_eq!(m.link_by_name("nope"), None);
+    }
+
+    #[test]
+    fn forward_kinematics_composes_joint_motions() {
+        let m = toy();
+        let base = Pose::new(Vec3::new(1.0, 0.0, 0.0), Quat::IDENTITY);
+        let q = m.positions_from_actuated(&[FRAC_PI_2, 0.05]);
+        let poses = m.forward_kinematics(&base, &q);
+        let at = |name: &str| poses[m.link_by_name(name).unwrap()];
+        // Shoulder turns +90 deg about z: the arm's x axis points along world y.
+        assert!(close(at("upper").position_m, Vec3::new(1.0, 0.0, 0.1)));
+        assert!(close(at("slider").position_m, Vec3::new(1.0, 0.25, 0.1)));
+        assert!(close(at("tool").position_m, Vec3::new(1.0, 0.25, 0.05)));
+        assert!(at("tool").orientation.angle_to(Quat::from_euler_rpy(std::f64::consts::PI, 0.0, FRAC_PI_2)) < 1e-12);
+        // The mimic joint follows: -2 * pi/2 + 0.1.
+        let twin = at("twin").orientation;
+        assert!(twin.angle_to(Quat::from_axis_angle(Vec3::new(0.0, 0.0, 1.0), -std::f64::consts::PI + 0.1)) < 1e-12);
+        // link_pose agrees with the full pass; short position slices mean 0.
+        let tool = m.link_by_name("tool").unwrap();
+        assert_eq!(m.link_pose(&base, &q, tool), Some(at("tool")));
+        assert_eq!(m.link_pose(&base, &q, 999), None);
+        let rest = m.forward_kinematics(&base, &[]);
+        assert!(close(rest[tool].position_m, Vec3::new(1.2, 0.0, 0.05)));
+
+        let mut named = HashMap::new();
+        named.insert("shoulder".to_string(), FRAC_PI_2);
+        named.insert("slide".to_string(), 0.05);
+        assert_eq!(m.positions_from_names(&named).unwrap(), q);
+        named.insert("elbow".to_string(), 1.0);
+        let e = m.positions_from_names(&named).unwrap_err();
+        assert_eq!(e.to_string(), "robot \"toy\" has no joint named \"elbow\"");
+        named.remove("elbow");
+        named.insert("mount".to_string(), 1.0);
+        assert!(matches!(m.positions_from_names(&named), Err(RobotError::FixedJointPosition { .. })));
+    }
+
+    #[test]
+    fn gravity_torques_of_a_horizontal_arm() {
+        let m = toy();
+        let g = Vec3::new(0.0, 0.0, -9.81);
+        // Shoulder axis is vertical: gravity exerts no torque about it.
+        let t = m.gravity_torques(&Pose::IDENTITY, &[], g);
+        assert!(t[m.joint_by_name("shoulder").unwrap()].abs() < 1e-12);
+        // Tip the whole robot on its side (base rotated -90 deg about x): the
+        // shoulder axis is now world +y, the 2 kg at 0.1 m along x hangs
+        // off it: torque about +y of r x F = 0.1 * 2 * 9.81.
+        let tipped = Pose::new(Vec3::ZERO, Quat::from_axis_angle(Vec3::new(1.0, 0.0, 0.0), -FRAC_PI_2));
+        let t = m.gravity_torques(&tipped, &[], g);
+        assert!((t[m.joint_by_name("shoulder").unwrap()] - 0.1 * 2.0 * 9.81).abs() < 1e-12, "{t:?}");
+        // The prismatic slider carries no mass; fixed joints report 0.
+        assert_eq!(t[m.joint_by_name("slide").unwrap()], 0.0);
+        assert_eq!(t[m.joint_by_name("mount").unwrap()], 0.0);
+    }
+
+    fn load_err(xml: &str) -> RobotError {
+        RobotModel::from_urdf_str(xml, Path::new("/models/bad.urdf"), &PackageResolver::new()).unwrap_err()
+    }
+
+    #[test]
+    fn missing_file_names_the_path() {
+        let e = RobotModel::from_urdf_file(Path::new("/nonexistent/robot.urdf"), &PackageResolver::new()).unwrap_err();
+        assert!(matches!(e, RobotError::Io { .. }));
+        assert!(e.to_string().starts_with("cannot read URDF file /nonexistent/robot.urdf: "), "{e}");
+    }
+
+    #[test]
+    fn malformed_xml_names_file_line_and_column() {
+        let e = load_err("<robot name=\"r\">\n  <link name=\"a\">\n  </lnk>\n</robot>\n");
+        let RobotError::Xml { line, column, .. } = &e else { panic!("{e:?}") };
+        assert_eq!(*line, Some(3), "{e}");
+        assert!(column.is_some(), "{e}");
+        assert!(e.to_string().starts_with("/models/bad.urdf:3:"), "{e}");
+        // Well-formed XML that is not URDF: no position, but the reason.
+        let e = load_err("<robot name=\"r\"><link name=\"a\"/><joint name=\"j\" type=\"revolute\"><parent link=\"a\"/></joint></robot>");
+        assert!(matches!(e, RobotError::Xml { .. }), "{e:?}");
+        assert!(e.to_string().starts_with("/models/bad.urdf: "), "{e}");
+    }
+
+    #[test]
+    fn unknown_links_and_bad_trees_are_reported() {
+        let e = load_err(
+            "<robot name=\"r\">\n<link name=\"a\"/>\n<joint name=\"j\" type=\"fixed\">\n<parent link=\"a\"/><child link=\"b\"/>\n</joint>\n</robot>",
+        );
+        assert_eq!(
+            e.to_string(),
+            "/models/bad.urdf:3: joint \"j\" names child link \"b\", which is not defined (links: a)"
+        );
+        let e = load_err("<robot name=\"r\"><link name=\"a\"/><link name=\"b\"/></robot>");
+        assert_eq!(e.to_string(), "/models/bad.urdf: several links have no parent joint (a, b); a URDF must have exactly one root link");
+        let e = load_err(
+            r#"<robot name="r"><link name="root"/><link name="a"/><link name="b"/>
+            <joint name="j1" type="fixed"><parent link="a"/><child link="b"/></joint>
+            <joint name="j2" type="fixed"><parent link="b"/><child link="a"/></joint></robot>"#,
+        );
+        assert!(matches!(e, RobotError::Cycle { .. }), "{e:?}");
+        assert!(e.to_string().contains("cycle through links"), "{e}");
+        let e = load_err(
+            r#"<robot name="r"><link name="a"/><link name="b"/>
+            <joint name="j1" type="fixed"><parent link="a"/><child link="b"/></joint>
+            <joint name="j2" type="fixed"><parent link="b"/><child link="a"/></joint></robot>"#,
+        );
+        assert!(matches!(e, RobotError::Cycle { .. }), "{e:?}");
+        let e = load_err(
+            r#"<robot name="r"><link name="a"/><link name="b"/><link name="c"/>
+            <joint name="j1" type="fixed"><parent link="a"/><child link="c"/></joint>
+            <joint name="j2" type="fixed"><parent link="b"/><child link="c"/></joint></robot>"#,
+        );
+        assert_eq!(e.to_string(), "/models/bad.urdf: link \"c\" is the child of several joints (j1, j2); a URDF must be a tree");
+        let e = load_err("<robot name=\"r\">\n<link name=\"a\"/>\n<link name=\"a\"/>\n</robot>");
+        assert_eq!(e.to_string(), "/models/bad.urdf:3: duplicate link name \"a\"");
+        let e = load_err("<robot name=\"r\"></robot>");
+        assert_eq!(e.to_string(), "/models/bad.urdf: the robot has no links");
+        let e = load_err(
+            "<robot name=\"r\"><link name=\"a\"/><link name=\"b\"/>\n<joint name=\"free\" type=\"floating\"><parent link=\"a\"/><child link=\"b\"/></joint></robot>",
+        );
+        assert!(e.to_string().starts_with("/models/bad.urdf:2: joint \"free\" has type \"floating\", which is not supported"), "{e}");
+    }
+
+    #[test]
+    fn out_of_range_values_are_reported() {
+        let joint = |body: &str| {
+            format!("<robot name=\"r\"><link name=\"a\"/><link name=\"b\"/>\n<joint name=\"j\" type=\"revolute\"><parent link=\"a\"/><child link=\"b\"/>{body}</joint></robot>")
+        };
+        let e = load_err(&joint("<axis xyz=\"0 0 0\"/><limit lower=\"0\" upper=\"1\" effort=\"1\" velocity=\"1\"/>"));
+        assert!(e.to_string().starts_with("/models/bad.urdf:2: joint \"j\" <axis>: axis [0.0, 0.0, 0.0] must be a finite, non-zero vector"), "{e}");
+        let e = load_err(&joint("<axis xyz=\"0 0 1\"/>"));
+        assert!(e.to_string().contains("a revolute joint needs <limit"), "{e}");
+        let e = load_err(&joint("<limit lower=\"1\" upper=\"0\" effort=\"1\" velocity=\"1\"/>"));
+        assert!(e.to_string().contains("lower 1 must not exceed upper 0"), "{e}");
+        let e = load_err(&joint("<limit lower=\"0\" upper=\"1\" effort=\"-1\" velocity=\"1\"/>"));
+        assert!(e.to_string().contains("effort -1 and velocity 1 must be >= 0"), "{e}");
+        let e = load_err(&joint("<origin xyz=\"0 nan 0\"/><limit lower=\"0\" upper=\"1\" effort=\"1\" velocity=\"1\"/>"));
+        assert!(e.to_string().contains("must be finite"), "{e}");
+        let e = load_err(&joint("<limit lower=\"0\" upper=\"1\" effort=\"1\" velocity=\"1\"/><mimic joint=\"x\"/>"));
+        assert!(e.to_string().contains("mimics joint \"x\", which is not defined"), "{e}");
+        let e = load_err(
+            "<robot name=\"r\">\n<link name=\"a\"><inertial><mass value=\"-1\"/><inertia ixx=\"1\" ixy=\"0\" ixz=\"0\" iyy=\"1\" iyz=\"0\" izz=\"1\"/></inertial></link></robot>",
+        );
+        assert_eq!(e.to_string(), "/models/bad.urdf:2: link \"a\" <inertial><mass>: mass -1 must be a finite number >= 0 kg");
+        let e = load_err("<robot name=\"r\">\n<link name=\"a\"><collision><geometry><sphere radius=\"0\"/></geometry></collision></link></robot>");
+        assert_eq!(e.to_string(), "/models/bad.urdf:2: link \"a\" <collision> <geometry>: sphere radius 0 must be > 0 m");
+    }
+
+    #[test]
+    fn meshes_resolve_through_packages_and_relative_paths() {
+        let root = temp_dir("mesh");
+        std::fs::create_dir_all(root.join("ws/my_robot/meshes")).unwrap();
+        std::fs::write(root.join("ws/my_robot/meshes/arm.stl"), b"solid x\nendsolid x\n").unwrap();
+        std::fs::create_dir_all(root.join("urdf/parts")).unwrap();
+        std::fs::write(root.join("urdf/parts/local.stl"), b"solid x\nendsolid x\n").unwrap();
+        let urdf = root.join("urdf/robot.urdf");
+        let write = |mesh: &str| {
+            std::fs::write(
+                &urdf,
+                format!("<robot name=\"r\">\n<link name=\"a\">\n<visual><geometry><mesh filename=\"{mesh}\" scale=\"0.001 0.001 0.001\"/></geometry></visual>\n</link>\n</robot>\n"),
+            )
+            .unwrap();
+        };
+        let mut search = PackageResolver::new();
+        search.add_search_path(&format!("{}:{}", root.join("nowhere").display(), root.join("ws").display()));
+
+        write("package://my_robot/meshes/arm.stl");
+        let m = RobotModel::from_urdf_file(&urdf, &search).unwrap();
+        let Geometry::Mesh { path, uri, scale } = &m.links[0].visuals[0].geometry else { panic!() };
+        assert_eq!(path, &root.join("ws/my_robot/meshes/arm.stl"));
+        assert_eq!(uri, "package://my_robot/meshes/arm.stl");
+        assert_eq!(*scale, Vec3::new(0.001, 0.001, 0.001));
+
+        // An explicit mapping wins; the package is found without a search path.
+        let mut explicit = PackageResolver::new();
+        explicit.insert_arg(&format!("my_robot={}", root.join("ws/my_robot").display())).unwrap();
+        assert!(RobotModel::from_urdf_file(&urdf, &explicit).is_ok());
+
+        // Unknown package: where it looked, and how to fix it.
+        let e = RobotModel::from_urdf_file(&urdf, &PackageResolver::new()).unwrap_err();
+        assert!(matches!(e, RobotError::PackageNotFound { .. }));
+        assert!(e.to_string().contains("package \"my_robot\" not found (looked in: nowhere"), "{e}");
+        assert!(e.to_string().contains("set ROS_PACKAGE_PATH") && e.to_string().contains("--package my_robot=DIR"), "{e}");
+        write("package://other_robot/meshes/arm.stl");
+        let e = RobotModel::from_urdf_file(&urdf, &search).unwrap_err();
+        let RobotError::PackageNotFound { searched, link, .. } = &e else { panic!("{e:?}") };
+        assert_eq!(searched, &vec![root.join("nowhere"), root.join("ws")]);
+        assert_eq!(link, "a");
+        assert!(e.to_string().contains(&root.join("ws").display().to_string()), "{e}");
+
+        // Package found, file missing: which link, which URI, where.
+        write("package://my_robot/meshes/missing.stl");
+        let e = RobotModel::from_urdf_file(&urdf, &search).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            format!(
+                "{}: link \"a\": mesh \"package://my_robot/meshes/missing.stl\" not found at {}",
+                urdf.display(),
+                root.join("ws/my_robot/meshes/missing.stl").display()
+            )
+        );
+
+        // Relative paths are relative to the URDF file; file:// is a path.
+        write("parts/local.stl");
+        let m = RobotModel::from_urdf_file(&urdf, &PackageResolver::new()).unwrap();
+        assert!(matches!(&m.links[0].visuals[0].geometry, Geometry::Mesh { path, .. } if *path == root.join("urdf/parts/local.stl")));
+        write(&format!("file://{}", root.join("urdf/parts/local.stl").display()));
+        assert!(RobotModel::from_urdf_file(&urdf, &PackageResolver::new()).is_ok());
+        write("parts/none.stl");
+        let e = RobotModel::from_urdf_file(&urdf, &PackageResolver::new()).unwrap_err();
+        assert!(matches!(e, RobotError::MeshNotFound { .. }), "{e:?}");
+        write("http://example.com/arm.stl");
+        let e = RobotModel::from_urdf_file(&urdf, &PackageResolver::new()).unwrap_err();
+        assert!(matches!(e, RobotError::UnsupportedUri { .. }), "{e:?}");
+        let _ = std::fs::remove_dir_all(&root);
+    }
+
+    #[test]
+    fn arbitrary_text_never_panics() {
+        for text in ["", "<", "<robot", "<robot/>", "<?xml version=\"1.0\"?>", "\u{0}\u{1}", "<robot><link/></robot>", "<a><b></a>"] {
+            let _ = RobotModel::from_urdf_str(text, Path::new("x"), &PackageResolver::new());
+        }
+    }
+}

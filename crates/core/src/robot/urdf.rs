@@ -19,7 +19,11 @@ pub(super) fn build(
     base_dir: &Path,
     resolver: &PackageResolver,
 ) -> Result<RobotModel, RobotError> {
-    let robot = urdf_rs::read_from_string(xml).map_err(|e| xml_error(xml, source, &e.to_string()))?;
+    check_well_formed(xml).map_err(|(offset, message)| {
+        let (line, column) = line_col_at(xml, offset);
+        RobotError::Xml { source_file: source.to_path_buf(), line: Some(line), column: Some(column), message }
+    })?;
+    let robot = urdf_rs::read_from_string(xml).map_err(|e| xml_error(source, &e.to_string()))?;
     let ctx = Ctx { xml, source, base_dir, resolver };
 
     let mut link_index: HashMap<&str, usize> = HashMap::new();
@@ -374,21 +378,84 @@ impl Ctx<'_> {
     }
 }
 
-/// Turns an error of `urdf-rs` (from its XML parsers) into
-/// [`RobotError::Xml`], pulling out a line and column when the message
-/// carries one.
-fn xml_error(xml: &str, source: &Path, message: &str) -> RobotError {
+/// Checks that `xml` is well-formed XML (tags nest and close, attributes
+/// parse), returning the byte offset and a description of the first problem.
+/// urdf-rs reports such problems without a position.
+fn check_well_formed(xml: &str) -> Result<(), (usize, String)> {
+    use quick_xml::events::Event;
+    let mut reader = quick_xml::Reader::from_str(xml);
+    reader.config_mut().check_end_names = true;
+    let mut open: Vec<(String, usize)> = Vec::new();
+    let mut roots = 0;
+    loop {
+        let before = reader.buffer_position() as usize;
+        let event = reader.read_event().map_err(|e| (reader.error_position() as usize, e.to_string()))?;
+        let check_attributes = |e: &quick_xml::events::BytesStart<'_>| -> Result<(), (usize, String)> {
+            for attribute in e.attributes() {
+                attribute.map_err(|err| (before, format!("malformed attribute: {err}")))?;
+            }
+            Ok(())
+        };
+        match event {
+            Event::Start(e) => {
+                check_attributes(&e)?;
+                if open.is_empty() {
+                    roots += 1;
+                }
+                open.push((String::from_utf8_lossy(e.name().as_ref()).into_owned(), before));
+            }
+            Event::Empty(e) => {
+                check_attributes(&e)?;
+                if open.is_empty() {
+                    roots += 1;
+                }
+            }
+            Event::End(_) => {
+                open.pop();
+            }
+            Event::Eof => break,
+            _ => {}
+        }
+        if roots > 1 {
+            return Err((before, "more than one top-level element (a URDF has one <robot>)".into()));
+        }
+    }
+    if let Some((name, at)) = open.last() {
+        return Err((*at, format!("<{name}> is never closed")));
+    }
+    if roots == 0 {
+        return Err((0, "no <robot> element".into()));
+    }
+    Ok(())
+}
+
+/// 1-based line and column (in characters) of a byte offset.
+fn line_col_at(text: &str, offset: usize) -> (usize, usize) {
+    let mut offset = offset.min(text.len());
+    while !text.is_char_boundary(offset) {
+        offset -= 1;
+    }
+    let before = &text[..offset];
+    let line = before.matches('\n').count() + 1;
+    let line_start = before.rfind('\n').map(|i| i + 1).unwrap_or(0);
+    (line, before[line_start..].chars().count() + 1)
+}
+
+/// Turns an error of `urdf-rs` into [`RobotError::Xml`], pulling out a line
+/// and column when the message carries one.
+fn xml_error(source: &Path, message: &str) -> RobotError {
     let (line, column) = line_col_in_message(message);
-    let _ = xml;
     RobotError::Xml { source_file: source.to_path_buf(), line, column, message: message.trim().to_string() }
 }
 
-/// Finds a `LINE:COL` pair (as RustyXml reports it) at the start of a message.
+/// Finds `Line: L, Column: C` (as RustyXml reports positions) in a message.
 fn line_col_in_message(message: &str) -> (Option<usize>, Option<usize>) {
-    let mut parts = message.trim().splitn(3, |c: char| c == ':' || c.is_whitespace());
-    let line = parts.next().and_then(|s| s.parse::<usize>().ok());
-    let column = parts.next().and_then(|s| s.parse::<usize>().ok());
-    match (line, column) {
+    let number_after = |key: &str| {
+        let start = message.find(key)? + key.len();
+        let digits: String = message[start..].trim_start().chars().take_while(|c| c.is_ascii_digit()).collect();
+        digits.parse::<usize>().ok()
+    };
+    match (number_after("Line:"), number_after("Column:")) {
         (Some(l), Some(c)) => (Some(l), Some(c)),
         _ => (None, None),
     }
@@ -458,8 +525,27 @@ mod tests {
     }
 
     #[test]
-    fn line_col_is_read_from_the_start_of_a_message() {
-        assert_eq!(line_col_in_message("3:17 Unexpected token"), (Some(3), Some(17)));
+    fn line_col_is_read_from_parser_messages() {
+        assert_eq!(
+            line_col_in_message("Parse error; Line: 3, Column: 17, Reason: Unexpected token"),
+            (Some(3), Some(17))
+        );
         assert_eq!(line_col_in_message("missing field `velocity`"), (None, None));
+    }
+
+    #[test]
+    fn well_formedness_problems_have_positions() {
+        let at = |xml: &str| check_well_formed(xml).map_err(|(o, m)| (line_col_at(xml, o), m));
+        assert_eq!(at("<robot>\n  <link>\n  </lnk>\n</robot>").unwrap_err().0 .0, 3);
+        let (pos, message) = at("<robot>\n<link name=\"a\">\n</robot>").unwrap_err();
+        assert_eq!(pos.0, 3, "{message}");
+        let (pos, message) = at("<robot>\n  <link name=\"a\">").unwrap_err();
+        assert_eq!((pos, message.as_str()), ((2, 3), "<link> is never closed"));
+        assert!(at("<robot>\n<link name=a/></robot>").is_err());
+        assert!(at("<robot/><robot/>").is_err());
+        assert!(at("").is_err());
+        assert!(at("<?xml version=\"1.0\"?>\n<!-- c --><robot name=\"r\"><link name=\"a\"/></robot>\n").is_ok());
+        assert_eq!(line_col_at("ab\ncd\u{e9}f", 7), (2, 4));
+        assert_eq!(line_col_at("ab\ncd\u{e9}f", 6), (2, 3), "inside a character: its start");
     }
 }
