@@ -270,6 +270,24 @@ impl Joint {
     }
 }
 
+/// The role a link plays for a joint.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LinkRole {
+    /// The joint's parent link.
+    Parent,
+    /// The joint's child link.
+    Child,
+}
+
+impl fmt::Display for LinkRole {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            LinkRole::Parent => "parent",
+            LinkRole::Child => "child",
+        })
+    }
+}
+
 /// Why a robot description could not be loaded or used.
 #[derive(Debug, thiserror::Error)]
 pub enum RobotError {
@@ -330,8 +348,8 @@ pub enum RobotError {
         line: Option<usize>,
         /// The joint's name.
         joint: String,
-        /// `"parent"` or `"child"`.
-        role: &'static str,
+        /// Whether the joint names it as its parent or its child.
+        role: LinkRole,
         /// The missing link's name.
         link: String,
         /// The links that are defined.
@@ -466,8 +484,10 @@ impl RobotModel {
     /// file's directory and `package://` URIs through `resolver`; every mesh
     /// must exist.
     pub fn from_urdf_file(path: &Path, resolver: &PackageResolver) -> Result<Self, RobotError> {
-        let xml = std::fs::read_to_string(path)
-            .map_err(|source| RobotError::Io { path: path.to_path_buf(), source })?;
+        let xml = std::fs::read_to_string(path).map_err(|source| RobotError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
         let base_dir = match path.parent() {
             Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
             _ => PathBuf::from("."),
@@ -477,7 +497,11 @@ impl RobotModel {
 
     /// Reads URDF text. Relative mesh paths are resolved against `base_dir`,
     /// which also names the source in error messages.
-    pub fn from_urdf_str(xml: &str, base_dir: &Path, resolver: &PackageResolver) -> Result<Self, RobotError> {
+    pub fn from_urdf_str(
+        xml: &str,
+        base_dir: &Path,
+        resolver: &PackageResolver,
+    ) -> Result<Self, RobotError> {
         urdf::build(xml, base_dir, base_dir, resolver)
     }
 
@@ -491,7 +515,9 @@ impl RobotModel {
         source: PathBuf,
     ) -> Result<Self, RobotError> {
         if links.is_empty() {
-            return Err(RobotError::NoLinks { source_file: source });
+            return Err(RobotError::NoLinks {
+                source_file: source,
+            });
         }
         let mut parent_joint: Vec<Option<usize>> = vec![None; links.len()];
         let mut child_joints: Vec<Vec<usize>> = vec![Vec::new(); links.len()];
@@ -506,7 +532,9 @@ impl RobotModel {
             parent_joint[joint.child] = Some(j);
             child_joints[joint.parent].push(j);
         }
-        let roots: Vec<usize> = (0..links.len()).filter(|&l| parent_joint[l].is_none()).collect();
+        let roots: Vec<usize> = (0..links.len())
+            .filter(|&l| parent_joint[l].is_none())
+            .collect();
         if roots.len() > 1 {
             return Err(RobotError::MultipleRoots {
                 source_file: source,
@@ -514,7 +542,10 @@ impl RobotModel {
             });
         }
         let Some(&root_link) = roots.first() else {
-            return Err(RobotError::Cycle { source_file: source, links: find_cycle(&links, &joints, &parent_joint) });
+            return Err(RobotError::Cycle {
+                source_file: source,
+                links: find_cycle(&links, &joints, &parent_joint),
+            });
         };
         // Depth-first from the root, children in file order.
         let mut tree_order = Vec::with_capacity(joints.len());
@@ -526,9 +557,21 @@ impl RobotModel {
         if tree_order.len() != joints.len() {
             // Every link has one parent, so links not reached from the root
             // hang off a loop.
-            return Err(RobotError::Cycle { source_file: source, links: find_cycle(&links, &joints, &parent_joint) });
+            return Err(RobotError::Cycle {
+                source_file: source,
+                links: find_cycle(&links, &joints, &parent_joint),
+            });
         }
-        Ok(RobotModel { name, links, joints, root_link, source, parent_joint, child_joints, tree_order })
+        Ok(RobotModel {
+            name,
+            links,
+            joints,
+            root_link,
+            source,
+            parent_joint,
+            child_joints,
+            tree_order,
+        })
     }
 
     /// Index of the link with this name.
@@ -550,7 +593,10 @@ impl RobotModel {
     /// The joints whose parent is `link`, in file order (empty for a leaf or
     /// an index out of range).
     pub fn child_joints(&self, link: usize) -> &[usize] {
-        self.child_joints.get(link).map(Vec::as_slice).unwrap_or(&[])
+        self.child_joints
+            .get(link)
+            .map(Vec::as_slice)
+            .unwrap_or(&[])
     }
 
     /// Every joint, depth-first from the root link (each link's child joints
@@ -598,14 +644,23 @@ impl RobotModel {
     /// A full joint-position vector (indexed by joint index) from positions
     /// by joint name; joints not named are at 0. Errors on an unknown name
     /// or a fixed joint.
-    pub fn positions_from_names(&self, named: &HashMap<String, f64>) -> Result<Vec<f64>, RobotError> {
+    pub fn positions_from_names(
+        &self,
+        named: &HashMap<String, f64>,
+    ) -> Result<Vec<f64>, RobotError> {
         let mut positions = vec![0.0; self.joints.len()];
         for (name, &value) in named {
             let j = self
                 .joint_by_name(name)
-                .ok_or_else(|| RobotError::UnknownJoint { robot: self.name.clone(), joint: name.clone() })?;
+                .ok_or_else(|| RobotError::UnknownJoint {
+                    robot: self.name.clone(),
+                    joint: name.clone(),
+                })?;
             if !self.joints[j].kind.is_movable() {
-                return Err(RobotError::FixedJointPosition { robot: self.name.clone(), joint: name.clone() });
+                return Err(RobotError::FixedJointPosition {
+                    robot: self.name.clone(),
+                    joint: name.clone(),
+                });
             }
             positions[j] = value;
         }
@@ -646,7 +701,8 @@ impl RobotModel {
         }
         let mut pose = *base;
         for j in self.chain_to(link) {
-            pose = pose.compose(&self.joints[j].transform(self.effective_position(joint_positions, j)));
+            pose = pose
+                .compose(&self.joints[j].transform(self.effective_position(joint_positions, j)));
         }
         Some(pose)
     }
@@ -657,7 +713,12 @@ impl RobotModel {
     /// axis, 0 for fixed joints. `gravity_m_s2` is in the world frame (e.g.
     /// `(0, 0, -9.81)`). An actuator holding the robot still must apply the
     /// opposite.
-    pub fn gravity_torques(&self, base: &Pose, joint_positions: &[f64], gravity_m_s2: Vec3) -> Vec<f64> {
+    pub fn gravity_torques(
+        &self,
+        base: &Pose,
+        joint_positions: &[f64],
+        gravity_m_s2: Vec3,
+    ) -> Vec<f64> {
         let poses = self.forward_kinematics(base, joint_positions);
         // Mass and first moment (mass-weighted centre of mass) of each
         // link's subtree, accumulated from the leaves up.
@@ -666,7 +727,9 @@ impl RobotModel {
         for (l, link) in self.links.iter().enumerate() {
             if let Some(i) = link.inertial {
                 mass[l] = i.mass_kg;
-                moment[l] = poses[l].transform_point(i.origin.position_m).scale(i.mass_kg);
+                moment[l] = poses[l]
+                    .transform_point(i.origin.position_m)
+                    .scale(i.mass_kg);
             }
         }
         for &j in self.tree_order.iter().rev() {
@@ -694,7 +757,10 @@ impl RobotModel {
 
     /// Total mass of all links, kg.
     pub fn total_mass_kg(&self) -> f64 {
-        self.links.iter().filter_map(|l| l.inertial.map(|i| i.mass_kg)).sum()
+        self.links
+            .iter()
+            .filter_map(|l| l.inertial.map(|i| i.mass_kg))
+            .sum()
     }
 }
 
@@ -703,7 +769,9 @@ impl RobotModel {
 fn find_cycle(links: &[Link], joints: &[Joint], parent_joint: &[Option<usize>]) -> Vec<String> {
     // Links reachable from a parentless link are not on a loop.
     let mut on_tree = vec![false; links.len()];
-    let mut stack: Vec<usize> = (0..links.len()).filter(|&l| parent_joint[l].is_none()).collect();
+    let mut stack: Vec<usize> = (0..links.len())
+        .filter(|&l| parent_joint[l].is_none())
+        .collect();
     while let Some(l) = stack.pop() {
         on_tree[l] = true;
         for j in joints.iter().filter(|j| j.parent == l) {
@@ -720,7 +788,10 @@ fn find_cycle(links: &[Link], joints: &[Joint], parent_joint: &[Option<usize>]) 
     let mut current = start;
     while let Some(j) = parent_joint[current] {
         if let Some(&i) = visited_at.get(&current) {
-            let mut cycle: Vec<String> = path[i..].iter().map(|&l: &usize| links[l].name.clone()).collect();
+            let mut cycle: Vec<String> = path[i..]
+                .iter()
+                .map(|&l: &usize| links[l].name.clone())
+                .collect();
             cycle.reverse(); // parent -> child order
             cycle.push(cycle[0].clone());
             return cycle;
@@ -795,7 +866,8 @@ mod tests {
     }
 
     fn temp_dir(tag: &str) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!("realitygap-robot-{tag}-{}", std::process::id()));
+        let dir =
+            std::env::temp_dir().join(format!("realitygap-robot-{tag}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
         dir
@@ -813,40 +885,105 @@ mod tests {
         assert_eq!(inertial.inertia, [0.01, 0.0, 0.0, 0.02, 0.0, 0.03]);
         assert_eq!(inertial.inertia_matrix()[4], 0.02);
         assert!(close(inertial.origin.position_m, Vec3::new(0.1, 0.0, 0.0)));
-        assert_eq!(upper.collisions[0].geometry, Geometry::Cylinder { radius_m: 0.03, length_m: 0.2 });
-        assert_eq!(upper.collisions[1].geometry, Geometry::Capsule { radius_m: 0.02, length_m: 0.1 });
+        assert_eq!(
+            upper.collisions[0].geometry,
+            Geometry::Cylinder {
+                radius_m: 0.03,
+                length_m: 0.2
+            }
+        );
+        assert_eq!(
+            upper.collisions[1].geometry,
+            Geometry::Capsule {
+                radius_m: 0.02,
+                length_m: 0.1
+            }
+        );
         let base = &m.links[m.link_by_name("base").unwrap()];
         assert!(base.inertial.is_none());
         assert_eq!(base.collisions[0].name.as_deref(), Some("plate"));
-        assert_eq!(base.visuals[0].rgba, Some([1.0, 0.0, 0.0, 1.0]), "robot-level material by name");
+        assert_eq!(
+            base.visuals[0].rgba,
+            Some([1.0, 0.0, 0.0, 1.0]),
+            "robot-level material by name"
+        );
         let slider = &m.links[m.link_by_name("slider").unwrap()];
-        assert_eq!(slider.visuals[0].rgba, Some([0.0, 0.0, 1.0, 0.5]), "inline material colour");
-        assert_eq!(slider.visuals[0].geometry, Geometry::Sphere { radius_m: 0.01 });
+        assert_eq!(
+            slider.visuals[0].rgba,
+            Some([0.0, 0.0, 1.0, 0.5]),
+            "inline material colour"
+        );
+        assert_eq!(
+            slider.visuals[0].geometry,
+            Geometry::Sphere { radius_m: 0.01 }
+        );
 
         let shoulder = &m.joints[m.joint_by_name("shoulder").unwrap()];
         assert_eq!(shoulder.kind, JointKind::Revolute);
-        assert!(close(shoulder.axis, Vec3::new(0.0, 0.0, 1.0)), "axis is normalised");
-        assert_eq!(shoulder.limits, Some(JointLimits { lower: -1.5, upper: 1.5, effort: 10.0, velocity: 2.0 }));
+        assert!(
+            close(shoulder.axis, Vec3::new(0.0, 0.0, 1.0)),
+            "axis is normalised"
+        );
+        assert_eq!(
+            shoulder.limits,
+            Some(JointLimits {
+                lower: -1.5,
+                upper: 1.5,
+                effort: 10.0,
+                velocity: 2.0
+            })
+        );
         assert_eq!((shoulder.damping, shoulder.friction), (0.5, 0.1));
         let mount = &m.joints[m.joint_by_name("mount").unwrap()];
-        assert_eq!((mount.kind, mount.limits, mount.axis), (JointKind::Fixed, None, Vec3::new(1.0, 0.0, 0.0)));
+        assert_eq!(
+            (mount.kind, mount.limits, mount.axis),
+            (JointKind::Fixed, None, Vec3::new(1.0, 0.0, 0.0))
+        );
         let spin = &m.joints[m.joint_by_name("spin").unwrap()];
         let lim = spin.limits.unwrap();
-        assert!(lim.lower == f64::NEG_INFINITY && lim.upper == f64::INFINITY && lim.effort == f64::INFINITY);
-        assert_eq!(spin.mimic, Some(Mimic { joint: m.joint_by_name("shoulder").unwrap(), multiplier: -2.0, offset: 0.1 }));
+        assert!(
+            lim.lower == f64::NEG_INFINITY
+                && lim.upper == f64::INFINITY
+                && lim.effort == f64::INFINITY
+        );
+        assert_eq!(
+            spin.mimic,
+            Some(Mimic {
+                joint: m.joint_by_name("shoulder").unwrap(),
+                multiplier: -2.0,
+                offset: 0.1
+            })
+        );
         assert!((m.total_mass_kg() - 2.0).abs() < 1e-15);
     }
 
     #[test]
     fn tree_queries_follow_the_kinematic_tree() {
         let m = toy();
-        let names = |js: &[usize]| js.iter().map(|&j| m.joints[j].name.clone()).collect::<Vec<_>>();
-        assert_eq!(names(m.joints_in_tree_order()), ["shoulder", "slide", "mount", "spin"]);
-        assert_eq!(names(&m.actuated_joints()), ["shoulder", "slide"], "mimic joints are not actuated");
-        assert_eq!(names(&m.chain_to(m.link_by_name("tool").unwrap())), ["shoulder", "slide", "mount"]);
+        let names = |js: &[usize]| {
+            js.iter()
+                .map(|&j| m.joints[j].name.clone())
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(
+            names(m.joints_in_tree_order()),
+            ["shoulder", "slide", "mount", "spin"]
+        );
+        assert_eq!(
+            names(&m.actuated_joints()),
+            ["shoulder", "slide"],
+            "mimic joints are not actuated"
+        );
+        assert_eq!(
+            names(&m.chain_to(m.link_by_name("tool").unwrap())),
+            ["shoulder", "slide", "mount"]
+        );
         assert!(m.chain_to(m.root_link).is_empty());
         assert!(m.chain_to(999).is_empty());
-        assert_eq!(m.parent_joint(m.link_by_name("twin").unwrap()), m.joint_by_name("spin"));
+        assert_eq!(
+            m.parent_joint(m.link_by_name("twin").unwrap()),
+            m.joint_by_name("spin")
+        );
         assert_eq!(names(m.child_joints(m.root_link)), ["shoulder", "spin"]);
         assert!(m.child_joints(999).is_empty());
         assert_eq!(m.joint_by_name("nope"), None);
@@ -864,10 +1001,21 @@ mod tests {
         assert!(close(at("upper").position_m, Vec3::new(1.0, 0.0, 0.1)));
         assert!(close(at("slider").position_m, Vec3::new(1.0, 0.25, 0.1)));
         assert!(close(at("tool").position_m, Vec3::new(1.0, 0.25, 0.05)));
-        assert!(at("tool").orientation.angle_to(Quat::from_euler_rpy(std::f64::consts::PI, 0.0, FRAC_PI_2)) < 1e-12);
+        assert!(
+            at("tool").orientation.angle_to(Quat::from_euler_rpy(
+                std::f64::consts::PI,
+                0.0,
+                FRAC_PI_2
+            )) < 1e-12
+        );
         // The mimic joint follows: -2 * pi/2 + 0.1.
         let twin = at("twin").orientation;
-        assert!(twin.angle_to(Quat::from_axis_angle(Vec3::new(0.0, 0.0, 1.0), -std::f64::consts::PI + 0.1)) < 1e-12);
+        assert!(
+            twin.angle_to(Quat::from_axis_angle(
+                Vec3::new(0.0, 0.0, 1.0),
+                -std::f64::consts::PI + 0.1
+            )) < 1e-12
+        );
         // link_pose agrees with the full pass; short position slices mean 0.
         let tool = m.link_by_name("tool").unwrap();
         assert_eq!(m.link_pose(&base, &q, tool), Some(at("tool")));
@@ -884,7 +1032,10 @@ mod tests {
         assert_eq!(e.to_string(), "robot \"toy\" has no joint named \"elbow\"");
         named.remove("elbow");
         named.insert("mount".to_string(), 1.0);
-        assert!(matches!(m.positions_from_names(&named), Err(RobotError::FixedJointPosition { .. })));
+        assert!(matches!(
+            m.positions_from_names(&named),
+            Err(RobotError::FixedJointPosition { .. })
+        ));
     }
 
     #[test]
@@ -897,29 +1048,46 @@ mod tests {
         // Tip the whole robot on its side (base rotated -90 deg about x): the
         // shoulder axis is now world +y, the 2 kg at 0.1 m along x hangs
         // off it: torque about +y of r x F = 0.1 * 2 * 9.81.
-        let tipped = Pose::new(Vec3::ZERO, Quat::from_axis_angle(Vec3::new(1.0, 0.0, 0.0), -FRAC_PI_2));
+        let tipped = Pose::new(
+            Vec3::ZERO,
+            Quat::from_axis_angle(Vec3::new(1.0, 0.0, 0.0), -FRAC_PI_2),
+        );
         let t = m.gravity_torques(&tipped, &[], g);
-        assert!((t[m.joint_by_name("shoulder").unwrap()] - 0.1 * 2.0 * 9.81).abs() < 1e-12, "{t:?}");
+        assert!(
+            (t[m.joint_by_name("shoulder").unwrap()] - 0.1 * 2.0 * 9.81).abs() < 1e-12,
+            "{t:?}"
+        );
         // The prismatic slider carries no mass; fixed joints report 0.
         assert_eq!(t[m.joint_by_name("slide").unwrap()], 0.0);
         assert_eq!(t[m.joint_by_name("mount").unwrap()], 0.0);
     }
 
     fn load_err(xml: &str) -> RobotError {
-        RobotModel::from_urdf_str(xml, Path::new("/models/bad.urdf"), &PackageResolver::new()).unwrap_err()
+        RobotModel::from_urdf_str(xml, Path::new("/models/bad.urdf"), &PackageResolver::new())
+            .unwrap_err()
     }
 
     #[test]
     fn missing_file_names_the_path() {
-        let e = RobotModel::from_urdf_file(Path::new("/nonexistent/robot.urdf"), &PackageResolver::new()).unwrap_err();
+        let e = RobotModel::from_urdf_file(
+            Path::new("/nonexistent/robot.urdf"),
+            &PackageResolver::new(),
+        )
+        .unwrap_err();
         assert!(matches!(e, RobotError::Io { .. }));
-        assert!(e.to_string().starts_with("cannot read URDF file /nonexistent/robot.urdf: "), "{e}");
+        assert!(
+            e.to_string()
+                .starts_with("cannot read URDF file /nonexistent/robot.urdf: "),
+            "{e}"
+        );
     }
 
     #[test]
     fn malformed_xml_names_file_line_and_column() {
         let e = load_err("<robot name=\"r\">\n  <link name=\"a\">\n  </lnk>\n</robot>\n");
-        let RobotError::Xml { line, column, .. } = &e else { panic!("{e:?}") };
+        let RobotError::Xml { line, column, .. } = &e else {
+            panic!("{e:?}")
+        };
         assert_eq!(*line, Some(3), "{e}");
         assert!(column.is_some(), "{e}");
         assert!(e.to_string().starts_with("/models/bad.urdf:3:"), "{e}");
@@ -960,13 +1128,21 @@ mod tests {
         );
         assert_eq!(e.to_string(), "/models/bad.urdf: link \"c\" is the child of several joints (j1, j2); a URDF must be a tree");
         let e = load_err("<robot name=\"r\">\n<link name=\"a\"/>\n<link name=\"a\"/>\n</robot>");
-        assert_eq!(e.to_string(), "/models/bad.urdf:3: duplicate link name \"a\"");
+        assert_eq!(
+            e.to_string(),
+            "/models/bad.urdf:3: duplicate link name \"a\""
+        );
         let e = load_err("<robot name=\"r\"></robot>");
         assert_eq!(e.to_string(), "/models/bad.urdf: the robot has no links");
         let e = load_err(
             "<robot name=\"r\"><link name=\"a\"/><link name=\"b\"/>\n<joint name=\"free\" type=\"floating\"><parent link=\"a\"/><child link=\"b\"/></joint></robot>",
         );
-        assert!(e.to_string().starts_with("/models/bad.urdf:2: joint \"free\" has type \"floating\", which is not supported"), "{e}");
+        assert!(
+            e.to_string().starts_with(
+                "/models/bad.urdf:2: joint \"free\" has type \"floating\", which is not supported"
+            ),
+            "{e}"
+        );
     }
 
     #[test]
@@ -974,31 +1150,62 @@ mod tests {
         let joint = |body: &str| {
             format!("<robot name=\"r\"><link name=\"a\"/><link name=\"b\"/>\n<joint name=\"j\" type=\"revolute\"><parent link=\"a\"/><child link=\"b\"/>{body}</joint></robot>")
         };
-        let e = load_err(&joint("<axis xyz=\"0 0 0\"/><limit lower=\"0\" upper=\"1\" effort=\"1\" velocity=\"1\"/>"));
+        let e = load_err(&joint(
+            "<axis xyz=\"0 0 0\"/><limit lower=\"0\" upper=\"1\" effort=\"1\" velocity=\"1\"/>",
+        ));
         assert!(e.to_string().starts_with("/models/bad.urdf:2: joint \"j\" <axis>: axis [0.0, 0.0, 0.0] must be a finite, non-zero vector"), "{e}");
         let e = load_err(&joint("<axis xyz=\"0 0 1\"/>"));
-        assert!(e.to_string().contains("a revolute joint needs <limit"), "{e}");
-        let e = load_err(&joint("<limit lower=\"1\" upper=\"0\" effort=\"1\" velocity=\"1\"/>"));
-        assert!(e.to_string().contains("lower 1 must not exceed upper 0"), "{e}");
-        let e = load_err(&joint("<limit lower=\"0\" upper=\"1\" effort=\"-1\" velocity=\"1\"/>"));
-        assert!(e.to_string().contains("effort -1 and velocity 1 must be >= 0"), "{e}");
-        let e = load_err(&joint("<origin xyz=\"0 nan 0\"/><limit lower=\"0\" upper=\"1\" effort=\"1\" velocity=\"1\"/>"));
+        assert!(
+            e.to_string().contains("a revolute joint needs <limit"),
+            "{e}"
+        );
+        let e = load_err(&joint(
+            "<limit lower=\"1\" upper=\"0\" effort=\"1\" velocity=\"1\"/>",
+        ));
+        assert!(
+            e.to_string().contains("lower 1 must not exceed upper 0"),
+            "{e}"
+        );
+        let e = load_err(&joint(
+            "<limit lower=\"0\" upper=\"1\" effort=\"-1\" velocity=\"1\"/>",
+        ));
+        assert!(
+            e.to_string()
+                .contains("effort -1 and velocity 1 must be >= 0"),
+            "{e}"
+        );
+        let e = load_err(&joint(
+            "<origin xyz=\"0 nan 0\"/><limit lower=\"0\" upper=\"1\" effort=\"1\" velocity=\"1\"/>",
+        ));
         assert!(e.to_string().contains("must be finite"), "{e}");
-        let e = load_err(&joint("<limit lower=\"0\" upper=\"1\" effort=\"1\" velocity=\"1\"/><mimic joint=\"x\"/>"));
-        assert!(e.to_string().contains("mimics joint \"x\", which is not defined"), "{e}");
+        let e = load_err(&joint(
+            "<limit lower=\"0\" upper=\"1\" effort=\"1\" velocity=\"1\"/><mimic joint=\"x\"/>",
+        ));
+        assert!(
+            e.to_string()
+                .contains("mimics joint \"x\", which is not defined"),
+            "{e}"
+        );
         let e = load_err(
             "<robot name=\"r\">\n<link name=\"a\"><inertial><mass value=\"-1\"/><inertia ixx=\"1\" ixy=\"0\" ixz=\"0\" iyy=\"1\" iyz=\"0\" izz=\"1\"/></inertial></link></robot>",
         );
         assert_eq!(e.to_string(), "/models/bad.urdf:2: link \"a\" <inertial><mass>: mass -1 must be a finite number >= 0 kg");
         let e = load_err("<robot name=\"r\">\n<link name=\"a\"><collision><geometry><sphere radius=\"0\"/></geometry></collision></link></robot>");
-        assert_eq!(e.to_string(), "/models/bad.urdf:2: link \"a\" <collision> <geometry>: sphere radius 0 must be > 0 m");
+        assert_eq!(
+            e.to_string(),
+            "/models/bad.urdf:2: link \"a\" <collision> <geometry>: sphere radius 0 must be > 0 m"
+        );
     }
 
     #[test]
     fn meshes_resolve_through_packages_and_relative_paths() {
         let root = temp_dir("mesh");
         std::fs::create_dir_all(root.join("ws/my_robot/meshes")).unwrap();
-        std::fs::write(root.join("ws/my_robot/meshes/arm.stl"), b"solid x\nendsolid x\n").unwrap();
+        std::fs::write(
+            root.join("ws/my_robot/meshes/arm.stl"),
+            b"solid x\nendsolid x\n",
+        )
+        .unwrap();
         std::fs::create_dir_all(root.join("urdf/parts")).unwrap();
         std::fs::write(root.join("urdf/parts/local.stl"), b"solid x\nendsolid x\n").unwrap();
         let urdf = root.join("urdf/robot.urdf");
@@ -1010,31 +1217,53 @@ mod tests {
             .unwrap();
         };
         let mut search = PackageResolver::new();
-        search.add_search_path(&format!("{}:{}", root.join("nowhere").display(), root.join("ws").display()));
+        search.add_search_path(&format!(
+            "{}:{}",
+            root.join("nowhere").display(),
+            root.join("ws").display()
+        ));
 
         write("package://my_robot/meshes/arm.stl");
         let m = RobotModel::from_urdf_file(&urdf, &search).unwrap();
-        let Geometry::Mesh { path, uri, scale } = &m.links[0].visuals[0].geometry else { panic!() };
+        let Geometry::Mesh { path, uri, scale } = &m.links[0].visuals[0].geometry else {
+            panic!()
+        };
         assert_eq!(path, &root.join("ws/my_robot/meshes/arm.stl"));
         assert_eq!(uri, "package://my_robot/meshes/arm.stl");
         assert_eq!(*scale, Vec3::new(0.001, 0.001, 0.001));
 
         // An explicit mapping wins; the package is found without a search path.
         let mut explicit = PackageResolver::new();
-        explicit.insert_arg(&format!("my_robot={}", root.join("ws/my_robot").display())).unwrap();
+        explicit
+            .insert_arg(&format!("my_robot={}", root.join("ws/my_robot").display()))
+            .unwrap();
         assert!(RobotModel::from_urdf_file(&urdf, &explicit).is_ok());
 
         // Unknown package: where it looked, and how to fix it.
         let e = RobotModel::from_urdf_file(&urdf, &PackageResolver::new()).unwrap_err();
         assert!(matches!(e, RobotError::PackageNotFound { .. }));
-        assert!(e.to_string().contains("package \"my_robot\" not found (looked in: nowhere"), "{e}");
-        assert!(e.to_string().contains("set ROS_PACKAGE_PATH") && e.to_string().contains("--package my_robot=DIR"), "{e}");
+        assert!(
+            e.to_string()
+                .contains("package \"my_robot\" not found (looked in: nowhere"),
+            "{e}"
+        );
+        assert!(
+            e.to_string().contains("set ROS_PACKAGE_PATH")
+                && e.to_string().contains("--package my_robot=DIR"),
+            "{e}"
+        );
         write("package://other_robot/meshes/arm.stl");
         let e = RobotModel::from_urdf_file(&urdf, &search).unwrap_err();
-        let RobotError::PackageNotFound { searched, link, .. } = &e else { panic!("{e:?}") };
+        let RobotError::PackageNotFound { searched, link, .. } = &e else {
+            panic!("{e:?}")
+        };
         assert_eq!(searched, &vec![root.join("nowhere"), root.join("ws")]);
         assert_eq!(link, "a");
-        assert!(e.to_string().contains(&root.join("ws").display().to_string()), "{e}");
+        assert!(
+            e.to_string()
+                .contains(&root.join("ws").display().to_string()),
+            "{e}"
+        );
 
         // Package found, file missing: which link, which URI, where.
         write("package://my_robot/meshes/missing.stl");
@@ -1051,8 +1280,13 @@ mod tests {
         // Relative paths are relative to the URDF file; file:// is a path.
         write("parts/local.stl");
         let m = RobotModel::from_urdf_file(&urdf, &PackageResolver::new()).unwrap();
-        assert!(matches!(&m.links[0].visuals[0].geometry, Geometry::Mesh { path, .. } if *path == root.join("urdf/parts/local.stl")));
-        write(&format!("file://{}", root.join("urdf/parts/local.stl").display()));
+        assert!(
+            matches!(&m.links[0].visuals[0].geometry, Geometry::Mesh { path, .. } if *path == root.join("urdf/parts/local.stl"))
+        );
+        write(&format!(
+            "file://{}",
+            root.join("urdf/parts/local.stl").display()
+        ));
         assert!(RobotModel::from_urdf_file(&urdf, &PackageResolver::new()).is_ok());
         write("parts/none.stl");
         let e = RobotModel::from_urdf_file(&urdf, &PackageResolver::new()).unwrap_err();
@@ -1065,7 +1299,16 @@ mod tests {
 
     #[test]
     fn arbitrary_text_never_panics() {
-        for text in ["", "<", "<robot", "<robot/>", "<?xml version=\"1.0\"?>", "\u{0}\u{1}", "<robot><link/></robot>", "<a><b></a>"] {
+        for text in [
+            "",
+            "<",
+            "<robot",
+            "<robot/>",
+            "<?xml version=\"1.0\"?>",
+            "\u{0}\u{1}",
+            "<robot><link/></robot>",
+            "<a><b></a>",
+        ] {
             let _ = RobotModel::from_urdf_str(text, Path::new("x"), &PackageResolver::new());
         }
     }

@@ -71,7 +71,9 @@ impl PackageResolver {
             Some((name, dir)) if !name.trim().is_empty() && !dir.trim().is_empty() => {
                 Ok((name.trim().to_string(), PathBuf::from(dir.trim())))
             }
-            _ => Err(RobotError::InvalidPackageArg { arg: arg.to_string() }),
+            _ => Err(RobotError::InvalidPackageArg {
+                arg: arg.to_string(),
+            }),
         }
     }
 
@@ -106,9 +108,14 @@ impl PackageResolver {
             if sub.is_dir() {
                 return Ok(sub);
             }
-            let Ok(entries) = std::fs::read_dir(dir) else { continue };
-            let mut subdirs: Vec<PathBuf> =
-                entries.filter_map(|e| e.ok()).map(|e| e.path()).filter(|p| p.is_dir()).collect();
+            let Ok(entries) = std::fs::read_dir(dir) else {
+                continue;
+            };
+            let mut subdirs: Vec<PathBuf> = entries
+                .filter_map(|e| e.ok())
+                .map(|e| e.path())
+                .filter(|p| p.is_dir())
+                .collect();
             subdirs.sort();
             if let Some(found) = subdirs.into_iter().find(|s| package_xml_names(s, name)) {
                 return Ok(found);
@@ -120,10 +127,15 @@ impl PackageResolver {
 
 /// True when `dir/package.xml` exists and its `<name>` is `name`.
 fn package_xml_names(dir: &Path, name: &str) -> bool {
-    let Ok(text) = std::fs::read_to_string(dir.join("package.xml")) else { return false };
-    let Some(start) = text.find("<name>") else { return false };
+    let Ok(text) = std::fs::read_to_string(dir.join("package.xml")) else {
+        return false;
+    };
+    let Some(start) = text.find("<name>") else {
+        return false;
+    };
     let rest = &text[start + "<name>".len()..];
-    rest.find("</name>").is_some_and(|end| rest[..end].trim() == name)
+    rest.find("</name>")
+        .is_some_and(|end| rest[..end].trim() == name)
 }
 
 #[cfg(test)]
@@ -154,17 +166,25 @@ mod tests {
         std::fs::create_dir_all(root.join("elsewhere/alpha")).unwrap();
 
         let mut r = PackageResolver::new();
-        let list = format!("{}::{}", root.join("ws/src").display(), root.join("other/gamma").display());
+        let list = format!(
+            "{}::{}",
+            root.join("ws/src").display(),
+            root.join("other/gamma").display()
+        );
         r.add_search_path(&list);
         assert_eq!(r.search_dirs().len(), 2, "empty entries are skipped");
         assert_eq!(r.find("alpha").unwrap(), root.join("ws/src/alpha"));
         assert_eq!(r.find("beta").unwrap(), root.join("ws/src/beta_repo"));
         assert_eq!(r.find("gamma").unwrap(), root.join("other/gamma"));
         let searched = r.find("delta").unwrap_err();
-        assert_eq!(searched, vec![root.join("ws/src"), root.join("other/gamma")]);
+        assert_eq!(
+            searched,
+            vec![root.join("ws/src"), root.join("other/gamma")]
+        );
 
         // Explicit entries win over the search path.
-        r.insert_arg(&format!("alpha={}", root.join("elsewhere/alpha").display())).unwrap();
+        r.insert_arg(&format!("alpha={}", root.join("elsewhere/alpha").display()))
+            .unwrap();
         assert_eq!(r.find("alpha").unwrap(), root.join("elsewhere/alpha"));
         // An explicit entry that does not exist falls back to the search path
         // and is listed among the places searched.

@@ -59,7 +59,10 @@ impl Aabb {
 impl TriangleMesh {
     /// Reads an STL file, binary or ASCII.
     pub fn read(path: &Path) -> Result<Self, StlError> {
-        let bytes = std::fs::read(path).map_err(|source| StlError::Io { path: path.to_path_buf(), source })?;
+        let bytes = std::fs::read(path).map_err(|source| StlError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
         Self::parse(&bytes, path)
     }
 
@@ -77,7 +80,9 @@ impl TriangleMesh {
         let text = std::str::from_utf8(bytes).map_err(|_| StlError::Malformed {
             path: path.to_path_buf(),
             line: None,
-            message: "neither a binary STL (size does not match the triangle count) nor UTF-8 ASCII STL".into(),
+            message:
+                "neither a binary STL (size does not match the triangle count) nor UTF-8 ASCII STL"
+                    .into(),
         })?;
         if !text.trim_start().starts_with("solid") {
             return Err(StlError::Malformed {
@@ -90,12 +95,14 @@ impl TriangleMesh {
     }
 
     fn parse_binary(body: &[u8], n: usize) -> Self {
-        let f = |b: &[u8], k: usize| f32::from_le_bytes([b[k], b[k + 1], b[k + 2], b[k + 3]]) as f64;
+        let f =
+            |b: &[u8], k: usize| f32::from_le_bytes([b[k], b[k + 1], b[k + 2], b[k + 3]]) as f64;
         let triangles = body
             .chunks_exact(50)
             .take(n)
             .map(|t| {
-                let v = |k: usize| Vec3::new(f(t, 12 + 12 * k), f(t, 16 + 12 * k), f(t, 20 + 12 * k));
+                let v =
+                    |k: usize| Vec3::new(f(t, 12 + 12 * k), f(t, 16 + 12 * k), f(t, 20 + 12 * k));
                 [v(0), v(1), v(2)]
             })
             .collect();
@@ -115,7 +122,10 @@ impl TriangleMesh {
                 return Err(StlError::Malformed {
                     path: path.to_path_buf(),
                     line: Some(i + 1),
-                    message: format!("expected \"vertex X Y Z\" with three finite numbers, found \"{}\"", line.trim()),
+                    message: format!(
+                        "expected \"vertex X Y Z\" with three finite numbers, found \"{}\"",
+                        line.trim()
+                    ),
                 });
             }
             corners.push(Vec3::new(coords[0], coords[1], coords[2]));
@@ -184,9 +194,15 @@ mod tests {
     #[test]
     fn rejects_garbage_with_file_and_line() {
         let e = TriangleMesh::parse(b"solid x\nvertex 0 0\n", Path::new("bad.stl")).unwrap_err();
-        assert_eq!(e.to_string(), "bad.stl:2: expected \"vertex X Y Z\" with three finite numbers, found \"vertex 0 0\"");
+        assert_eq!(
+            e.to_string(),
+            "bad.stl:2: expected \"vertex X Y Z\" with three finite numbers, found \"vertex 0 0\""
+        );
         let e = TriangleMesh::parse(&[0xff; 90], Path::new("bin.stl")).unwrap_err();
-        assert!(e.to_string().starts_with("bin.stl: neither a binary STL"), "{e}");
+        assert!(
+            e.to_string().starts_with("bin.stl: neither a binary STL"),
+            "{e}"
+        );
         let e = TriangleMesh::read(Path::new("/nonexistent/x.stl")).unwrap_err();
         assert!(e.to_string().contains("/nonexistent/x.stl"), "{e}");
     }

@@ -4,8 +4,8 @@
 //! the file and, where it can be found, the line.
 
 use super::{
-    Collision, Geometry, Inertial, Joint, JointKind, JointLimits, Link, Mimic, PackageResolver, RobotError,
-    RobotModel, Visual,
+    Collision, Geometry, Inertial, Joint, JointKind, JointLimits, Link, LinkRole, Mimic,
+    PackageResolver, RobotError, RobotModel, Visual,
 };
 use crate::pose::{Pose, Quat, Vec3};
 use std::collections::HashMap;
@@ -21,10 +21,20 @@ pub(super) fn build(
 ) -> Result<RobotModel, RobotError> {
     check_well_formed(xml).map_err(|(offset, message)| {
         let (line, column) = line_col_at(xml, offset);
-        RobotError::Xml { source_file: source.to_path_buf(), line: Some(line), column: Some(column), message }
+        RobotError::Xml {
+            source_file: source.to_path_buf(),
+            line: Some(line),
+            column: Some(column),
+            message,
+        }
     })?;
     let robot = urdf_rs::read_from_string(xml).map_err(|e| xml_error(source, &e.to_string()))?;
-    let ctx = Ctx { xml, source, base_dir, resolver };
+    let ctx = Ctx {
+        xml,
+        source,
+        base_dir,
+        resolver,
+    };
 
     let mut link_index: HashMap<&str, usize> = HashMap::new();
     for (i, l) in robot.links.iter().enumerate() {
@@ -75,9 +85,13 @@ pub(super) fn build(
             message,
         };
         let Some(&leader) = joint_index.get(m.joint.as_str()) else {
-            return Err(invalid(format!("mimics joint \"{}\", which is not defined", m.joint)));
+            return Err(invalid(format!(
+                "mimics joint \"{}\", which is not defined",
+                m.joint
+            )));
         };
-        if !joints[leader].kind.is_movable() || robot.joints[leader].mimic.is_some() || leader == i {
+        if !joints[leader].kind.is_movable() || robot.joints[leader].mimic.is_some() || leader == i
+        {
             return Err(invalid(format!(
                 "mimics joint \"{}\", which is fixed or itself a mimic joint (not supported)",
                 m.joint
@@ -86,10 +100,16 @@ pub(super) fn build(
         let multiplier = m.multiplier.unwrap_or(1.0);
         let offset = m.offset.unwrap_or(0.0);
         if !(multiplier.is_finite() && offset.is_finite()) {
-            return Err(invalid("multiplier and offset must be finite numbers".into()));
+            return Err(invalid(
+                "multiplier and offset must be finite numbers".into(),
+            ));
         }
         if joints[i].kind.is_movable() {
-            joints[i].mimic = Some(Mimic { joint: leader, multiplier, offset });
+            joints[i].mimic = Some(Mimic {
+                joint: leader,
+                multiplier,
+                offset,
+            });
         }
     }
 
@@ -121,7 +141,13 @@ impl Ctx<'_> {
         }
     }
 
-    fn pose(&self, tag: &str, name: &str, what: &str, p: &urdf_rs::Pose) -> Result<Pose, RobotError> {
+    fn pose(
+        &self,
+        tag: &str,
+        name: &str,
+        what: &str,
+        p: &urdf_rs::Pose,
+    ) -> Result<Pose, RobotError> {
         let (xyz, rpy) = (p.xyz.0, p.rpy.0);
         if !xyz.iter().chain(rpy.iter()).all(|v| v.is_finite()) {
             return Err(self.invalid(
@@ -131,13 +157,27 @@ impl Ctx<'_> {
                 format!("origin xyz {xyz:?} rpy {rpy:?} must be finite numbers"),
             ));
         }
-        Ok(Pose::new(Vec3::from_array(xyz), Quat::from_euler_rpy(rpy[0], rpy[1], rpy[2])))
+        Ok(Pose::new(
+            Vec3::from_array(xyz),
+            Quat::from_euler_rpy(rpy[0], rpy[1], rpy[2]),
+        ))
     }
 
-    fn link(&self, l: &urdf_rs::Link, materials: &HashMap<&str, [f64; 4]>) -> Result<Link, RobotError> {
+    fn link(
+        &self,
+        l: &urdf_rs::Link,
+        materials: &HashMap<&str, [f64; 4]>,
+    ) -> Result<Link, RobotError> {
         let name = l.name.as_str();
         let i = &l.inertial;
-        let inertia = [i.inertia.ixx, i.inertia.ixy, i.inertia.ixz, i.inertia.iyy, i.inertia.iyz, i.inertia.izz];
+        let inertia = [
+            i.inertia.ixx,
+            i.inertia.ixy,
+            i.inertia.ixz,
+            i.inertia.iyy,
+            i.inertia.iyz,
+            i.inertia.izz,
+        ];
         let mass = i.mass.value;
         // urdf-rs gives an all-zero inertial when the element is absent.
         let inertial = if mass == 0.0 && inertia.iter().all(|&v| v == 0.0) {
@@ -151,7 +191,11 @@ impl Ctx<'_> {
                     format!("mass {mass} must be a finite number >= 0 kg"),
                 ));
             }
-            if !inertia.iter().all(|v| v.is_finite()) || inertia[0] < 0.0 || inertia[3] < 0.0 || inertia[5] < 0.0 {
+            if !inertia.iter().all(|v| v.is_finite())
+                || inertia[0] < 0.0
+                || inertia[3] < 0.0
+                || inertia[5] < 0.0
+            {
                 return Err(self.invalid(
                     "link",
                     name,
@@ -159,14 +203,20 @@ impl Ctx<'_> {
                     format!("inertia {inertia:?} must be finite with ixx, iyy, izz >= 0 kg m^2"),
                 ));
             }
-            Some(Inertial { mass_kg: mass, origin: self.pose("link", name, "<inertial><origin>", &i.origin)?, inertia })
+            Some(Inertial {
+                mass_kg: mass,
+                origin: self.pose("link", name, "<inertial><origin>", &i.origin)?,
+                inertia,
+            })
         };
         let mut visuals = Vec::with_capacity(l.visual.len());
         for v in &l.visual {
-            let rgba = v
-                .material
-                .as_ref()
-                .and_then(|m| m.color.as_ref().map(|c| c.rgba.0).or_else(|| materials.get(m.name.as_str()).copied()));
+            let rgba = v.material.as_ref().and_then(|m| {
+                m.color
+                    .as_ref()
+                    .map(|c| c.rgba.0)
+                    .or_else(|| materials.get(m.name.as_str()).copied())
+            });
             visuals.push(Visual {
                 name: v.name.clone(),
                 origin: self.pose("link", name, "<visual><origin>", &v.origin)?,
@@ -182,29 +232,64 @@ impl Ctx<'_> {
                 geometry: self.geometry(name, "<collision>", &c.geometry)?,
             });
         }
-        Ok(Link { name: l.name.clone(), inertial, visuals, collisions })
+        Ok(Link {
+            name: l.name.clone(),
+            inertial,
+            visuals,
+            collisions,
+        })
     }
 
-    fn geometry(&self, link: &str, what: &str, g: &urdf_rs::Geometry) -> Result<Geometry, RobotError> {
-        let bad = |message: String| self.invalid("link", link, format!("link \"{link}\" {what} <geometry>"), message);
+    fn geometry(
+        &self,
+        link: &str,
+        what: &str,
+        g: &urdf_rs::Geometry,
+    ) -> Result<Geometry, RobotError> {
+        let bad = |message: String| {
+            self.invalid(
+                "link",
+                link,
+                format!("link \"{link}\" {what} <geometry>"),
+                message,
+            )
+        };
         let positive = |v: f64| v.is_finite() && v > 0.0;
         Ok(match g {
             urdf_rs::Geometry::Box { size } => {
                 if !size.0.iter().all(|&v| positive(v)) {
-                    return Err(bad(format!("box size {:?} must be three numbers > 0 m", size.0)));
+                    return Err(bad(format!(
+                        "box size {:?} must be three numbers > 0 m",
+                        size.0
+                    )));
                 }
-                Geometry::Box { size_m: Vec3::from_array(size.0) }
+                Geometry::Box {
+                    size_m: Vec3::from_array(size.0),
+                }
             }
-            urdf_rs::Geometry::Cylinder { radius, length } | urdf_rs::Geometry::Capsule { radius, length } => {
+            urdf_rs::Geometry::Cylinder { radius, length }
+            | urdf_rs::Geometry::Capsule { radius, length } => {
                 let capsule = matches!(g, urdf_rs::Geometry::Capsule { .. });
-                let length_ok = if capsule { length.is_finite() && *length >= 0.0 } else { positive(*length) };
+                let length_ok = if capsule {
+                    length.is_finite() && *length >= 0.0
+                } else {
+                    positive(*length)
+                };
                 if !(positive(*radius) && length_ok) {
-                    return Err(bad(format!("radius {radius} m and length {length} m must be > 0")));
+                    return Err(bad(format!(
+                        "radius {radius} m and length {length} m must be > 0"
+                    )));
                 }
                 if capsule {
-                    Geometry::Capsule { radius_m: *radius, length_m: *length }
+                    Geometry::Capsule {
+                        radius_m: *radius,
+                        length_m: *length,
+                    }
                 } else {
-                    Geometry::Cylinder { radius_m: *radius, length_m: *length }
+                    Geometry::Cylinder {
+                        radius_m: *radius,
+                        length_m: *length,
+                    }
                 }
             }
             urdf_rs::Geometry::Sphere { radius } => {
@@ -214,11 +299,17 @@ impl Ctx<'_> {
                 Geometry::Sphere { radius_m: *radius }
             }
             urdf_rs::Geometry::Mesh { filename, scale } => {
-                let scale = scale.map(|s| Vec3::from_array(s.0)).unwrap_or(Vec3::new(1.0, 1.0, 1.0));
+                let scale = scale
+                    .map(|s| Vec3::from_array(s.0))
+                    .unwrap_or(Vec3::new(1.0, 1.0, 1.0));
                 if !scale.is_finite() {
                     return Err(bad(format!("mesh scale {scale:?} must be finite")));
                 }
-                Geometry::Mesh { path: self.resolve_mesh(link, filename)?, uri: filename.clone(), scale }
+                Geometry::Mesh {
+                    path: self.resolve_mesh(link, filename)?,
+                    uri: filename.clone(),
+                    scale,
+                }
             }
         })
     }
@@ -283,18 +374,21 @@ impl Ctx<'_> {
                 })
             }
         };
-        let find_link = |role: &'static str, link: &str| {
-            link_index.get(link).copied().ok_or_else(|| RobotError::UnknownLink {
-                source_file: self.source.to_path_buf(),
-                line,
-                joint: j.name.clone(),
-                role,
-                link: link.to_string(),
-                known_links: urdf_links.iter().map(|l| l.name.clone()).collect(),
-            })
+        let find_link = |role: LinkRole, link: &str| {
+            link_index
+                .get(link)
+                .copied()
+                .ok_or_else(|| RobotError::UnknownLink {
+                    source_file: self.source.to_path_buf(),
+                    line,
+                    joint: j.name.clone(),
+                    role,
+                    link: link.to_string(),
+                    known_links: urdf_links.iter().map(|l| l.name.clone()).collect(),
+                })
         };
-        let parent = find_link("parent", &j.parent.link)?;
-        let child = find_link("child", &j.child.link)?;
+        let parent = find_link(LinkRole::Parent, &j.parent.link)?;
+        let child = find_link(LinkRole::Child, &j.child.link)?;
         if parent == child {
             return Err(RobotError::Cycle {
                 source_file: self.source.to_path_buf(),
@@ -319,7 +413,10 @@ impl Ctx<'_> {
                     "joint",
                     name,
                     format!("joint \"{name}\" <axis>"),
-                    format!("axis {:?} must be a finite, non-zero vector for a {kind} joint", j.axis.xyz.0),
+                    format!(
+                        "axis {:?} must be a finite, non-zero vector for a {kind} joint",
+                        j.axis.xyz.0
+                    ),
                 ))
             }
         };
@@ -352,20 +449,36 @@ impl Ctx<'_> {
                         format!("lower {} must not exceed upper {}", l.lower, l.upper),
                     ));
                 }
-                Some(JointLimits { lower: l.lower, upper: l.upper, effort: l.effort, velocity: l.velocity })
+                Some(JointLimits {
+                    lower: l.lower,
+                    upper: l.upper,
+                    effort: l.effort,
+                    velocity: l.velocity,
+                })
             }
         };
         if let Some(lim) = &limits {
-            if lim.effort.is_nan() || lim.effort < 0.0 || lim.velocity.is_nan() || lim.velocity < 0.0 {
+            if lim.effort.is_nan()
+                || lim.effort < 0.0
+                || lim.velocity.is_nan()
+                || lim.velocity < 0.0
+            {
                 return Err(self.invalid(
                     "joint",
                     name,
                     format!("joint \"{name}\" <limit>"),
-                    format!("effort {} and velocity {} must be >= 0", lim.effort, lim.velocity),
+                    format!(
+                        "effort {} and velocity {} must be >= 0",
+                        lim.effort, lim.velocity
+                    ),
                 ));
             }
         }
-        let (damping, friction) = j.dynamics.as_ref().map(|d| (d.damping, d.friction)).unwrap_or((0.0, 0.0));
+        let (damping, friction) = j
+            .dynamics
+            .as_ref()
+            .map(|d| (d.damping, d.friction))
+            .unwrap_or((0.0, 0.0));
         if !(damping.is_finite() && damping >= 0.0 && friction.is_finite() && friction >= 0.0) {
             return Err(self.invalid(
                 "joint",
@@ -374,7 +487,18 @@ impl Ctx<'_> {
                 format!("damping {damping} and friction {friction} must be finite and >= 0"),
             ));
         }
-        Ok(Joint { name: j.name.clone(), kind, parent, child, origin, axis, limits, damping, friction, mimic: None })
+        Ok(Joint {
+            name: j.name.clone(),
+            kind,
+            parent,
+            child,
+            origin,
+            axis,
+            limits,
+            damping,
+            friction,
+            mimic: None,
+        })
     }
 }
 
@@ -389,20 +513,26 @@ fn check_well_formed(xml: &str) -> Result<(), (usize, String)> {
     let mut roots = 0;
     loop {
         let before = reader.buffer_position() as usize;
-        let event = reader.read_event().map_err(|e| (reader.error_position() as usize, e.to_string()))?;
-        let check_attributes = |e: &quick_xml::events::BytesStart<'_>| -> Result<(), (usize, String)> {
-            for attribute in e.attributes() {
-                attribute.map_err(|err| (before, format!("malformed attribute: {err}")))?;
-            }
-            Ok(())
-        };
+        let event = reader
+            .read_event()
+            .map_err(|e| (reader.error_position() as usize, e.to_string()))?;
+        let check_attributes =
+            |e: &quick_xml::events::BytesStart<'_>| -> Result<(), (usize, String)> {
+                for attribute in e.attributes() {
+                    attribute.map_err(|err| (before, format!("malformed attribute: {err}")))?;
+                }
+                Ok(())
+            };
         match event {
             Event::Start(e) => {
                 check_attributes(&e)?;
                 if open.is_empty() {
                     roots += 1;
                 }
-                open.push((String::from_utf8_lossy(e.name().as_ref()).into_owned(), before));
+                open.push((
+                    String::from_utf8_lossy(e.name().as_ref()).into_owned(),
+                    before,
+                ));
             }
             Event::Empty(e) => {
                 check_attributes(&e)?;
@@ -417,7 +547,10 @@ fn check_well_formed(xml: &str) -> Result<(), (usize, String)> {
             _ => {}
         }
         if roots > 1 {
-            return Err((before, "more than one top-level element (a URDF has one <robot>)".into()));
+            return Err((
+                before,
+                "more than one top-level element (a URDF has one <robot>)".into(),
+            ));
         }
     }
     if let Some((name, at)) = open.last() {
@@ -445,14 +578,23 @@ fn line_col_at(text: &str, offset: usize) -> (usize, usize) {
 /// and column when the message carries one.
 fn xml_error(source: &Path, message: &str) -> RobotError {
     let (line, column) = line_col_in_message(message);
-    RobotError::Xml { source_file: source.to_path_buf(), line, column, message: message.trim().to_string() }
+    RobotError::Xml {
+        source_file: source.to_path_buf(),
+        line,
+        column,
+        message: message.trim().to_string(),
+    }
 }
 
 /// Finds `Line: L, Column: C` (as RustyXml reports positions) in a message.
 fn line_col_in_message(message: &str) -> (Option<usize>, Option<usize>) {
     let number_after = |key: &str| {
         let start = message.find(key)? + key.len();
-        let digits: String = message[start..].trim_start().chars().take_while(|c| c.is_ascii_digit()).collect();
+        let digits: String = message[start..]
+            .trim_start()
+            .chars()
+            .take_while(|c| c.is_ascii_digit())
+            .collect();
         digits.parse::<usize>().ok()
     };
     match (number_after("Line:"), number_after("Column:")) {
@@ -479,9 +621,14 @@ pub(super) fn element_lines(xml: &str, tag: &str, name: &str) -> Vec<usize> {
             }
         }
         let after = start + 1;
-        let end_tag = xml[after..].find('>').map(|e| after + e).unwrap_or(xml.len());
+        let end_tag = xml[after..]
+            .find('>')
+            .map(|e| after + e)
+            .unwrap_or(xml.len());
         if xml[after..].starts_with(tag)
-            && bytes.get(after + tag.len()).is_some_and(|b| b.is_ascii_whitespace())
+            && bytes
+                .get(after + tag.len())
+                .is_some_and(|b| b.is_ascii_whitespace())
             && attribute(&xml[after + tag.len()..end_tag], "name") == Some(name)
         {
             lines.push(xml[..start].bytes().filter(|&b| b == b'\n').count() + 1);
@@ -496,7 +643,10 @@ fn attribute<'a>(tag_text: &'a str, key: &str) -> Option<&'a str> {
     let mut rest = tag_text;
     while let Some(eq) = rest.find('=') {
         let k = rest[..eq].trim();
-        let k = k.rsplit(|c: char| c.is_ascii_whitespace()).next().unwrap_or(k);
+        let k = k
+            .rsplit(|c: char| c.is_ascii_whitespace())
+            .next()
+            .unwrap_or(k);
         let after = rest[eq + 1..].trim_start();
         let quote = after.chars().next()?;
         if quote != '"' && quote != '\'' {
@@ -530,13 +680,22 @@ mod tests {
             line_col_in_message("Parse error; Line: 3, Column: 17, Reason: Unexpected token"),
             (Some(3), Some(17))
         );
-        assert_eq!(line_col_in_message("missing field `velocity`"), (None, None));
+        assert_eq!(
+            line_col_in_message("missing field `velocity`"),
+            (None, None)
+        );
     }
 
     #[test]
     fn well_formedness_problems_have_positions() {
         let at = |xml: &str| check_well_formed(xml).map_err(|(o, m)| (line_col_at(xml, o), m));
-        assert_eq!(at("<robot>\n  <link>\n  </lnk>\n</robot>").unwrap_err().0 .0, 3);
+        assert_eq!(
+            at("<robot>\n  <link>\n  </lnk>\n</robot>")
+                .unwrap_err()
+                .0
+                 .0,
+            3
+        );
         let (pos, message) = at("<robot>\n<link name=\"a\">\n</robot>").unwrap_err();
         assert_eq!(pos.0, 3, "{message}");
         let (pos, message) = at("<robot>\n  <link name=\"a\">").unwrap_err();
@@ -544,8 +703,15 @@ mod tests {
         assert!(at("<robot>\n<link name=a/></robot>").is_err());
         assert!(at("<robot/><robot/>").is_err());
         assert!(at("").is_err());
-        assert!(at("<?xml version=\"1.0\"?>\n<!-- c --><robot name=\"r\"><link name=\"a\"/></robot>\n").is_ok());
+        assert!(at(
+            "<?xml version=\"1.0\"?>\n<!-- c --><robot name=\"r\"><link name=\"a\"/></robot>\n"
+        )
+        .is_ok());
         assert_eq!(line_col_at("ab\ncd\u{e9}f", 7), (2, 4));
-        assert_eq!(line_col_at("ab\ncd\u{e9}f", 6), (2, 3), "inside a character: its start");
+        assert_eq!(
+            line_col_at("ab\ncd\u{e9}f", 6),
+            (2, 3),
+            "inside a character: its start"
+        );
     }
 }
