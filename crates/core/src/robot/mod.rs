@@ -1297,6 +1297,18 @@ mod tests {
         let _ = std::fs::remove_dir_all(&root);
     }
 
+    proptest::proptest! {
+        #[test]
+        fn mutilated_urdf_never_panics(cut in 0usize..2000, len in 0usize..40, insert in "[<>/=\"a-z0-9 .-]{0,6}") {
+            let start = cut.min(ARM.len());
+            let end = (start + len).min(ARM.len());
+            if ARM.is_char_boundary(start) && ARM.is_char_boundary(end) {
+                let text = format!("{}{}{}", &ARM[..start], insert, &ARM[end..]);
+                let _ = RobotModel::from_urdf_str(&text, Path::new("x"), &PackageResolver::new());
+            }
+        }
+    }
+
     #[test]
     fn arbitrary_text_never_panics() {
         for text in [
