@@ -8,6 +8,7 @@ use std::process::ExitCode;
 mod cmd_compare;
 mod cmd_engines;
 mod cmd_import;
+mod cmd_report;
 mod cmd_run;
 
 /// Measure the reality gap: how far physics engines stray from a real robot
@@ -33,6 +34,9 @@ enum Command {
     Run(cmd_run::Args),
     /// List the physics engines compiled in, with their versions.
     Engines(cmd_engines::Args),
+    /// Write the figures (SVG, PNG), tables and a self-contained
+    /// index.html of a study.
+    Report(cmd_report::Args),
     /// Internal: run one simulation (a job as JSON on standard input) and
     /// print its trajectory; `run` starts one such process per run.
     #[command(name = "__run-one", hide = true)]
@@ -46,6 +50,7 @@ fn main() -> ExitCode {
         Command::Import(cmd) => cmd_import::run(cmd),
         Command::Run(args) => cmd_run::run(args),
         Command::Engines(args) => cmd_engines::run(args),
+        Command::Report(args) => cmd_report::run(args),
         Command::RunOne => cmd_run::run_one(),
     };
     match result {

@@ -1,0 +1,198 @@
+//! Figures and the HTML report of a reality-gap study.
+//!
+//! Input: the [`SceneReport`]s the analysis produced (one per scene) and a
+//! [`Provenance`] saying what produced them. Output, by [`write_report`],
+//! in one folder:
+//!
+//! - `figures/<scene>_<measure>.svg` and `.png`: per scene, each source's
+//!   mean over time of the wrist's distance to the goal, its distance to the
+//!   reference's mean, and for scenes with a cube the cube's displacement
+//!   and pitch change ([`figures`]);
+//! - `table.md`, `table.csv`, `table.json`, `table.tex`: the accumulated-
+//!   error table and measures, rendered by `realitygap_analysis::table`;
+//! - `series.json`: the same JSON with every per-step series, for
+//!   re-plotting elsewhere; `provenance.json`;
+//! - `index.html`: one self-contained page (figures inline as SVG, style
+//!   inline, no scripts, no network) with the table, per-scene figures,
+//!   measures, the closest source per scene and phase, run-health flags,
+//!   the alignment used and provenance ([`html`]).
+//!
+//! The `realitygap report` and `realitygap reproduce` commands both end
+//! here.
+
+pub mod figures;
+pub mod html;
+pub mod provenance;
+#[cfg(test)]
+mod testdata;
+
+pub use figures::{Figure, FigureKind, SourceStyles};
+pub use provenance::{Provenance, SourceProvenance};
+
+use realitygap_analysis::table::{self, Format};
+use realitygap_analysis::SceneReport;
+use std::path::{Path, PathBuf};
+
+/// Errors of [`write_report`].
+#[derive(Debug, thiserror::Error)]
+pub enum ReportError {
+    /// A file or folder could not be written.
+    #[error("cannot {action} {}: {source}", path.display())]
+    Io {
+        /// What was being done (`create folder`, `write`).
+        action: &'static str,
+        /// The file or folder.
+        path: PathBuf,
+        /// The underlying error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A figure could not be drawn.
+    #[error(transparent)]
+    Figure(#[from] figures::FigureError),
+    /// There is nothing to report.
+    #[error("nothing to report: no scene was evaluated")]
+    Empty,
+}
+
+/// The files [`write_report`] wrote.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct ReportFiles {
+    /// The HTML report.
+    pub index_html: PathBuf,
+    /// Figures as SVG, in report order.
+    pub figures_svg: Vec<PathBuf>,
+    /// The same figures as PNG.
+    pub figures_png: Vec<PathBuf>,
+    /// `table.md`, `table.csv`, `table.json`, `table.tex`.
+    pub tables: Vec<PathBuf>,
+    /// `series.json` and `provenance.json`.
+    pub data: Vec<PathBuf>,
+}
+
+fn write(path: &Path, bytes: impl AsRef<[u8]>) -> Result<PathBuf, ReportError> {
+    std::fs::write(path, bytes).map_err(|source| ReportError::Io {
+        action: "write",
+        path: path.to_path_buf(),
+        source,
+    })?;
+    Ok(path.to_path_buf())
+}
+
+/// Writes the figures, tables and `index.html` of `reports` into `out_dir`
+/// (created if missing; files of an earlier report there are replaced).
+pub fn write_report(
+    reports: &[SceneReport],
+    provenance: &Provenance,
+    out_dir: &Path,
+) -> Result<ReportFiles, ReportError> {
+    if reports.is_empty() {
+        return Err(ReportError::Empty);
+    }
+    let fig_dir = out_dir.join("figures");
+    std::fs::create_dir_all(&fig_dir).map_err(|source| ReportError::Io {
+        action: "create folder",
+        path: fig_dir.clone(),
+        source,
+    })?;
+    let mut files = ReportFiles::default();
+
+    let styles = SourceStyles::for_reports(reports);
+    let figures: Vec<Figure> = reports
+        .iter()
+        .flat_map(|r| figures::scene_figures(r, &styles))
+        .collect();
+    let mut svgs = Vec::with_capacity(figures.len());
+    let mut rel = Vec::with_capacity(figures.len());
+    for f in &figures {
+        let svg = f.to_svg()?;
+        let png = f.to_png()?;
+        files
+            .figures_svg
+            .push(write(&fig_dir.join(format!("{}.svg", f.stem)), &svg)?);
+        files
+            .figures_png
+            .push(write(&fig_dir.join(format!("{}.png", f.stem)), &png)?);
+        rel.push((format!("figures/{}.svg", f.stem), format!("figures/{}.png", f.stem)));
+        svgs.push(svg);
+    }
+
+    let tables = [
+        ("table.md", Format::Markdown),
+        ("table.csv", Format::Csv),
+        ("table.json", Format::Json),
+        ("table.tex", Format::Latex),
+    ];
+    for (name, format) in tables {
+        files
+            .tables
+            .push(write(&out_dir.join(name), table::render(reports, format))?);
+    }
+    let series = serde_json::to_string(&table::to_json(reports, true)).unwrap_or_default();
+    files.data.push(write(&out_dir.join("series.json"), series + "\n")?);
+    let prov = serde_json::to_string_pretty(provenance).unwrap_or_default();
+    files.data.push(write(&out_dir.join("provenance.json"), prov + "\n")?);
+
+    let entries: Vec<html::FigureEntry<'_>> = figures
+        .iter()
+        .zip(&svgs)
+        .zip(&rel)
+        .map(|((figure, svg), (svg_file, png_file))| html::FigureEntry {
+            figure,
+            svg,
+            svg_file,
+            png_file,
+        })
+        .collect();
+    let downloads: Vec<(String, String)> = vec![
+        ("table.md".into(), "table (Markdown)".into()),
+        ("table.csv".into(), "table (CSV)".into()),
+        ("table.json".into(), "measures (JSON)".into()),
+        ("table.tex".into(), "table (LaTeX)".into()),
+        ("series.json".into(), "per-step series (JSON)".into()),
+        ("provenance.json".into(), "provenance (JSON)".into()),
+    ];
+    let page = html::render_index(reports, &entries, provenance, &downloads);
+    files.index_html = write(&out_dir.join("index.html"), page)?;
+    Ok(files)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn write_report_writes_every_file() {
+        let dir = std::env::temp_dir().join(format!("rg-report-test-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let reports = [testdata::scene()];
+        let files = write_report(&reports, &Provenance::new("t"), &dir).unwrap();
+        assert_eq!(files.figures_svg.len(), 2);
+        assert_eq!(files.figures_png.len(), 2);
+        for f in files
+            .figures_svg
+            .iter()
+            .chain(&files.figures_png)
+            .chain(&files.tables)
+            .chain(&files.data)
+        {
+            let len = std::fs::metadata(f).unwrap().len();
+            assert!(len > 100, "{}: {len} bytes", f.display());
+        }
+        let html = std::fs::read_to_string(&files.index_html).unwrap();
+        assert!(html.contains("href=\"figures/scene_test_goal_distance.png\""));
+        assert!(files.figures_png[0].ends_with("figures/scene_test_goal_distance.png"));
+        assert!(matches!(
+            write_report(&[], &Provenance::new("t"), &dir),
+            Err(ReportError::Empty)
+        ));
+        // An output path that is a file is an error naming it.
+        let blocker = dir.join("blocker");
+        std::fs::write(&blocker, "x").unwrap();
+        let e = write_report(&reports, &Provenance::new("t"), &blocker)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("blocker"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
