@@ -9,6 +9,7 @@ mod cmd_compare;
 mod cmd_engines;
 mod cmd_import;
 mod cmd_report;
+mod cmd_reproduce;
 mod cmd_run;
 
 /// Measure the reality gap: how far physics engines stray from a real robot
@@ -37,6 +38,10 @@ enum Command {
     /// Write the figures (SVG, PNG), tables and a self-contained
     /// index.html of a study.
     Report(cmd_report::Args),
+    /// The whole study in one command: every scene in every engine, the
+    /// comparison (against the real recordings with --data), the table,
+    /// the figures and the report.
+    Reproduce(cmd_reproduce::Args),
     /// Internal: run one simulation (a job as JSON on standard input) and
     /// print its trajectory; `run` starts one such process per run.
     #[command(name = "__run-one", hide = true)]
@@ -51,6 +56,7 @@ fn main() -> ExitCode {
         Command::Run(args) => cmd_run::run(args),
         Command::Engines(args) => cmd_engines::run(args),
         Command::Report(args) => cmd_report::run(args),
+        Command::Reproduce(args) => cmd_reproduce::run(args),
         Command::RunOne => cmd_run::run_one(),
     };
     match result {

@@ -146,7 +146,12 @@ impl Study {
     /// line and column.
     pub fn from_file(path: &Path) -> Result<Study> {
         let text = std::fs::read_to_string(path).with_context(|| format!("cannot read study file {}", path.display()))?;
-        let study: Study = toml::from_str(&text).map_err(|e| anyhow!("{}: {}", path.display(), toml_error(&text, &e)))?;
+        Study::from_toml_str(&text, path)
+    }
+
+    /// Parses and checks a study from its text; `path` names it in errors.
+    pub fn from_toml_str(text: &str, path: &Path) -> Result<Study> {
+        let study: Study = toml::from_str(text).map_err(|e| anyhow!("{}: {}", path.display(), toml_error(text, &e)))?;
         study.check().with_context(|| format!("in study file {}", path.display()))?;
         Ok(study)
     }
