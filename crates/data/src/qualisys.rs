@@ -577,10 +577,8 @@ fn read_header_line(line: &Line, file: &Path, header: &mut Header) -> Result<(),
             }
             header.body_names = Some(names);
         }
-        b"DATA_INCLUDED" => {
-            if values.first().is_some_and(|v| *v != b"6D") {
-                return Err(bad("6D (only 6DOF exports can be imported)"));
-            }
+        b"DATA_INCLUDED" if values.first().is_some_and(|v| *v != b"6D") => {
+            return Err(bad("6D (only 6DOF exports can be imported)"));
         }
         _ => {}
     }

@@ -284,8 +284,7 @@ pub fn parse(bytes: &[u8], file: &Path, opts: &RecordedOptions) -> Result<Import
             let position = Vec3::new(v[offset], v[offset + 1], v[offset + 2]);
             let q = order.quat(&[v[offset + 3], v[offset + 4], v[offset + 5], v[offset + 6]]);
             let norm = q.norm();
-            // Written so that a NaN norm counts as off.
-            if !((norm - 1.0).abs() <= opts.norm_tolerance) {
+            if norm.is_nan() || (norm - 1.0).abs() > opts.norm_tolerance {
                 norm_off = true;
             }
             let orientation = if norm == 0.0 { Quat::IDENTITY } else { q.normalized().unwrap_or(q) };

@@ -293,7 +293,7 @@ fn wrong_column_count() {
     assert_eq!(e.line, Some(1));
     assert!(e.message.contains("found 53") && e.message.contains("3 bodies"), "{e}");
     // A later row.
-    let short = row(Some((2, 0.01)), &[b.clone()], true);
+    let short = row(Some((2, 0.01)), std::slice::from_ref(&b), true);
     let s = format!("{good}\r\n{short}\r\n{good}\r\n");
     let e = parse_str(&s, &two_bodies()).unwrap_err();
     assert_eq!(e.line, Some(2));

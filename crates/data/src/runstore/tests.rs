@@ -8,7 +8,7 @@ fn sample_trajectory() -> Trajectory {
         Some(Pose::new(Vec3::new(0.0670618953, 0.8718789057, -0.0), Quat::IDENTITY)),
         None,
         Some(Pose::new(Vec3::new(1e17, -1.5e-19, f64::INFINITY), Quat::new(0.5, -0.5, 0.5, 0.5))),
-        Some(Pose::new(Vec3::new(1.0 / 3.0, 2e-5, 9.999999999999999e15), Quat::new(0.0, 1.0, 0.0, 0.0))),
+        Some(Pose::new(Vec3::new(1.0 / 3.0, 2e-5, 9_999_999_999_999_998.0), Quat::new(0.0, 1.0, 0.0, 0.0))),
     ];
     t.bodies[1].poses = vec![
         Some(Pose::new(Vec3::new(0.5, 0.0, 0.0375), Quat::IDENTITY)),
