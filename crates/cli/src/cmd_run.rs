@@ -433,7 +433,8 @@ fn run_child(job: &Job, timeout_s: Option<f64>) -> ChildEnd {
             Err(e) => ChildEnd::Failed(format!("the run's output could not be read ({e}); stderr: {}", last_lines(&err, 5))),
         }
     } else {
-        let said = last_lines(&err.replace("error: ", ""), 5);
+        let err: String = err.lines().map(|l| l.strip_prefix("error: ").unwrap_or(l)).collect::<Vec<_>>().join("\n");
+        let said = last_lines(&err, 5);
         let said = if said.is_empty() { "no message".to_string() } else { said };
         ChildEnd::Failed(format!("{}: {said}", describe_exit(status)))
     }
@@ -622,7 +623,7 @@ pub fn run(args: Args) -> Result<()> {
                     loop_time_total += result.wall_time_s;
                     if let Some((t_s, reason)) = &result.diverged {
                         entry.status = StoreStatus::Diverged;
-                        entry.message = Some(format!("diverged at t = {t_s} s: {reason}"));
+                        entry.message = Some(format!("diverged at t = {t_s:.4} s: {reason}"));
                         entry.extra.insert("diverged_at_s".into(), serde_json::json!(t_s));
                         g.done[1] += 1;
                     } else {
@@ -674,10 +675,10 @@ pub fn run(args: Args) -> Result<()> {
         let dir = g.store.dir().display().to_string();
         match &g.load_error {
             Some(e) => {
-                println!("{}/{}: not run: {e}", g.scene_name, g.source);
+                say(format!("{}/{}: not run: {e}", g.scene_name, g.source));
                 load_failures.push(format!("{}/{}", g.scene_name, g.source));
             }
-            None => println!(
+            None => say(format!(
                 "{}/{}: {} ok, {} diverged, {} failed, {} kept -> {dir}",
                 g.scene_name,
                 g.source,
@@ -685,14 +686,14 @@ pub fn run(args: Args) -> Result<()> {
                 g.done[1],
                 g.done[2],
                 args.repeats as usize - g.pending.len()
-            ),
+            )),
         }
     }
-    if total > 0 {
-        println!(
+    if steps_total > 0 {
+        say(format!(
             "{total} runs in {batch_wall_s:.1} s with {jobs} jobs ({:.0} engine steps/s per run)",
             if loop_time_total > 0.0 { steps_total as f64 / loop_time_total } else { 0.0 }
-        );
+        ));
     }
     if !load_failures.is_empty() {
         bail!("the engine could not load {}", load_failures.join(", "));
@@ -701,6 +702,13 @@ pub fn run(args: Args) -> Result<()> {
         bail!("{failures} of {total} runs failed (their messages are in the manifests); rerun the same command to retry them");
     }
     Ok(())
+}
+
+/// Prints a line on standard output; a closed pipe (`| head`) is not an
+/// error worth a panic.
+fn say(line: String) {
+    let mut out = std::io::stdout().lock();
+    let _ = writeln!(out, "{line}");
 }
 
 fn setting_json(v: &SettingValue) -> serde_json::Value {

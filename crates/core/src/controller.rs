@@ -380,6 +380,9 @@ pub fn run_scene(sim: &mut dyn Simulation, scene: &Scene, options: &RunOptions) 
         match sim.step_n(steps_per_period) {
             Ok(()) => engine_steps += steps_per_period,
             Err(EngineError::Unstable { t_s, message, .. }) => {
+                // Steps taken in this period, up to and including the bad one.
+                let into_period = ((t_s - tick as f64 * period) / sim.timestep_s()).round().max(0.0) as u64;
+                engine_steps += (into_period + 1).min(steps_per_period);
                 status = RunStatus::Diverged { t_s, reason: message };
                 break;
             }

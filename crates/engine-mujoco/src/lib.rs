@@ -385,19 +385,20 @@ impl MujocoSimulation {
         INSTABILITY_WARNINGS.map(|(kind, _)| w[kind as usize].number)
     }
 
-    fn check_stability(&mut self) -> Result<(), EngineError> {
+    /// After a step: an error when MuJoCo flagged (and reset) an unusable
+    /// state during it; `t_s` is the simulated time the step started from.
+    fn check_stability(&mut self, t_s: f64) -> Result<(), EngineError> {
         let counts = self.warning_counts();
-        for (i, (_, what)) in INSTABILITY_WARNINGS.iter().enumerate() {
-            if counts[i] > self.warnings_seen[i] {
-                self.warnings_seen = counts;
-                let mut message = what.to_string();
-                if let Some(m) = take_messages().into_iter().last() {
-                    message.push_str(&format!(" ({m})"));
-                }
-                return Err(EngineError::Unstable { engine: ENGINE_NAME.to_string(), t_s: self.time_s(), message });
-            }
+        if counts == self.warnings_seen {
+            return Ok(());
         }
-        Ok(())
+        let i = (0..3).find(|&i| counts[i] > self.warnings_seen[i]).unwrap_or(2);
+        self.warnings_seen = counts;
+        let mut message = INSTABILITY_WARNINGS[i].1.to_string();
+        if let Some(m) = take_messages().into_iter().last() {
+            message.push_str(&format!(" ({m})"));
+        }
+        Err(EngineError::Unstable { engine: ENGINE_NAME.to_string(), t_s, message })
     }
 
     /// Steps `n` times with `mj_step` and nothing else: no checks, no
@@ -494,15 +495,23 @@ impl Simulation for MujocoSimulation {
     }
 
     fn step(&mut self) -> Result<(), EngineError> {
+        let t_s = self.time_s();
         self.data.step();
-        self.check_stability()
+        self.check_stability(t_s)
     }
 
     fn step_n(&mut self, n: u64) -> Result<(), EngineError> {
         for _ in 0..n {
+            let t_s = self.data.ffi().time;
             self.data.step();
+            if self.data.ffi().warning[mujoco_c::mjtWarning::mjWARN_BADQACC as usize].number != self.warnings_seen[2]
+                || self.data.ffi().warning[mujoco_c::mjtWarning::mjWARN_BADQPOS as usize].number != self.warnings_seen[0]
+                || self.data.ffi().warning[mujoco_c::mjtWarning::mjWARN_BADQVEL as usize].number != self.warnings_seen[1]
+            {
+                return self.check_stability(t_s);
+            }
         }
-        self.check_stability()
+        Ok(())
     }
 
     fn joint_angles_rad(&self, out: &mut [f64]) {

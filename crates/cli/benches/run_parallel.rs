@@ -1,0 +1,39 @@
+//! Benchmark: wall time of `realitygap run` on the three study scenes x
+//! REPEATS repeats (default 20) in MuJoCo, with --jobs 1 and with --jobs 2,
+//! and the parallel speed-up. Each batch writes into a fresh temporary
+//! directory, so nothing is skipped.
+//!
+//!     cargo bench -p realitygap --bench run_parallel
+//!     REPEATS=5 cargo bench -p realitygap --bench run_parallel
+
+use std::path::Path;
+use std::process::Command;
+use std::time::Instant;
+
+fn batch(jobs: usize, repeats: u32, out: &Path) -> f64 {
+    let scenes = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/scenes");
+    let start = Instant::now();
+    let result = Command::new(env!("CARGO_BIN_EXE_realitygap"))
+        .arg("run")
+        .args(["scene1_single_joint", "scene2_two_joints", "scene3_cube_push"].map(|s| scenes.join(format!("{s}.toml"))))
+        .args(["--engine", "mujoco", "--repeats", &repeats.to_string(), "--jobs", &jobs.to_string(), "--out"])
+        .arg(out)
+        .output()
+        .expect("realitygap starts");
+    let seconds = start.elapsed().as_secs_f64();
+    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    print!("{}", String::from_utf8_lossy(&result.stdout));
+    seconds
+}
+
+fn main() {
+    let repeats: u32 = std::env::var("REPEATS").ok().and_then(|v| v.parse().ok()).unwrap_or(20);
+    let tmp = std::env::temp_dir().join(format!("realitygap-bench-{}", std::process::id()));
+    let one = batch(1, repeats, &tmp.join("jobs1"));
+    let two = batch(2, repeats, &tmp.join("jobs2"));
+    let _ = std::fs::remove_dir_all(&tmp);
+    println!("3 scenes x {repeats} repeats, MuJoCo, study settings (dt = 1e-4 s):");
+    println!("  --jobs 1: {one:.1} s ({:.2} s per repeat of the three scenes)", one / repeats as f64);
+    println!("  --jobs 2: {two:.1} s ({:.2} s per repeat of the three scenes)", two / repeats as f64);
+    println!("  speed-up: {:.2}x (target: at least 1.8x on 2 cores)", one / two);
+}
