@@ -22,13 +22,7 @@ fn scratch(name: &str) -> PathBuf {
 }
 
 fn paper_data() -> Option<PathBuf> {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/paper-data");
-    if dir.join("MotionCapture").is_dir() {
-        Some(dir)
-    } else {
-        eprintln!("SKIPPED: paper-data not found at {}", dir.display());
-        None
-    }
+    realitygap::paper_data_for_tests()
 }
 
 #[test]

@@ -65,12 +65,16 @@ impl ImportedRun {
 }
 
 /// Path of the study's recordings, for tests: `../../../shared/paper-data`
-/// from this crate. `None` (after printing why) when it is absent.
+/// from this crate. `None` (after printing why) when it is absent; a panic
+/// instead when `REALITYGAP_REQUIRE_PAPER_DATA` is set (CI sets it), so the
+/// tests cannot pass by skipping.
 #[cfg(test)]
 pub(crate) fn paper_data() -> Option<PathBuf> {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/paper-data");
     if dir.join("MotionCapture").is_dir() && dir.join("Simulation").is_dir() {
         Some(dir)
+    } else if std::env::var_os("REALITYGAP_REQUIRE_PAPER_DATA").is_some() {
+        panic!("paper-data not found at {} but REALITYGAP_REQUIRE_PAPER_DATA is set", dir.display());
     } else {
         eprintln!("SKIPPED: paper-data not found at {} (tests on the study's recordings did not run)", dir.display());
         None
