@@ -74,9 +74,15 @@ pub fn run(args: Args) -> Result<()> {
 /// settings and seeds from the manifest for results directories.
 pub fn provenance_for_study(study: &Study, study_path: &Path, roots: &Roots, mode: AnalysisMode) -> Provenance {
     let mut p = Provenance::new(study.title.clone().unwrap_or_else(|| study.name.clone()));
-    p.study = Some(study_path.display().to_string());
-    p.data_dir = Some(roots.data.display().to_string());
-    p.results_dir = Some(roots.results.display().to_string());
+    let absolute = |p: &Path| {
+        std::fs::canonicalize(p)
+            .unwrap_or_else(|_| p.to_path_buf())
+            .display()
+            .to_string()
+    };
+    p.study = Some(absolute(study_path));
+    p.data_dir = Some(absolute(&roots.data));
+    p.results_dir = Some(absolute(&roots.results));
     p.mode = mode;
     p.details
         .push(("Control period".into(), format!("{} s", study.control_period_s)));
@@ -114,9 +120,6 @@ fn source_header(spec: &SourceSpec) -> SourceProvenance {
     if let Some(q) = spec.quat_order {
         s = s.with("quaternion order", q.to_string());
     }
-    if let Some(a) = &spec.alignment {
-        s = s.with("alignment in the study file", a.describe());
-    }
     s
 }
 
@@ -127,6 +130,9 @@ fn scene_details(
     roots: &Roots,
 ) -> Vec<(String, String)> {
     let mut out = Vec::new();
+    if let Some(a) = &spec.alignment {
+        out.push(("alignment in the study file".into(), a.describe()));
+    }
     match spec.format {
         SourceFormat::Qualisys | SourceFormat::Recorded => {
             let Some(pattern) = spec.files.as_deref().and_then(|f| expand(f, vars).ok()) else {

@@ -754,7 +754,7 @@ fn lower_first(s: &str) -> String {
 
 /// Decimals for tick labels of a range.
 fn tick_decimals(span: f64) -> usize {
-    if !(span > 0.0) {
+    if span.is_nan() || span <= 0.0 {
         return 2;
     }
     let step = span / 6.0;

@@ -69,11 +69,12 @@ pub fn inline_svg(svg: &str, label: &str) -> String {
 }
 
 const CSS: &str = "
-body{font-family:system-ui,-apple-system,'Segoe UI',Roboto,'DejaVu Sans',sans-serif;color:#1a1a1a;max-width:1080px;margin:0 auto;padding:1rem 1.5rem 3rem;line-height:1.45}
+body{font-family:system-ui,-apple-system,'Segoe UI',Roboto,'DejaVu Sans',sans-serif;color:#1a1a1a;max-width:1340px;margin:0 auto;padding:1rem 1.5rem 3rem;line-height:1.45}
 h1{font-size:1.6rem;margin-bottom:.2rem}h2{margin-top:2.2rem;border-bottom:2px solid #ddd;padding-bottom:.2rem}h3{margin-top:1.5rem}
 .meta{color:#555;margin-top:0}
 nav ul{list-style:none;padding:0;display:flex;flex-wrap:wrap;gap:.4rem 1.2rem}
-table{border-collapse:collapse;margin:.6rem 0;font-size:.92rem}
+table{border-collapse:collapse;margin:.6rem 0;font-size:.92rem;display:block;overflow-x:auto;max-width:100%}
+th[scope=row]{white-space:nowrap}
 th,td{border:1px solid #d0d0d0;padding:.25rem .55rem;vertical-align:top}
 th{background:#f3f3f3;text-align:left}
 td.num{text-align:right;font-variant-numeric:tabular-nums;white-space:nowrap}
@@ -81,9 +82,10 @@ td.best{background:#dff0e3;font-weight:bold}
 tr.reference td{background:#f7f7f7;font-style:italic}
 .note{color:#555;font-size:.9rem}
 .flag-excluded{color:#a03000;font-weight:bold}
-figure{margin:1rem 0 1.6rem;display:inline-block;vertical-align:top;max-width:100%}
+.figures{display:grid;grid-template-columns:repeat(auto-fill,minmax(540px,1fr));gap:1rem 1.5rem}
+figure{margin:0 0 1rem}
 figure svg{max-width:100%;height:auto;border:1px solid #e5e5e5}
-figcaption{font-size:.88rem;color:#333;max-width:640px}
+figcaption{font-size:.88rem;color:#333;max-width:640px;margin-top:.3rem}
 dl.kv{display:grid;grid-template-columns:max-content 1fr;gap:.2rem 1rem}dl.kv dt{font-weight:bold}dl.kv dd{margin:0;word-break:break-all}
 code{font-size:.9em}
 details{margin:.4rem 0}summary{cursor:pointer}
@@ -294,13 +296,13 @@ fn scene_section(h: &mut String, r: &SceneReport, figures: &[&FigureEntry<'_>]) 
         h.push_str("</tr></thead>\n<tbody>\n");
         for s in &r.sources {
             let _ = write!(h, "<tr><th scope=\"row\">{}</th>", escape(&s.source));
-            for i in 0..r.phases_s.len() {
+            for (i, best) in closest.iter().enumerate() {
                 let v = if s.accumulated_error_m.is_some() {
                     s.phase_errors_m.get(i).copied()
                 } else {
                     None
                 };
-                num_cell(h, &fmt_m(v), closest[i].as_deref() == Some(s.source.as_str()));
+                num_cell(h, &fmt_m(v), best.as_deref() == Some(s.source.as_str()));
             }
             h.push_str("</tr>\n");
         }
@@ -322,7 +324,7 @@ fn scene_section(h: &mut String, r: &SceneReport, figures: &[&FigureEntry<'_>]) 
 
     // Figures.
     if !figures.is_empty() {
-        h.push_str("<h3>Figures</h3>\n");
+        h.push_str("<h3>Figures</h3>\n<div class=\"figures\">\n");
         for f in figures {
             let _ = writeln!(
                 h,
@@ -334,6 +336,7 @@ fn scene_section(h: &mut String, r: &SceneReport, figures: &[&FigureEntry<'_>]) 
                 escape(f.png_file)
             );
         }
+        h.push_str("</div>\n");
     }
 
     measures_table(h, r);
@@ -345,9 +348,18 @@ fn scene_section(h: &mut String, r: &SceneReport, figures: &[&FigureEntry<'_>]) 
     h.push_str("</section>\n");
 }
 
+/// Fixed decimals without a minus sign on values that round to zero.
+fn fixed(v: f64, decimals: usize) -> String {
+    let s = format!("{v:.decimals$}");
+    match s.strip_prefix('-') {
+        Some(rest) if rest.chars().all(|c| c == '0' || c == '.') => rest.to_string(),
+        _ => s,
+    }
+}
+
 fn opt_num(v: Option<f64>, decimals: usize) -> String {
     match v {
-        Some(v) if v.is_finite() => format!("{v:.decimals$}"),
+        Some(v) if v.is_finite() => fixed(v, decimals),
         Some(v) => format!("{v}"),
         None => "n/a".into(),
     }
@@ -358,7 +370,8 @@ fn measures_table(h: &mut String, r: &SceneReport) {
     let rows: Vec<&SourceSummary> = std::iter::once(&r.reference).chain(&r.sources).collect();
     let best = best_index(&rows.iter().map(|s| s.accumulated_error_m).collect::<Vec<_>>());
     for (i, s) in rows.iter().enumerate() {
-        let g = s.goal.as_ref();
+        // Without usable runs the goal measures of an empty mean say nothing.
+        let g = s.goal.as_ref().filter(|_| s.runs_used > 0);
         let _ = write!(
             h,
             "<tr{}><th scope=\"row\">{}</th><td>{}</td>",
@@ -401,7 +414,12 @@ fn measures_table(h: &mut String, r: &SceneReport) {
 
 fn vec3(v: Option<[f64; 3]>, decimals: usize) -> String {
     v.map_or("n/a".into(), |v| {
-        format!("({:.d$}, {:.d$}, {:.d$})", v[0], v[1], v[2], d = decimals)
+        format!(
+            "({}, {}, {})",
+            fixed(v[0], decimals),
+            fixed(v[1], decimals),
+            fixed(v[2], decimals)
+        )
     })
 }
 
@@ -637,6 +655,10 @@ mod tests {
 
     #[test]
     fn everything_is_escaped() {
+        assert_eq!(
+            (fixed(-0.0001, 3), fixed(-0.001, 3), fixed(-0.0, 1)),
+            ("0.000".into(), "-0.001".into(), "0.0".into())
+        );
         let (html, _) = page();
         assert!(html.contains("<title>A &lt;b&gt;study&lt;/b&gt; &amp; co</title>"));
         assert!(html.contains("Alpha &lt;&amp;&gt;"));
