@@ -117,6 +117,9 @@ fn source_header(spec: &SourceSpec) -> SourceProvenance {
             SourceFormat::Store => "realitygap results directory",
         },
     );
+    if let Some(about) = &spec.about {
+        s = s.with("about", about.clone());
+    }
     if let Some(q) = spec.quat_order {
         s = s.with("quaternion order", q.to_string());
     }

@@ -210,6 +210,7 @@ fn engine_sources(runs_dir: &Path, scene: &str, engines: &[String]) -> Result<Ve
         let label = version.split(" (").next().unwrap_or_default().trim();
         out.push(SourceSpec {
             name: format!("{} (this tool)", if label.is_empty() { engine.as_str() } else { label }),
+            about: Some(format!("simulated by this tool: {version}")),
             format: SourceFormat::Store,
             files: None,
             dir: Some(format!("{scene}/{engine}")),

@@ -104,6 +104,10 @@ fn default_tol() -> f64 {
 pub struct SourceSpec {
     /// Display name.
     pub name: String,
+    /// What the source is, in words (simulator version, settings), for the
+    /// report's provenance.
+    #[serde(default)]
+    pub about: Option<String>,
     /// `qualisys`, `recorded` or `store`.
     pub format: SourceFormat,
     /// File pattern (qualisys, recorded).
