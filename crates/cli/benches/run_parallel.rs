@@ -26,7 +26,20 @@ fn batch(jobs: usize, repeats: u32, out: &Path) -> f64 {
     seconds
 }
 
+/// The 1-minute load average (Linux), to warn when other work competes for
+/// the cores and the speed-up cannot be measured.
+fn load_average() -> Option<f64> {
+    std::fs::read_to_string("/proc/loadavg").ok()?.split_whitespace().next()?.parse().ok()
+}
+
 fn main() {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    if let Some(load) = load_average() {
+        println!("load average before the benchmark: {load:.2} on {cores} cores");
+        if load > 0.5 {
+            println!("warning: other processes are using the cores; the speed-up will be understated");
+        }
+    }
     let repeats: u32 = std::env::var("REPEATS").ok().and_then(|v| v.parse().ok()).unwrap_or(20);
     let tmp = std::env::temp_dir().join(format!("realitygap-bench-{}", std::process::id()));
     let one = batch(1, repeats, &tmp.join("jobs1"));
@@ -36,4 +49,7 @@ fn main() {
     println!("  --jobs 1: {one:.1} s ({:.2} s per repeat of the three scenes)", one / repeats as f64);
     println!("  --jobs 2: {two:.1} s ({:.2} s per repeat of the three scenes)", two / repeats as f64);
     println!("  speed-up: {:.2}x (target: at least 1.8x on 2 cores)", one / two);
+    if let Some(load) = load_average() {
+        println!("load average after: {load:.2}");
+    }
 }

@@ -19,6 +19,10 @@ pub fn compiled() -> Vec<Box<dyn Engine>> {
     let mut engines: Vec<Box<dyn Engine>> = Vec::new();
     #[cfg(feature = "mujoco")]
     engines.push(Box::new(realitygap_engine_mujoco::MujocoEngine));
+    #[cfg(feature = "ode")]
+    engines.push(Box::new(realitygap_engine_ode::OdeEngine));
+    #[cfg(feature = "rapier")]
+    engines.push(Box::new(realitygap_engine_rapier::RapierEngine));
     engines
 }
 
@@ -41,6 +45,8 @@ pub fn find(name: &str) -> Result<Box<dyn Engine>> {
 pub fn install_native_handlers() {
     #[cfg(feature = "mujoco")]
     realitygap_engine_mujoco::install_message_handler();
+    #[cfg(feature = "ode")]
+    realitygap_engine_ode::install_message_handler();
 }
 
 /// Prints the compiled-in engines, one per line: name, version, default

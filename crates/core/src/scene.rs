@@ -458,13 +458,27 @@ impl Builder<'_> {
         }
     }
 
+    /// `rel` against the scene file's directory, with `.` and `..`
+    /// removed lexically (`/a/scenes/../robots/x` -> `/a/robots/x`).
     fn resolve(&self, rel: &str) -> PathBuf {
         let p = Path::new(rel);
-        if p.is_absolute() {
-            p.to_path_buf()
-        } else {
-            self.path.parent().unwrap_or(Path::new(".")).join(p)
+        let joined = if p.is_absolute() { p.to_path_buf() } else { self.path.parent().unwrap_or(Path::new(".")).join(p) };
+        let mut out = PathBuf::new();
+        for c in joined.components() {
+            match c {
+                std::path::Component::CurDir => {}
+                std::path::Component::ParentDir => match out.components().next_back() {
+                    Some(std::path::Component::Normal(_)) => {
+                        out.pop();
+                    }
+                    // `/..` is `/`.
+                    Some(std::path::Component::RootDir | std::path::Component::Prefix(_)) => {}
+                    _ => out.push(".."),
+                },
+                other => out.push(other),
+            }
         }
+        out
     }
 }
 
@@ -955,6 +969,8 @@ integrator = "euler"
     fn parses_minimal_scene() {
         let s = parse(MINIMAL).unwrap();
         assert_eq!(s.robot.urdf, PathBuf::from("/scenes/arm.urdf"));
+        let up = parse(&MINIMAL.replace("urdf = \"arm.urdf\"", "urdf = \"../robots/./arm.urdf\"")).unwrap();
+        assert_eq!(up.robot.urdf, PathBuf::from("/robots/arm.urdf"));
         assert_eq!(s.sample_count(), 20);
         assert_eq!(s.controlled_joints(), vec!["j1", "j2"]);
         assert_eq!(s.actuators[1].force_limit, f64::INFINITY);

@@ -527,3 +527,134 @@ impl Simulation for MujocoSimulation {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use realitygap_core::engine::SettingValue;
+    use realitygap_core::robot::PackageResolver;
+    use std::path::{Path, PathBuf};
+
+    fn workspace() -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+    }
+
+    fn scene1() -> Scene {
+        Scene::from_file(&workspace().join("assets/scenes/scene1_single_joint.toml")).unwrap()
+    }
+
+    fn mico2() -> RobotModel {
+        RobotModel::from_urdf_file(&workspace().join("assets/robots/mico2/mico2.urdf"), &PackageResolver::new()).unwrap()
+    }
+
+    fn settings(pairs: &[(&str, SettingValue)]) -> EngineSettings {
+        pairs.iter().map(|(k, v)| (k.to_string(), v.clone())).collect()
+    }
+
+    #[test]
+    fn settings_are_checked() {
+        let e = MujocoEngine;
+        assert_eq!(e.check_settings(&EngineSettings::new()).unwrap(), MUJOCO_DEFAULT_TIMESTEP_S);
+        let ok = settings(&[
+            ("timestep_s", SettingValue::Float(1e-4)),
+            ("integrator", SettingValue::Text("RK4".into())),
+            ("solver", SettingValue::Text("pgs".into())),
+            ("iterations", SettingValue::Integer(50)),
+            ("cone", SettingValue::Text("elliptic".into())),
+            ("impratio", SettingValue::Integer(10)),
+            ("noslip_iterations", SettingValue::Integer(0)),
+            ("tolerance", SettingValue::Float(0.0)),
+        ]);
+        assert_eq!(e.check_settings(&ok).unwrap(), 1e-4);
+        for (key, value, expected) in [
+            ("timestep_s", SettingValue::Float(0.0), "must be > 0"),
+            ("timestep_s", SettingValue::Text("fast".into()), "expected a number"),
+            ("integrator", SettingValue::Text("verlet".into()), "not one of euler, rk4"),
+            ("iterations", SettingValue::Float(2.5), "expected a whole number"),
+            ("iterations", SettingValue::Integer(0), ">= 1"),
+            ("gravity", SettingValue::Float(1.0), "unknown setting"),
+        ] {
+            let err = e.check_settings(&settings(&[(key, value)])).unwrap_err().to_string();
+            assert!(err.contains(key) && err.contains(expected), "{err}");
+        }
+    }
+
+    #[test]
+    fn settings_reach_the_model() {
+        let s = scene1();
+        let robot = mico2();
+        let set = settings(&[
+            ("timestep_s", SettingValue::Float(5e-4)),
+            ("integrator", SettingValue::Text("implicitfast".into())),
+            ("iterations", SettingValue::Integer(7)),
+        ]);
+        let sim = MujocoSimulation::load(&s, &robot, &set, &ModelVariation::default()).unwrap();
+        let opt = sim.model().opt();
+        assert_eq!(opt.timestep, 5e-4);
+        assert_eq!(opt.integrator, mujoco_c::mjtIntegrator::mjINT_IMPLICITFAST as i32);
+        assert_eq!(opt.iterations, 7);
+        assert_eq!(sim.joint_count(), 6);
+        assert_eq!(sim.tracked_count(), 2);
+    }
+
+    #[test]
+    fn generated_model_has_urdf_masses_and_the_cube() {
+        let s = scene1();
+        let robot = mico2();
+        let sim = MujocoSimulation::load(&s, &robot, &EngineSettings::new(), &ModelVariation::default()).unwrap();
+        let total: f64 = sim.model().body_mass().iter().sum();
+        let expected = robot.total_mass_kg() + 0.0884;
+        assert!((total - expected).abs() < 1e-9, "{total} vs {expected}");
+        // The cube rests on the ground at its scene pose.
+        let mut poses = [Pose::IDENTITY; 2];
+        sim.tracked_poses(&mut poses);
+        assert!(poses[1].position_m.distance(Vec3::new(0.5, 0.0, 0.0375)) < 1e-12);
+    }
+
+    #[test]
+    fn mass_and_friction_variation_scale_the_model() {
+        let s = scene1();
+        let robot = mico2();
+        let base = MujocoSimulation::load(&s, &robot, &EngineSettings::new(), &ModelVariation::default()).unwrap();
+        let v = ModelVariation { mass_scale: 1.1, friction_scale: 0.5 };
+        let varied = MujocoSimulation::load(&s, &robot, &EngineSettings::new(), &v).unwrap();
+        let sum = |m: &MujocoSimulation| m.model().body_mass().iter().sum::<f64>();
+        assert!((sum(&varied) - 1.1 * sum(&base)).abs() < 1e-9);
+        let f0 = base.model().geom_friction()[0][0];
+        assert!((varied.model().geom_friction()[0][0] - 0.5 * f0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn mjcf_mode_errors_name_what_is_missing() {
+        let mut s = scene1();
+        let robot = mico2();
+        s.robot.mjcf = Some(PathBuf::from("/nonexistent/model.xml"));
+        let err = MujocoSimulation::load(&s, &robot, &EngineSettings::new(), &ModelVariation::default()).err().unwrap();
+        assert!(err.to_string().contains("MJCF file /nonexistent/model.xml not found"), "{err}");
+
+        // A model without the scene's joints.
+        let dir = std::env::temp_dir().join(format!("rg-mjcf-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("pendulum.xml");
+        std::fs::write(
+            &file,
+            "<mujoco><worldbody><body name=\"m1n6s300_link_6\"><joint name=\"m1n6s300_joint_1\"/><geom size=\"0.1\"/></body></worldbody></mujoco>",
+        )
+        .unwrap();
+        s.robot.mjcf = Some(file.clone());
+        let err = MujocoSimulation::load(&s, &robot, &EngineSettings::new(), &ModelVariation::default()).err().unwrap();
+        assert!(err.to_string().contains("no actuator drives joint \"m1n6s300_joint_1\""), "{err}");
+
+        // Malformed XML: MuJoCo's parser message, with the file.
+        std::fs::write(&file, "<mujoco><worldbody>").unwrap();
+        let err = MujocoSimulation::load(&s, &robot, &EngineSettings::new(), &ModelVariation::default()).err().unwrap();
+        assert!(err.to_string().contains("pendulum.xml"), "{err}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn formats_the_version() {
+        assert!(mujoco_version().starts_with("3."));
+        assert!(MujocoEngine.version().contains(&mujoco_version()));
+    }
+}

@@ -299,3 +299,110 @@ fn write_link(
     writeln!(out, "{ind}</body>").unwrap();
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use realitygap_core::robot::PackageResolver;
+    use std::path::{Path, PathBuf};
+
+    fn workspace() -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+    }
+
+    const ARM: &str = r#"<robot name="arm">
+  <link name="world"/>
+  <link name="a">
+    <inertial><origin xyz="0 0 0.1" rpy="0 0 1.5707963267948966"/><mass value="1"/>
+      <inertia ixx="0.01" ixy="0" ixz="0" iyy="0.02" iyz="0" izz="0.03"/></inertial>
+    <collision><geometry><box size="0.1 0.2 0.3"/></geometry></collision>
+  </link>
+  <link name="b">
+    <inertial><mass value="0.5"/><inertia ixx="0.001" ixy="0" ixz="0" iyy="0.001" iyz="0" izz="0.001"/></inertial>
+    <collision><geometry><capsule radius="0.02" length="0.2"/></geometry></collision>
+  </link>
+  <link name="c"/>
+  <joint name="fix" type="fixed"><parent link="world"/><child link="a"/></joint>
+  <joint name="j1" type="revolute"><parent link="a"/><child link="b"/><origin xyz="0 0 0.3"/>
+    <axis xyz="0 1 0"/><limit lower="-1" upper="1" effort="10" velocity="1"/><dynamics damping="0.2"/></joint>
+  <joint name="j2" type="revolute"><parent link="b"/><child link="c"/><origin xyz="0 0 0.2"/>
+    <axis xyz="1 0 0"/><limit lower="-1" upper="1" effort="10" velocity="1"/></joint>
+</robot>"#;
+
+    const SCENE: &str = r#"
+name = "t"
+duration_s = 1.0
+[robot]
+urdf = "arm.urdf"
+base_position_m = [0, 0, 0.5]
+[robot.held_joints_deg]
+j2 = 30.0
+[ground]
+height_m = 0.0
+friction = 0.7
+[[object]]
+name = "block"
+shape = "box"
+size_m = [0.1, 0.1, 0.1]
+mass_kg = 0.2
+position_m = [1, 0, 0.05]
+[controller]
+gain_per_s = 10.0
+max_speed_deg_s = 30.0
+period_s = 0.05
+[[actuator]]
+joint = "j1"
+kv = 5.0
+force_limit = 3.0
+[[schedule]]
+t_s = 0.0
+targets_deg = { j1 = 10.0 }
+"#;
+
+    fn build() -> String {
+        let robot = RobotModel::from_urdf_str(ARM, Path::new("/tmp"), &PackageResolver::new()).unwrap();
+        let scene = Scene::from_toml_str(SCENE, Path::new("/tmp/t.toml")).unwrap();
+        scene.validate(&robot).unwrap();
+        scene_to_mjcf(&scene, &robot).unwrap()
+    }
+
+    #[test]
+    fn writes_joints_servos_objects_and_excludes() {
+        let xml = build();
+        assert!(xml.contains("<body name=\"urdf:world\""), "{xml}");
+        assert!(xml.contains("<joint name=\"j1\" type=\"hinge\" axis=\"0.0 1.0 0.0\" limited=\"true\" range=\"-1.0 1.0\" damping=\"0.2\"/>"), "{xml}");
+        assert!(!xml.contains("name=\"j2\""), "held joint must be welded: {xml}");
+        assert!(xml.contains("<velocity name=\"servo:j1\" joint=\"j1\" kv=\"5.0\" forcelimited=\"true\" forcerange=\"-3.0 3.0\"/>"));
+        assert!(xml.contains("<freejoint name=\"object:block\"/>"));
+        assert!(xml.contains("<geom type=\"box\" size=\"0.05 0.05 0.05\"/>"));
+        assert!(xml.contains("friction=\"0.7 0.005 0.0001\""));
+        assert!(xml.contains("<exclude body1=\"a\" body2=\"b\"/>"));
+        assert!(xml.contains("type=\"capsule\" size=\"0.02 0.1\""));
+        // The inertia, rotated by 90 degrees about z, swaps ixx and iyy.
+        assert!(xml.contains("fullinertia=\"0.02"), "{xml}");
+    }
+
+    #[test]
+    fn rejects_mesh_formats_mujoco_cannot_read() {
+        let dir = std::env::temp_dir().join(format!("rg-dae-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join("part.dae"), "<COLLADA/>").unwrap();
+        let urdf = ARM.replace("<box size=\"0.1 0.2 0.3\"/>", "<mesh filename=\"part.dae\"/>");
+        let robot = RobotModel::from_urdf_str(&urdf, &dir, &PackageResolver::new()).unwrap();
+        let scene = Scene::from_toml_str(SCENE, &dir.join("t.toml")).unwrap();
+        let err = scene_to_mjcf(&scene, &robot).unwrap_err();
+        assert!(err.0.contains("part.dae") && err.0.contains("STL, OBJ or MSH"), "{}", err.0);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn the_project_scenes_build() {
+        let robot = RobotModel::from_urdf_file(&workspace().join("assets/robots/mico2/mico2.urdf"), &PackageResolver::new()).unwrap();
+        for name in ["scene1_single_joint", "scene2_two_joints", "scene3_cube_push"] {
+            let scene = Scene::from_file(&workspace().join(format!("assets/scenes/{name}.toml"))).unwrap();
+            scene.validate(&robot).unwrap();
+            let xml = scene_to_mjcf(&scene, &robot).unwrap();
+            assert_eq!(xml.matches("<velocity ").count(), 6, "{name}");
+        }
+    }
+}

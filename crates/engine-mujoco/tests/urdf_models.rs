@@ -120,7 +120,7 @@ fn mico2_runs_scenes_2_and_3_close_to_the_official_model() {
     if paper_data().is_none() {
         return;
     }
-    let (last2, max2) = mico2_vs_official("scene2_two_joints");
+    let (_, max2) = mico2_vs_official("scene2_two_joints");
     let (last3, max3) = mico2_vs_official("scene3_cube_push");
     // Measured: scene 2 identical (no contact; same joints, masses and
     // inertias); scene 3 up to 29 mm apart while the hand pushes the cube
