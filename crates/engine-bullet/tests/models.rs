@@ -1,0 +1,229 @@
+//! The world Bullet builds from a scene: links where the URDF's forward
+//! kinematics puts them, contacts only where they belong, the three study
+//! scenes with both robot models, model variations and settings applied.
+
+mod common;
+
+use common::*;
+use realitygap_core::controller::{simulate, RunOptions, RunStatus, SplitMix64};
+use realitygap_core::engine::{EngineSettings, ModelVariation, SettingValue, Simulation};
+use realitygap_core::pose::Pose;
+use realitygap_core::robot::RobotModel;
+use realitygap_core::scene::Scene;
+use realitygap_engine_bullet::{BulletEngine, BulletSimulation};
+use std::collections::HashMap;
+
+fn load(scene: &Scene, robot: &RobotModel, settings: &EngineSettings, variation: &ModelVariation) -> BulletSimulation {
+    scene.validate(robot).unwrap();
+    BulletSimulation::load(scene, robot, settings, variation).unwrap()
+}
+
+/// Places the arm at random configurations and compares every link's frame
+/// with the URDF forward kinematics (fingers held at their scene angles).
+fn check_kinematics(scene: &Scene, robot: &RobotModel) {
+    let mut sim = load(scene, robot, &EngineSettings::new(), &ModelVariation::default());
+    let mut rng = SplitMix64::new(5);
+    let controlled = scene.controlled_joints();
+    let mut worst: (f64, f64) = (0.0, 0.0);
+    for _ in 0..10 {
+        let angles: Vec<f64> = controlled
+            .iter()
+            .map(|name| {
+                let lim = robot.joints[robot.joint_by_name(name).unwrap()].limits.unwrap();
+                let (lo, hi) = (lim.lower.max(-3.0), lim.upper.min(3.0));
+                lo + (hi - lo) * rng.uniform()
+            })
+            .collect();
+        sim.set_joint_angles_rad(&angles).unwrap();
+        let mut read = vec![0.0; angles.len()];
+        sim.joint_angles_rad(&mut read);
+        assert_eq!(read, angles);
+        let mut named: HashMap<String, f64> =
+            controlled.iter().zip(&angles).map(|(n, &a)| (n.to_string(), a)).collect();
+        for (n, &a) in &scene.robot.held_joints_rad {
+            named.insert(n.clone(), a);
+        }
+        let fk = robot.forward_kinematics(&scene.robot.base, &robot.positions_from_names(&named).unwrap());
+        for (link, expected) in robot.links.iter().zip(&fk) {
+            let Some(got) = sim.link_pose(&link.name).unwrap() else {
+                assert_eq!(link.name, robot.links[robot.root_link].name, "link {} missing", link.name);
+                continue;
+            };
+            let d = got.position_m.distance(expected.position_m);
+            let a = got.orientation.angle_to(expected.orientation);
+            assert!(d < 1e-12 && a < 1e-9, "{}: link {} off by {d} m, {a} rad", robot.name, link.name);
+            worst = (worst.0.max(d), worst.1.max(a));
+        }
+        let mut poses = [Pose::IDENTITY; 2];
+        sim.tracked_poses(&mut poses);
+        let w = fk[robot.link_by_name("m1n6s300_link_6").unwrap()];
+        assert!(poses[0].position_m.distance(w.position_m) < 1e-12);
+        assert!(poses[0].orientation.angle_to(w.orientation) < 1e-9);
+    }
+    eprintln!("{}: largest gap to the URDF kinematics {:.2e} m, {:.2e} rad", robot.name, worst.0, worst.1);
+}
+
+#[test]
+fn mico2_follows_urdf_kinematics() {
+    check_kinematics(&scene("scene1_single_joint"), &mico2());
+}
+
+#[test]
+fn official_model_follows_urdf_kinematics() {
+    let Some(paper) = paper_data() else { return };
+    check_kinematics(&official_scene("scene1_single_joint", &paper), &official_robot(&paper));
+}
+
+/// At rest the only contact is the cube on the ground; the initial state
+/// is the scene's.
+#[test]
+fn at_rest_only_the_cube_touches_the_ground() {
+    for (s, robot) in [(scene("scene1_single_joint"), mico2())]
+        .into_iter()
+        .chain(paper_data().map(|p| (official_scene("scene1_single_joint", &p), official_robot(&p))))
+    {
+        let mut sim = load(&s, &robot, &EngineSettings::new(), &ModelVariation::default());
+        let mut poses = [Pose::IDENTITY; 2];
+        sim.tracked_poses(&mut poses);
+        assert!(poses[1].position_m.distance(s.objects[0].pose.position_m) < 1e-12);
+        sim.step_n(10).unwrap();
+        let contacts = sim.contacts().unwrap();
+        assert!(!contacts.is_empty(), "{}: the cube should rest on the ground", robot.name);
+        for (a, b) in &contacts {
+            let pair = [a.as_str(), b.as_str()];
+            assert!(
+                pair.contains(&"object:cube") && pair.contains(&"ground"),
+                "{}: unexpected contact {a} - {b}",
+                robot.name
+            );
+        }
+        sim.tracked_poses(&mut poses);
+        assert!(poses[1].position_m.distance(s.objects[0].pose.position_m) < 1e-3, "cube moved: {:?}", poses[1]);
+    }
+}
+
+/// Contact between the hand and the cube: the hand, lowered until its
+/// fingertips are 7 cm above the table (joint 2 at -85, joint 3 at 30,
+/// joint 4 at 90 degrees), sweeps sideways (joint 1 at 0.3 rad/s) into a
+/// cube placed in the fingertips' path, and pushes it along. (In scene 3
+/// itself Bullet's stiff motors hold the hand about 2 cm higher than
+/// MuJoCo's servos do and it only grazes the cube, as in the study's
+/// PyBullet recording.)
+#[test]
+fn sweeping_hand_pushes_the_cube() {
+    let runs = [("mico2", scene("scene3_cube_push"), mico2())]
+        .into_iter()
+        .chain(paper_data().map(|p| ("official", official_scene("scene3_cube_push", &p), official_robot(&p))))
+        .map(|(label, mut s, robot)| {
+            s.objects[0].pose.position_m = realitygap_core::Vec3::new(0.575, -0.12, 0.0375);
+            (label, s, robot)
+        });
+    for (label, s, robot) in runs {
+        let mut sim = load(&s, &robot, &EngineSettings::new(), &ModelVariation::default());
+        sim.set_joint_angles_rad(&[0.0, (-85f64).to_radians(), 30f64.to_radians(), 90f64.to_radians(), 0.0, 0.0])
+            .unwrap();
+        sim.set_joint_velocity_targets(&[0.3, 0.0, 0.0, 0.0, 0.0, 0.0]);
+        let mut touched = None;
+        for tick in 0..40 {
+            sim.step_n(5).unwrap();
+            let hand_on_cube = sim.contacts().unwrap().into_iter().find(|(a, b)| {
+                (a == "object:cube" && b.starts_with("m1n6s300")) || (b == "object:cube" && a.starts_with("m1n6s300"))
+            });
+            if let (None, Some(pair)) = (&touched, hand_on_cube) {
+                touched = Some((tick, pair));
+            }
+        }
+        let mut poses = [Pose::IDENTITY; 2];
+        sim.tracked_poses(&mut poses);
+        let moved = poses[1].position_m.distance(s.objects[0].pose.position_m);
+        eprintln!("{label}: first hand-cube contact {touched:?}; the cube moved {:.1} mm", moved * 1e3);
+        assert!(touched.is_some(), "{label}: the hand never touched the cube");
+        assert!(moved > 0.01, "{label}: the cube moved only {moved} m");
+    }
+}
+
+#[test]
+fn every_scene_runs_with_both_robots() {
+    let paper = paper_data();
+    for name in ["scene1_single_joint", "scene2_two_joints", "scene3_cube_push"] {
+        let mut runs = vec![("mico2", scene(name), mico2())];
+        if let Some(p) = &paper {
+            runs.push(("official", official_scene(name, p), official_robot(p)));
+        }
+        for (label, s, robot) in runs {
+            let out = run(&s, &robot);
+            assert_eq!(out.trajectory.len(), s.sample_count());
+            out.trajectory.validate().unwrap();
+            let w = wrist(&out);
+            let goal_reached = out.trajectory.joint_angles_rad.as_ref().unwrap().last().unwrap().clone();
+            eprintln!(
+                "{name} / {label}: final wrist ({:.4}, {:.4}, {:.4}) m, joints {:?} rad, {:.0} steps/s",
+                w.last().unwrap().x,
+                w.last().unwrap().y,
+                w.last().unwrap().z,
+                goal_reached.iter().map(|a| (a * 1e3).round() / 1e3).collect::<Vec<_>>(),
+                out.steps_per_second()
+            );
+        }
+    }
+}
+
+#[test]
+fn settings_reach_bullet() {
+    let s = scene("scene1_single_joint");
+    let settings: EngineSettings = [
+        ("timestep_s", SettingValue::Float(0.005)),
+        ("solver_iterations", SettingValue::Integer(123)),
+        ("contact_erp", SettingValue::Float(0.3)),
+        ("split_impulse", SettingValue::Bool(false)),
+        ("cone_friction", SettingValue::Bool(false)),
+        ("contact_breaking_threshold_m", SettingValue::Float(0.01)),
+    ]
+    .into_iter()
+    .map(|(k, v)| (k.to_string(), v))
+    .collect();
+    let mut sim = load(&s, &mico2(), &settings, &ModelVariation::default());
+    let p = sim.physics_parameters().unwrap();
+    assert_eq!(p.timestep_s, 0.005);
+    assert_eq!(p.gravity_m_s2, [0.0, 0.0, -9.81]);
+    assert_eq!(p.solver_iterations, 123);
+    assert_eq!(p.contact_erp, 0.3);
+    assert!(!p.split_impulse);
+    assert!(!p.cone_friction);
+    assert_eq!(p.contact_breaking_threshold_m, 0.01);
+    assert_eq!(sim.timestep_s(), 0.005);
+    let mut defaults = load(&s, &mico2(), &EngineSettings::new(), &ModelVariation::default());
+    eprintln!("Bullet defaults: {:?}", defaults.physics_parameters().unwrap());
+}
+
+#[test]
+fn variations_scale_masses_and_frictions() {
+    let s = scene("scene1_single_joint");
+    let robot = mico2();
+    let mut plain = load(&s, &robot, &EngineSettings::new(), &ModelVariation::default());
+    let variation = ModelVariation { mass_scale: 1.5, friction_scale: 0.25 };
+    let mut varied = load(&s, &robot, &EngineSettings::new(), &variation);
+    for name in ["m1n6s300_link_3", "object:cube"] {
+        let (m0, f0) = plain.mass_and_friction(name).unwrap().unwrap();
+        let (m1, f1) = varied.mass_and_friction(name).unwrap().unwrap();
+        assert!((m1 - 1.5 * m0).abs() < 1e-12, "{name}: mass {m0} -> {m1}");
+        assert!((f1 - 0.5 * f0).abs() < 1e-12, "{name}: friction {f0} -> {f1} (sqrt of 0.25 per body)");
+    }
+    let (cube_mass, _) = plain.mass_and_friction("object:cube").unwrap().unwrap();
+    assert_eq!(cube_mass, 0.0884);
+}
+
+/// A run whose motors cannot hold the arm (force 1e-3 N m) still completes
+/// and reports where gravity took it; and the reported state is Bullet's,
+/// not clamped.
+#[test]
+fn weak_motors_let_the_arm_fall() {
+    let s = scene("scene1_single_joint");
+    let robot = mico2();
+    let weak: EngineSettings = [("max_force_n_m".to_string(), SettingValue::Float(1e-3))].into_iter().collect();
+    let out = simulate(&BulletEngine, &s, &robot, &weak, &RunOptions::default()).unwrap();
+    assert_eq!(out.status, RunStatus::Completed);
+    let strong = run(&s, &robot);
+    let (a, b) = (wrist(&out), wrist(&strong));
+    assert!(a.last().unwrap().distance(*b.last().unwrap()) > 0.05, "a weak arm should end elsewhere");
+}
