@@ -89,12 +89,15 @@ fn bad_scenes_are_reported_with_file_line_and_field() {
     // The control period is not a whole number of timesteps.
     let scene = assets().join("scenes/scene1_single_joint.toml");
     fails_with(
-        &[os(&scene), os("--set"), os("timestep_s=0.03"), os("--out"), os(&out)],
+        &[os(&scene), os("--engine"), os("mujoco"), os("--set"), os("timestep_s=0.03"), os("--out"), os(&out)],
         &["scene1_single_joint.toml", "controller.period_s", "not a whole number of engine timesteps"],
     );
 
     // Unknown engine setting, unknown engine, bad perturbation, bad package.
-    fails_with(&[os(&scene), os("--set"), os("bogus=1"), os("--out"), os(&out)], &["setting `bogus`", "timestep_s"]);
+    fails_with(
+        &[os(&scene), os("--engine"), os("mujoco"), os("--set"), os("bogus=1"), os("--out"), os(&out)],
+        &["setting `bogus`", "timestep_s"],
+    );
     fails_with(&[os(&scene), os("--engine"), os("warp"), os("--out"), os(&out)], &["unknown engine \"warp\"", "mujoco"]);
     fails_with(&[os(&scene), os("--perturb"), os("mass_scale=2"), os("--out"), os(&out)], &["mass_scale must be below 1"]);
     fails_with(&[os(&scene), os("--package"), os("noequals"), os("--out"), os(&out)], &["expected NAME=DIR"]);
@@ -173,6 +176,8 @@ fn a_crashing_engine_fails_only_its_runs() {
     let result = run(&[
         os(&crashing),
         os(&scene_path),
+        os("--engine"),
+        os("mujoco"),
         os("--repeats"),
         os("2"),
         os("--set"),

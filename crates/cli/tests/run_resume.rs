@@ -50,7 +50,10 @@ fn killed_batch_resumes_without_recomputing_finished_runs() {
     let out = tmp.path().join("results");
     let dir = out.join("scene1_single_joint/mujoco");
     let args = |c: &mut Command| {
-        c.arg("run").arg(scene("scene1_single_joint")).args(["--repeats", "5", "--jobs", "1", "--out"]).arg(&out);
+        c.arg("run")
+            .arg(scene("scene1_single_joint"))
+            .args(["--engine", "mujoco", "--repeats", "5", "--jobs", "1", "--out"])
+            .arg(&out);
     };
 
     // Start the batch and kill it once a run has finished.
@@ -118,7 +121,7 @@ fn rerun_with_other_settings_is_refused() {
         Command::new(exe())
             .arg("run")
             .arg(scene("scene1_single_joint"))
-            .args(["--repeats", "1", "--set", "timestep_s=0.0005", "--out"])
+            .args(["--engine", "mujoco", "--repeats", "1", "--set", "timestep_s=0.0005", "--out"])
             .arg(tmp.path())
             .args(extra)
             .output()
@@ -138,7 +141,7 @@ fn perturbed_repeats_differ_and_are_seeded() {
         Command::new(exe())
             .arg("run")
             .arg(scene("scene1_single_joint"))
-            .args(["--repeats", "3", "--set", "mujoco.timestep_s=0.00025", "--seed", "7"])
+            .args(["--engine", "mujoco", "--repeats", "3", "--set", "mujoco.timestep_s=0.00025", "--seed", "7"])
             .args(["--perturb", "initial_offset_deg=2,sensor_noise_deg=0.2", "--perturb", "mass_scale=0.1"])
             .arg("--out")
             .arg(out)
@@ -172,7 +175,7 @@ fn engines_lists_mujoco_with_its_version() {
     let out = Command::new(exe()).arg("engines").output().unwrap();
     assert!(out.status.success());
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(text.starts_with("mujoco") && text.contains("MuJoCo 3."), "{text}");
+    assert!(text.lines().any(|l| l.starts_with("mujoco ") && l.contains("MuJoCo 3.")), "{text}");
 }
 
 /// At dt = 1e-3 the velocity servos of the light wrist links are unstable
@@ -184,7 +187,7 @@ fn unstable_timestep_is_recorded_as_diverged() {
     let out = Command::new(exe())
         .arg("run")
         .arg(scene("scene1_single_joint"))
-        .args(["--set", "timestep_s=0.001", "--out"])
+        .args(["--engine", "mujoco", "--set", "timestep_s=0.001", "--out"])
         .arg(tmp.path())
         .output()
         .unwrap();
