@@ -1,0 +1,494 @@
+//! Assembly: a [`Scene`] and its [`RobotModel`] become a Rapier world.
+//!
+//! The stages, in order:
+//!
+//! 1. **Groups.** The robot's links are split into rigid groups: a group
+//!    starts at the root link or at the child of an actuated joint, and takes
+//!    in every link reached through fixed, held (non-actuated) and mimic
+//!    joints, each at its fixed or held position. A group is one Rapier rigid
+//!    body whose frame is the frame of its top link; every member link keeps
+//!    its offset from that frame.
+//! 2. **Bodies.** The root group is a fixed body at the scene's base pose;
+//!    every other group is a dynamic body with the URDF mass properties of
+//!    its links combined (masses summed, centre of mass, inertia tensors
+//!    rotated into the group frame and moved by the parallel-axis theorem).
+//!    Colliders carry no mass of their own. Robot bodies never sleep: they
+//!    are driven by motors whose targets change from outside.
+//! 3. **Colliders.** Every URDF `<collision>` shape of every member link,
+//!    at the link's offset composed with the shape's origin (see
+//!    [`crate::shapes`]), with Rapier's default friction (0.5) and
+//!    restitution (0).
+//! 4. **Joints.** Every actuated joint becomes a multibody joint (reduced
+//!    coordinates) from its parent's group to its child's group: revolute
+//!    (continuous joints without limits) or prismatic along the URDF axis,
+//!    with the URDF position limits, a force-based velocity motor (damping =
+//!    the scene's `kv`, target velocity 0, maximum force = the scene's force
+//!    limit), the URDF damping as the multibody's viscous joint damping
+//!    (replacing Rapier's default 0.1 N m s/rad) and the URDF friction as its
+//!    dry joint friction. Contacts between the two bodies a joint connects
+//!    are disabled; other robot bodies may touch.
+//! 5. **World.** A fixed half-space `z >= height_m` for the ground, one
+//!    dynamic box per scene object (mass from the scene, uniform density),
+//!    gravity (0, 0, -9.81) m/s^2, and the solver settings.
+
+use crate::settings::RapierSettings;
+use crate::shapes::ShapeBuilder;
+use rapier3d::dynamics::{GenericJointBuilder, JointAxesMask, JointAxis, MotorModel};
+use rapier3d::math::{Pose as RPose, Rotation, Vector};
+use rapier3d::prelude::{
+    ColliderBuilder, MassProperties, MultibodyJointHandle, PhysicsWorld, RigidBodyBuilder, RigidBodyHandle,
+};
+use realitygap_core::engine::ModelVariation;
+use realitygap_core::pose::{Pose, Quat, Vec3};
+use realitygap_core::robot::{JointKind, RobotModel};
+use realitygap_core::scene::{ObjectShape, Scene, TrackTarget};
+use std::collections::HashMap;
+
+/// Standard gravity along -z, m/s^2.
+pub const GRAVITY_M_S2: f64 = 9.81;
+
+/// A controlled joint in the assembled world.
+#[derive(Debug, Clone)]
+pub struct ControlledJoint {
+    /// The URDF joint's name.
+    pub name: String,
+    /// The multibody joint (its handle is the child body's).
+    pub handle: MultibodyJointHandle,
+    /// The motor's free axis: `AngX` (revolute) or `LinX` (prismatic).
+    pub axis: JointAxis,
+    /// Index of the joint coordinate in Rapier's 6-vector of joint
+    /// coordinates (3 for `AngX`, 0 for `LinX`).
+    pub coordinate: usize,
+    /// The servo's velocity gain, N m s/rad (the motor's damping).
+    pub kv: f32,
+}
+
+/// Where a frame sits: a body and the frame's pose in the body frame.
+#[derive(Debug, Clone, Copy)]
+pub struct BodyFrame {
+    /// The rigid body.
+    pub body: RigidBodyHandle,
+    /// The frame's pose in the body's frame (m, unit quaternion).
+    pub offset: Pose,
+}
+
+/// The assembled world and the handles the simulation needs.
+pub struct Assembly {
+    /// The Rapier world.
+    pub world: PhysicsWorld,
+    /// The controlled joints, in the scene's actuator order.
+    pub joints: Vec<ControlledJoint>,
+    /// The tracked frames, in the scene's `[[track]]` order.
+    pub tracked: Vec<BodyFrame>,
+    /// Every URDF link's frame, by link name.
+    pub links: HashMap<String, BodyFrame>,
+    /// A name for every body: the top link's name for a robot body,
+    /// `object:NAME` for a scene object, `ground` for the ground.
+    pub body_names: HashMap<RigidBodyHandle, String>,
+}
+
+/// A rigid group of links (one Rapier body).
+struct Group {
+    /// The top link (its frame is the group's frame).
+    top_link: usize,
+    /// The top link's world pose at the initial configuration.
+    world_pose: Pose,
+    /// Member links and their offsets in the group frame.
+    members: Vec<(usize, Pose)>,
+}
+
+pub(crate) fn to_rapier_pose(p: &Pose) -> RPose {
+    let q = p.orientation.normalized().unwrap_or(Quat::IDENTITY);
+    RPose::from_parts(
+        Vector::new(p.position_m.x as f32, p.position_m.y as f32, p.position_m.z as f32),
+        Rotation::from_xyzw(q.x as f32, q.y as f32, q.z as f32, q.w as f32).normalize(),
+    )
+}
+
+pub(crate) fn from_rapier_pose(p: &RPose) -> Pose {
+    let t = p.translation;
+    let q = p.rotation;
+    Pose::new(Vec3::new(t.x as f64, t.y as f64, t.z as f64), Quat::new(q.w as f64, q.x as f64, q.y as f64, q.z as f64))
+}
+
+/// The rotation that takes the x axis onto the unit vector `axis` (the
+/// shortest arc; a half turn about z when `axis` is -x).
+fn x_onto(axis: Vec3) -> Quat {
+    let x = Vec3::new(1.0, 0.0, 0.0);
+    let n = axis.norm();
+    let a = if n > 0.0 { axis.scale(1.0 / n) } else { x };
+    let d = x.dot(a);
+    if d < -1.0 + 1e-12 {
+        return Quat::new(0.0, 0.0, 0.0, 1.0);
+    }
+    let c = x.cross(a);
+    Quat::new(1.0 + d, c.x, c.y, c.z).normalized().unwrap_or(Quat::IDENTITY)
+}
+
+fn mat_mul(a: &[f64; 9], b: &[f64; 9]) -> [f64; 9] {
+    let mut m = [0.0; 9];
+    for r in 0..3 {
+        for c in 0..3 {
+            m[3 * r + c] = (0..3).map(|k| a[3 * r + k] * b[3 * k + c]).sum();
+        }
+    }
+    m
+}
+
+fn transpose(a: &[f64; 9]) -> [f64; 9] {
+    [a[0], a[3], a[6], a[1], a[4], a[7], a[2], a[5], a[8]]
+}
+
+/// Combined mass properties of a group in its frame: (mass kg, centre of
+/// mass m, inertia about the centre of mass, row-major kg m^2), scaled by
+/// `mass_scale`. Links without an inertial or with zero mass add nothing.
+fn group_mass(robot: &RobotModel, members: &[(usize, Pose)], mass_scale: f64) -> (f64, Vec3, [f64; 9]) {
+    let mut parts = Vec::new();
+    for &(link, offset) in members {
+        let Some(inertial) = robot.links[link].inertial else { continue };
+        if inertial.mass_kg <= 0.0 {
+            continue;
+        }
+        let frame = offset.compose(&inertial.origin);
+        let r = frame.orientation.to_rotation_matrix();
+        let i = mat_mul(&mat_mul(&r, &inertial.inertia_matrix()), &transpose(&r));
+        parts.push((inertial.mass_kg * mass_scale, frame.position_m, i.map(|v| v * mass_scale)));
+    }
+    let mass: f64 = parts.iter().map(|p| p.0).sum();
+    if mass <= 0.0 {
+        return (0.0, Vec3::ZERO, [0.0; 9]);
+    }
+    let com = parts.iter().fold(Vec3::ZERO, |acc, p| acc + p.1.scale(p.0 / mass));
+    let mut inertia = [0.0; 9];
+    for (m, c, i) in &parts {
+        let d = *c - com;
+        let dd = d.dot(d);
+        let dv = [d.x, d.y, d.z];
+        for r in 0..3 {
+            for k in 0..3 {
+                let delta = if r == k { 1.0 } else { 0.0 };
+                inertia[3 * r + k] += i[3 * r + k] + m * (dd * delta - dv[r] * dv[k]);
+            }
+        }
+    }
+    (mass, com, inertia)
+}
+
+/// Builds the world of `scene` with `robot` (see the module documentation).
+/// Errors are messages for [`realitygap_core::EngineError::Load`].
+pub fn assemble(
+    scene: &Scene,
+    robot: &RobotModel,
+    settings: &RapierSettings,
+    variation: &ModelVariation,
+) -> Result<Assembly, String> {
+    if !(variation.mass_scale.is_finite() && variation.mass_scale > 0.0) {
+        return Err(format!("the mass factor must be positive and finite, found {}", variation.mass_scale));
+    }
+    if !(variation.friction_scale.is_finite() && variation.friction_scale >= 0.0) {
+        return Err(format!("the friction factor must be >= 0 and finite, found {}", variation.friction_scale));
+    }
+
+    // Controlled joints, in scene order.
+    let mut actuated: HashMap<usize, usize> = HashMap::new(); // joint index -> actuator index
+    for (i, a) in scene.actuators.iter().enumerate() {
+        let j = robot
+            .joint_by_name(&a.joint)
+            .ok_or_else(|| format!("robot \"{}\" has no joint \"{}\"", robot.name, a.joint))?;
+        let joint = &robot.joints[j];
+        if !joint.kind.is_movable() {
+            return Err(format!("joint \"{}\" is fixed and cannot carry an actuator", a.joint));
+        }
+        if joint.mimic.is_some() {
+            return Err(format!("joint \"{}\" mimics another joint and cannot carry an actuator", a.joint));
+        }
+        if !(a.kv.is_finite() && a.kv > 0.0) {
+            return Err(format!("actuator of joint \"{}\": kv must be positive and finite, found {}", a.joint, a.kv));
+        }
+        if a.force_limit.is_nan() || a.force_limit <= 0.0 {
+            return Err(format!("actuator of joint \"{}\": force limit must be positive, found {}", a.joint, a.force_limit));
+        }
+        if actuated.insert(j, i).is_some() {
+            return Err(format!("joint \"{}\" has two actuators", a.joint));
+        }
+    }
+
+    // 1. Groups.
+    let mut group_of = vec![usize::MAX; robot.links.len()];
+    let mut offset = vec![Pose::IDENTITY; robot.links.len()];
+    let mut link_world = vec![scene.robot.base; robot.links.len()];
+    let mut groups = vec![Group { top_link: robot.root_link, world_pose: scene.robot.base, members: vec![] }];
+    group_of[robot.root_link] = 0;
+    groups[0].members.push((robot.root_link, Pose::IDENTITY));
+    let held = |j: usize| -> f64 {
+        let joint = &robot.joints[j];
+        match scene.robot.held_joints_rad.get(&joint.name) {
+            Some(&v) => v,
+            None => match &joint.mimic {
+                Some(m) => {
+                    let leader = &robot.joints[m.joint].name;
+                    m.multiplier * scene.robot.held_joints_rad.get(leader).copied().unwrap_or(0.0) + m.offset
+                }
+                None => 0.0,
+            },
+        }
+    };
+    for &j in robot.joints_in_tree_order() {
+        let joint = &robot.joints[j];
+        if let Some(m) = &joint.mimic {
+            if actuated.contains_key(&m.joint) {
+                return Err(format!(
+                    "joint \"{}\" mimics the actuated joint \"{}\"; mimic joints that follow a controlled joint are not supported",
+                    joint.name, robot.joints[m.joint].name
+                ));
+            }
+        }
+        let (parent, child) = (joint.parent, joint.child);
+        if actuated.contains_key(&j) {
+            link_world[child] = link_world[parent].compose(&joint.origin);
+            group_of[child] = groups.len();
+            offset[child] = Pose::IDENTITY;
+            groups.push(Group { top_link: child, world_pose: link_world[child], members: vec![(child, Pose::IDENTITY)] });
+        } else {
+            let position = if joint.kind.is_movable() { held(j) } else { 0.0 };
+            let transform = joint.transform(position);
+            link_world[child] = link_world[parent].compose(&transform);
+            group_of[child] = group_of[parent];
+            offset[child] = offset[parent].compose(&transform);
+            groups[group_of[child]].members.push((child, offset[child]));
+        }
+    }
+
+    let mut world = PhysicsWorld::new();
+    world.gravity = Vector::new(0.0, 0.0, -GRAVITY_M_S2 as f32);
+    let p = &mut world.integration_parameters;
+    p.dt = settings.timestep_s as f32;
+    p.num_solver_iterations = settings.solver_iterations;
+    p.num_internal_pgs_iterations = settings.internal_pgs_iterations;
+    p.num_internal_stabilization_iterations = settings.stabilization_iterations;
+
+    let friction = |f: Option<f64>| (f.unwrap_or(ColliderBuilder::default_friction() as f64) * variation.friction_scale) as f32;
+
+    // 2 and 3. Bodies and colliders.
+    let mut shapes = ShapeBuilder::new();
+    let mut bodies = Vec::with_capacity(groups.len());
+    for (g, group) in groups.iter().enumerate() {
+        let top = &robot.links[group.top_link].name;
+        let builder = if g == 0 {
+            RigidBodyBuilder::fixed().pose(to_rapier_pose(&group.world_pose))
+        } else {
+            let (mass, com, inertia) = group_mass(robot, &group.members, variation.mass_scale);
+            if mass <= 0.0 {
+                return Err(format!(
+                    "link \"{top}\" and the links fixed to it have no mass; a moving body needs a positive mass \
+                     (give it an <inertial> in {})",
+                    robot.source.display()
+                ));
+            }
+            if !(mass as f32).is_normal() || inertia.iter().any(|v| !(*v as f32).is_finite()) {
+                return Err(format!(
+                    "link \"{top}\" and the links fixed to it: mass {mass} kg is out of single-precision range"
+                ));
+            }
+            let m = rapier3d::math::Matrix::from_cols_array(&inertia.map(|v| v as f32));
+            let props = MassProperties::with_inertia_matrix(
+                Vector::new(com.x as f32, com.y as f32, com.z as f32),
+                mass as f32,
+                m,
+            );
+            RigidBodyBuilder::dynamic()
+                .pose(to_rapier_pose(&group.world_pose))
+                .additional_mass_properties(props)
+                .can_sleep(false)
+        };
+        let body = world.bodies.insert(builder.build());
+        for &(link, link_offset) in &group.members {
+            for (c, collision) in robot.links[link].collisions.iter().enumerate() {
+                let (shape, shape_pose) = shapes.shape(&collision.geometry, settings.mesh_shape).map_err(|e| {
+                    let name = collision.name.as_deref().map(|n| format!(" \"{n}\"")).unwrap_or_default();
+                    format!("link \"{}\", collision {}{name}: {e}", robot.links[link].name, c + 1)
+                })?;
+                let pose = to_rapier_pose(&link_offset.compose(&collision.origin)) * shape_pose;
+                let collider = ColliderBuilder::new(shape).position(pose).density(0.0).friction(friction(None));
+                world.colliders.insert_with_parent(collider.build(), body, &mut world.bodies);
+            }
+        }
+        bodies.push(body);
+    }
+
+    // 4. Multibody joints, parents first.
+    let mut handles: HashMap<usize, MultibodyJointHandle> = HashMap::new();
+    for &j in robot.joints_in_tree_order() {
+        let Some(&a) = actuated.get(&j) else { continue };
+        let joint = &robot.joints[j];
+        let spec = &scene.actuators[a];
+        let basis = Pose::new(Vec3::ZERO, x_onto(joint.axis));
+        let frame1 = offset[joint.parent].compose(&joint.origin).compose(&basis);
+        let (locked, axis) = match joint.kind {
+            JointKind::Revolute | JointKind::Continuous => (JointAxesMask::LOCKED_REVOLUTE_AXES, JointAxis::AngX),
+            JointKind::Prismatic => (JointAxesMask::LOCKED_PRISMATIC_AXES, JointAxis::LinX),
+            JointKind::Fixed => unreachable!("fixed joints were refused above"),
+        };
+        let max_force = if spec.force_limit.is_finite() { spec.force_limit as f32 } else { f32::MAX };
+        let mut builder = GenericJointBuilder::new(locked)
+            .local_frame1(to_rapier_pose(&frame1))
+            .local_frame2(to_rapier_pose(&basis))
+            .contacts_enabled(false)
+            .motor_model(axis, MotorModel::ForceBased)
+            .motor_velocity(axis, 0.0, spec.kv as f32)
+            .motor_max_force(axis, max_force);
+        if let Some(lim) = joint.limits {
+            if lim.lower.is_finite() && lim.upper.is_finite() {
+                builder = builder.limits(axis, [lim.lower as f32, lim.upper as f32]);
+            }
+        }
+        let handle = world
+            .multibody_joints
+            .insert(bodies[group_of[joint.parent]], bodies[group_of[joint.child]], builder.build(), true)
+            .ok_or_else(|| format!("Rapier refused the multibody joint \"{}\"", joint.name))?;
+        handles.insert(j, handle);
+    }
+
+    // Fix the multibody's root, place every link, then set the per-DoF
+    // damping and friction (DoF indices are final only once the root is
+    // known to be fixed).
+    if let Some(first) = handles.values().next() {
+        let (mb, _) = world.multibody_joints.get_mut(*first).expect("the handle was just inserted");
+        mb.forward_kinematics(&world.bodies, true);
+        mb.update_rigid_bodies(&mut world.bodies, true);
+    }
+    for (&j, &handle) in &handles {
+        let joint = &robot.joints[j];
+        let (mb, link_id) = world.multibody_joints.get_mut(handle).expect("the handle was just inserted");
+        let dof = mb.link(link_id).expect("the link exists").assembly_id();
+        mb.damping_mut()[dof] = joint.damping as f32;
+        mb.frictions_mut()[dof] = joint.friction as f32;
+    }
+
+    let joints = scene
+        .actuators
+        .iter()
+        .map(|a| {
+            let j = robot.joint_by_name(&a.joint).expect("checked above");
+            let axis = if robot.joints[j].kind == JointKind::Prismatic { JointAxis::LinX } else { JointAxis::AngX };
+            ControlledJoint {
+                name: a.joint.clone(),
+                handle: handles[&j],
+                axis,
+                coordinate: axis as usize,
+                kv: a.kv as f32,
+            }
+        })
+        .collect();
+
+    let links: HashMap<String, BodyFrame> = robot
+        .links
+        .iter()
+        .enumerate()
+        .map(|(l, link)| (link.name.clone(), BodyFrame { body: bodies[group_of[l]], offset: offset[l] }))
+        .collect();
+    let mut body_names: HashMap<RigidBodyHandle, String> =
+        groups.iter().zip(&bodies).map(|(g, &b)| (b, robot.links[g.top_link].name.clone())).collect();
+
+    // 5. Ground and objects.
+    if let Some(ground) = &scene.ground {
+        let body = world.bodies.insert(RigidBodyBuilder::fixed().translation(Vector::new(0.0, 0.0, ground.height_m as f32)));
+        let collider = ColliderBuilder::halfspace(rapier3d::na::Unit::new_unchecked(Vector::Z)).friction(friction(ground.friction));
+        world.colliders.insert_with_parent(collider.build(), body, &mut world.bodies);
+        body_names.insert(body, "ground".to_string());
+    }
+    let mut objects = HashMap::new();
+    for o in &scene.objects {
+        let shape = match o.shape {
+            ObjectShape::Box { size_m } if !(size_m.is_finite() && size_m.x > 0.0 && size_m.y > 0.0 && size_m.z > 0.0) => {
+                return Err(format!("object \"{}\": box size ({}, {}, {}) m must be positive", o.name, size_m.x, size_m.y, size_m.z));
+            }
+            ObjectShape::Box { size_m } => ColliderBuilder::cuboid(
+                (size_m.x / 2.0) as f32,
+                (size_m.y / 2.0) as f32,
+                (size_m.z / 2.0) as f32,
+            ),
+        };
+        let body = world.bodies.insert(RigidBodyBuilder::dynamic().pose(to_rapier_pose(&o.pose)));
+        let mass = (o.mass_kg * variation.mass_scale) as f32;
+        if !mass.is_normal() || mass < 0.0 {
+            return Err(format!("object \"{}\": mass {} kg is not a positive single-precision number", o.name, o.mass_kg * variation.mass_scale));
+        }
+        let collider = shape.mass(mass).friction(friction(o.friction));
+        world.colliders.insert_with_parent(collider.build(), body, &mut world.bodies);
+        objects.insert(o.name.clone(), body);
+        body_names.insert(body, format!("object:{}", o.name));
+    }
+
+    let tracked = scene
+        .tracked
+        .iter()
+        .map(|t| match &t.target {
+            TrackTarget::Link(link) => {
+                links.get(link).copied().ok_or_else(|| format!("tracked link \"{link}\" is not a link of robot \"{}\"", robot.name))
+            }
+            TrackTarget::Object(name) => objects
+                .get(name)
+                .map(|&body| BodyFrame { body, offset: Pose::IDENTITY })
+                .ok_or_else(|| format!("tracked object \"{name}\" is not an object of the scene")),
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+
+    Ok(Assembly { world, joints, tracked, links, body_names })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn x_onto_maps_x_to_the_axis() {
+        for axis in [
+            Vec3::new(0.0, 0.0, 1.0),
+            Vec3::new(0.0, 0.0, -1.0),
+            Vec3::new(1.0, 0.0, 0.0),
+            Vec3::new(-1.0, 0.0, 0.0),
+            Vec3::new(0.0, 1.0, 0.0),
+            Vec3::new(0.3, -0.4, 0.5),
+        ] {
+            let got = x_onto(axis).rotate(Vec3::new(1.0, 0.0, 0.0));
+            let want = axis.scale(1.0 / axis.norm());
+            assert!(got.distance(want) < 1e-12, "{axis:?} -> {got:?}");
+        }
+    }
+
+    #[test]
+    fn rapier_pose_round_trip() {
+        let p = Pose::new(Vec3::new(0.1, -0.2, 0.3), Quat::from_euler_rpy(0.3, -0.2, 1.1));
+        let back = from_rapier_pose(&to_rapier_pose(&p));
+        assert!(back.position_m.distance(p.position_m) < 1e-7);
+        assert!(back.orientation.angle_to(p.orientation) < 1e-6);
+    }
+
+    #[test]
+    fn combined_inertia_uses_the_parallel_axis_theorem() {
+        use realitygap_core::robot::PackageResolver;
+        // Two 1 kg point-like links 0.2 m apart along x, the second turned
+        // by 90 degrees about z: the group's inertia about z is
+        // 2 * 1 * 0.1^2 plus each link's own izz.
+        let urdf = r#"<robot name="pair">
+          <link name="a"><inertial><mass value="1"/><inertia ixx="0.001" ixy="0" ixz="0" iyy="0.002" iyz="0" izz="0.003"/></inertial></link>
+          <link name="b"><inertial><mass value="1"/><inertia ixx="0.001" ixy="0" ixz="0" iyy="0.002" iyz="0" izz="0.003"/></inertial></link>
+          <joint name="ab" type="fixed"><parent link="a"/><child link="b"/><origin xyz="0.2 0 0" rpy="0 0 1.5707963267948966"/></joint>
+        </robot>"#;
+        let robot = RobotModel::from_urdf_str(urdf, std::path::Path::new("."), &PackageResolver::new()).unwrap();
+        let b_offset = robot.joints[0].transform(0.0);
+        let (mass, com, i) = group_mass(&robot, &[(0, Pose::IDENTITY), (1, b_offset)], 1.0);
+        assert!((mass - 2.0).abs() < 1e-12);
+        assert!(com.distance(Vec3::new(0.1, 0.0, 0.0)) < 1e-12);
+        // ixx: a's 0.001 + b's iyy (turned) 0.002, no offset along y/z.
+        assert!((i[0] - 0.003).abs() < 1e-12, "{i:?}");
+        // iyy: a's 0.002 + b's ixx 0.001 + 2 * 0.1^2.
+        assert!((i[4] - (0.003 + 0.02)).abs() < 1e-12, "{i:?}");
+        assert!((i[8] - (0.006 + 0.02)).abs() < 1e-12, "{i:?}");
+        assert!(i[1].abs() < 1e-12 && i[2].abs() < 1e-12 && i[5].abs() < 1e-12);
+        // Scaled masses scale everything.
+        let (m2, _, i2) = group_mass(&robot, &[(0, Pose::IDENTITY), (1, b_offset)], 1.5);
+        assert!((m2 - 3.0).abs() < 1e-12 && (i2[8] - 1.5 * i[8]).abs() < 1e-12);
+    }
+}

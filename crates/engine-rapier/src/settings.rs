@@ -1,0 +1,222 @@
+//! The engine settings (`[engine.rapier]` in a scene file, `--set` on the
+//! command line): parsing, checking, defaults.
+
+use realitygap_core::engine::{EngineError, EngineSettings, SettingInfo, SettingValue};
+
+use crate::ENGINE_NAME;
+
+/// The timestep used when the settings give none, s (the choice:
+/// the study's PyBullet step, five steps per 0.05 s control period).
+pub const DEFAULT_TIMESTEP_S: f64 = 0.01;
+
+/// Default number of solver iterations (Rapier's substeps per step). Rapier's
+/// own default, kept.
+pub const DEFAULT_SOLVER_ITERATIONS: usize = 4;
+
+/// Default number of projected Gauss-Seidel iterations inside each solver
+/// iteration. Rapier's default is 1, which leaves the six coupled joint
+/// motors of the arm far from converged: the arm sags by tens of degrees
+/// under gravity. 20 converges them (see the crate README).
+pub const DEFAULT_INTERNAL_PGS_ITERATIONS: usize = 20;
+
+/// Default number of stabilization (position-correction) iterations per
+/// solver iteration. Rapier's own default, kept.
+pub const DEFAULT_STABILIZATION_ITERATIONS: usize = 1;
+
+/// Largest accepted iteration count of any kind (a typo guard: more than
+/// this would run for hours).
+pub const MAX_ITERATIONS: i64 = 10_000;
+
+/// How a URDF mesh becomes a collision shape.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum MeshShape {
+    /// The convex hull of the mesh's vertices (what MuJoCo collides with).
+    ConvexHull,
+    /// The triangle mesh itself (a hollow surface: contacts only where
+    /// surfaces cross).
+    TriMesh,
+}
+
+impl MeshShape {
+    /// The setting's text for this choice.
+    pub fn name(self) -> &'static str {
+        match self {
+            MeshShape::ConvexHull => "convex_hull",
+            MeshShape::TriMesh => "trimesh",
+        }
+    }
+}
+
+/// The settings accepted in `[engine.rapier]` and by `--set`.
+pub const SETTINGS: &[SettingInfo] = &[
+    SettingInfo { key: "timestep_s", help: "integration timestep, s (> 0, at most 1); default 0.01" },
+    SettingInfo {
+        key: "solver_iterations",
+        help: "solver iterations (substeps) per step (1 to 10000); default 4 (Rapier's)",
+    },
+    SettingInfo {
+        key: "internal_pgs_iterations",
+        help: "Gauss-Seidel iterations per solver iteration (1 to 10000); default 20 (Rapier's 1 lets the arm sag)",
+    },
+    SettingInfo {
+        key: "stabilization_iterations",
+        help: "position-stabilization iterations per solver iteration (0 to 10000); default 1 (Rapier's)",
+    },
+    SettingInfo {
+        key: "mesh_shape",
+        help: "collision shape of URDF meshes: convex_hull | trimesh; default convex_hull",
+    },
+];
+
+/// Checked engine settings, every field filled with its default when not
+/// given.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RapierSettings {
+    /// Integration timestep, s.
+    pub timestep_s: f64,
+    /// Rapier's `num_solver_iterations` (substeps per step).
+    pub solver_iterations: usize,
+    /// Rapier's `num_internal_pgs_iterations`.
+    pub internal_pgs_iterations: usize,
+    /// Rapier's `num_internal_stabilization_iterations`.
+    pub stabilization_iterations: usize,
+    /// Collision shape of URDF meshes.
+    pub mesh_shape: MeshShape,
+}
+
+impl Default for RapierSettings {
+    fn default() -> Self {
+        RapierSettings {
+            timestep_s: DEFAULT_TIMESTEP_S,
+            solver_iterations: DEFAULT_SOLVER_ITERATIONS,
+            internal_pgs_iterations: DEFAULT_INTERNAL_PGS_ITERATIONS,
+            stabilization_iterations: DEFAULT_STABILIZATION_ITERATIONS,
+            mesh_shape: MeshShape::ConvexHull,
+        }
+    }
+}
+
+fn setting_error(key: &str, message: impl Into<String>) -> EngineError {
+    EngineError::Setting { engine: ENGINE_NAME.to_string(), key: key.to_string(), message: message.into() }
+}
+
+fn whole(key: &str, value: &SettingValue, min: i64) -> Result<usize, EngineError> {
+    let v = value
+        .as_i64()
+        .ok_or_else(|| setting_error(key, format!("expected a whole number, found \"{value}\"")))?;
+    if (min..=MAX_ITERATIONS).contains(&v) {
+        Ok(v as usize)
+    } else {
+        Err(setting_error(key, format!("must be a whole number from {min} to {MAX_ITERATIONS}, found {v}")))
+    }
+}
+
+impl RapierSettings {
+    /// Reads `settings`, checking every key and value; unknown keys and bad
+    /// values are errors naming the key and what is accepted.
+    pub fn parse(settings: &EngineSettings) -> Result<RapierSettings, EngineError> {
+        let mut s = RapierSettings::default();
+        for (key, value) in settings {
+            match key.as_str() {
+                "timestep_s" => {
+                    let v = value
+                        .as_f64()
+                        .ok_or_else(|| setting_error(key, format!("expected a number, found \"{value}\"")))?;
+                    if !(v.is_finite() && v > 0.0 && v <= 1.0) {
+                        return Err(setting_error(key, format!("must be > 0 and at most 1 s, found {v}")));
+                    }
+                    s.timestep_s = v;
+                }
+                "solver_iterations" => s.solver_iterations = whole(key, value, 1)?,
+                "internal_pgs_iterations" => s.internal_pgs_iterations = whole(key, value, 1)?,
+                "stabilization_iterations" => s.stabilization_iterations = whole(key, value, 0)?,
+                "mesh_shape" => {
+                    s.mesh_shape = match value.as_str().map(str::to_ascii_lowercase).as_deref() {
+                        Some("convex_hull") => MeshShape::ConvexHull,
+                        Some("trimesh") => MeshShape::TriMesh,
+                        _ => {
+                            return Err(setting_error(
+                                key,
+                                format!("\"{value}\" is not one of convex_hull, trimesh"),
+                            ))
+                        }
+                    }
+                }
+                other => {
+                    return Err(setting_error(
+                        other,
+                        format!(
+                            "unknown setting (Rapier accepts: {})",
+                            SETTINGS.iter().map(|s| s.key).collect::<Vec<_>>().join(", ")
+                        ),
+                    ))
+                }
+            }
+        }
+        Ok(s)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn settings(pairs: &[(&str, SettingValue)]) -> EngineSettings {
+        pairs.iter().map(|(k, v)| (k.to_string(), v.clone())).collect()
+    }
+
+    #[test]
+    fn defaults_when_empty() {
+        let s = RapierSettings::parse(&EngineSettings::new()).unwrap();
+        assert_eq!(s, RapierSettings::default());
+        assert_eq!(s.timestep_s, 0.01);
+        assert_eq!(s.internal_pgs_iterations, 20);
+        assert_eq!(s.mesh_shape, MeshShape::ConvexHull);
+    }
+
+    #[test]
+    fn reads_every_setting() {
+        let s = RapierSettings::parse(&settings(&[
+            ("timestep_s", SettingValue::Float(0.005)),
+            ("solver_iterations", SettingValue::Integer(8)),
+            ("internal_pgs_iterations", SettingValue::Integer(3)),
+            ("stabilization_iterations", SettingValue::Integer(0)),
+            ("mesh_shape", SettingValue::Text("TriMesh".into())),
+        ]))
+        .unwrap();
+        assert_eq!(
+            s,
+            RapierSettings {
+                timestep_s: 0.005,
+                solver_iterations: 8,
+                internal_pgs_iterations: 3,
+                stabilization_iterations: 0,
+                mesh_shape: MeshShape::TriMesh
+            }
+        );
+        // An integer timestep is a number too.
+        assert_eq!(RapierSettings::parse(&settings(&[("timestep_s", SettingValue::Integer(1))])).unwrap().timestep_s, 1.0);
+    }
+
+    #[test]
+    fn rejects_bad_values_naming_the_key() {
+        let cases: &[(&str, SettingValue, &str)] = &[
+            ("timestep_s", SettingValue::Float(0.0), "must be > 0"),
+            ("timestep_s", SettingValue::Float(f64::NAN), "must be > 0"),
+            ("timestep_s", SettingValue::Float(2.0), "at most 1"),
+            ("timestep_s", SettingValue::Text("fast".into()), "expected a number"),
+            ("solver_iterations", SettingValue::Integer(0), "from 1 to"),
+            ("solver_iterations", SettingValue::Float(4.5), "whole number"),
+            ("internal_pgs_iterations", SettingValue::Integer(1_000_000), "from 1 to 10000"),
+            ("stabilization_iterations", SettingValue::Integer(-1), "from 0 to"),
+            ("mesh_shape", SettingValue::Text("voxels".into()), "convex_hull, trimesh"),
+            ("mesh_shape", SettingValue::Bool(true), "convex_hull, trimesh"),
+            ("iterations", SettingValue::Integer(3), "unknown setting (Rapier accepts: timestep_s"),
+        ];
+        for (key, value, expected) in cases {
+            let err = RapierSettings::parse(&settings(&[(key, value.clone())])).unwrap_err();
+            let text = err.to_string();
+            assert!(text.contains(&format!("setting `{key}`")) && text.contains(expected), "{key}={value}: {text}");
+        }
+    }
+}
