@@ -1,0 +1,645 @@
+//! The ODE model of a scene, worked out in plain Rust before any ODE object
+//! exists: which URDF links become one rigid ODE body, each body's mass,
+//! centre of mass and inertia, where its collision shapes sit, which joints
+//! become hinges, and where each tracked link frame is on its body.
+//!
+//! Rules:
+//! - Links joined by a fixed joint, or by a movable joint the scene does not
+//!   control (held, e.g. the fingers, at the scene's held position), form
+//!   one rigid body (setting `weld = "merge"`, the default). This is exact
+//!   for a held joint (it cannot move) and keeps the 10 g finger links from
+//!   being separate bodies. With `weld = "fixed_joint"` every link with mass
+//!   is its own body instead, held to its parent by an ODE fixed joint
+//!   ([`ModelPlan::welds`]); massless links still merge into their parent.
+//! - Every controlled joint becomes an ODE hinge between two bodies.
+//! - An ODE body's frame is at its centre of mass (ODE requires it) with
+//!   the axes of its first link (the link nearest the root), so a link
+//!   frame is found on its body by composing the body pose with
+//!   `translate(-com) * link_in_root` ([`BodyPlan::link_in_body`]).
+//! - Masses and inertias come from the URDF `<inertial>`s only, combined
+//!   with the parallel-axis theorem; a moving body without mass is an
+//!   error (ODE cannot integrate it). A massless base is static.
+
+use crate::settings::{Base, OdeSettings, Weld};
+use realitygap_core::engine::ModelVariation;
+use realitygap_core::pose::{Pose, Quat, Vec3};
+use realitygap_core::robot::stl::TriangleMesh;
+use realitygap_core::robot::{Geometry, JointKind, RobotModel};
+use realitygap_core::scene::{ObjectShape, Scene, TrackTarget};
+use std::collections::HashMap;
+use std::f64::consts::PI;
+
+/// Why a scene and robot cannot be built as an ODE model.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlanError(pub String);
+
+/// The inverse of a rigid pose.
+pub fn pose_inverse(p: &Pose) -> Pose {
+    let q = p.orientation.conjugate();
+    Pose::new(-q.rotate(p.position_m), q)
+}
+
+/// A pure translation.
+fn translation(v: Vec3) -> Pose {
+    Pose::new(v, Quat::IDENTITY)
+}
+
+/// Mass properties of a body about its centre of mass, in the body axes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MassPlan {
+    /// Mass, kg.
+    pub mass_kg: f64,
+    /// Inertia about the centre of mass, body axes, kg m^2, row-major 3x3.
+    pub inertia: [f64; 9],
+}
+
+/// A collision shape, centred on its own frame.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ShapePlan {
+    /// Full edge lengths along x, y, z, m.
+    Box(Vec3),
+    /// Radius, m.
+    Sphere(f64),
+    /// Along z: radius and full length, m.
+    Cylinder(f64, f64),
+    /// Along z: radius and length of the cylindrical part, m.
+    Capsule(f64, f64),
+    /// A triangle mesh (scaled, vertices welded).
+    Mesh(MeshPlan),
+}
+
+/// A triangle mesh ready for `dGeomTriMeshDataBuildDouble`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MeshPlan {
+    /// The file it came from (for messages).
+    pub uri: String,
+    /// Vertex coordinates, x y z per vertex, m.
+    pub vertices: Vec<f64>,
+    /// Three vertex indices per triangle, counter-clockwise from outside.
+    pub indices: Vec<u32>,
+}
+
+/// A collision shape on a body.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GeomPlan {
+    /// The link it belongs to (index in the robot), for messages.
+    pub link: usize,
+    /// The shape.
+    pub shape: ShapePlan,
+    /// Pose of the shape's frame in the body frame (centre of mass).
+    pub offset: Pose,
+}
+
+/// One rigid ODE body of the robot: one or more URDF links.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BodyPlan {
+    /// The name of its first link, for messages.
+    pub name: String,
+    /// The first (root-most) link of the body.
+    pub root_link: usize,
+    /// All links of the body.
+    pub links: Vec<usize>,
+    /// Mass properties; `None` for a massless body (only allowed for a
+    /// static base).
+    pub mass: Option<MassPlan>,
+    /// Centre of mass in the root link's frame, m (0 when massless).
+    pub com_in_root_m: Vec3,
+    /// Collision shapes.
+    pub geoms: Vec<GeomPlan>,
+    /// Whether the body has no ODE body (a static base): its shapes are
+    /// fixed in the world.
+    pub is_static: bool,
+}
+
+impl BodyPlan {
+    /// The pose of the body frame (centre of mass) given the world pose of
+    /// its root link frame.
+    pub fn body_pose_from_root(&self, root_link_world: &Pose) -> Pose {
+        root_link_world.compose(&translation(self.com_in_root_m))
+    }
+
+    /// The pose of a link frame on this body (`link_in_root`: the link in
+    /// the root link's frame) relative to the body frame.
+    pub fn link_in_body(&self, link_in_root: &Pose) -> Pose {
+        translation(-self.com_in_root_m).compose(link_in_root)
+    }
+}
+
+/// A controlled joint, as an ODE hinge.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HingePlan {
+    /// The joint's index in the robot.
+    pub joint: usize,
+    /// The body the joint moves (its child link's body).
+    pub child_body: usize,
+    /// The body it hangs on (its parent link's body).
+    pub parent_body: usize,
+    /// Lower and upper stops, rad, each within [-pi, pi]; `None` where the
+    /// joint has no limit (or one ODE's hinge cannot express).
+    pub stops_rad: (Option<f64>, Option<f64>),
+    /// Viscous damping, N m s/rad.
+    pub damping: f64,
+    /// Coulomb friction torque, N m.
+    pub friction_nm: f64,
+    /// Servo gain, N m s/rad.
+    pub kv: f64,
+    /// Servo torque limit, N m (may be infinite).
+    pub force_limit_nm: f64,
+}
+
+/// A free object of the scene.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ObjectPlan {
+    /// The object's name.
+    pub name: String,
+    /// Full box edges, m.
+    pub size_m: Vec3,
+    /// Mass (scaled by the variation).
+    pub mass: MassPlan,
+    /// Initial pose of its centre.
+    pub pose: Pose,
+    /// Friction coefficient (scene's or default, scaled).
+    pub mu: f64,
+}
+
+/// What a tracked body follows on the model.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum TrackedPlan {
+    /// A link frame at `link_in_body` on robot body `body`.
+    Link {
+        /// Robot body index.
+        body: usize,
+        /// The link frame relative to the body frame.
+        link_in_body: Pose,
+    },
+    /// Object `index` (its centre).
+    Object(usize),
+}
+
+/// The whole model.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ModelPlan {
+    /// Robot bodies; body 0 holds the root link.
+    pub bodies: Vec<BodyPlan>,
+    /// The body of every link (indexed like `robot.links`).
+    pub body_of_link: Vec<usize>,
+    /// Every link's frame relative to its body's root link frame.
+    pub link_in_root: Vec<Pose>,
+    /// One hinge per controlled joint, in the scene's actuator order.
+    pub hinges: Vec<HingePlan>,
+    /// Bodies held to their parent body by a fixed joint (child, parent),
+    /// with `weld = "fixed_joint"`.
+    pub welds: Vec<(usize, usize)>,
+    /// Free objects, in scene order.
+    pub objects: Vec<ObjectPlan>,
+    /// Ground height, m, and friction, when there is a ground.
+    pub ground: Option<(f64, f64)>,
+    /// Friction coefficient of the robot's surfaces.
+    pub robot_mu: f64,
+    /// Tracked bodies, in scene order.
+    pub tracked: Vec<TrackedPlan>,
+    /// Joint positions (indexed like `robot.joints`) of the initial
+    /// configuration: controlled joints 0, held joints at their positions.
+    pub initial_positions: Vec<f64>,
+}
+
+/// Scales a 3x3 matrix.
+fn scaled(m: &[f64; 9], s: f64) -> [f64; 9] {
+    m.map(|x| x * s)
+}
+
+/// `R I R^T` for a rotation `r` (row-major).
+fn rotate_inertia(r: &[f64; 9], i: &[f64; 9]) -> [f64; 9] {
+    let mut ri = [0.0; 9];
+    let mut out = [0.0; 9];
+    for a in 0..3 {
+        for b in 0..3 {
+            ri[3 * a + b] = (0..3).map(|k| r[3 * a + k] * i[3 * k + b]).sum();
+        }
+    }
+    for a in 0..3 {
+        for b in 0..3 {
+            out[3 * a + b] = (0..3).map(|k| ri[3 * a + k] * r[3 * b + k]).sum();
+        }
+    }
+    out
+}
+
+/// Combines point masses with inertias (position, mass, inertia about its
+/// own centre in common axes) into total mass, centre and inertia about
+/// that centre (parallel-axis theorem). `None` when the total mass is 0.
+pub fn combine_masses(parts: &[(Vec3, f64, [f64; 9])]) -> Option<(MassPlan, Vec3)> {
+    let mass: f64 = parts.iter().map(|p| p.1).sum();
+    if mass <= 0.0 {
+        return None;
+    }
+    let com = parts.iter().fold(Vec3::ZERO, |acc, (p, m, _)| acc + p.scale(*m)).scale(1.0 / mass);
+    let mut inertia = [0.0; 9];
+    for (p, m, i) in parts {
+        let d = *p - com;
+        let dd = d.dot(d);
+        let dv = [d.x, d.y, d.z];
+        for a in 0..3 {
+            for b in 0..3 {
+                let delta = if a == b { 1.0 } else { 0.0 };
+                inertia[3 * a + b] += i[3 * a + b] + m * (dd * delta - dv[a] * dv[b]);
+            }
+        }
+    }
+    Some((MassPlan { mass_kg: mass, inertia }, com))
+}
+
+/// Whether a symmetric 3x3 matrix is positive definite (Sylvester's
+/// criterion) and finite.
+pub fn is_positive_definite(m: &[f64; 9]) -> bool {
+    let d1 = m[0];
+    let d2 = m[0] * m[4] - m[1] * m[3];
+    let d3 = m[0] * (m[4] * m[8] - m[5] * m[7]) - m[1] * (m[3] * m[8] - m[5] * m[6]) + m[2] * (m[3] * m[7] - m[4] * m[6]);
+    m.iter().all(|x| x.is_finite()) && d1 > 0.0 && d2 > 0.0 && d3 > 0.0
+}
+
+/// Reads an STL mesh, scales it, and welds equal vertices.
+pub fn mesh_plan(path: &std::path::Path, uri: &str, scale: Vec3, link_name: &str) -> Result<MeshPlan, PlanError> {
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    if ext != "stl" {
+        return Err(PlanError(format!(
+            "link \"{link_name}\": mesh \"{uri}\" ({}) is not an STL file; the ODE engine reads STL meshes only",
+            path.display()
+        )));
+    }
+    let mesh = TriangleMesh::read(path).map_err(|e| PlanError(format!("link \"{link_name}\": {e}")))?;
+    if mesh.triangles.is_empty() {
+        return Err(PlanError(format!("link \"{link_name}\": mesh {} has no triangles", path.display())));
+    }
+    if !(scale.x != 0.0 && scale.y != 0.0 && scale.z != 0.0 && scale.is_finite()) {
+        return Err(PlanError(format!("link \"{link_name}\": mesh \"{uri}\" has a zero or non-finite scale")));
+    }
+    // A mirroring scale turns the triangles inside out: swap two corners.
+    let mirrored = scale.x * scale.y * scale.z < 0.0;
+    let mut index_of: HashMap<[u64; 3], u32> = HashMap::new();
+    let mut vertices: Vec<f64> = Vec::new();
+    let mut indices: Vec<u32> = Vec::with_capacity(mesh.triangles.len() * 3);
+    for (t, tri) in mesh.triangles.iter().enumerate() {
+        let corners = if mirrored { [tri[0], tri[2], tri[1]] } else { *tri };
+        let mut ids = [0u32; 3];
+        for (id, v) in ids.iter_mut().zip(corners) {
+            let s = Vec3::new(v.x * scale.x, v.y * scale.y, v.z * scale.z);
+            if !s.is_finite() {
+                return Err(PlanError(format!("link \"{link_name}\": mesh {} triangle {t} has a non-finite vertex", path.display())));
+            }
+            // +0.0 and -0.0 are the same vertex.
+            let key = [(s.x + 0.0).to_bits(), (s.y + 0.0).to_bits(), (s.z + 0.0).to_bits()];
+            let next = (vertices.len() / 3) as u32;
+            *id = *index_of.entry(key).or_insert_with(|| {
+                vertices.extend_from_slice(&[s.x, s.y, s.z]);
+                next
+            });
+        }
+        // Degenerate triangles (two equal corners) carry no surface.
+        if ids[0] != ids[1] && ids[1] != ids[2] && ids[0] != ids[2] {
+            indices.extend_from_slice(&ids);
+        }
+    }
+    if indices.is_empty() {
+        return Err(PlanError(format!("link \"{link_name}\": mesh {} has only degenerate triangles", path.display())));
+    }
+    if vertices.len() / 3 > i32::MAX as usize || indices.len() > i32::MAX as usize {
+        return Err(PlanError(format!("link \"{link_name}\": mesh {} is too large for ODE", path.display())));
+    }
+    Ok(MeshPlan { uri: uri.to_string(), vertices, indices })
+}
+
+fn shape_plan(geometry: &Geometry, link_name: &str) -> Result<ShapePlan, PlanError> {
+    let positive = |what: &str, v: f64| {
+        if v.is_finite() && v > 0.0 {
+            Ok(v)
+        } else {
+            Err(PlanError(format!("link \"{link_name}\": collision {what} must be positive and finite, found {v}")))
+        }
+    };
+    Ok(match geometry {
+        Geometry::Box { size_m } => {
+            ShapePlan::Box(Vec3::new(positive("box size", size_m.x)?, positive("box size", size_m.y)?, positive("box size", size_m.z)?))
+        }
+        Geometry::Sphere { radius_m } => ShapePlan::Sphere(positive("sphere radius", *radius_m)?),
+        Geometry::Cylinder { radius_m, length_m } => {
+            ShapePlan::Cylinder(positive("cylinder radius", *radius_m)?, positive("cylinder length", *length_m)?)
+        }
+        Geometry::Capsule { radius_m, length_m } => {
+            let length = if *length_m == 0.0 { 0.0 } else { positive("capsule length", *length_m)? };
+            ShapePlan::Capsule(positive("capsule radius", *radius_m)?, length)
+        }
+        Geometry::Mesh { path, uri, scale } => ShapePlan::Mesh(mesh_plan(path, uri, *scale, link_name)?),
+    })
+}
+
+/// Works out the ODE model of `scene` with `robot` (validated against the
+/// scene), configured by `settings` and changed by `variation`.
+pub fn plan(
+    scene: &Scene,
+    robot: &RobotModel,
+    settings: &OdeSettings,
+    variation: &ModelVariation,
+) -> Result<ModelPlan, PlanError> {
+    let actuated: Vec<usize> = scene
+        .actuators
+        .iter()
+        .map(|a| {
+            robot
+                .joint_by_name(&a.joint)
+                .ok_or_else(|| PlanError(format!("robot \"{}\" has no joint \"{}\"", robot.name, a.joint)))
+        })
+        .collect::<Result<_, _>>()?;
+    for &j in &actuated {
+        let joint = &robot.joints[j];
+        if !matches!(joint.kind, JointKind::Revolute | JointKind::Continuous) {
+            return Err(PlanError(format!(
+                "joint \"{}\" is {}; the ODE engine drives revolute and continuous joints only",
+                joint.name, joint.kind
+            )));
+        }
+    }
+    let usable = variation.mass_scale.is_finite()
+        && variation.mass_scale > 0.0
+        && variation.friction_scale.is_finite()
+        && variation.friction_scale >= 0.0;
+    if !usable {
+        return Err(PlanError(format!(
+            "the model variation must scale masses by a positive and friction by a non-negative factor, found {} and {}",
+            variation.mass_scale, variation.friction_scale
+        )));
+    }
+
+    // Joint positions of the initial configuration (held joints at their
+    // positions); mimic joints that follow a controlled joint cannot be
+    // welded.
+    let mut initial_positions = vec![0.0; robot.joints.len()];
+    for (j, joint) in robot.joints.iter().enumerate() {
+        if actuated.contains(&j) || !joint.kind.is_movable() {
+            continue;
+        }
+        if let Some(m) = &joint.mimic {
+            if actuated.contains(&m.joint) {
+                return Err(PlanError(format!(
+                    "joint \"{}\" mimics the controlled joint \"{}\"; mimic joints that follow a controlled joint are not supported",
+                    joint.name, robot.joints[m.joint].name
+                )));
+            }
+        }
+        initial_positions[j] = scene.robot.held_joints_rad.get(&joint.name).copied().unwrap_or(0.0);
+    }
+
+    // Bodies: a new one at the root and below every controlled joint.
+    let has_mass = |l: usize| robot.links[l].inertial.is_some_and(|i| i.mass_kg > 0.0);
+    let mut body_of_link = vec![usize::MAX; robot.links.len()];
+    let mut roots = vec![robot.root_link];
+    let mut welds = Vec::new();
+    body_of_link[robot.root_link] = 0;
+    for &j in robot.joints_in_tree_order() {
+        let joint = &robot.joints[j];
+        let welded_body = settings.weld == Weld::FixedJoint && has_mass(joint.child);
+        if actuated.contains(&j) || welded_body {
+            body_of_link[joint.child] = roots.len();
+            if !actuated.contains(&j) {
+                welds.push((roots.len(), body_of_link[joint.parent]));
+            }
+            roots.push(joint.child);
+        } else {
+            body_of_link[joint.child] = body_of_link[joint.parent];
+        }
+    }
+    let world = robot.forward_kinematics(&Pose::IDENTITY, &initial_positions);
+    let link_in_root: Vec<Pose> = (0..robot.links.len())
+        .map(|l| pose_inverse(&world[roots[body_of_link[l]]]).compose(&world[l]))
+        .collect();
+
+    let mut bodies = Vec::with_capacity(roots.len());
+    for (b, &root) in roots.iter().enumerate() {
+        let links: Vec<usize> = (0..robot.links.len()).filter(|&l| body_of_link[l] == b).collect();
+        let mut parts = Vec::new();
+        for &l in &links {
+            if let Some(inertial) = &robot.links[l].inertial {
+                if inertial.mass_kg > 0.0 {
+                    let frame = link_in_root[l].compose(&inertial.origin);
+                    let r = frame.orientation.to_rotation_matrix();
+                    let i = rotate_inertia(&r, &inertial.inertia_matrix());
+                    parts.push((frame.position_m, inertial.mass_kg * variation.mass_scale, scaled(&i, variation.mass_scale)));
+                }
+            }
+        }
+        let link_names = || links.iter().map(|&l| robot.links[l].name.as_str()).collect::<Vec<_>>().join(", ");
+        let (mass, com) = match combine_masses(&parts) {
+            Some((m, c)) => (Some(m), c),
+            None => (None, Vec3::ZERO),
+        };
+        let is_static = b == 0 && (settings.base == Base::Static || mass.is_none());
+        if let Some(m) = &mass {
+            if !is_static && !is_positive_definite(&m.inertia) {
+                return Err(PlanError(format!(
+                    "the links {} (one rigid body) have an inertia that is not positive definite ({:?} kg m^2); ODE cannot integrate it",
+                    link_names(),
+                    m.inertia
+                )));
+            }
+        } else if !is_static {
+            let joint = robot.parent_joint(root).map(|j| robot.joints[j].name.as_str()).unwrap_or("?");
+            return Err(PlanError(format!(
+                "the links {} moved by joint \"{joint}\" have no mass (no <inertial>); ODE cannot simulate a massless moving body",
+                link_names()
+            )));
+        }
+        let body = BodyPlan { name: robot.links[root].name.clone(), root_link: root, links: links.clone(), mass, com_in_root_m: com, geoms: Vec::new(), is_static };
+        let mut geoms = Vec::new();
+        for &l in &links {
+            for c in &robot.links[l].collisions {
+                let shape = shape_plan(&c.geometry, &robot.links[l].name)?;
+                let offset = body.link_in_body(&link_in_root[l]).compose(&c.origin);
+                geoms.push(GeomPlan { link: l, shape, offset });
+            }
+        }
+        bodies.push(BodyPlan { geoms, ..body });
+    }
+
+    let mut hinges = Vec::with_capacity(actuated.len());
+    for (a, &j) in scene.actuators.iter().zip(&actuated) {
+        let joint = &robot.joints[j];
+        let mut stops = (None, None);
+        if let Some(lim) = joint.limits {
+            if lim.lower.is_finite() && lim.lower >= -PI {
+                stops.0 = Some(lim.lower);
+            }
+            if lim.upper.is_finite() && lim.upper <= PI {
+                stops.1 = Some(lim.upper);
+            }
+        }
+        hinges.push(HingePlan {
+            joint: j,
+            child_body: body_of_link[joint.child],
+            parent_body: body_of_link[joint.parent],
+            stops_rad: stops,
+            damping: joint.damping,
+            friction_nm: joint.friction,
+            kv: a.kv,
+            force_limit_nm: a.force_limit,
+        });
+    }
+
+    let friction = |f: Option<f64>| f.unwrap_or(settings.contact_mu) * variation.friction_scale;
+    let objects = scene
+        .objects
+        .iter()
+        .map(|o| {
+            let ObjectShape::Box { size_m } = o.shape;
+            let p = o.principal_inertia();
+            let s = variation.mass_scale;
+            ObjectPlan {
+                name: o.name.clone(),
+                size_m,
+                mass: MassPlan { mass_kg: o.mass_kg * s, inertia: [p.x * s, 0.0, 0.0, 0.0, p.y * s, 0.0, 0.0, 0.0, p.z * s] },
+                pose: o.pose,
+                mu: friction(o.friction),
+            }
+        })
+        .collect();
+
+    let mut tracked = Vec::with_capacity(scene.tracked.len());
+    for t in &scene.tracked {
+        tracked.push(match &t.target {
+            TrackTarget::Link(name) => {
+                let l = robot
+                    .link_by_name(name)
+                    .ok_or_else(|| PlanError(format!("robot \"{}\" has no link \"{name}\" to track", robot.name)))?;
+                let b = body_of_link[l];
+                TrackedPlan::Link { body: b, link_in_body: bodies[b].link_in_body(&link_in_root[l]) }
+            }
+            TrackTarget::Object(name) => {
+                let i = scene
+                    .objects
+                    .iter()
+                    .position(|o| &o.name == name)
+                    .ok_or_else(|| PlanError(format!("the scene has no object \"{name}\" to track")))?;
+                TrackedPlan::Object(i)
+            }
+        });
+    }
+
+    Ok(ModelPlan {
+        bodies,
+        body_of_link,
+        link_in_root,
+        hinges,
+        welds,
+        objects,
+        ground: scene.ground.map(|g| (g.height_m, friction(g.friction))),
+        robot_mu: friction(None),
+        tracked,
+        initial_positions,
+    })
+}
+
+impl ModelPlan {
+    /// World poses of the robot bodies' frames (centres of mass) with the
+    /// controlled joints at `angles_rad` (actuator order) and the base at
+    /// `base`.
+    pub fn body_poses(&self, robot: &RobotModel, base: &Pose, angles_rad: &[f64]) -> Vec<Pose> {
+        let mut positions = self.initial_positions.clone();
+        for (h, &a) in self.hinges.iter().zip(angles_rad) {
+            positions[h.joint] = a;
+        }
+        let world = robot.forward_kinematics(base, &positions);
+        self.bodies.iter().map(|b| b.body_pose_from_root(&world[b.root_link])).collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn close(a: f64, b: f64) -> bool {
+        (a - b).abs() < 1e-12
+    }
+
+    #[test]
+    fn combined_masses_follow_the_parallel_axis_theorem() {
+        // Two 1 kg point masses 2 m apart on x: centre in the middle,
+        // inertia 2 kg m^2 about y and z, none about x.
+        let zero = [0.0; 9];
+        let (m, c) = combine_masses(&[(Vec3::new(1.0, 0.0, 0.0), 1.0, zero), (Vec3::new(3.0, 0.0, 0.0), 1.0, zero)]).unwrap();
+        assert_eq!(m.mass_kg, 2.0);
+        assert!(close(c.x, 2.0) && close(c.y, 0.0));
+        assert!(close(m.inertia[0], 0.0) && close(m.inertia[4], 2.0) && close(m.inertia[8], 2.0));
+        assert!(combine_masses(&[(Vec3::ZERO, 0.0, zero)]).is_none());
+        // Off-diagonal terms for an offset in x and y.
+        let (m, _) = combine_masses(&[(Vec3::new(1.0, 1.0, 0.0), 1.0, zero), (Vec3::new(-1.0, -1.0, 0.0), 1.0, zero)]).unwrap();
+        assert!(close(m.inertia[1], -2.0) && close(m.inertia[3], -2.0));
+        assert!(!is_positive_definite(&m.inertia));
+    }
+
+    #[test]
+    fn rotated_inertia_swaps_axes() {
+        // A quarter turn about z exchanges the x and y moments.
+        let r = Quat::from_axis_angle(Vec3::new(0.0, 0.0, 1.0), PI / 2.0).to_rotation_matrix();
+        let i = rotate_inertia(&r, &[1.0, 0.0, 0.0, 0.0, 2.0, 0.0, 0.0, 0.0, 3.0]);
+        assert!(close(i[0], 2.0) && close(i[4], 1.0) && close(i[8], 3.0) && close(i[1], 0.0));
+        assert!(is_positive_definite(&i));
+    }
+
+    #[test]
+    fn pose_inverse_undoes_a_pose() {
+        let p = Pose::new(Vec3::new(0.1, -0.2, 0.3), Quat::from_euler_rpy(0.3, -0.4, 1.2));
+        let id = p.compose(&pose_inverse(&p));
+        assert!(id.position_m.norm() < 1e-15 && id.orientation.angle_to(Quat::IDENTITY) < 1e-7);
+    }
+
+    fn write_stl(dir: &std::path::Path, name: &str, tris: &[[[f32; 3]; 3]]) -> std::path::PathBuf {
+        let mut b = vec![0u8; 80];
+        b.extend_from_slice(&(tris.len() as u32).to_le_bytes());
+        for t in tris {
+            b.extend_from_slice(&[0u8; 12]);
+            for v in t {
+                for c in v {
+                    b.extend_from_slice(&c.to_le_bytes());
+                }
+            }
+            b.extend_from_slice(&[0u8; 2]);
+        }
+        let p = dir.join(name);
+        std::fs::write(&p, b).unwrap();
+        p
+    }
+
+    #[test]
+    fn meshes_are_welded_scaled_and_checked() {
+        let dir = std::env::temp_dir().join(format!("realitygap-ode-plan-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        // Two triangles sharing an edge, and one degenerate triangle.
+        let p = write_stl(
+            &dir,
+            "quad.stl",
+            &[
+                [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0]],
+                [[0.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]],
+                [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+            ],
+        );
+        let m = mesh_plan(&p, "quad.stl", Vec3::new(2.0, 1.0, 1.0), "l").unwrap();
+        assert_eq!(m.vertices.len(), 4 * 3);
+        assert_eq!(m.indices, vec![0, 1, 2, 0, 2, 3]);
+        assert_eq!(m.vertices[3], 2.0);
+        // A mirroring scale keeps the outside out.
+        let m = mesh_plan(&p, "quad.stl", Vec3::new(-1.0, 1.0, 1.0), "l").unwrap();
+        assert_eq!(&m.indices[..3], &[0, 1, 2]);
+        assert_eq!(&m.vertices[3..6], &[-1.0, 1.0, 0.0]);
+        let e = mesh_plan(&p, "quad.stl", Vec3::new(0.0, 1.0, 1.0), "l").unwrap_err();
+        assert!(e.0.contains("zero or non-finite scale"), "{}", e.0);
+        let bad = dir.join("quad.dae");
+        std::fs::write(&bad, "<COLLADA/>").unwrap();
+        let e = mesh_plan(&bad, "package://x/quad.dae", Vec3::new(1.0, 1.0, 1.0), "hand").unwrap_err();
+        assert!(e.0.contains("link \"hand\"") && e.0.contains("STL meshes only"), "{}", e.0);
+        let broken = dir.join("broken.stl");
+        std::fs::write(&broken, b"solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0\n").unwrap();
+        let e = mesh_plan(&broken, "broken.stl", Vec3::new(1.0, 1.0, 1.0), "hand").unwrap_err();
+        assert!(e.0.contains("broken.stl"), "{}", e.0);
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}
