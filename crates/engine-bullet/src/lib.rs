@@ -115,7 +115,7 @@ pub const SETTINGS: &[SettingInfo] = &[
         key: "solver_residual_threshold",
         help: "solverResidualThreshold: the solver stops when the residual falls below it (>= 0); default 1e-7",
     },
-    SettingInfo { key: "contact_erp", help: "defaultContactERP: contact error reduction per step, 0..1; default 0.2" },
+    SettingInfo { key: "contact_erp", help: "defaultContactERP: contact error reduction per step, 0..1; default 0.08" },
     SettingInfo {
         key: "non_contact_erp",
         help: "defaultNonContactERP: error reduction of joint limits and motors, 0..1; default 0.2",
@@ -125,11 +125,11 @@ pub const SETTINGS: &[SettingInfo] = &[
     SettingInfo { key: "split_impulse", help: "useSplitImpulse: true | false; default true" },
     SettingInfo {
         key: "split_impulse_penetration_threshold_m",
-        help: "splitImpulsePenetrationThreshold, m (>= 0); default -0.04",
+        help: "splitImpulsePenetrationThreshold: penetration beyond which split impulse is used, m; default -0.04",
     },
     SettingInfo {
         key: "contact_breaking_threshold_m",
-        help: "contactBreakingThreshold: contact points farther apart are dropped, m (> 0); default 0.02",
+        help: "contactBreakingThreshold: contact points farther apart are dropped, m (> 0); default 0.01",
     },
     SettingInfo { key: "cone_friction", help: "enableConeFriction: true | false; default true" },
     SettingInfo {
@@ -769,6 +769,9 @@ impl BulletSimulation {
     }
 
     /// Reads the joint angles and tracked poses. Call with the lock held.
+    /// Bullet recomputes the link frames from the joint positions first:
+    /// the frames it keeps are those of the collision detection, one
+    /// position update behind after a step (3 mm at the wrist in scene 1).
     fn refresh(&mut self) -> Result<(), EngineError> {
         let h = self.client.handle();
         let mut max_speed: f64 = 0.0;

@@ -192,8 +192,22 @@ fn settings_reach_bullet() {
     assert!(!p.cone_friction);
     assert_eq!(p.contact_breaking_threshold_m, 0.01);
     assert_eq!(sim.timestep_s(), 0.005);
+    // The defaults the settings' help texts state are Bullet's.
     let mut defaults = load(&s, &mico2(), &EngineSettings::new(), &ModelVariation::default());
-    eprintln!("Bullet defaults: {:?}", defaults.physics_parameters().unwrap());
+    let d = defaults.physics_parameters().unwrap();
+    eprintln!("Bullet defaults: {d:?}");
+    assert_eq!(d.timestep_s, 0.01);
+    assert_eq!(d.solver_iterations, 50);
+    assert_eq!(d.solver_residual_threshold, 1e-7);
+    assert_eq!(d.contact_erp, 0.08);
+    assert_eq!((d.non_contact_erp, d.friction_erp, d.global_cfm), (0.2, 0.2, 0.0));
+    assert!(d.split_impulse && d.cone_friction);
+    assert!((d.split_impulse_penetration_threshold_m + 0.04).abs() < 1e-8);
+    assert_eq!(d.contact_breaking_threshold_m, 0.01);
+    let help = |key: &str| realitygap_engine_bullet::SETTINGS.iter().find(|s| s.key == key).unwrap().help;
+    assert!(help("contact_erp").ends_with("default 0.08"));
+    assert!(help("contact_breaking_threshold_m").ends_with("default 0.01"));
+    assert!(help("solver_iterations").ends_with("default 50"));
 }
 
 #[test]
@@ -209,8 +223,9 @@ fn variations_scale_masses_and_frictions() {
         assert!((m1 - 1.5 * m0).abs() < 1e-12, "{name}: mass {m0} -> {m1}");
         assert!((f1 - 0.5 * f0).abs() < 1e-12, "{name}: friction {f0} -> {f1} (sqrt of 0.25 per body)");
     }
-    let (cube_mass, _) = plain.mass_and_friction("object:cube").unwrap().unwrap();
+    let (cube_mass, cube_friction) = plain.mass_and_friction("object:cube").unwrap().unwrap();
     assert_eq!(cube_mass, 0.0884);
+    assert_eq!(cube_friction, 0.5, "Bullet's default lateral friction");
 }
 
 /// A run whose motors cannot hold the arm (force 1e-3 N m) still completes

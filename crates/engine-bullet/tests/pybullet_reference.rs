@@ -42,11 +42,11 @@ fn compare(scene_name: &str, fixture: &str, official: bool, settings: &EngineSet
     let joints_last_max_rad = angles.iter().zip(reference_angles).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
     let gap = Gap { max_m, max_row, last_m: *g.last().unwrap(), cube_last_m, joints_last_max_rad };
     eprintln!(
-        "{fixture}: wrist gap max {:.4} um (row {}), last {:.4} um; cube last {:.4} um; joints last {:.2e} rad; {} ({})",
-        gap.max_m * 1e6,
+        "{fixture}: wrist gap max {:.2e} m (row {}), last {:.2e} m; cube last {:.2e} m; joints last {:.2e} rad; {} ({})",
+        gap.max_m,
         gap.max_row,
-        gap.last_m * 1e6,
-        gap.cube_last_m * 1e6,
+        gap.last_m,
+        gap.cube_last_m,
         gap.joints_last_max_rad,
         reference.provenance.first().map(String::as_str).unwrap_or("?"),
         reference.provenance.get(2).map(String::as_str).unwrap_or("?"),
