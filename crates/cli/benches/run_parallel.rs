@@ -32,6 +32,27 @@ fn load_average() -> Option<f64> {
     std::fs::read_to_string("/proc/loadavg").ok()?.split_whitespace().next()?.parse().ok()
 }
 
+/// A fixed CPU-bound task (integer hashing), s.
+fn spin() -> f64 {
+    let start = Instant::now();
+    let mut x = 0x9E37_79B9_7F4A_7C15u64;
+    for i in 0..400_000_000u64 {
+        x = (x ^ i).wrapping_mul(0xBF58_476D_1CE4_E5B9).rotate_left(17);
+    }
+    std::hint::black_box(x);
+    start.elapsed().as_secs_f64()
+}
+
+/// How many cores this process can use right now: the same task run once
+/// alone and then on `n` threads at once.
+fn cores_available(n: usize) -> f64 {
+    let alone = spin();
+    let together: Vec<f64> =
+        std::thread::scope(|s| (0..n).map(|_| s.spawn(spin)).collect::<Vec<_>>().into_iter().map(|h| h.join().unwrap()).collect());
+    let slowest = together.iter().copied().fold(0.0, f64::max);
+    n as f64 * alone / slowest
+}
+
 fn main() {
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     if let Some(load) = load_average() {
@@ -40,6 +61,8 @@ fn main() {
             println!("warning: other processes are using the cores; the speed-up will be understated");
         }
     }
+    let usable = cores_available(cores);
+    println!("a CPU-bound reference task can use {usable:.2} of the {cores} cores now");
     let repeats: u32 = std::env::var("REPEATS").ok().and_then(|v| v.parse().ok()).unwrap_or(20);
     let tmp = std::env::temp_dir().join(format!("realitygap-bench-{}", std::process::id()));
     let one = batch(1, repeats, &tmp.join("jobs1"));
@@ -52,4 +75,8 @@ fn main() {
     if let Some(load) = load_average() {
         println!("load average after: {load:.2}");
     }
+    let usable_after = cores_available(cores);
+    println!(
+        "the reference task could use {usable:.2} cores before and {usable_after:.2} after: a speed-up above that is not possible"
+    );
 }
