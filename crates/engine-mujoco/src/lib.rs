@@ -17,6 +17,12 @@
 //! solver, ...) are applied to the compiled model, then the mass and
 //! friction factors of a [`ModelVariation`].
 //!
+//! State is read as the study's own loop read it: after the period's last
+//! `mj_step`, joint angles (`qpos`) are those at time t, and body poses
+//! (`xpos`, `xquat`) come from that step's kinematics pass, one timestep
+//! earlier (at dt = 1e-4 s and 0.5 m/s, 0.05 mm). Matching this is what
+//! makes the study's recordings reproducible to micrometres.
+//!
 //! MuJoCo ends the process on a fatal error (`mju_error`). Call
 //! [`install_message_handler`] once at the start of a program so that the
 //! message goes to standard error with a clear prefix before that happens;
