@@ -23,6 +23,8 @@ pub fn compiled() -> Vec<Box<dyn Engine>> {
     engines.push(Box::new(realitygap_engine_ode::OdeEngine));
     #[cfg(feature = "rapier")]
     engines.push(Box::new(realitygap_engine_rapier::RapierEngine));
+    #[cfg(feature = "bullet")]
+    engines.push(Box::new(realitygap_engine_bullet::BulletEngine));
     engines
 }
 
@@ -47,6 +49,8 @@ pub fn install_native_handlers() {
     realitygap_engine_mujoco::install_message_handler();
     #[cfg(feature = "ode")]
     realitygap_engine_ode::install_message_handler();
+    #[cfg(feature = "bullet")]
+    realitygap_engine_bullet::install_message_handler();
 }
 
 /// Prints the compiled-in engines, one per line: name, version, default
