@@ -65,6 +65,8 @@
 //! turns. Run simulations in parallel in separate processes, as
 //! `realitygap run` does.
 
+#![warn(missing_docs)]
+
 mod ffi;
 mod messages;
 mod urdf_file;
