@@ -16,7 +16,10 @@ fn main() {
         println!("cargo::rustc-link-arg-benches=-Wl,-rpath,{dir}");
     }
 
-    let library = match pkg_config::Config::new().atleast_version("0.16").probe("ode") {
+    let library = match pkg_config::Config::new()
+        .atleast_version("0.16")
+        .probe("ode")
+    {
         Ok(library) => library,
         Err(e) => {
             eprintln!(
@@ -26,7 +29,10 @@ fn main() {
             std::process::exit(1);
         }
     };
-    println!("cargo::rustc-env=REALITYGAP_ODE_PKG_VERSION={}", library.version);
+    println!(
+        "cargo::rustc-env=REALITYGAP_ODE_PKG_VERSION={}",
+        library.version
+    );
 
     let mut builder = bindgen::Builder::default()
         .header("wrapper.h")
@@ -72,7 +78,8 @@ fn main() {
             std::process::exit(1);
         }
     };
-    let out = PathBuf::from(std::env::var("OUT_DIR").expect("cargo sets OUT_DIR")).join("ode_bindings.rs");
+    let out = PathBuf::from(std::env::var("OUT_DIR").expect("cargo sets OUT_DIR"))
+        .join("ode_bindings.rs");
     if let Err(e) = bindings.write_to_file(&out) {
         eprintln!("cannot write {}: {e}", out.display());
         std::process::exit(1);

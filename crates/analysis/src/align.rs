@@ -64,14 +64,25 @@ fn default_search() -> usize {
 impl Alignment {
     /// The default estimate settings.
     pub fn estimate() -> Alignment {
-        Alignment::Estimate { search_frames: default_search(), rest_frames: default_rest(), threshold_m: default_threshold() }
+        Alignment::Estimate {
+            search_frames: default_search(),
+            rest_frames: default_rest(),
+            threshold_m: default_threshold(),
+        }
     }
     /// Short description, e.g. `onset - 93 frames`.
     pub fn describe(&self) -> String {
         match self {
             Alignment::Fixed { frame } => format!("fixed start frame {frame}"),
-            Alignment::Onset { lead_frames, threshold_m, .. } => {
-                format!("motion onset ({:.0} mm) minus {lead_frames} frames", threshold_m * 1000.0)
+            Alignment::Onset {
+                lead_frames,
+                threshold_m,
+                ..
+            } => {
+                format!(
+                    "motion onset ({:.0} mm) minus {lead_frames} frames",
+                    threshold_m * 1000.0
+                )
             }
             Alignment::Estimate { search_frames, .. } => {
                 format!("estimated per run against the simulated mean (search +-{search_frames} frames around onset)")
@@ -115,7 +126,11 @@ pub fn median_position(positions: &[Option<Vec3>], frames: (usize, usize)) -> Op
 /// The motion onset: first frame at or after `rest_frames.0` lying more
 /// than `threshold_m` from the median of the rest window. `None` when the
 /// body never moves that far (or is never seen in the rest window).
-pub fn motion_onset(positions: &[Option<Vec3>], rest_frames: (usize, usize), threshold_m: f64) -> Option<usize> {
+pub fn motion_onset(
+    positions: &[Option<Vec3>],
+    rest_frames: (usize, usize),
+    threshold_m: f64,
+) -> Option<usize> {
     let rest = median_position(positions, rest_frames)?;
     positions
         .iter()
@@ -193,17 +208,33 @@ pub fn choose_start(
         return None;
     }
     let (start, onset) = match alignment {
-        Alignment::Fixed { frame } => (*frame, motion_onset(&positions, default_rest(), default_threshold())),
-        Alignment::Onset { lead_frames, rest_frames, threshold_m } => {
+        Alignment::Fixed { frame } => (
+            *frame,
+            motion_onset(&positions, default_rest(), default_threshold()),
+        ),
+        Alignment::Onset {
+            lead_frames,
+            rest_frames,
+            threshold_m,
+        } => {
             let onset = motion_onset(&positions, *rest_frames, *threshold_m)?;
             (onset.saturating_sub(*lead_frames), Some(onset))
         }
-        Alignment::Estimate { search_frames, rest_frames, threshold_m } => {
+        Alignment::Estimate {
+            search_frames,
+            rest_frames,
+            threshold_m,
+        } => {
             let onset = motion_onset(&positions, *rest_frames, *threshold_m);
             let start = match template_m {
-                Some(t) if !t.is_empty() => {
-                    estimate_start(&positions, t, stride.max(1), *rest_frames, *threshold_m, *search_frames)?
-                }
+                Some(t) if !t.is_empty() => estimate_start(
+                    &positions,
+                    t,
+                    stride.max(1),
+                    *rest_frames,
+                    *threshold_m,
+                    *search_frames,
+                )?,
                 _ => onset?,
             };
             (start, onset)
@@ -212,7 +243,11 @@ pub fn choose_start(
     if start >= traj.len() {
         return None;
     }
-    Some(RunStart { start_frame: start, start_s: traj.time_s[start] - traj.time_s[0], onset_frame: onset })
+    Some(RunStart {
+        start_frame: start,
+        start_s: traj.time_s[start] - traj.time_s[0],
+        onset_frame: onset,
+    })
 }
 
 /// Resamples a recording onto the control grid, starting at `start_frame`.
@@ -231,7 +266,13 @@ pub fn resample(
     steps: usize,
     end: EndPolicy,
 ) -> (Trajectory, usize) {
-    let mut out = Trajectory::with_bodies(&traj.bodies.iter().map(|b| b.role.as_str()).collect::<Vec<_>>());
+    let mut out = Trajectory::with_bodies(
+        &traj
+            .bodies
+            .iter()
+            .map(|b| b.role.as_str())
+            .collect::<Vec<_>>(),
+    );
     let k = rate_hz * period_s;
     let stride = k.round() as usize;
     let integer = stride >= 1 && (k - stride as f64).abs() < 1e-9;
@@ -278,12 +319,19 @@ fn interpolate_at(traj: &Trajectory, t: f64) -> Option<Vec<Option<Pose>>> {
     }
     let j = times.partition_point(|&x| x <= t).clamp(1, times.len() - 1);
     let (t0, t1) = (times[j - 1], times[j]);
-    let a = if t1 > t0 { ((t - t0) / (t1 - t0)).clamp(0.0, 1.0) } else { 0.0 };
+    let a = if t1 > t0 {
+        ((t - t0) / (t1 - t0)).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
     Some(
         traj.bodies
             .iter()
             .map(|b| match (b.poses[j - 1], b.poses[j]) {
-                (Some(p0), Some(p1)) => Some(Pose::new(p0.position_m.lerp(p1.position_m, a), nlerp(p0.orientation, p1.orientation, a))),
+                (Some(p0), Some(p1)) => Some(Pose::new(
+                    p0.position_m.lerp(p1.position_m, a),
+                    nlerp(p0.orientation, p1.orientation, a),
+                )),
                 (Some(p), None) if a < 0.5 => Some(p),
                 (None, Some(p)) if a >= 0.5 => Some(p),
                 _ => None,
@@ -294,10 +342,19 @@ fn interpolate_at(traj: &Trajectory, t: f64) -> Option<Vec<Option<Pose>>> {
 
 /// Normalised linear interpolation of unit quaternions along the short arc.
 pub fn nlerp(a: Quat, b: Quat, t: f64) -> Quat {
-    let b = if a.dot(b) < 0.0 { Quat::new(-b.w, -b.x, -b.y, -b.z) } else { b };
-    Quat::new(a.w + (b.w - a.w) * t, a.x + (b.x - a.x) * t, a.y + (b.y - a.y) * t, a.z + (b.z - a.z) * t)
-        .normalized()
-        .unwrap_or(a)
+    let b = if a.dot(b) < 0.0 {
+        Quat::new(-b.w, -b.x, -b.y, -b.z)
+    } else {
+        b
+    };
+    Quat::new(
+        a.w + (b.w - a.w) * t,
+        a.x + (b.x - a.x) * t,
+        a.y + (b.y - a.y) * t,
+        a.z + (b.z - a.z) * t,
+    )
+    .normalized()
+    .unwrap_or(a)
 }
 
 #[cfg(test)]
@@ -310,8 +367,14 @@ mod tests {
         let mut t = Trajectory::with_bodies(&["wrist"]);
         for i in 0..frames {
             t.time_s.push(i as f64 * 0.01);
-            let x = if i < rest { 0.0 } else { (i - rest) as f64 * 0.001 };
-            t.bodies[0].poses.push(Some(Pose::new(Vec3::new(x, 0.0, 0.8), Quat::IDENTITY)));
+            let x = if i < rest {
+                0.0
+            } else {
+                (i - rest) as f64 * 0.001
+            };
+            t.bodies[0]
+                .poses
+                .push(Some(Pose::new(Vec3::new(x, 0.0, 0.8), Quat::IDENTITY)));
         }
         t
     }
@@ -320,8 +383,22 @@ mod tests {
     fn onset_is_first_frame_beyond_threshold() {
         let t = ramp(150, 400);
         // 10 mm at 1 mm per frame: frame 150 + 11 is the first > 10 mm.
-        assert_eq!(motion_onset(&t.positions("wrist"), (20, 100), 0.01), Some(161));
-        let s = choose_start(&t, "wrist", &Alignment::Onset { lead_frames: 93, rest_frames: (20, 100), threshold_m: 0.01 }, 5, None).unwrap();
+        assert_eq!(
+            motion_onset(&t.positions("wrist"), (20, 100), 0.01),
+            Some(161)
+        );
+        let s = choose_start(
+            &t,
+            "wrist",
+            &Alignment::Onset {
+                lead_frames: 93,
+                rest_frames: (20, 100),
+                threshold_m: 0.01,
+            },
+            5,
+            None,
+        )
+        .unwrap();
         assert_eq!((s.start_frame, s.onset_frame), (68, Some(161)));
     }
 
@@ -329,7 +406,9 @@ mod tests {
     fn estimate_recovers_a_known_offset() {
         let t = ramp(237, 1000);
         // Template: rest for 4 steps then the same ramp at 20 Hz (5 mm/step).
-        let template: Vec<Vec3> = (0..100).map(|i| Vec3::new(if i < 4 { 0.0 } else { (i - 4) as f64 * 0.005 }, 0.0, 0.5)).collect();
+        let template: Vec<Vec3> = (0..100)
+            .map(|i| Vec3::new(if i < 4 { 0.0 } else { (i - 4) as f64 * 0.005 }, 0.0, 0.5))
+            .collect();
         let s = estimate_start(&t.positions("wrist"), &template, 5, (20, 100), 0.01, 300).unwrap();
         assert_eq!(s, 237 - 20);
     }

@@ -244,7 +244,11 @@ impl SceneReport {
         self.sources
             .iter()
             .filter(|s| s.accumulated_error_m.is_some_and(f64::is_finite))
-            .min_by(|a, b| a.accumulated_error_m.partial_cmp(&b.accumulated_error_m).unwrap())
+            .min_by(|a, b| {
+                a.accumulated_error_m
+                    .partial_cmp(&b.accumulated_error_m)
+                    .unwrap()
+            })
     }
     /// Per phase, the name of the source with the smallest error.
     pub fn closest_per_phase(&self) -> Vec<Option<String>> {
@@ -252,7 +256,10 @@ impl SceneReport {
             .map(|i| {
                 self.sources
                     .iter()
-                    .filter(|s| s.accumulated_error_m.is_some() && s.phase_errors_m.get(i).is_some_and(|v| v.is_finite()))
+                    .filter(|s| {
+                        s.accumulated_error_m.is_some()
+                            && s.phase_errors_m.get(i).is_some_and(|v| v.is_finite())
+                    })
                     .min_by(|a, b| a.phase_errors_m[i].total_cmp(&b.phase_errors_m[i]))
                     .map(|s| s.source.clone())
             })
@@ -277,38 +284,69 @@ fn to_grid(
         AnalysisMode::Study => EndPolicy::RepeatLast,
         AnalysisMode::Default => EndPolicy::Cut,
     };
-    let alignment = src.alignment.as_ref().map(|own| match (&opts.alignment, opts.mode) {
-        (Some(a), _) => a.clone(),
-        (None, AnalysisMode::Study) => own.clone(),
-        (None, AnalysisMode::Default) => Alignment::estimate(),
-    });
+    let alignment = src
+        .alignment
+        .as_ref()
+        .map(|own| match (&opts.alignment, opts.mode) {
+            (Some(a), _) => a.clone(),
+            (None, AnalysisMode::Study) => own.clone(),
+            (None, AnalysisMode::Default) => Alignment::estimate(),
+        });
     let stride = (src.rate_hz * spec.control_period_s).round().max(1.0) as usize;
-    let mut report = alignment.as_ref().map(|a| AlignmentReport { method: a.describe(), runs: vec![], failed: vec![] });
-    let mut g = Gridded { runs: vec![], flagged: vec![], total: src.runs.len() };
+    let mut report = alignment.as_ref().map(|a| AlignmentReport {
+        method: a.describe(),
+        runs: vec![],
+        failed: vec![],
+    });
+    let mut g = Gridded {
+        runs: vec![],
+        flagged: vec![],
+        total: src.runs.len(),
+    };
     for run in &src.runs {
         let mut flags = health::check(&run.trajectory, &opts.health).flags;
         if let Some(m) = &run.failed {
             flags.insert(0, HealthFlag::Failed { message: m.clone() });
         }
         let start = match (&alignment, report.as_mut()) {
-            (Some(a), Some(rep)) => match align::choose_start(&run.trajectory, WRIST, a, stride, template) {
-                Some(s) => Some((s, rep)),
-                None => {
-                    rep.failed.push((run.id.clone(), "no motion onset found in the wrist track".into()));
-                    flags.push(HealthFlag::Failed { message: "could not be aligned: no motion onset".into() });
-                    None
+            (Some(a), Some(rep)) => {
+                match align::choose_start(&run.trajectory, WRIST, a, stride, template) {
+                    Some(s) => Some((s, rep)),
+                    None => {
+                        rep.failed.push((
+                            run.id.clone(),
+                            "no motion onset found in the wrist track".into(),
+                        ));
+                        flags.push(HealthFlag::Failed {
+                            message: "could not be aligned: no motion onset".into(),
+                        });
+                        None
+                    }
                 }
-            },
+            }
             _ => None,
         };
         let start_frame = start.as_ref().map_or(0, |(s, _)| s.start_frame);
-        let (grid, available) =
-            align::resample(&run.trajectory, start_frame, src.rate_hz, spec.control_period_s, spec.steps, end);
+        let (grid, available) = align::resample(
+            &run.trajectory,
+            start_frame,
+            src.rate_hz,
+            spec.control_period_s,
+            spec.steps,
+            end,
+        );
         if let Some((s, rep)) = start {
-            rep.runs.push(AlignedRun { run: run.id.clone(), start: s, steps_available: available });
+            rep.runs.push(AlignedRun {
+                run: run.id.clone(),
+                start: s,
+                steps_available: available,
+            });
         }
         if available < spec.steps && !run.trajectory.is_empty() {
-            flags.push(HealthFlag::Short { samples: available, needed: spec.steps });
+            flags.push(HealthFlag::Short {
+                samples: available,
+                needed: spec.steps,
+            });
         }
         let excluded = flags.iter().any(HealthFlag::excludes) || run.trajectory.is_empty();
         if !flags.is_empty() {
@@ -334,11 +372,17 @@ struct Means {
 }
 
 fn means(g: &Gridded, steps: usize) -> Means {
-    let pos = |role: &str| -> Vec<Vec<Option<Vec3>>> { g.runs.iter().map(|(_, t)| t.positions(role)).collect() };
+    let pos = |role: &str| -> Vec<Vec<Option<Vec3>>> {
+        g.runs.iter().map(|(_, t)| t.positions(role)).collect()
+    };
     let rot = |role: &str| -> Vec<Vec<Option<Quat>>> {
         g.runs
             .iter()
-            .map(|(_, t)| t.body(role).map(|b| b.poses.iter().map(|p| p.map(|p| p.orientation)).collect()).unwrap_or_default())
+            .map(|(_, t)| {
+                t.body(role)
+                    .map(|b| b.poses.iter().map(|p| p.map(|p| p.orientation)).collect())
+                    .unwrap_or_default()
+            })
             .collect()
     };
     let has_cube = g.runs.iter().any(|(_, t)| t.body(CUBE).is_some());
@@ -350,7 +394,12 @@ fn means(g: &Gridded, steps: usize) -> Means {
     }
 }
 
-fn cube_measures(m: &Means, spec: &SceneSpec, cube: &CubeSpec, series: &mut Series) -> Option<CubeMeasures> {
+fn cube_measures(
+    m: &Means,
+    spec: &SceneSpec,
+    cube: &CubeSpec,
+    series: &mut Series,
+) -> Option<CubeMeasures> {
     let track = m.cube.as_ref()?;
     let start = track.mean_m.iter().flatten().next().copied()?;
     let end = track.mean_m.iter().rev().flatten().next().copied()?;
@@ -359,34 +408,61 @@ fn cube_measures(m: &Means, spec: &SceneSpec, cube: &CubeSpec, series: &mut Seri
     let q1 = m.cube_rot.iter().rev().flatten().next().copied();
     series.cube_displacement_m = disp.clone();
     series.cube_pitch_change_deg = match q0 {
-        Some(q0) => m.cube_rot.iter().map(|q| q.map(|q| metrics::rpy_change_deg(q0, q)[1])).collect(),
+        Some(q0) => m
+            .cube_rot
+            .iter()
+            .map(|q| q.map(|q| metrics::rpy_change_deg(q0, q)[1]))
+            .collect(),
         None => vec![None; m.cube_rot.len()],
     };
     let max_tilt = match q0 {
-        Some(q0) => m.cube_rot.iter().flatten().map(|q| metrics::tilt_deg(q0, *q)).fold(0.0, f64::max),
+        Some(q0) => m
+            .cube_rot
+            .iter()
+            .flatten()
+            .map(|q| metrics::tilt_deg(q0, *q))
+            .fold(0.0, f64::max),
         None => 0.0,
     };
     Some(CubeMeasures {
         final_position_m: end.to_array(),
-        final_offset_from_nominal_m: cube.nominal_start_m.map(|n| (end - Vec3::from_array(n)).to_array()),
+        final_offset_from_nominal_m: cube
+            .nominal_start_m
+            .map(|n| (end - Vec3::from_array(n)).to_array()),
         final_displacement_m: end.distance(start),
         rpy_change_deg: match (q0, q1) {
             (Some(a), Some(b)) => metrics::rpy_change_deg(a, b),
             _ => [f64::NAN; 3],
         },
         max_tilt_deg: max_tilt,
-        contact_onset_s: metrics::first_exceeding(&disp, cube.contact_threshold_m).map(|i| i as f64 * spec.control_period_s),
+        contact_onset_s: metrics::first_exceeding(&disp, cube.contact_threshold_m)
+            .map(|i| i as f64 * spec.control_period_s),
     })
 }
 
-fn summarize(src: &SourceRuns, g: &Gridded, m: &Means, spec: &SceneSpec, reference: Option<&Means>) -> SourceSummary {
-    let t_s: Vec<f64> = (0..spec.steps).map(|i| i as f64 * spec.control_period_s).collect();
+fn summarize(
+    src: &SourceRuns,
+    g: &Gridded,
+    m: &Means,
+    spec: &SceneSpec,
+    reference: Option<&Means>,
+) -> SourceSummary {
+    let t_s: Vec<f64> = (0..spec.steps)
+        .map(|i| i as f64 * spec.control_period_s)
+        .collect();
     let goal = spec.goal_m.map(Vec3::from_array);
     let mut series = Series {
         t_s,
-        wrist_mean_m: m.wrist.mean_m.iter().map(|p| p.map(Vec3::to_array)).collect(),
+        wrist_mean_m: m
+            .wrist
+            .mean_m
+            .iter()
+            .map(|p| p.map(Vec3::to_array))
+            .collect(),
         wrist_spread_m: m.wrist.spread_m.clone(),
-        wrist_distance_to_goal_m: goal.map(|g| metrics::distance_to_point(&m.wrist.mean_m, g)).unwrap_or_default(),
+        wrist_distance_to_goal_m: goal
+            .map(|g| metrics::distance_to_point(&m.wrist.mean_m, g))
+            .unwrap_or_default(),
         runs: m.wrist.runs.clone(),
         ..Series::default()
     };
@@ -403,7 +479,14 @@ fn summarize(src: &SourceRuns, g: &Gridded, m: &Means, spec: &SceneSpec, referen
         final_error_m: None,
         phase_errors_m: vec![],
         orientation_error_deg: None,
-        goal: goal.map(|g| metrics::goal_measures(&m.wrist.mean_m, g, spec.goal_tolerance_m, spec.control_period_s)),
+        goal: goal.map(|g| {
+            metrics::goal_measures(
+                &m.wrist.mean_m,
+                g,
+                spec.goal_tolerance_m,
+                spec.control_period_s,
+            )
+        }),
         cube: None,
         series: Series::default(),
     };
@@ -422,7 +505,10 @@ fn summarize(src: &SourceRuns, g: &Gridded, m: &Means, spec: &SceneSpec, referen
                 .map(|t| (t / spec.control_period_s).round() as usize)
                 .chain([spec.steps])
                 .collect();
-            out.phase_errors_m = bounds.windows(2).map(|w| metrics::accumulate_range(&d, w[0]..w[1])).collect();
+            out.phase_errors_m = bounds
+                .windows(2)
+                .map(|w| metrics::accumulate_range(&d, w[0]..w[1]))
+                .collect();
             out.orientation_error_deg = metrics::mean_angle_deg(
                 &metrics::rotation_since_start(&m.wrist_rot),
                 &metrics::rotation_since_start(&r.wrist_rot),
@@ -441,10 +527,17 @@ fn summarize(src: &SourceRuns, g: &Gridded, m: &Means, spec: &SceneSpec, referen
 /// describe. The template for estimated alignment is the mean, over the
 /// sources that are on the control grid and have usable runs, of their mean
 /// wrist tracks.
-pub fn evaluate_scene(spec: &SceneSpec, reference: &SourceRuns, sources: &[SourceRuns], opts: &CompareOptions) -> SceneReport {
+pub fn evaluate_scene(
+    spec: &SceneSpec,
+    reference: &SourceRuns,
+    sources: &[SourceRuns],
+    opts: &CompareOptions,
+) -> SceneReport {
     // Sources first: they give the template for the reference's alignment.
-    let gridded: Vec<(Gridded, Option<AlignmentReport>)> =
-        sources.iter().map(|s| to_grid(s, spec, opts, None)).collect();
+    let gridded: Vec<(Gridded, Option<AlignmentReport>)> = sources
+        .iter()
+        .map(|s| to_grid(s, spec, opts, None))
+        .collect();
     let src_means: Vec<Means> = gridded.iter().map(|(g, _)| means(g, spec.steps)).collect();
     let template = template(&src_means, sources, spec.steps);
     let (ref_g, alignment) = to_grid(reference, spec, opts, template.as_deref());
@@ -474,14 +567,26 @@ fn template(means: &[Means], sources: &[SourceRuns], steps: usize) -> Option<Vec
         .iter()
         .zip(sources)
         .filter(|(_, s)| s.alignment.is_none())
-        .filter_map(|(m, _)| m.wrist.mean_m.iter().copied().collect::<Option<Vec<Vec3>>>())
-        .filter(|t| t.len() == steps && steps > 0 && t.iter().all(|p| p.is_finite() && p.norm() < 10.0))
+        .filter_map(|(m, _)| {
+            m.wrist
+                .mean_m
+                .iter()
+                .copied()
+                .collect::<Option<Vec<Vec3>>>()
+        })
+        .filter(|t| {
+            t.len() == steps && steps > 0 && t.iter().all(|p| p.is_finite() && p.norm() < 10.0)
+        })
         .collect();
     if full.is_empty() {
         return None;
     }
     let n = full.len() as f64;
-    Some((0..steps).map(|i| full.iter().fold(Vec3::ZERO, |a, t| a + t[i]).scale(1.0 / n)).collect())
+    Some(
+        (0..steps)
+            .map(|i| full.iter().fold(Vec3::ZERO, |a, t| a + t[i]).scale(1.0 / n))
+            .collect(),
+    )
 }
 
 #[cfg(test)]
@@ -491,17 +596,31 @@ mod tests {
 
     /// A run on the control grid: the wrist moves along x from 0 to `reach`
     /// over `move_steps`, then rests; z = 0.8.
-    fn run(id: &str, steps: usize, rate_steps_per_control: usize, rest: usize, reach: f64, offset: f64) -> RunInput {
+    fn run(
+        id: &str,
+        steps: usize,
+        rate_steps_per_control: usize,
+        rest: usize,
+        reach: f64,
+        offset: f64,
+    ) -> RunInput {
         let mut t = Trajectory::with_bodies(&[WRIST]);
         let n = (steps + 20) * rate_steps_per_control + rest;
         for i in 0..n {
-            t.time_s.push(i as f64 * 0.05 / rate_steps_per_control as f64);
+            t.time_s
+                .push(i as f64 * 0.05 / rate_steps_per_control as f64);
             let k = i.saturating_sub(rest) as f64 / rate_steps_per_control as f64;
             // A slow drift keeps the rest from being bit-identical (frozen).
             let x = offset + reach * (k / 40.0).min(1.0) + 1e-6 * k;
-            t.bodies[0].poses.push(Some(Pose::new(Vec3::new(x, 0.0, 0.8), Quat::IDENTITY)));
+            t.bodies[0]
+                .poses
+                .push(Some(Pose::new(Vec3::new(x, 0.0, 0.8), Quat::IDENTITY)));
         }
-        RunInput { id: id.into(), trajectory: t, failed: None }
+        RunInput {
+            id: id.into(),
+            trajectory: t,
+            failed: None,
+        }
     }
 
     fn spec() -> SceneSpec {
@@ -530,13 +649,24 @@ mod tests {
             name: "real".into(),
             kind: "real".into(),
             rate_hz: 100.0,
-            alignment: Some(Alignment::Onset { lead_frames: 0, rest_frames: (20, 100), threshold_m: 0.01 }),
+            alignment: Some(Alignment::Onset {
+                lead_frames: 0,
+                rest_frames: (20, 100),
+                threshold_m: 0.01,
+            }),
             runs: vec![run("r1", 100, 5, 173, 0.5, 0.0)],
         };
         let rep = evaluate_scene(&spec(), &real, &[sim.clone()], &CompareOptions::default());
-        assert_eq!(rep.alignment.as_ref().unwrap().runs[0].start.start_frame, 173);
+        assert_eq!(
+            rep.alignment.as_ref().unwrap().runs[0].start.start_frame,
+            173
+        );
         let s = &rep.sources[0];
-        assert!(s.accumulated_error_m.unwrap() < 1e-9, "{:?}", s.accumulated_error_m);
+        assert!(
+            s.accumulated_error_m.unwrap() < 1e-9,
+            "{:?}",
+            s.accumulated_error_m
+        );
         assert_eq!(s.runs_used, 2);
         assert_eq!(s.phase_errors_m.len(), 2);
         assert!(s.goal.as_ref().unwrap().final_distance_m.unwrap() < 1e-3);
@@ -547,7 +677,11 @@ mod tests {
     #[test]
     fn flagged_runs_are_excluded_by_default_and_kept_in_study_mode() {
         let mut bad = run("bad", 100, 1, 0, 0.5, 0.0);
-        bad.trajectory.bodies[0].poses[50].as_mut().unwrap().position_m.x = 1e17;
+        bad.trajectory.bodies[0].poses[50]
+            .as_mut()
+            .unwrap()
+            .position_m
+            .x = 1e17;
         let sim = SourceRuns {
             name: "sim".into(),
             kind: "recorded".into(),
@@ -555,13 +689,25 @@ mod tests {
             alignment: None,
             runs: vec![run("a", 100, 1, 0, 0.5, 0.0), bad],
         };
-        let reference = SourceRuns { name: "ref".into(), runs: vec![run("r", 100, 1, 0, 0.5, 0.0)], ..sim.clone() };
-        let rep = evaluate_scene(&spec(), &reference, &[sim.clone()], &CompareOptions::default());
+        let reference = SourceRuns {
+            name: "ref".into(),
+            runs: vec![run("r", 100, 1, 0, 0.5, 0.0)],
+            ..sim.clone()
+        };
+        let rep = evaluate_scene(
+            &spec(),
+            &reference,
+            &[sim.clone()],
+            &CompareOptions::default(),
+        );
         let s = &rep.sources[0];
         assert_eq!((s.runs_used, s.runs_flagged.len()), (1, 1));
         assert!(s.runs_flagged[0].excluded);
         assert_eq!(s.runs_flagged[0].flags[0].name(), "diverged");
-        let study = CompareOptions { mode: AnalysisMode::Study, ..Default::default() };
+        let study = CompareOptions {
+            mode: AnalysisMode::Study,
+            ..Default::default()
+        };
         let rep = evaluate_scene(&spec(), &reference, &[sim], &study);
         assert_eq!(rep.sources[0].runs_used, 2);
         assert!(rep.sources[0].accumulated_error_m.unwrap() > 1e15);

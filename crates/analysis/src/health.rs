@@ -24,7 +24,11 @@ pub struct HealthOptions {
 
 impl Default for HealthOptions {
     fn default() -> Self {
-        HealthOptions { divergence_bound_m: 10.0, frozen_min_fraction: 0.5, frozen_min_s: 2.0 }
+        HealthOptions {
+            divergence_bound_m: 10.0,
+            frozen_min_fraction: 0.5,
+            frozen_min_s: 2.0,
+        }
     }
 }
 
@@ -144,7 +148,11 @@ impl RunHealth {
     }
     /// Names of the flags, comma-separated (empty when healthy).
     pub fn summary(&self) -> String {
-        self.flags.iter().map(|f| f.name()).collect::<Vec<_>>().join(",")
+        self.flags
+            .iter()
+            .map(|f| f.name())
+            .collect::<Vec<_>>()
+            .join(",")
     }
 }
 
@@ -182,10 +190,17 @@ pub fn check(traj: &Trajectory, opts: &HealthOptions) -> RunHealth {
         }
     }
     if let Some(i) = first_nonfinite {
-        flags.push(HealthFlag::NonFinite { first_sample: i, t_s: t_at(i) });
+        flags.push(HealthFlag::NonFinite {
+            first_sample: i,
+            t_s: t_at(i),
+        });
     }
     if let Some(i) = first_diverged {
-        flags.push(HealthFlag::Diverged { first_sample: i, t_s: t_at(i), max_abs_m: max_abs });
+        flags.push(HealthFlag::Diverged {
+            first_sample: i,
+            t_s: t_at(i),
+            max_abs_m: max_abs,
+        });
     }
 
     // All-zero rows: every seen body at exactly the origin.
@@ -203,7 +218,10 @@ pub fn check(traj: &Trajectory, opts: &HealthOptions) -> RunHealth {
         })
         .collect();
     if let Some(&first) = zero_rows.first() {
-        flags.push(HealthFlag::ZeroRows { count: zero_rows.len(), first_sample: first });
+        flags.push(HealthFlag::ZeroRows {
+            count: zero_rows.len(),
+            first_sample: first,
+        });
     }
 
     // Frozen: longest stretch of bit-identical rows (zero rows excluded).
@@ -226,8 +244,15 @@ pub fn check(traj: &Trajectory, opts: &HealthOptions) -> RunHealth {
         if len > 1 {
             let duration = t_at(s + len - 1) - t_at(s);
             let total = t_at(n - 1) - t_at(0);
-            if duration >= opts.frozen_min_s && total > 0.0 && duration >= opts.frozen_min_fraction * total {
-                flags.push(HealthFlag::Frozen { first_sample: s, samples: len, duration_s: duration });
+            if duration >= opts.frozen_min_s
+                && total > 0.0
+                && duration >= opts.frozen_min_fraction * total
+            {
+                flags.push(HealthFlag::Frozen {
+                    first_sample: s,
+                    samples: len,
+                    duration_s: duration,
+                });
             }
         }
     }
@@ -236,7 +261,10 @@ pub fn check(traj: &Trajectory, opts: &HealthOptions) -> RunHealth {
     for b in &traj.bodies {
         let count = b.poses.iter().filter(|p| p.is_none()).count();
         if count > 0 {
-            flags.push(HealthFlag::Gaps { body: b.role.clone(), count });
+            flags.push(HealthFlag::Gaps {
+                body: b.role.clone(),
+                count,
+            });
         }
     }
     RunHealth { flags }
@@ -251,7 +279,9 @@ mod tests {
         let mut t = Trajectory::with_bodies(&["wrist"]);
         for (i, p) in points.iter().enumerate() {
             t.time_s.push(i as f64 * 0.05);
-            t.bodies[0].poses.push(Some(Pose::new(Vec3::from_array(*p), Quat::IDENTITY)));
+            t.bodies[0]
+                .poses
+                .push(Some(Pose::new(Vec3::from_array(*p), Quat::IDENTITY)));
         }
         t
     }
@@ -259,7 +289,9 @@ mod tests {
     #[test]
     fn healthy_run_has_no_flags() {
         let pts: Vec<[f64; 3]> = (0..100).map(|i| [i as f64 * 0.001, 0.0, 0.8]).collect();
-        assert!(check(&traj(&pts), &HealthOptions::default()).flags.is_empty());
+        assert!(check(&traj(&pts), &HealthOptions::default())
+            .flags
+            .is_empty());
     }
 
     #[test]
@@ -269,7 +301,13 @@ mod tests {
         pts[20] = [f64::NAN, 0.0, 0.0];
         let h = check(&traj(&pts), &HealthOptions::default());
         assert_eq!(h.summary(), "non_finite,diverged");
-        assert!(matches!(h.flags[1], HealthFlag::Diverged { first_sample: 10, .. }));
+        assert!(matches!(
+            h.flags[1],
+            HealthFlag::Diverged {
+                first_sample: 10,
+                ..
+            }
+        ));
         assert!(h.is_excluded());
     }
 
@@ -279,8 +317,21 @@ mod tests {
         pts.extend(std::iter::repeat_n([1.12, -1.9, 1.08], 369));
         let h = check(&traj(&pts), &HealthOptions::default());
         assert_eq!(h.summary(), "zero_rows,frozen");
-        assert!(matches!(h.flags[0], HealthFlag::ZeroRows { count: 31, first_sample: 0 }));
-        assert!(matches!(h.flags[1], HealthFlag::Frozen { first_sample: 31, samples: 369, .. }));
+        assert!(matches!(
+            h.flags[0],
+            HealthFlag::ZeroRows {
+                count: 31,
+                first_sample: 0
+            }
+        ));
+        assert!(matches!(
+            h.flags[1],
+            HealthFlag::Frozen {
+                first_sample: 31,
+                samples: 369,
+                ..
+            }
+        ));
     }
 
     #[test]
@@ -288,7 +339,9 @@ mod tests {
         // 3 s of an exactly locked motor at the end of a 20 s run is normal.
         let mut pts: Vec<[f64; 3]> = (0..340).map(|i| [i as f64 * 0.001, 0.0, 0.8]).collect();
         pts.extend(std::iter::repeat_n([0.5, 0.0, 0.3], 60));
-        assert!(check(&traj(&pts), &HealthOptions::default()).flags.is_empty());
+        assert!(check(&traj(&pts), &HealthOptions::default())
+            .flags
+            .is_empty());
     }
 
     #[test]

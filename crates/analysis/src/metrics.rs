@@ -25,7 +25,10 @@ pub fn distance_to_point(a: &[Option<Vec3>], point: Vec3) -> Vec<Option<f64>> {
 /// Sum of a series over its steps with data (the study's accumulated
 /// error), with the number of steps summed.
 pub fn accumulate(series: &[Option<f64>]) -> (f64, usize) {
-    series.iter().flatten().fold((0.0, 0), |(s, n), v| (s + v, n + 1))
+    series
+        .iter()
+        .flatten()
+        .fold((0.0, 0), |(s, n), v| (s + v, n + 1))
 }
 
 /// Sum of a series over the steps `range` (clamped to the series).
@@ -43,7 +46,11 @@ pub fn last_value(series: &[Option<f64>]) -> Option<f64> {
 /// Time at which the distance to a goal enters `tolerance_m` and stays
 /// within it to the end: the first step of the final stretch within
 /// tolerance, times `period_s`. `None` when the last sample is outside.
-pub fn convergence_time(distance_m: &[Option<f64>], tolerance_m: f64, period_s: f64) -> Option<f64> {
+pub fn convergence_time(
+    distance_m: &[Option<f64>],
+    tolerance_m: f64,
+    period_s: f64,
+) -> Option<f64> {
     let last = distance_m.iter().rposition(|d| d.is_some())?;
     if distance_m[last]? > tolerance_m {
         return None;
@@ -68,13 +75,22 @@ pub fn overshoot(positions: &[Option<Vec3>], start_m: Vec3, goal_m: Vec3) -> f64
         return 0.0;
     }
     let dir = dir.scale(1.0 / len);
-    positions.iter().flatten().map(|p| (*p - goal_m).dot(dir)).fold(0.0, f64::max)
+    positions
+        .iter()
+        .flatten()
+        .map(|p| (*p - goal_m).dot(dir))
+        .fold(0.0, f64::max)
 }
 
 /// Number of times the wrist crosses the goal plane (normal to the approach
 /// direction) once it has come within `band_m` of the goal: a count of
 /// oscillations about the goal.
-pub fn goal_crossings(positions: &[Option<Vec3>], start_m: Vec3, goal_m: Vec3, band_m: f64) -> usize {
+pub fn goal_crossings(
+    positions: &[Option<Vec3>],
+    start_m: Vec3,
+    goal_m: Vec3,
+    band_m: f64,
+) -> usize {
     let dir = goal_m - start_m;
     let len = dir.norm();
     if len == 0.0 {
@@ -107,7 +123,9 @@ pub fn displacement_series(positions: &[Option<Vec3>], start_m: Vec3) -> Vec<Opt
 /// First step at which the displacement exceeds `threshold_m`: contact
 /// onset for a body that is still until pushed.
 pub fn first_exceeding(series: &[Option<f64>], threshold_m: f64) -> Option<usize> {
-    series.iter().position(|d| d.is_some_and(|d| d > threshold_m))
+    series
+        .iter()
+        .position(|d| d.is_some_and(|d| d > threshold_m))
 }
 
 /// Change of roll, pitch and yaw between two orientations, degrees, each
@@ -135,16 +153,22 @@ pub fn rotation_since_start(orientations: &[Option<Quat>]) -> Vec<Option<Quat>> 
     let Some(q0) = orientations.iter().flatten().next().copied() else {
         return vec![None; orientations.len()];
     };
-    orientations.iter().map(|q| q.map(|q| q * q0.conjugate())).collect()
+    orientations
+        .iter()
+        .map(|q| q.map(|q| q * q0.conjugate()))
+        .collect()
 }
 
 /// Mean geodesic angle, degrees, between two series of orientations, over
 /// the steps where both exist; `None` when there is none.
 pub fn mean_angle_deg(a: &[Option<Quat>], b: &[Option<Quat>]) -> Option<f64> {
-    let (sum, n) = a.iter().zip(b).fold((0.0, 0usize), |(s, n), (p, q)| match (p, q) {
-        (Some(p), Some(q)) => (s + p.angle_to(*q), n + 1),
-        _ => (s, n),
-    });
+    let (sum, n) = a
+        .iter()
+        .zip(b)
+        .fold((0.0, 0usize), |(s, n), (p, q)| match (p, q) {
+            (Some(p), Some(q)) => (s + p.angle_to(*q), n + 1),
+            _ => (s, n),
+        });
     (n > 0).then(|| (sum / n as f64).to_degrees())
 }
 
@@ -166,14 +190,20 @@ pub struct GoalMeasures {
 }
 
 /// Computes [`GoalMeasures`] for a mean position series.
-pub fn goal_measures(positions: &[Option<Vec3>], goal_m: Vec3, tolerance_m: f64, period_s: f64) -> GoalMeasures {
+pub fn goal_measures(
+    positions: &[Option<Vec3>],
+    goal_m: Vec3,
+    tolerance_m: f64,
+    period_s: f64,
+) -> GoalMeasures {
     let dist = distance_to_point(positions, goal_m);
     let start = positions.iter().flatten().next().copied().unwrap_or(goal_m);
     GoalMeasures {
         final_distance_m: last_value(&dist),
         convergence_time_s: convergence_time(&dist, tolerance_m, period_s),
         tolerance_m,
-        overshoot_m: (start.distance(goal_m) > 5.0 * tolerance_m).then(|| overshoot(positions, start, goal_m)),
+        overshoot_m: (start.distance(goal_m) > 5.0 * tolerance_m)
+            .then(|| overshoot(positions, start, goal_m)),
         goal_crossings: goal_crossings(positions, start, goal_m, tolerance_m),
     }
 }
@@ -204,8 +234,10 @@ mod tests {
     #[test]
     fn overshoot_and_crossings() {
         let goal = Vec3::new(1.0, 0.0, 0.0);
-        let path: Vec<Option<Vec3>> =
-            [0.0, 0.5, 0.95, 1.1, 0.97, 1.02, 1.0].iter().map(|x| Some(Vec3::new(*x, 0.0, 0.0))).collect();
+        let path: Vec<Option<Vec3>> = [0.0, 0.5, 0.95, 1.1, 0.97, 1.02, 1.0]
+            .iter()
+            .map(|x| Some(Vec3::new(*x, 0.0, 0.0)))
+            .collect();
         assert!((overshoot(&path, Vec3::ZERO, goal) - 0.1).abs() < 1e-12);
         assert_eq!(goal_crossings(&path, Vec3::ZERO, goal, 0.06), 3);
         let g = goal_measures(&path, goal, 0.05, 0.05);
@@ -226,8 +258,14 @@ mod tests {
     #[test]
     fn rotation_since_start_is_mounting_independent() {
         let mount = Quat::from_axis_angle(Vec3::new(1.0, 1.0, 0.0), 0.7);
-        let motion: Vec<Option<Quat>> =
-            (0..5).map(|i| Some(Quat::from_axis_angle(Vec3::new(0.0, 1.0, 0.0), i as f64 * 0.2))).collect();
+        let motion: Vec<Option<Quat>> = (0..5)
+            .map(|i| {
+                Some(Quat::from_axis_angle(
+                    Vec3::new(0.0, 1.0, 0.0),
+                    i as f64 * 0.2,
+                ))
+            })
+            .collect();
         let marker: Vec<Option<Quat>> = motion.iter().map(|q| q.map(|q| q * mount)).collect();
         let a = rotation_since_start(&motion);
         let b = rotation_since_start(&marker);

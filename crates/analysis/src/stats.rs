@@ -35,7 +35,10 @@ impl MeanTrack {
 pub fn mean_positions(runs: &[Vec<Option<Vec3>>], steps: usize) -> MeanTrack {
     let mut out = MeanTrack::default();
     for i in 0..steps {
-        let seen: Vec<Vec3> = runs.iter().filter_map(|r| r.get(i).copied().flatten()).collect();
+        let seen: Vec<Vec3> = runs
+            .iter()
+            .filter_map(|r| r.get(i).copied().flatten())
+            .collect();
         out.runs.push(seen.len());
         if seen.is_empty() {
             out.mean_m.push(None);
@@ -51,7 +54,8 @@ pub fn mean_positions(runs: &[Vec<Option<Vec3>>], steps: usize) -> MeanTrack {
         });
         let var = var.scale(1.0 / n);
         out.mean_m.push(Some(mean));
-        out.std_m.push(Some(Vec3::new(var.x.sqrt(), var.y.sqrt(), var.z.sqrt())));
+        out.std_m
+            .push(Some(Vec3::new(var.x.sqrt(), var.y.sqrt(), var.z.sqrt())));
         out.spread_m.push(Some((var.x + var.y + var.z).sqrt()));
     }
     out
@@ -68,7 +72,12 @@ pub fn mean_orientations(runs: &[Vec<Option<Quat>>], steps: usize) -> Vec<Option
             let mut acc = first;
             for q in seen {
                 let s = if q.dot(first) < 0.0 { -1.0 } else { 1.0 };
-                acc = Quat::new(acc.w + s * q.w, acc.x + s * q.x, acc.y + s * q.y, acc.z + s * q.z);
+                acc = Quat::new(
+                    acc.w + s * q.w,
+                    acc.x + s * q.x,
+                    acc.y + s * q.y,
+                    acc.z + s * q.z,
+                );
             }
             acc.normalized()
         })
@@ -81,7 +90,10 @@ mod tests {
 
     #[test]
     fn mean_and_std_of_two_runs() {
-        let a = vec![Some(Vec3::new(0.0, 0.0, 0.0)), Some(Vec3::new(1.0, 0.0, 0.0))];
+        let a = vec![
+            Some(Vec3::new(0.0, 0.0, 0.0)),
+            Some(Vec3::new(1.0, 0.0, 0.0)),
+        ];
         let b = vec![Some(Vec3::new(2.0, 0.0, 0.0))];
         let m = mean_positions(&[a, b], 3);
         assert_eq!(m.mean_m[0], Some(Vec3::new(1.0, 0.0, 0.0)));

@@ -27,7 +27,9 @@ impl std::str::FromStr for Format {
             "csv" => Ok(Format::Csv),
             "json" => Ok(Format::Json),
             "latex" | "tex" => Ok(Format::Latex),
-            _ => Err(format!("unknown format '{s}' (expected md, csv, json or latex)")),
+            _ => Err(format!(
+                "unknown format '{s}' (expected md, csv, json or latex)"
+            )),
         }
     }
 }
@@ -37,7 +39,9 @@ pub fn render(reports: &[SceneReport], format: Format) -> String {
     match format {
         Format::Markdown => markdown(reports),
         Format::Csv => csv(reports),
-        Format::Json => serde_json::to_string_pretty(&to_json(reports, false)).unwrap_or_default() + "\n",
+        Format::Json => {
+            serde_json::to_string_pretty(&to_json(reports, false)).unwrap_or_default() + "\n"
+        }
         Format::Latex => latex(reports),
     }
 }
@@ -59,7 +63,11 @@ pub fn source_names(reports: &[SceneReport]) -> Vec<String> {
 /// when the source lacks a scene or a value.
 pub fn total(reports: &[SceneReport], source: &str) -> Option<f64> {
     reports.iter().try_fold(0.0, |acc, r| {
-        r.sources.iter().find(|s| s.source == source).and_then(|s| s.accumulated_error_m).map(|v| acc + v)
+        r.sources
+            .iter()
+            .find(|s| s.source == source)
+            .and_then(|s| s.accumulated_error_m)
+            .map(|v| acc + v)
     })
 }
 
@@ -112,8 +120,13 @@ pub fn to_json(reports: &[SceneReport], series: bool) -> Value {
             }));
         }
     }
-    let totals: serde_json::Map<String, Value> =
-        source_names(reports).into_iter().map(|n| { let t = total(reports, &n); (n, json!(t)) }).collect();
+    let totals: serde_json::Map<String, Value> = source_names(reports)
+        .into_iter()
+        .map(|n| {
+            let t = total(reports, &n);
+            (n, json!(t))
+        })
+        .collect();
     let scenes: serde_json::Map<String, Value> = reports
         .iter()
         .map(|r| {
@@ -122,7 +135,10 @@ pub fn to_json(reports: &[SceneReport], series: bool) -> Value {
                 strip_series(&mut v);
             }
             if let Value::Object(o) = &mut v {
-                o.insert("closest_source".into(), json!(r.closest().map(|s| s.source.clone())));
+                o.insert(
+                    "closest_source".into(),
+                    json!(r.closest().map(|s| s.source.clone())),
+                );
                 o.insert("closest_per_phase".into(), json!(r.closest_per_phase()));
             }
             (r.scene.clone(), v)
@@ -163,23 +179,44 @@ fn markdown(reports: &[SceneReport]) -> String {
         let mut line = format!("| {n} |");
         for r in reports {
             let s = r.sources.iter().find(|s| &s.source == n);
-            let _ = write!(line, " {}{} |", fmt_m(s.and_then(|s| s.accumulated_error_m)), s.map(flagged_note).unwrap_or_default());
+            let _ = write!(
+                line,
+                " {}{} |",
+                fmt_m(s.and_then(|s| s.accumulated_error_m)),
+                s.map(flagged_note).unwrap_or_default()
+            );
         }
         let _ = writeln!(out, "{line} {} |", fmt_m(total(reports, n)));
     }
     for r in reports {
         let _ = writeln!(out, "\n### {}\n", r.scene);
-        let _ = writeln!(out, "Reference: {} ({} of {} runs used).", r.reference.source, r.reference.runs_used, r.reference.runs_total);
+        let _ = writeln!(
+            out,
+            "Reference: {} ({} of {} runs used).",
+            r.reference.source, r.reference.runs_used, r.reference.runs_total
+        );
         if let Some(a) = &r.alignment {
-            let starts: Vec<String> = a.runs.iter().map(|x| x.start.start_frame.to_string()).collect();
-            let _ = writeln!(out, "Alignment: {}; start frames {}.", a.method, starts.join(", "));
+            let starts: Vec<String> = a
+                .runs
+                .iter()
+                .map(|x| x.start.start_frame.to_string())
+                .collect();
+            let _ = writeln!(
+                out,
+                "Alignment: {}; start frames {}.",
+                a.method,
+                starts.join(", ")
+            );
         }
         if let Some(c) = r.closest() {
             let _ = writeln!(out, "Closest source: {}.", c.source);
         }
         let _ = writeln!(out);
         let _ = writeln!(out, "| Source | Runs | Mean err (m) | Final err (m) | Goal dist (m) | Converged (s) | Overshoot (m) | Orient. err (deg) | Cube final dx (m) | Cube tilt (deg) | Contact (s) |");
-        let _ = writeln!(out, "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+        let _ = writeln!(
+            out,
+            "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+        );
         for s in std::iter::once(&r.reference).chain(&r.sources) {
             let g = s.goal.as_ref();
             let c = s.cube.as_ref();
@@ -192,12 +229,15 @@ fn markdown(reports: &[SceneReport]) -> String {
                 fmt_m(s.mean_error_m),
                 fmt_m(s.final_error_m),
                 fmt_m(g.and_then(|g| g.final_distance_m)),
-                g.and_then(|g| g.convergence_time_s).map_or("never".into(), |t| format!("{t:.2}")),
+                g.and_then(|g| g.convergence_time_s)
+                    .map_or("never".into(), |t| format!("{t:.2}")),
                 fmt_m(g.and_then(|g| g.overshoot_m)),
-                s.orientation_error_deg.map_or("n/a".into(), |v| format!("{v:.1}")),
+                s.orientation_error_deg
+                    .map_or("n/a".into(), |v| format!("{v:.1}")),
                 fmt_m(c.and_then(|c| c.final_offset_from_nominal_m.map(|o| o[0]))),
                 c.map_or("n/a".into(), |c| format!("{:.1}", c.max_tilt_deg)),
-                c.and_then(|c| c.contact_onset_s).map_or("n/a".into(), |t| format!("{t:.2}")),
+                c.and_then(|c| c.contact_onset_s)
+                    .map_or("n/a".into(), |t| format!("{t:.2}")),
             );
         }
         let flagged: Vec<String> = std::iter::once(&r.reference)
@@ -205,7 +245,13 @@ fn markdown(reports: &[SceneReport]) -> String {
             .flat_map(|s| {
                 s.runs_flagged.iter().map(move |f| {
                     let what: Vec<String> = f.flags.iter().map(|x| x.describe()).collect();
-                    format!("- {} / {}{}: {}", s.source, f.run, if f.excluded { " (left out)" } else { "" }, what.join("; "))
+                    format!(
+                        "- {} / {}{}: {}",
+                        s.source,
+                        f.run,
+                        if f.excluded { " (left out)" } else { "" },
+                        what.join("; ")
+                    )
                 })
             })
             .collect();
@@ -221,8 +267,21 @@ fn csv(reports: &[SceneReport]) -> String {
     let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v}"));
     for r in reports {
         for s in &r.sources {
-            let flagged: Vec<String> =
-                s.runs_flagged.iter().map(|f| format!("{}:{}", f.run, f.flags.iter().map(|x| x.name()).collect::<Vec<_>>().join("+"))).collect();
+            let flagged: Vec<String> = s
+                .runs_flagged
+                .iter()
+                .map(|f| {
+                    format!(
+                        "{}:{}",
+                        f.run,
+                        f.flags
+                            .iter()
+                            .map(|x| x.name())
+                            .collect::<Vec<_>>()
+                            .join("+")
+                    )
+                })
+                .collect();
             let _ = writeln!(
                 out,
                 "{},{},{},{},{},{},{},{},\"{}\"",
@@ -239,7 +298,12 @@ fn csv(reports: &[SceneReport]) -> String {
         }
     }
     for n in source_names(reports) {
-        let _ = writeln!(out, "{},total,{},,,,,,", csv_field(&n), opt(total(reports, &n)));
+        let _ = writeln!(
+            out,
+            "{},total,{},,,,,,",
+            csv_field(&n),
+            opt(total(reports, &n))
+        );
     }
     out
 }
@@ -253,21 +317,37 @@ fn csv_field(s: &str) -> String {
 }
 
 fn latex_escape(s: &str) -> String {
-    s.replace('\\', "\\textbackslash{}").replace('_', "\\_").replace('&', "\\&").replace('%', "\\%").replace('#', "\\#")
+    s.replace('\\', "\\textbackslash{}")
+        .replace('_', "\\_")
+        .replace('&', "\\&")
+        .replace('%', "\\%")
+        .replace('#', "\\#")
 }
 
 fn latex(reports: &[SceneReport]) -> String {
     let mut out = String::new();
     let cols = "l".to_string() + &"r".repeat(reports.len() + 1);
-    let _ = writeln!(out, "% Accumulated error (m); generated by realitygap {}", realitygap_core::TOOL_VERSION);
+    let _ = writeln!(
+        out,
+        "% Accumulated error (m); generated by realitygap {}",
+        realitygap_core::TOOL_VERSION
+    );
     let _ = writeln!(out, "\\begin{{tabular}}{{{cols}}}\n\\toprule");
     let scenes: Vec<String> = reports.iter().map(|r| latex_escape(&r.scene)).collect();
-    let _ = writeln!(out, "Source & {} & Total \\\\\n\\midrule", scenes.join(" & "));
+    let _ = writeln!(
+        out,
+        "Source & {} & Total \\\\\n\\midrule",
+        scenes.join(" & ")
+    );
     for n in source_names(reports) {
         let cells: Vec<String> = reports
             .iter()
             .map(|r| {
-                let v = r.sources.iter().find(|s| s.source == n).and_then(|s| s.accumulated_error_m);
+                let v = r
+                    .sources
+                    .iter()
+                    .find(|s| s.source == n)
+                    .and_then(|s| s.accumulated_error_m);
                 match v {
                     Some(v) if v.is_finite() && v.abs() >= 1e6 => {
                         let e = v.abs().log10().floor();
@@ -277,7 +357,13 @@ fn latex(reports: &[SceneReport]) -> String {
                 }
             })
             .collect();
-        let _ = writeln!(out, "{} & {} & {} \\\\", latex_escape(&n), cells.join(" & "), fmt_m(total(reports, &n)));
+        let _ = writeln!(
+            out,
+            "{} & {} & {} \\\\",
+            latex_escape(&n),
+            cells.join(" & "),
+            fmt_m(total(reports, &n))
+        );
     }
     let _ = writeln!(out, "\\bottomrule\n\\end{{tabular}}");
     out

@@ -18,7 +18,9 @@ fn dir_bytes(dir: &Path) -> u64 {
             let p = e.path();
             if p.is_dir() {
                 total += dir_bytes(&p);
-            } else if p.extension().is_some_and(|x| x == "csv" || x == "tsv") && !p.to_string_lossy().contains("Format") {
+            } else if p.extension().is_some_and(|x| x == "csv" || x == "tsv")
+                && !p.to_string_lossy().contains("Format")
+            {
                 total += e.metadata().map(|m| m.len()).unwrap_or(0);
             }
         }
@@ -34,22 +36,36 @@ fn main() {
         .map(PathBuf::from)
         .unwrap_or_else(|| root.join("../shared/paper-data"));
     if !data.join("MotionCapture").is_dir() {
-        eprintln!("paper-data not found at {}; pass its path as an argument", data.display());
+        eprintln!(
+            "paper-data not found at {}; pass its path as an argument",
+            data.display()
+        );
         std::process::exit(1);
     }
-    let study = Study::from_file(&root.join("assets/studies/collins2019.toml")).expect("study file");
-    let roots = Roots { data: data.clone(), results: root.clone() };
-    let mb = (dir_bytes(&data.join("MotionCapture")) + dir_bytes(&data.join("Simulation"))) as f64 / 1e6;
+    let study =
+        Study::from_file(&root.join("assets/studies/collins2019.toml")).expect("study file");
+    let roots = Roots {
+        data: data.clone(),
+        results: root.clone(),
+    };
+    let mb =
+        (dir_bytes(&data.join("MotionCapture")) + dir_bytes(&data.join("Simulation"))) as f64 / 1e6;
     println!("threads: {}", rayon::current_num_threads());
     println!("data: {mb:.1} MB in {}", data.display());
     for mode in [AnalysisMode::Default, AnalysisMode::Study] {
-        let opts = CompareOptions { mode, ..CompareOptions::default() };
+        let opts = CompareOptions {
+            mode,
+            ..CompareOptions::default()
+        };
         let mut best = (f64::MAX, f64::MAX);
         for _ in 0..5 {
             let t0 = Instant::now();
             let scenes = study.load(&roots).expect("load");
             let t1 = Instant::now();
-            let reports: Vec<_> = scenes.iter().map(|s| evaluate_scene(&s.spec, &s.reference, &s.sources, &opts)).collect();
+            let reports: Vec<_> = scenes
+                .iter()
+                .map(|s| evaluate_scene(&s.spec, &s.reference, &s.sources, &opts))
+                .collect();
             let t2 = Instant::now();
             std::hint::black_box(&reports);
             let (l, a) = ((t1 - t0).as_secs_f64(), (t2 - t1).as_secs_f64());

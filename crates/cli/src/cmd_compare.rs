@@ -50,29 +50,50 @@ pub fn parse_alignment(s: &str) -> Result<Alignment> {
     };
     Ok(match method {
         "estimate" => Alignment::estimate(),
-        "onset" => Alignment::Onset { lead_frames: num("LEAD")?, rest_frames: (20, 100), threshold_m: 0.01 },
-        "fixed" => Alignment::Fixed { frame: num("FRAME")? },
+        "onset" => Alignment::Onset {
+            lead_frames: num("LEAD")?,
+            rest_frames: (20, 100),
+            threshold_m: 0.01,
+        },
+        "fixed" => Alignment::Fixed {
+            frame: num("FRAME")?,
+        },
         _ => bail!("unknown --alignment '{s}' (expected estimate, onset:LEAD or fixed:FRAME)"),
     })
 }
 
 /// Loads a study and evaluates every scene.
-pub fn evaluate(study_path: &std::path::Path, data: Option<PathBuf>, results: Option<PathBuf>, opts: &CompareOptions) -> Result<Vec<SceneReport>> {
+pub fn evaluate(
+    study_path: &std::path::Path,
+    data: Option<PathBuf>,
+    results: Option<PathBuf>,
+    opts: &CompareOptions,
+) -> Result<Vec<SceneReport>> {
     let study = Study::from_file(study_path)?;
     let base = study_path.parent().map(PathBuf::from).unwrap_or_default();
-    let roots = Roots { data: data.unwrap_or_else(|| base.clone()), results: results.unwrap_or(base) };
+    let roots = Roots {
+        data: data.unwrap_or_else(|| base.clone()),
+        results: results.unwrap_or(base),
+    };
     if !roots.data.is_dir() {
         bail!("data folder {} does not exist", roots.data.display());
     }
     let scenes = study.load(&roots)?;
-    Ok(scenes.iter().map(|s| evaluate_scene(&s.spec, &s.reference, &s.sources, opts)).collect())
+    Ok(scenes
+        .iter()
+        .map(|s| evaluate_scene(&s.spec, &s.reference, &s.sources, opts))
+        .collect())
 }
 
 /// Runs the command.
 pub fn run(args: Args) -> Result<()> {
     let format: Format = args.format.parse().map_err(anyhow::Error::msg)?;
     let opts = CompareOptions {
-        mode: if args.mode == "study" { AnalysisMode::Study } else { AnalysisMode::Default },
+        mode: if args.mode == "study" {
+            AnalysisMode::Study
+        } else {
+            AnalysisMode::Default
+        },
         alignment: args.alignment.as_deref().map(parse_alignment).transpose()?,
         ..CompareOptions::default()
     };
@@ -83,7 +104,9 @@ pub fn run(args: Args) -> Result<()> {
         table::render(&reports, format)
     };
     match args.output {
-        Some(p) => std::fs::write(&p, text).with_context(|| format!("cannot write {}", p.display()))?,
+        Some(p) => {
+            std::fs::write(&p, text).with_context(|| format!("cannot write {}", p.display()))?
+        }
         None => print!("{text}"),
     }
     Ok(())

@@ -63,7 +63,12 @@ pub fn run(args: Args) -> Result<()> {
     }
     let width = engines.iter().map(|e| e.name().len()).max().unwrap_or(0);
     for e in &engines {
-        println!("{:<width$}  {}  (default timestep {} s)", e.name(), e.version(), e.default_timestep_s());
+        println!(
+            "{:<width$}  {}  (default timestep {} s)",
+            e.name(),
+            e.version(),
+            e.default_timestep_s()
+        );
         if args.settings {
             for s in e.settings_help() {
                 println!("{:<width$}    {:<18} {}", "", s.key, s.help);

@@ -5,7 +5,9 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand, ValueEnum};
 use realitygap_data::qualisys::{self, QualisysOptions};
 use realitygap_data::recorded::{self, QuatOrder, RecordedOptions};
-use realitygap_data::{sanitize_run_id, ImportError, ImportedRun, RunEntry, RunStatus, RunStore, SourceKind};
+use realitygap_data::{
+    sanitize_run_id, ImportError, ImportedRun, RunEntry, RunStatus, RunStore, SourceKind,
+};
 use serde_json::{json, Map, Value};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -93,7 +95,9 @@ fn parse_role(s: &str) -> Result<(String, String), String> {
         Some((name, role)) if !name.trim().is_empty() && !role.trim().is_empty() => {
             Ok((name.trim().to_string(), role.trim().to_string()))
         }
-        _ => Err(format!("expected NAME=ROLE (e.g. \"RB1(Orange)=wrist\"), found {s:?}")),
+        _ => Err(format!(
+            "expected NAME=ROLE (e.g. \"RB1(Orange)=wrist\"), found {s:?}"
+        )),
     }
 }
 
@@ -128,7 +132,12 @@ fn import_qualisys(args: QualisysArgs) -> Result<()> {
         "body_names": opts.body_names,
         "roles": opts.roles.iter().map(|(n, r)| (n.clone(), Value::from(r.clone()))).collect::<Map<_, _>>(),
     });
-    let target = Target { out: &args.out, source: &args.source, kind: SourceKind::Real, scene: Some(&args.scene) };
+    let target = Target {
+        out: &args.out,
+        source: &args.source,
+        kind: SourceKind::Real,
+        scene: Some(&args.scene),
+    };
     import_files(&args.files, &target, settings, |f| qualisys::read(f, &opts))
 }
 
@@ -138,20 +147,34 @@ fn import_recorded(args: RecordedArgs) -> Result<()> {
         QuatOrderArg::Xyzw => QuatOrder::Xyzw,
     };
     if !(args.control_period.is_finite() && args.control_period > 0.0) {
-        bail!("--control-period must be a positive number of seconds, not {}", args.control_period);
+        bail!(
+            "--control-period must be a positive number of seconds, not {}",
+            args.control_period
+        );
     }
     if !(args.norm_tolerance.is_finite() && args.norm_tolerance >= 0.0) {
-        bail!("--norm-tolerance must be a number >= 0, not {}", args.norm_tolerance);
+        bail!(
+            "--norm-tolerance must be a number >= 0, not {}",
+            args.norm_tolerance
+        );
     }
-    let opts = RecordedOptions { quat_order, control_period_s: args.control_period, norm_tolerance: args.norm_tolerance };
+    let opts = RecordedOptions {
+        quat_order,
+        control_period_s: args.control_period,
+        norm_tolerance: args.norm_tolerance,
+    };
     let settings = json!({
         "importer": "recorded",
         "quat_order": quat_order.to_string(),
         "control_period_s": opts.control_period_s,
         "norm_tolerance": opts.norm_tolerance,
     });
-    let target =
-        Target { out: &args.out, source: &args.source, kind: SourceKind::Recorded, scene: args.scene.as_deref() };
+    let target = Target {
+        out: &args.out,
+        source: &args.source,
+        kind: SourceKind::Recorded,
+        scene: args.scene.as_deref(),
+    };
     import_files(&args.files, &target, settings, |f| recorded::read(f, &opts))
 }
 
@@ -176,10 +199,17 @@ fn import_files(
     let mut ids: BTreeMap<String, &Path> = BTreeMap::new();
     let mut planned = Vec::with_capacity(files.len());
     for f in files {
-        let stem = f.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+        let stem = f
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
         let id = sanitize_run_id(&stem);
         if let Some(other) = ids.insert(id.clone(), f) {
-            bail!("{} and {} would both be run '{id}': import them into different directories", other.display(), f.display());
+            bail!(
+                "{} and {} would both be run '{id}': import them into different directories",
+                other.display(),
+                f.display()
+            );
         }
         planned.push((f, id));
     }
@@ -199,9 +229,13 @@ fn import_files(
         let entry = entry_for(&id, file, &run);
         let status = entry.status;
         let replaced = store.run(&id).is_some();
-        store
-            .write_run(entry, &run.trajectory)
-            .with_context(|| format!("storing run '{id}' (from {}) in {}", file.display(), target.out.display()))?;
+        store.write_run(entry, &run.trajectory).with_context(|| {
+            format!(
+                "storing run '{id}' (from {}) in {}",
+                file.display(),
+                target.out.display()
+            )
+        })?;
         let t = &run.trajectory;
         println!(
             "{id}: {} samples, {:.2} s at {} Hz, {} bodies, {} gaps{}{} <- {}",
@@ -210,7 +244,11 @@ fn import_files(
             run.frequency_hz,
             t.bodies.len(),
             run.gap_count(),
-            if status == RunStatus::Diverged { ", diverged (non-finite values)" } else { "" },
+            if status == RunStatus::Diverged {
+                ", diverged (non-finite values)"
+            } else {
+                ""
+            },
             if replaced { " (replaced)" } else { "" },
             file.display()
         );
@@ -228,7 +266,10 @@ fn import_files(
         target.scene.unwrap_or("not set")
     );
     if failed > 0 {
-        bail!("{failed} of {} files could not be imported (see the errors above)", files.len());
+        bail!(
+            "{failed} of {} files could not be imported (see the errors above)",
+            files.len()
+        );
     }
     Ok(())
 }
@@ -240,15 +281,23 @@ fn entry_for(id: &str, file: &Path, run: &ImportedRun) -> RunEntry {
     let mut entry = RunEntry::new(id);
     let origin = std::fs::canonicalize(file).unwrap_or_else(|_| file.to_path_buf());
     entry.origin = vec![origin.display().to_string()];
-    let non_finite = t.bodies.iter().flat_map(|b| b.poses.iter().flatten()).any(|p| !p.is_finite());
+    let non_finite = t
+        .bodies
+        .iter()
+        .flat_map(|b| b.poses.iter().flatten())
+        .any(|p| !p.is_finite());
     if non_finite {
         entry.status = RunStatus::Diverged;
     }
     if !run.warnings.is_empty() {
         entry.message = Some(run.warnings.join("; "));
     }
-    let bodies: Map<String, Value> =
-        run.body_names.iter().zip(&t.bodies).map(|(name, b)| (b.role.clone(), Value::from(name.clone()))).collect();
+    let bodies: Map<String, Value> = run
+        .body_names
+        .iter()
+        .zip(&t.bodies)
+        .map(|(name, b)| (b.role.clone(), Value::from(name.clone())))
+        .collect();
     let extra = &mut entry.extra;
     extra.insert("samples".into(), t.len().into());
     extra.insert("frequency_hz".into(), run.frequency_hz.into());
@@ -269,7 +318,10 @@ mod tests {
 
     #[test]
     fn roles_parse() {
-        assert_eq!(parse_role("RB1(Orange)=wrist"), Ok(("RB1(Orange)".into(), "wrist".into())));
+        assert_eq!(
+            parse_role("RB1(Orange)=wrist"),
+            Ok(("RB1(Orange)".into(), "wrist".into()))
+        );
         assert_eq!(parse_role("a=b=c"), Ok(("a=b".into(), "c".into())));
         assert!(parse_role("wrist").is_err());
         assert!(parse_role("=wrist").is_err());

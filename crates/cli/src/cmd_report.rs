@@ -55,7 +55,9 @@ pub fn run(args: Args) -> Result<()> {
     };
     let mut provenance = provenance_for_study(&study, &args.study, &roots, mode);
     if let Some(a) = &args.alignment {
-        provenance.details.push(("Alignment override".into(), a.clone()));
+        provenance
+            .details
+            .push(("Alignment override".into(), a.clone()));
     }
     let files = write_report(&reports, &provenance, &args.out)
         .with_context(|| format!("writing the report into {}", args.out.display()))?;
@@ -72,7 +74,12 @@ pub fn run(args: Args) -> Result<()> {
 /// the mode, and per source (reference and sources, each once) where its
 /// runs came from: the format and files for recordings, the engine,
 /// settings and seeds from the manifest for results directories.
-pub fn provenance_for_study(study: &Study, study_path: &Path, roots: &Roots, mode: AnalysisMode) -> Provenance {
+pub fn provenance_for_study(
+    study: &Study,
+    study_path: &Path,
+    roots: &Roots,
+    mode: AnalysisMode,
+) -> Provenance {
     let mut p = Provenance::new(study.title.clone().unwrap_or_else(|| study.name.clone()));
     let absolute = |p: &Path| {
         std::fs::canonicalize(p)
@@ -84,8 +91,10 @@ pub fn provenance_for_study(study: &Study, study_path: &Path, roots: &Roots, mod
     p.data_dir = Some(absolute(&roots.data));
     p.results_dir = Some(absolute(&roots.results));
     p.mode = mode;
-    p.details
-        .push(("Control period".into(), format!("{} s", study.control_period_s)));
+    p.details.push((
+        "Control period".into(),
+        format!("{} s", study.control_period_s),
+    ));
     for scene in &study.scenes {
         for spec in std::iter::once(&scene.reference)
             .chain(&study.sources)
@@ -100,7 +109,9 @@ pub fn provenance_for_study(study: &Study, study_path: &Path, roots: &Roots, mod
             };
             let details = scene_details(spec, &scene.vars, roots);
             for (k, v) in details {
-                p.sources[entry].details.push((format!("{}: {k}", scene.name), v));
+                p.sources[entry]
+                    .details
+                    .push((format!("{}: {k}", scene.name), v));
             }
         }
     }
@@ -156,7 +167,10 @@ fn scene_details(
                     if let Some(e) = &m.engine {
                         out.push(("engine".into(), format!("{} {}", e.name, e.version)));
                     }
-                    out.push(("written by".into(), format!("realitygap {}", m.tool_version)));
+                    out.push((
+                        "written by".into(),
+                        format!("realitygap {}", m.tool_version),
+                    ));
                     if let serde_json::Value::Object(settings) = &m.settings {
                         for (k, v) in settings {
                             let v = match v {

@@ -28,7 +28,10 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// The study definition, built in.
-const COLLINS2019: &str = include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/../../assets/studies/collins2019.toml"));
+const COLLINS2019: &str = include_str!(concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../../assets/studies/collins2019.toml"
+));
 
 /// Arguments of `realitygap reproduce`.
 #[derive(clap::Args, Debug)]
@@ -76,7 +79,11 @@ pub fn assets_dir() -> PathBuf {
 /// Runs the command.
 pub fn run(args: Args) -> Result<()> {
     let started = Instant::now();
-    let mode = if args.mode == "study" { AnalysisMode::Study } else { AnalysisMode::Default };
+    let mode = if args.mode == "study" {
+        AnalysisMode::Study
+    } else {
+        AnalysisMode::Default
+    };
     if let Some(d) = &args.data {
         if !d.join("MotionCapture").is_dir() || !d.join("Simulation").is_dir() {
             bail!("--data {}: expected the study's recordings there (folders MotionCapture/ and Simulation/)", d.display());
@@ -84,22 +91,30 @@ pub fn run(args: Args) -> Result<()> {
     }
     let scenes: Vec<PathBuf> = if args.scenes.is_empty() {
         let dir = assets_dir().join("scenes");
-        ["scene1_single_joint", "scene2_two_joints", "scene3_cube_push"]
-            .iter()
-            .map(|s| dir.join(format!("{s}.toml")))
-            .collect()
+        [
+            "scene1_single_joint",
+            "scene2_two_joints",
+            "scene3_cube_push",
+        ]
+        .iter()
+        .map(|s| dir.join(format!("{s}.toml")))
+        .collect()
     } else {
         args.scenes.clone()
     };
     let engines: Vec<String> = if args.engines.is_empty() {
-        cmd_engines::compiled().iter().map(|e| e.name().to_string()).collect()
+        cmd_engines::compiled()
+            .iter()
+            .map(|e| e.name().to_string())
+            .collect()
     } else {
         args.engines.clone()
     };
     if engines.is_empty() {
         bail!("no physics engine is compiled into this binary");
     }
-    std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
     let runs_dir = args.out.join("runs");
     let mut timings: Vec<(String, f64)> = Vec::new();
     let mut problems: Vec<String> = Vec::new();
@@ -146,23 +161,53 @@ pub fn run(args: Args) -> Result<()> {
         Some(data) => {
             let path = assets_dir().join("studies/collins2019.toml");
             let mut study = Study::from_toml_str(COLLINS2019, &path)?;
-            study.scenes.retain(|s| loaded.iter().any(|l| l.name == s.name));
+            study
+                .scenes
+                .retain(|s| loaded.iter().any(|l| l.name == s.name));
             for s in &mut study.scenes {
-                s.sources.extend(engine_sources(&runs_dir, &s.name, &engines)?);
+                s.sources
+                    .extend(engine_sources(&runs_dir, &s.name, &engines)?);
             }
-            (study, path, Roots { data: data.clone(), results: runs_dir.clone() })
+            (
+                study,
+                path,
+                Roots {
+                    data: data.clone(),
+                    results: runs_dir.clone(),
+                },
+            )
         }
         None => {
             let study = cross_engine_study(&loaded, &runs_dir, &engines)?;
-            (study, args.out.join("study.toml"), Roots { data: args.out.clone(), results: runs_dir.clone() })
+            (
+                study,
+                args.out.join("study.toml"),
+                Roots {
+                    data: args.out.clone(),
+                    results: runs_dir.clone(),
+                },
+            )
         }
     };
     if study.scenes.is_empty() {
-        bail!("none of the scenes is part of the study (expected scene names {:?})", ["scene1_single_joint", "scene2_two_joints", "scene3_cube_push"]);
+        bail!(
+            "none of the scenes is part of the study (expected scene names {:?})",
+            [
+                "scene1_single_joint",
+                "scene2_two_joints",
+                "scene3_cube_push"
+            ]
+        );
     }
-    let opts = CompareOptions { mode, ..CompareOptions::default() };
+    let opts = CompareOptions {
+        mode,
+        ..CompareOptions::default()
+    };
     let scenes_in = study.load(&roots)?;
-    let reports: Vec<_> = scenes_in.iter().map(|s| evaluate_scene(&s.spec, &s.reference, &s.sources, &opts)).collect();
+    let reports: Vec<_> = scenes_in
+        .iter()
+        .map(|s| evaluate_scene(&s.spec, &s.reference, &s.sources, &opts))
+        .collect();
     timings.push(("compare".into(), t.elapsed().as_secs_f64()));
     print!("{}", table::render(&reports, Format::Markdown));
 
@@ -170,8 +215,14 @@ pub fn run(args: Args) -> Result<()> {
     eprintln!("[3/3] writing the report");
     let t = Instant::now();
     let mut provenance = provenance_for_study(&study, &study_path, &roots, mode);
-    provenance.details.push(("Command".into(), std::env::args().collect::<Vec<_>>().join(" ")));
-    provenance.details.push(("Repeats per scene and engine".into(), args.repeats.to_string()));
+    provenance.details.push((
+        "Command".into(),
+        std::env::args().collect::<Vec<_>>().join(" "),
+    ));
+    provenance.details.push((
+        "Repeats per scene and engine".into(),
+        args.repeats.to_string(),
+    ));
     let report_dir = args.out.join("report");
     let files = realitygap_report::write_report(&reports, &provenance, &report_dir)
         .with_context(|| format!("writing the report into {}", report_dir.display()))?;
@@ -179,17 +230,29 @@ pub fn run(args: Args) -> Result<()> {
 
     let total = started.elapsed().as_secs_f64();
     timings.push(("total".into(), total));
-    let timing_json: serde_json::Map<String, serde_json::Value> =
-        timings.iter().map(|(k, v)| (format!("{k}_s"), serde_json::json!(v))).collect();
-    std::fs::write(args.out.join("timings.json"), serde_json::to_string_pretty(&timing_json)? + "\n")
-        .with_context(|| format!("cannot write {}", args.out.join("timings.json").display()))?;
+    let timing_json: serde_json::Map<String, serde_json::Value> = timings
+        .iter()
+        .map(|(k, v)| (format!("{k}_s"), serde_json::json!(v)))
+        .collect();
+    std::fs::write(
+        args.out.join("timings.json"),
+        serde_json::to_string_pretty(&timing_json)? + "\n",
+    )
+    .with_context(|| format!("cannot write {}", args.out.join("timings.json").display()))?;
     eprintln!(
         "stage timings: {}",
-        timings.iter().map(|(k, v)| format!("{k} {v:.1} s")).collect::<Vec<_>>().join(", ")
+        timings
+            .iter()
+            .map(|(k, v)| format!("{k} {v:.1} s"))
+            .collect::<Vec<_>>()
+            .join(", ")
     );
     eprintln!("report: {}", files.index_html.display());
     if !problems.is_empty() {
-        bail!("the study finished, but not every simulation did: {}", problems.join("; "));
+        bail!(
+            "the study finished, but not every simulation did: {}",
+            problems.join("; ")
+        );
     }
     Ok(())
 }
@@ -206,10 +269,21 @@ fn engine_sources(runs_dir: &Path, scene: &str, engines: &[String]) -> Result<Ve
         let store = RunStore::open(&dir)?;
         let m = store.manifest();
         // "MuJoCo 3.17.0 (mujoco-rs 7.0.0)" -> "MuJoCo 3.17.0 (this tool)".
-        let version = m.engine.as_ref().map(|e| e.version.clone()).unwrap_or_default();
+        let version = m
+            .engine
+            .as_ref()
+            .map(|e| e.version.clone())
+            .unwrap_or_default();
         let label = version.split(" (").next().unwrap_or_default().trim();
         out.push(SourceSpec {
-            name: format!("{} (this tool)", if label.is_empty() { engine.as_str() } else { label }),
+            name: format!(
+                "{} (this tool)",
+                if label.is_empty() {
+                    engine.as_str()
+                } else {
+                    label
+                }
+            ),
             about: Some(format!("simulated by this tool: {version}")),
             format: SourceFormat::Store,
             files: None,
@@ -238,7 +312,10 @@ fn cross_engine_study(scenes: &[Scene], runs_dir: &Path, engines: &[String]) -> 
         let robot = RobotModel::from_urdf_file(&scene.robot.urdf, &PackageResolver::from_env())
             .with_context(|| format!("scene {}", scene.name))?;
         let goal = final_wrist(scene, &robot);
-        let cube = scene.objects.first().map(|o| CubeSpec { nominal_start_m: Some(o.pose.position_m.to_array()), contact_threshold_m: 0.005 });
+        let cube = scene.objects.first().map(|o| CubeSpec {
+            nominal_start_m: Some(o.pose.position_m.to_array()),
+            contact_threshold_m: 0.005,
+        });
         let mut phases: Vec<f64> = scene.schedule.iter().map(|e| e.t_s).collect();
         if phases.first() != Some(&0.0) {
             phases.insert(0, 0.0);
@@ -249,7 +326,15 @@ fn cross_engine_study(scenes: &[Scene], runs_dir: &Path, engines: &[String]) -> 
             goal_m: goal,
             goal_tolerance_m: 0.01,
             phases_s: phases,
-            cube: if scene.tracked.iter().any(|t| matches!(t.target, TrackTarget::Object(_))) { cube } else { None },
+            cube: if scene
+                .tracked
+                .iter()
+                .any(|t| matches!(t.target, TrackTarget::Object(_)))
+            {
+                cube
+            } else {
+                None
+            },
             vars: BTreeMap::new(),
             reference,
             sources,
@@ -266,10 +351,14 @@ fn cross_engine_study(scenes: &[Scene], runs_dir: &Path, engines: &[String]) -> 
 
 /// The wrist's world position at the scene's final targets.
 fn final_wrist(scene: &Scene, robot: &RobotModel) -> Option<[f64; 3]> {
-    let link = scene.tracked.iter().find(|t| t.role == WRIST).and_then(|t| match &t.target {
-        TrackTarget::Link(l) => robot.link_by_name(l),
-        TrackTarget::Object(_) => None,
-    })?;
+    let link = scene
+        .tracked
+        .iter()
+        .find(|t| t.role == WRIST)
+        .and_then(|t| match &t.target {
+            TrackTarget::Link(l) => robot.link_by_name(l),
+            TrackTarget::Object(_) => None,
+        })?;
     let last_tick = scene.sample_count().saturating_sub(1);
     let targets = scene.targets_deg_at_tick(last_tick);
     let mut q = vec![0.0; robot.joints.len()];
@@ -281,5 +370,7 @@ fn final_wrist(scene: &Scene, robot: &RobotModel) -> Option<[f64; 3]> {
             q[j] = *rad;
         }
     }
-    robot.link_pose(&scene.robot.base, &q, link).map(|p| p.position_m.to_array())
+    robot
+        .link_pose(&scene.robot.base, &q, link)
+        .map(|p| p.position_m.to_array())
 }

@@ -23,7 +23,9 @@ use realitygap_core::pose::{Pose, Quat, Vec3};
 use realitygap_core::robot::{PackageResolver, RobotModel};
 use realitygap_core::scene::Scene;
 use realitygap_core::trajectory::{BodyTrack, Trajectory};
-use realitygap_data::runstore::{EngineInfo, RunEntry, RunStatus as StoreStatus, RunStore, SourceKind};
+use realitygap_data::runstore::{
+    EngineInfo, RunEntry, RunStatus as StoreStatus, RunStore, SourceKind,
+};
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
 use std::io::{Read, Write};
@@ -33,7 +35,10 @@ use std::sync::{mpsc, Arc, Mutex};
 use std::time::{Duration, Instant};
 
 /// The project's Mico2 description, built into the binary for `--robot mico2`.
-const MICO2_URDF: &str = include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/../../assets/robots/mico2/mico2.urdf"));
+const MICO2_URDF: &str = include_str!(concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../../assets/robots/mico2/mico2.urdf"
+));
 
 /// Arguments of `realitygap run`.
 #[derive(clap::Args, Debug, Clone)]
@@ -142,8 +147,18 @@ impl ChildResult {
                         .collect()
                 })
                 .collect(),
-            joint_angles_rad: t.joint_angles_rad.iter().flatten().map(|r| bits(r)).collect(),
-            commands_rad_s: t.joint_velocity_commands_rad_s.iter().flatten().map(|r| bits(r)).collect(),
+            joint_angles_rad: t
+                .joint_angles_rad
+                .iter()
+                .flatten()
+                .map(|r| bits(r))
+                .collect(),
+            commands_rad_s: t
+                .joint_velocity_commands_rad_s
+                .iter()
+                .flatten()
+                .map(|r| bits(r))
+                .collect(),
         }
     }
 
@@ -160,15 +175,21 @@ impl ChildResult {
                         .iter()
                         .map(|p| {
                             let v = p.map(f64::from_bits);
-                            Some(Pose::new(Vec3::new(v[0], v[1], v[2]), Quat::new(v[3], v[4], v[5], v[6])))
+                            Some(Pose::new(
+                                Vec3::new(v[0], v[1], v[2]),
+                                Quat::new(v[3], v[4], v[5], v[6]),
+                            ))
                         })
                         .collect(),
                 })
                 .collect(),
             joint_angles_rad: Some(self.joint_angles_rad.iter().map(|r| unbits(r)).collect()),
-            joint_velocity_commands_rad_s: Some(self.commands_rad_s.iter().map(|r| unbits(r)).collect()),
+            joint_velocity_commands_rad_s: Some(
+                self.commands_rad_s.iter().map(|r| unbits(r)).collect(),
+            ),
         };
-        t.validate().map_err(|e| anyhow!("the run's trajectory is inconsistent: {e}"))?;
+        t.validate()
+            .map_err(|e| anyhow!("the run's trajectory is inconsistent: {e}"))?;
         Ok(t)
     }
 }
@@ -185,8 +206,13 @@ struct Prepared {
 
 /// The robot a `--robot` value names, with a short label for directory
 /// names; `None` keeps the scene's robot.
-fn robot_override(choice: Option<&str>, resolver: &PackageResolver) -> Result<Option<(RobotModel, PathBuf, String)>> {
-    let Some(choice) = choice else { return Ok(None) };
+fn robot_override(
+    choice: Option<&str>,
+    resolver: &PackageResolver,
+) -> Result<Option<(RobotModel, PathBuf, String)>> {
+    let Some(choice) = choice else {
+        return Ok(None);
+    };
     match choice {
         "mico2" => {
             let source = PathBuf::from("mico2.urdf (built in)");
@@ -208,9 +234,20 @@ fn robot_override(choice: Option<&str>, resolver: &PackageResolver) -> Result<Op
         path => {
             let path = PathBuf::from(path);
             let robot = RobotModel::from_urdf_file(&path, resolver)?;
-            let label = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "robot".into());
-            let label: String =
-                label.chars().map(|c| if c.is_ascii_alphanumeric() || "_-.".contains(c) { c } else { '_' }).collect();
+            let label = path
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "robot".into());
+            let label: String = label
+                .chars()
+                .map(|c| {
+                    if c.is_ascii_alphanumeric() || "_-.".contains(c) {
+                        c
+                    } else {
+                        '_'
+                    }
+                })
+                .collect();
             Ok(Some((robot, path, label)))
         }
     }
@@ -227,15 +264,23 @@ fn resolver(packages: &[String]) -> Result<PackageResolver> {
 /// The `--set` values that apply to `engine`, checked for form and for
 /// engine prefixes that name no compiled-in engine.
 fn overrides_for(set: &[String], engine: &str) -> Result<EngineSettings> {
-    let known: Vec<String> = cmd_engines::compiled().iter().map(|e| e.name().to_string()).collect();
+    let known: Vec<String> = cmd_engines::compiled()
+        .iter()
+        .map(|e| e.name().to_string())
+        .collect();
     let mut out = EngineSettings::new();
     for s in set {
-        let (key, value) = s.split_once('=').ok_or_else(|| anyhow!("--set \"{s}\": expected KEY=VALUE or ENGINE.KEY=VALUE"))?;
+        let (key, value) = s
+            .split_once('=')
+            .ok_or_else(|| anyhow!("--set \"{s}\": expected KEY=VALUE or ENGINE.KEY=VALUE"))?;
         let key = key.trim();
         let (target, key) = match key.split_once('.') {
             Some((e, k)) => {
                 if !known.iter().any(|n| n == e) {
-                    bail!("--set \"{s}\": \"{e}\" is not a compiled-in engine (compiled in: {})", known.join(", "));
+                    bail!(
+                        "--set \"{s}\": \"{e}\" is not a compiled-in engine (compiled in: {})",
+                        known.join(", ")
+                    );
                 }
                 (Some(e), k)
             }
@@ -259,7 +304,13 @@ fn parse_perturbation(specs: &[String]) -> Result<Perturbation> {
     Ok(p)
 }
 
-fn prepare(scene_file: &Path, engine: &str, robot: Option<&str>, packages: &[String], set: &[String]) -> Result<Prepared> {
+fn prepare(
+    scene_file: &Path,
+    engine: &str,
+    robot: Option<&str>,
+    packages: &[String],
+    set: &[String],
+) -> Result<Prepared> {
     let engine = cmd_engines::find(engine)?;
     let mut scene = Scene::from_file(scene_file)?;
     let resolver = resolver(packages)?;
@@ -274,11 +325,22 @@ fn prepare(scene_file: &Path, engine: &str, robot: Option<&str>, packages: &[Str
     scene.validate(&robot)?;
     let mut settings = scene.settings_for(engine.name());
     settings.extend(overrides_for(set, engine.name())?);
-    let timestep_s = engine
-        .check_settings(&settings)
-        .with_context(|| format!("scene {} ([engine.{}] and --set)", scene_file.display(), engine.name()))?;
+    let timestep_s = engine.check_settings(&settings).with_context(|| {
+        format!(
+            "scene {} ([engine.{}] and --set)",
+            scene_file.display(),
+            engine.name()
+        )
+    })?;
     let steps_per_period = scene.steps_per_period(timestep_s)?;
-    Ok(Prepared { scene, robot, engine, settings, timestep_s, steps_per_period })
+    Ok(Prepared {
+        scene,
+        robot,
+        engine,
+        settings,
+        timestep_s,
+        steps_per_period,
+    })
 }
 
 /// `realitygap __run-one`: reads a [`Job`] as JSON on standard input, runs
@@ -288,21 +350,36 @@ pub fn run_one() -> Result<()> {
     die_with_parent();
     cmd_engines::install_native_handlers();
     let mut input = String::new();
-    std::io::stdin().read_to_string(&mut input).context("reading the job from standard input")?;
-    let job: Job = serde_json::from_str(&input).context("the job on standard input is not valid")?;
-    let p = prepare(&job.scene_file, &job.engine, job.robot.as_deref(), &job.packages, &job.set)?;
+    std::io::stdin()
+        .read_to_string(&mut input)
+        .context("reading the job from standard input")?;
+    let job: Job =
+        serde_json::from_str(&input).context("the job on standard input is not valid")?;
+    let p = prepare(
+        &job.scene_file,
+        &job.engine,
+        job.robot.as_deref(),
+        &job.packages,
+        &job.set,
+    )?;
     let perturbation = parse_perturbation(&job.perturb)?;
-    let sample = (!perturbation.is_none()).then(|| perturbation.sample(job.seed, p.scene.actuators.len()));
+    let sample =
+        (!perturbation.is_none()).then(|| perturbation.sample(job.seed, p.scene.actuators.len()));
     let variation = sample.as_ref().map(|s| s.variation).unwrap_or_default();
     let mut sim = p.engine.load(&p.scene, &p.robot, &p.settings, &variation)?;
     if job.check_only {
         return Ok(());
     }
-    let options = RunOptions { perturbation: sample, ..RunOptions::default() };
+    let options = RunOptions {
+        perturbation: sample,
+        ..RunOptions::default()
+    };
     let outcome = run_scene(sim.as_mut(), &p.scene, &options)?;
     let text = serde_json::to_string(&ChildResult::from_outcome(&outcome))?;
     let mut out = std::io::stdout().lock();
-    out.write_all(text.as_bytes()).and_then(|_| out.flush()).context("writing the result to standard output")?;
+    out.write_all(text.as_bytes())
+        .and_then(|_| out.flush())
+        .context("writing the result to standard output")?;
     Ok(())
 }
 
@@ -430,12 +507,23 @@ fn run_child(job: &Job, timeout_s: Option<f64>) -> ChildEnd {
         }
         match serde_json::from_slice::<ChildResult>(&out) {
             Ok(r) => ChildEnd::Done(Box::new(r)),
-            Err(e) => ChildEnd::Failed(format!("the run's output could not be read ({e}); stderr: {}", last_lines(&err, 5))),
+            Err(e) => ChildEnd::Failed(format!(
+                "the run's output could not be read ({e}); stderr: {}",
+                last_lines(&err, 5)
+            )),
         }
     } else {
-        let err: String = err.lines().map(|l| l.strip_prefix("error: ").unwrap_or(l)).collect::<Vec<_>>().join("\n");
+        let err: String = err
+            .lines()
+            .map(|l| l.strip_prefix("error: ").unwrap_or(l))
+            .collect::<Vec<_>>()
+            .join("\n");
         let said = last_lines(&err, 5);
-        let said = if said.is_empty() { "no message".to_string() } else { said };
+        let said = if said.is_empty() {
+            "no message".to_string()
+        } else {
+            said
+        };
         ChildEnd::Failed(format!("{}: {said}", describe_exit(status)))
     }
 }
@@ -460,7 +548,10 @@ fn run_id(repeat: u32) -> String {
 pub fn run(args: Args) -> Result<()> {
     let batch_start = Instant::now();
     let engines: Vec<String> = if args.engines.is_empty() {
-        let all: Vec<String> = cmd_engines::compiled().iter().map(|e| e.name().to_string()).collect();
+        let all: Vec<String> = cmd_engines::compiled()
+            .iter()
+            .map(|e| e.name().to_string())
+            .collect();
         if all.is_empty() {
             bail!("no physics engine is compiled into this binary (build it with `--features mujoco`)");
         }
@@ -474,22 +565,42 @@ pub fn run(args: Args) -> Result<()> {
     let resolver = resolver(&args.packages)?;
     // Resolve the robot once, for its label and early errors.
     let robot_label = robot_override(args.robot.as_deref(), &resolver)?.map(|(_, _, label)| label);
-    let jobs = args.jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())).max(1);
+    let jobs = args
+        .jobs
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+        .max(1);
 
     // Check everything and open the results directories before running.
     let mut groups: Vec<Group> = Vec::new();
     for scene_file in &args.scenes {
         for engine in &engines {
-            let p = prepare(scene_file, engine, args.robot.as_deref(), &args.packages, &args.set)?;
+            let p = prepare(
+                scene_file,
+                engine,
+                args.robot.as_deref(),
+                &args.packages,
+                &args.set,
+            )?;
             let source = match &robot_label {
                 Some(label) => format!("{engine}-{label}"),
                 None => engine.clone(),
             };
-            if groups.iter().any(|g| g.scene_name == p.scene.name && g.source == source) {
-                bail!("scene \"{}\" is given twice (scene names must be unique in a batch)", p.scene.name);
+            if groups
+                .iter()
+                .any(|g| g.scene_name == p.scene.name && g.source == source)
+            {
+                bail!(
+                    "scene \"{}\" is given twice (scene names must be unique in a batch)",
+                    p.scene.name
+                );
             }
             let dir = args.out.join(&p.scene.name).join(&source);
-            let mut store = RunStore::create_or_open(&dir, &source, SourceKind::Simulated, Some(&p.scene.name))?;
+            let mut store = RunStore::create_or_open(
+                &dir,
+                &source,
+                SourceKind::Simulated,
+                Some(&p.scene.name),
+            )?;
             let config = serde_json::json!({
                 "scene_file": p.scene.source.display().to_string(),
                 "robot": {
@@ -521,15 +632,22 @@ pub fn run(args: Args) -> Result<()> {
                     );
                 }
             }
-            store.set_engine(EngineInfo { name: p.engine.name().to_string(), version: p.engine.version() })?;
+            store.set_engine(EngineInfo {
+                name: p.engine.name().to_string(),
+                version: p.engine.version(),
+            })?;
             let mut settings = store.manifest().settings.clone();
             if !settings.is_object() {
                 settings = serde_json::json!({});
             }
             settings["config"] = config;
-            settings["repeats"] = serde_json::json!(args.repeats.max(settings["repeats"].as_u64().unwrap_or(0) as u32));
+            settings["repeats"] = serde_json::json!(args
+                .repeats
+                .max(settings["repeats"].as_u64().unwrap_or(0) as u32));
             store.set_settings(settings)?;
-            let pending: Vec<u32> = (0..args.repeats).filter(|&r| !store.has_finished_run(&run_id(r))).collect();
+            let pending: Vec<u32> = (0..args.repeats)
+                .filter(|&r| !store.has_finished_run(&run_id(r)))
+                .collect();
             groups.push(Group {
                 scene_file: scene_file.clone(),
                 scene_name: p.scene.name.clone(),
@@ -562,7 +680,10 @@ pub fn run(args: Args) -> Result<()> {
         }
     }
 
-    let skipped: usize = groups.iter().map(|g| args.repeats as usize - g.pending.len()).sum();
+    let skipped: usize = groups
+        .iter()
+        .map(|g| args.repeats as usize - g.pending.len())
+        .sum();
     let queue: VecDeque<(usize, u32)> = groups
         .iter()
         .enumerate()
@@ -570,8 +691,13 @@ pub fn run(args: Args) -> Result<()> {
         .flat_map(|(i, g)| g.pending.iter().map(move |&r| (i, r)))
         .collect();
     let total = queue.len();
-    let jobs_list: Vec<Job> = queue.iter().map(|&(g, r)| job_for(&groups[g], r, false)).collect();
-    let queue = Arc::new(Mutex::new(queue.into_iter().zip(jobs_list).collect::<VecDeque<_>>()));
+    let jobs_list: Vec<Job> = queue
+        .iter()
+        .map(|&(g, r)| job_for(&groups[g], r, false))
+        .collect();
+    let queue = Arc::new(Mutex::new(
+        queue.into_iter().zip(jobs_list).collect::<VecDeque<_>>(),
+    ));
     let (tx, rx) = mpsc::channel::<((usize, u32), ChildEnd, f64)>();
     let workers: Vec<_> = (0..jobs.min(total.max(1)))
         .map(|_| {
@@ -593,11 +719,15 @@ pub fn run(args: Args) -> Result<()> {
 
     let bar = ProgressBar::new(total as u64);
     bar.set_style(
-        ProgressStyle::with_template("{spinner} [{elapsed_precise}] {wide_bar} {pos}/{len} runs ({eta} left) {msg}")
-            .expect("a valid template"),
+        ProgressStyle::with_template(
+            "{spinner} [{elapsed_precise}] {wide_bar} {pos}/{len} runs ({eta} left) {msg}",
+        )
+        .expect("a valid template"),
     );
     if skipped > 0 {
-        bar.println(format!("{skipped} finished runs kept from an earlier batch"));
+        bar.println(format!(
+            "{skipped} finished runs kept from an earlier batch"
+        ));
     }
     let mut failures = 0usize;
     let mut steps_total = 0u64;
@@ -609,22 +739,39 @@ pub fn run(args: Args) -> Result<()> {
         if !perturbation.is_none() {
             entry.seed = Some(repeat_seed(args.seed, repeat as u64));
         }
-        entry.extra.insert("repeat".into(), serde_json::json!(repeat));
+        entry
+            .extra
+            .insert("repeat".into(), serde_json::json!(repeat));
         let stored = match end {
             ChildEnd::Done(result) => match result.trajectory() {
                 Ok(trajectory) => {
                     entry.wall_time_s = Some(result.wall_time_s);
-                    entry.extra.insert("engine_steps".into(), serde_json::json!(result.engine_steps));
-                    let sps = if result.wall_time_s > 0.0 { result.engine_steps as f64 / result.wall_time_s } else { 0.0 };
-                    entry.extra.insert("steps_per_second".into(), serde_json::json!(sps.round()));
-                    entry.extra.insert("process_wall_time_s".into(), serde_json::json!(elapsed_s));
-                    entry.extra.insert("samples".into(), serde_json::json!(trajectory.len()));
+                    entry.extra.insert(
+                        "engine_steps".into(),
+                        serde_json::json!(result.engine_steps),
+                    );
+                    let sps = if result.wall_time_s > 0.0 {
+                        result.engine_steps as f64 / result.wall_time_s
+                    } else {
+                        0.0
+                    };
+                    entry
+                        .extra
+                        .insert("steps_per_second".into(), serde_json::json!(sps.round()));
+                    entry
+                        .extra
+                        .insert("process_wall_time_s".into(), serde_json::json!(elapsed_s));
+                    entry
+                        .extra
+                        .insert("samples".into(), serde_json::json!(trajectory.len()));
                     steps_total += result.engine_steps;
                     loop_time_total += result.wall_time_s;
                     if let Some((t_s, reason)) = &result.diverged {
                         entry.status = StoreStatus::Diverged;
                         entry.message = Some(format!("diverged at t = {t_s:.4} s: {reason}"));
-                        entry.extra.insert("diverged_at_s".into(), serde_json::json!(t_s));
+                        entry
+                            .extra
+                            .insert("diverged_at_s".into(), serde_json::json!(t_s));
                         g.done[1] += 1;
                     } else {
                         g.done[0] += 1;
@@ -639,7 +786,10 @@ pub fn run(args: Args) -> Result<()> {
                 }
             },
             ChildEnd::Failed(message) => {
-                bar.println(format!("{}/{} {id}: failed: {message}", g.scene_name, g.source));
+                bar.println(format!(
+                    "{}/{} {id}: failed: {message}",
+                    g.scene_name, g.source
+                ));
                 entry.message = Some(message);
                 entry.wall_time_s = Some(elapsed_s);
                 failures += 1;
@@ -692,7 +842,11 @@ pub fn run(args: Args) -> Result<()> {
     if steps_total > 0 {
         say(format!(
             "{total} runs in {batch_wall_s:.1} s with {jobs} jobs ({:.0} engine steps/s per run)",
-            if loop_time_total > 0.0 { steps_total as f64 / loop_time_total } else { 0.0 }
+            if loop_time_total > 0.0 {
+                steps_total as f64 / loop_time_total
+            } else {
+                0.0
+            }
         ));
     }
     if !load_failures.is_empty() {

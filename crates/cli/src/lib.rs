@@ -10,12 +10,16 @@ pub mod study;
 /// environment variable `REALITYGAP_REQUIRE_PAPER_DATA` is set (as CI sets
 /// it), in which case this panics so that the tests cannot pass silently.
 pub fn paper_data_for_tests() -> Option<std::path::PathBuf> {
-    let dir = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/paper-data");
+    let dir =
+        std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/paper-data");
     if dir.join("MotionCapture").is_dir() {
         return Some(dir);
     }
     if std::env::var_os("REALITYGAP_REQUIRE_PAPER_DATA").is_some() {
-        panic!("paper-data not found at {} but REALITYGAP_REQUIRE_PAPER_DATA is set", dir.display());
+        panic!(
+            "paper-data not found at {} but REALITYGAP_REQUIRE_PAPER_DATA is set",
+            dir.display()
+        );
     }
     eprintln!("SKIPPED: paper-data not found at {}", dir.display());
     None
@@ -31,38 +35,69 @@ mod paper_tests {
     use study::{Roots, Study};
 
     fn study() -> Study {
-        Study::from_file(&PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../assets/studies/collins2019.toml")).unwrap()
+        Study::from_file(
+            &PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+                .join("../../assets/studies/collins2019.toml"),
+        )
+        .unwrap()
     }
 
     /// The goals in the study file are forward kinematics of the official
     /// URDF at each scene's final targets, base raised 0.055 m.
     #[test]
     fn study_goals_match_forward_kinematics() {
-        let Some(data) = paper_data_for_tests() else { return };
+        let Some(data) = paper_data_for_tests() else {
+            return;
+        };
         let mut res = PackageResolver::new();
         res.insert("kinova_description", data.join("kinova_description"));
-        let robot = RobotModel::from_urdf_file(&data.join("kinova_description/urdf/m1n6s300.urdf"), &res).unwrap();
+        let robot =
+            RobotModel::from_urdf_file(&data.join("kinova_description/urdf/m1n6s300.urdf"), &res)
+                .unwrap();
         let wrist = robot.link_by_name("m1n6s300_link_6").unwrap();
-        let finals: [[f64; 6]; 3] = [[0.0, -100.0, 0.0, 0.0, 0.0, 0.0], [0.0; 6], [0.0, -67.0, 30.0, 90.0, 0.0, 0.0]];
+        let finals: [[f64; 6]; 3] = [
+            [0.0, -100.0, 0.0, 0.0, 0.0, 0.0],
+            [0.0; 6],
+            [0.0, -67.0, 30.0, 90.0, 0.0, 0.0],
+        ];
         for (scene, targets) in study().scenes.iter().zip(finals) {
             let mut q = vec![0.0; robot.joints.len()];
             for (j, deg) in targets.iter().enumerate() {
-                q[robot.joint_by_name(&format!("m1n6s300_joint_{}", j + 1)).unwrap()] = deg.to_radians();
+                q[robot
+                    .joint_by_name(&format!("m1n6s300_joint_{}", j + 1))
+                    .unwrap()] = deg.to_radians();
             }
             let base = Pose::new(Vec3::new(0.0, 0.0, 0.055), Quat::IDENTITY);
             let p = robot.link_pose(&base, &q, wrist).unwrap().position_m;
             let goal = Vec3::from_array(scene.goal_m.unwrap());
-            assert!(p.distance(goal) < 1e-5, "{}: FK {p:?} vs study file {goal:?}", scene.name);
+            assert!(
+                p.distance(goal) < 1e-5,
+                "{}: FK {p:?} vs study file {goal:?}",
+                scene.name
+            );
         }
     }
 
     #[test]
     fn study_mode_reproduces_the_table_shape_and_the_cube_fact() {
-        let Some(data) = paper_data_for_tests() else { return };
+        let Some(data) = paper_data_for_tests() else {
+            return;
+        };
         let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
-        let scenes = study().load(&Roots { data, results: root }).unwrap();
-        let opts = CompareOptions { mode: AnalysisMode::Study, ..Default::default() };
-        let reports: Vec<_> = scenes.iter().map(|s| evaluate_scene(&s.spec, &s.reference, &s.sources, &opts)).collect();
+        let scenes = study()
+            .load(&Roots {
+                data,
+                results: root,
+            })
+            .unwrap();
+        let opts = CompareOptions {
+            mode: AnalysisMode::Study,
+            ..Default::default()
+        };
+        let reports: Vec<_> = scenes
+            .iter()
+            .map(|s| evaluate_scene(&s.spec, &s.reference, &s.sources, &opts))
+            .collect();
         for r in &reports {
             assert_eq!(r.sources.len(), 7);
             for s in &r.sources {
@@ -70,32 +105,83 @@ mod paper_tests {
                 if s.source == "V-Rep ODE" {
                     assert!(e > 1e15, "{}: ODE {e}", r.scene);
                 } else {
-                    assert!(e.is_finite() && e > 0.0 && e < 1000.0, "{} {}: {e}", r.scene, s.source);
+                    assert!(
+                        e.is_finite() && e > 0.0 && e < 1000.0,
+                        "{} {}: {e}",
+                        r.scene,
+                        s.source
+                    );
                 }
                 assert_eq!(s.runs_used, 20);
             }
         }
-        if std::env::var_os("RG_PRINT").is_some() { println!("{}", realitygap_analysis::table::render(&reports, realitygap_analysis::table::Format::Markdown)); }
+        if std::env::var_os("RG_PRINT").is_some() {
+            println!(
+                "{}",
+                realitygap_analysis::table::render(
+                    &reports,
+                    realitygap_analysis::table::Format::Markdown
+                )
+            );
+        }
         let cube = reports[2].reference.cube.as_ref().unwrap();
         let dx = cube.final_offset_from_nominal_m.unwrap()[0];
-        assert!((dx - 0.0975).abs() < 0.0005, "real cube final x - 0.5 = {dx}");
+        assert!(
+            (dx - 0.0975).abs() < 0.0005,
+            "real cube final x - 0.5 = {dx}"
+        );
     }
 
     #[test]
     fn default_mode_flags_the_broken_runs() {
-        let Some(data) = paper_data_for_tests() else { return };
+        let Some(data) = paper_data_for_tests() else {
+            return;
+        };
         let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
-        let scenes = study().load(&Roots { data, results: root }).unwrap();
+        let scenes = study()
+            .load(&Roots {
+                data,
+                results: root,
+            })
+            .unwrap();
         for s in &scenes {
-            let r = evaluate_scene(&s.spec, &s.reference, &s.sources, &CompareOptions::default());
-            if std::env::var_os("RG_PRINT").is_some() { println!("{}", realitygap_analysis::table::render(&[r.clone()], realitygap_analysis::table::Format::Markdown)); }
+            let r = evaluate_scene(
+                &s.spec,
+                &s.reference,
+                &s.sources,
+                &CompareOptions::default(),
+            );
+            if std::env::var_os("RG_PRINT").is_some() {
+                println!(
+                    "{}",
+                    realitygap_analysis::table::render(
+                        &[r.clone()],
+                        realitygap_analysis::table::Format::Markdown
+                    )
+                );
+            }
             for src in &r.sources {
-                let excluded: Vec<&str> = src.runs_flagged.iter().filter(|f| f.excluded).map(|f| f.run.as_str()).collect();
+                let excluded: Vec<&str> = src
+                    .runs_flagged
+                    .iter()
+                    .filter(|f| f.excluded)
+                    .map(|f| f.run.as_str())
+                    .collect();
                 match (src.source.as_str(), r.scene.as_str()) {
-                    ("V-Rep ODE", _) => assert_eq!((excluded.len(), src.runs_used, src.accumulated_error_m), (20, 0, None)),
-                    ("V-Rep Bullet 2.83", "scene2_two_joints") => assert_eq!(excluded, ["Double_VRepBullet283_5"]),
+                    ("V-Rep ODE", _) => assert_eq!(
+                        (excluded.len(), src.runs_used, src.accumulated_error_m),
+                        (20, 0, None)
+                    ),
+                    ("V-Rep Bullet 2.83", "scene2_two_joints") => {
+                        assert_eq!(excluded, ["Double_VRepBullet283_5"])
+                    }
                     _ => {
-                        assert!(excluded.is_empty(), "{} {}: {excluded:?}", r.scene, src.source);
+                        assert!(
+                            excluded.is_empty(),
+                            "{} {}: {excluded:?}",
+                            r.scene,
+                            src.source
+                        );
                         assert!(src.accumulated_error_m.unwrap().is_finite());
                     }
                 }

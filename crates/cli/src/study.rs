@@ -36,7 +36,10 @@ use anyhow::{anyhow, bail, Context, Result};
 use rayon::prelude::*;
 use realitygap_analysis::align::Alignment;
 use realitygap_analysis::compare::{CubeSpec, RunInput, SceneSpec, SourceRuns};
-use realitygap_data::{qualisys, recorded, QualisysOptions, QuatOrder, RecordedOptions, RunStatus, RunStore, SourceKind};
+use realitygap_data::{
+    qualisys, recorded, QualisysOptions, QuatOrder, RecordedOptions, RunStatus, RunStore,
+    SourceKind,
+};
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -149,20 +152,27 @@ impl Study {
     /// Reads and checks a study file; errors name the file and the TOML
     /// line and column.
     pub fn from_file(path: &Path) -> Result<Study> {
-        let text = std::fs::read_to_string(path).with_context(|| format!("cannot read study file {}", path.display()))?;
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("cannot read study file {}", path.display()))?;
         Study::from_toml_str(&text, path)
     }
 
     /// Parses and checks a study from its text; `path` names it in errors.
     pub fn from_toml_str(text: &str, path: &Path) -> Result<Study> {
-        let study: Study = toml::from_str(text).map_err(|e| anyhow!("{}: {}", path.display(), toml_error(text, &e)))?;
-        study.check().with_context(|| format!("in study file {}", path.display()))?;
+        let study: Study = toml::from_str(text)
+            .map_err(|e| anyhow!("{}: {}", path.display(), toml_error(text, &e)))?;
+        study
+            .check()
+            .with_context(|| format!("in study file {}", path.display()))?;
         Ok(study)
     }
 
     fn check(&self) -> Result<()> {
         if !(self.control_period_s > 0.0) {
-            bail!("control_period_s must be positive, found {}", self.control_period_s);
+            bail!(
+                "control_period_s must be positive, found {}",
+                self.control_period_s
+            );
         }
         if self.scenes.is_empty() {
             bail!("no [[scenes]]");
@@ -172,7 +182,8 @@ impl Study {
                 bail!("scene '{}': steps must be at least 1", s.name);
             }
             for src in self.sources.iter().chain(&s.sources).chain([&s.reference]) {
-                src.check().with_context(|| format!("scene '{}', source '{}'", s.name, src.name))?;
+                src.check()
+                    .with_context(|| format!("scene '{}', source '{}'", s.name, src.name))?;
             }
         }
         Ok(())
@@ -184,7 +195,11 @@ pub fn toml_error(text: &str, e: &toml::de::Error) -> String {
     match e.span() {
         Some(span) => {
             let line = text[..span.start.min(text.len())].matches('\n').count() + 1;
-            let col = span.start - text[..span.start.min(text.len())].rfind('\n').map_or(0, |i| i + 1) + 1;
+            let col = span.start
+                - text[..span.start.min(text.len())]
+                    .rfind('\n')
+                    .map_or(0, |i| i + 1)
+                + 1;
             format!("line {line}, column {col}: {}", e.message())
         }
         None => e.message().to_string(),
@@ -223,7 +238,11 @@ pub fn expand(pattern: &str, vars: &BTreeMap<String, String>) -> Result<String> 
     }
     if let Some(i) = out.find('{') {
         let end = out[i..].find('}').map_or(out.len(), |j| i + j + 1);
-        bail!("pattern '{pattern}' has an unknown placeholder {} (scene vars: {:?})", &out[i..end], vars.keys().collect::<Vec<_>>());
+        bail!(
+            "pattern '{pattern}' has an unknown placeholder {} (scene vars: {:?})",
+            &out[i..end],
+            vars.keys().collect::<Vec<_>>()
+        );
     }
     Ok(out)
 }
@@ -232,7 +251,11 @@ pub fn expand(pattern: &str, vars: &BTreeMap<String, String>) -> Result<String> 
 /// order. An error when the folder is missing or nothing matches.
 pub fn glob(root: &Path, pattern: &str) -> Result<Vec<PathBuf>> {
     let full = root.join(pattern);
-    let name = full.file_name().and_then(|n| n.to_str()).ok_or_else(|| anyhow!("bad file pattern '{pattern}'"))?.to_string();
+    let name = full
+        .file_name()
+        .and_then(|n| n.to_str())
+        .ok_or_else(|| anyhow!("bad file pattern '{pattern}'"))?
+        .to_string();
     let dir = full.parent().map(Path::to_path_buf).unwrap_or_default();
     if !name.contains('*') {
         if full.is_file() {
@@ -240,11 +263,20 @@ pub fn glob(root: &Path, pattern: &str) -> Result<Vec<PathBuf>> {
         }
         bail!("file not found: {}", full.display());
     }
-    let entries = std::fs::read_dir(&dir).with_context(|| format!("cannot list folder {} (for pattern '{pattern}')", dir.display()))?;
+    let entries = std::fs::read_dir(&dir).with_context(|| {
+        format!(
+            "cannot list folder {} (for pattern '{pattern}')",
+            dir.display()
+        )
+    })?;
     let mut out: Vec<PathBuf> = entries
         .filter_map(|e| e.ok())
         .filter(|e| e.file_type().map(|t| t.is_file()).unwrap_or(false))
-        .filter(|e| e.file_name().to_str().is_some_and(|n| wildcard_match(&name, n)))
+        .filter(|e| {
+            e.file_name()
+                .to_str()
+                .is_some_and(|n| wildcard_match(&name, n))
+        })
         .map(|e| e.path())
         .collect();
     if out.is_empty() {
@@ -261,7 +293,10 @@ pub fn wildcard_match(pattern: &str, name: &str) -> bool {
         return pattern == name;
     }
     let (first, last) = (parts[0], parts[parts.len() - 1]);
-    if !name.starts_with(first) || !name[first.len()..].ends_with(last) || name.len() < first.len() + last.len() {
+    if !name.starts_with(first)
+        || !name[first.len()..].ends_with(last)
+        || name.len() < first.len() + last.len()
+    {
         return false;
     }
     let mut rest = &name[first.len()..name.len() - last.len()];
@@ -286,7 +321,9 @@ pub fn natural_cmp(a: &str, b: &str) -> std::cmp::Ordering {
                 let na = a.iter().take_while(|c| c.is_ascii_digit()).count();
                 let nb = b.iter().take_while(|c| c.is_ascii_digit()).count();
                 let (da, db) = (&a[..na], &b[..nb]);
-                let strip = |d: &[u8]| -> Vec<u8> { d.iter().skip_while(|c| **c == b'0').copied().collect() };
+                let strip = |d: &[u8]| -> Vec<u8> {
+                    d.iter().skip_while(|c| **c == b'0').copied().collect()
+                };
                 let (sa, sb) = (strip(da), strip(db));
                 let ord = sa.len().cmp(&sb.len()).then(sa.cmp(&sb)).then(na.cmp(&nb));
                 if ord != std::cmp::Ordering::Equal {
@@ -307,15 +344,23 @@ pub fn natural_cmp(a: &str, b: &str) -> std::cmp::Ordering {
 }
 
 fn stem(p: &Path) -> String {
-    p.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default()
+    p.file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default()
 }
 
 /// Reads every run of a source. Files are read in parallel, each once.
-pub fn load_source(spec: &SourceSpec, vars: &BTreeMap<String, String>, roots: &Roots, period_s: f64) -> Result<SourceRuns> {
+pub fn load_source(
+    spec: &SourceSpec,
+    vars: &BTreeMap<String, String>,
+    roots: &Roots,
+    period_s: f64,
+) -> Result<SourceRuns> {
     let ctx = || format!("source '{}'", spec.name);
     match spec.format {
         SourceFormat::Qualisys => {
-            let pattern = expand(spec.files.as_deref().unwrap_or_default(), vars).with_context(ctx)?;
+            let pattern =
+                expand(spec.files.as_deref().unwrap_or_default(), vars).with_context(ctx)?;
             let files = glob(&roots.data, &pattern).with_context(ctx)?;
             let mut opts = QualisysOptions::collins2019();
             if let Some(f) = spec.frequency_hz {
@@ -331,13 +376,24 @@ pub fn load_source(spec: &SourceSpec, vars: &BTreeMap<String, String>, roots: &R
                 .par_iter()
                 .map(|f| {
                     let r = qualisys::read(f, &opts)?;
-                    Ok((RunInput { id: stem(f), trajectory: r.trajectory, failed: None }, r.frequency_hz))
+                    Ok((
+                        RunInput {
+                            id: stem(f),
+                            trajectory: r.trajectory,
+                            failed: None,
+                        },
+                        r.frequency_hz,
+                    ))
                 })
                 .collect::<Result<_, realitygap_data::ImportError>>()
                 .with_context(ctx)?;
             let rate = runs.first().map_or(100.0, |r| r.1);
             if let Some((r, f)) = runs.iter().find(|r| (r.1 - rate).abs() > 1e-9) {
-                bail!("source '{}': run {} is at {f} Hz but the first run is at {rate} Hz", spec.name, r.id);
+                bail!(
+                    "source '{}': run {} is at {f} Hz but the first run is at {rate} Hz",
+                    spec.name,
+                    r.id
+                );
             }
             Ok(SourceRuns {
                 name: spec.name.clone(),
@@ -348,7 +404,8 @@ pub fn load_source(spec: &SourceSpec, vars: &BTreeMap<String, String>, roots: &R
             })
         }
         SourceFormat::Recorded => {
-            let pattern = expand(spec.files.as_deref().unwrap_or_default(), vars).with_context(ctx)?;
+            let pattern =
+                expand(spec.files.as_deref().unwrap_or_default(), vars).with_context(ctx)?;
             let files = glob(&roots.data, &pattern).with_context(ctx)?;
             let opts = RecordedOptions {
                 control_period_s: period_s,
@@ -358,14 +415,26 @@ pub fn load_source(spec: &SourceSpec, vars: &BTreeMap<String, String>, roots: &R
                 .par_iter()
                 .map(|f| {
                     let r = recorded::read(f, &opts)?;
-                    Ok(RunInput { id: stem(f), trajectory: r.trajectory, failed: None })
+                    Ok(RunInput {
+                        id: stem(f),
+                        trajectory: r.trajectory,
+                        failed: None,
+                    })
                 })
                 .collect::<Result<_, realitygap_data::ImportError>>()
                 .with_context(ctx)?;
-            Ok(SourceRuns { name: spec.name.clone(), kind: "recorded".into(), rate_hz: 1.0 / period_s, alignment: None, runs })
+            Ok(SourceRuns {
+                name: spec.name.clone(),
+                kind: "recorded".into(),
+                rate_hz: 1.0 / period_s,
+                alignment: None,
+                runs,
+            })
         }
         SourceFormat::Store => {
-            let dir = roots.results.join(expand(spec.dir.as_deref().unwrap_or_default(), vars).with_context(ctx)?);
+            let dir = roots
+                .results
+                .join(expand(spec.dir.as_deref().unwrap_or_default(), vars).with_context(ctx)?);
             load_store(&dir, Some(&spec.name), spec.alignment.clone())
         }
     }
@@ -374,8 +443,13 @@ pub fn load_source(spec: &SourceSpec, vars: &BTreeMap<String, String>, roots: &R
 /// Reads every run of a results directory as a source. Runs recorded as
 /// failed or diverged are kept (with their message) so the analysis can
 /// list them.
-pub fn load_store(dir: &Path, name: Option<&str>, alignment: Option<Alignment>) -> Result<SourceRuns> {
-    let store = RunStore::open(dir).with_context(|| format!("results directory {}", dir.display()))?;
+pub fn load_store(
+    dir: &Path,
+    name: Option<&str>,
+    alignment: Option<Alignment>,
+) -> Result<SourceRuns> {
+    let store =
+        RunStore::open(dir).with_context(|| format!("results directory {}", dir.display()))?;
     let m = store.manifest();
     let entries: Vec<_> = store.runs().to_vec();
     let runs: Vec<RunInput> = entries
@@ -383,7 +457,11 @@ pub fn load_store(dir: &Path, name: Option<&str>, alignment: Option<Alignment>) 
         .map(|e| {
             let failed = match e.status {
                 RunStatus::Ok => None,
-                _ => Some(e.message.clone().unwrap_or_else(|| format!("{:?}", e.status).to_lowercase())),
+                _ => Some(
+                    e.message
+                        .clone()
+                        .unwrap_or_else(|| format!("{:?}", e.status).to_lowercase()),
+                ),
             };
             let trajectory = match store.read_run(&e.id) {
                 Ok(t) => t,
@@ -393,7 +471,11 @@ pub fn load_store(dir: &Path, name: Option<&str>, alignment: Option<Alignment>) 
                 }
                 Err(err) => return Err(anyhow!("run '{}' of {}: {err}", e.id, dir.display())),
             };
-            Ok(RunInput { id: e.id.clone(), trajectory, failed })
+            Ok(RunInput {
+                id: e.id.clone(),
+                trajectory,
+                failed,
+            })
         })
         .collect::<Result<_>>()?;
     let rate_hz = runs
@@ -410,7 +492,13 @@ pub fn load_store(dir: &Path, name: Option<&str>, alignment: Option<Alignment>) 
         SourceKind::Simulated => ("simulated", None),
         SourceKind::Recorded => ("recorded", None),
     };
-    Ok(SourceRuns { name: name.map_or_else(|| m.source.clone(), str::to_string), kind: kind.into(), rate_hz, alignment, runs })
+    Ok(SourceRuns {
+        name: name.map_or_else(|| m.source.clone(), str::to_string),
+        kind: kind.into(),
+        rate_hz,
+        alignment,
+        runs,
+    })
 }
 
 /// A scene ready for analysis: its spec, reference and sources.
@@ -430,7 +518,8 @@ impl Study {
             .iter()
             .map(|s| {
                 let ctx = || format!("scene '{}'", s.name);
-                let reference = load_source(&s.reference, &s.vars, roots, self.control_period_s).with_context(ctx)?;
+                let reference = load_source(&s.reference, &s.vars, roots, self.control_period_s)
+                    .with_context(ctx)?;
                 let specs: Vec<&SourceSpec> = self.sources.iter().chain(&s.sources).collect();
                 let sources = specs
                     .par_iter()
@@ -444,7 +533,11 @@ impl Study {
                         control_period_s: self.control_period_s,
                         goal_m: s.goal_m,
                         goal_tolerance_m: s.goal_tolerance_m,
-                        phases_s: if s.phases_s.is_empty() { vec![0.0] } else { s.phases_s.clone() },
+                        phases_s: if s.phases_s.is_empty() {
+                            vec![0.0]
+                        } else {
+                            s.phases_s.clone()
+                        },
                         cube: s.cube.clone(),
                     },
                     reference,
@@ -461,8 +554,14 @@ mod tests {
 
     #[test]
     fn wildcards_and_natural_order() {
-        assert!(wildcard_match("Single_Mujoco_*.csv", "Single_Mujoco_12.csv"));
-        assert!(!wildcard_match("Single_Mujoco_*.csv", "Single_PyBullet_1.csv"));
+        assert!(wildcard_match(
+            "Single_Mujoco_*.csv",
+            "Single_Mujoco_12.csv"
+        ));
+        assert!(!wildcard_match(
+            "Single_Mujoco_*.csv",
+            "Single_PyBullet_1.csv"
+        ));
         assert!(wildcard_match("Single*_6D.tsv", "Single0001_6D.tsv"));
         assert!(!wildcard_match("a*b*c", "acb"));
         assert!(wildcard_match("a*b*c", "axxbyyc"));
@@ -475,7 +574,10 @@ mod tests {
     fn placeholders() {
         let vars: BTreeMap<String, String> = [("e".to_string(), "Experiment1".to_string())].into();
         assert_eq!(expand("S/{e}/a.csv", &vars).unwrap(), "S/Experiment1/a.csv");
-        assert!(expand("S/{x}/a.csv", &vars).unwrap_err().to_string().contains("{x}"));
+        assert!(expand("S/{x}/a.csv", &vars)
+            .unwrap_err()
+            .to_string()
+            .contains("{x}"));
     }
 
     #[test]
@@ -483,7 +585,11 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("rg-study-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let p = dir.join("bad.toml");
-        std::fs::write(&p, "name = \"x\"\n[[scenes]]\nname = \"s\"\nsteps = \"many\"\n").unwrap();
+        std::fs::write(
+            &p,
+            "name = \"x\"\n[[scenes]]\nname = \"s\"\nsteps = \"many\"\n",
+        )
+        .unwrap();
         let e = format!("{:#}", Study::from_file(&p).unwrap_err());
         assert!(e.contains("bad.toml") && e.contains("line 4"), "{e}");
         std::fs::write(&p, "name = \"x\"\n[[scenes]]\nname = \"s\"\nsteps = 3\n[scenes.reference]\nname = \"r\"\nformat = \"recorded\"\nfiles = \"a\"\n").unwrap();

@@ -6,7 +6,10 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 fn realitygap(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_realitygap")).args(args).output().expect("the binary runs")
+    Command::new(env!("CARGO_BIN_EXE_realitygap"))
+        .args(args)
+        .output()
+        .expect("the binary runs")
 }
 
 fn text(bytes: &[u8]) -> String {
@@ -15,7 +18,9 @@ fn text(bytes: &[u8]) -> String {
 
 /// A fresh scratch directory for one test.
 fn scratch(name: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("import-tests").join(name);
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join("import-tests")
+        .join(name);
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     dir
@@ -31,20 +36,38 @@ fn imports_real_captures() {
     let out = scratch("qualisys").join("real-scene3");
     let files: Vec<String> = ["CubeExp0001_6D.tsv", "CubeExp0002_6D.tsv"]
         .iter()
-        .map(|f| data.join("MotionCapture/Experiment3").join(f).display().to_string())
+        .map(|f| {
+            data.join("MotionCapture/Experiment3")
+                .join(f)
+                .display()
+                .to_string()
+        })
         .collect();
     let mut args = vec!["import", "qualisys"];
     args.extend(files.iter().map(String::as_str));
-    args.extend(["--scene", "scene3_cube_push", "--out", out.to_str().unwrap()]);
+    args.extend([
+        "--scene",
+        "scene3_cube_push",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     let o = realitygap(&args);
-    assert!(o.status.success(), "stdout: {}\nstderr: {}", text(&o.stdout), text(&o.stderr));
+    assert!(
+        o.status.success(),
+        "stdout: {}\nstderr: {}",
+        text(&o.stdout),
+        text(&o.stderr)
+    );
     let stdout = text(&o.stdout);
     assert!(stdout.contains("CubeExp0001_6D: 2000 samples"), "{stdout}");
     assert!(stdout.contains("imported 2 of 2 files"), "{stdout}");
 
     let store = RunStore::open(&out).unwrap();
     let m = store.manifest();
-    assert_eq!((m.source.as_str(), m.kind, m.scene.as_deref()), ("real", SourceKind::Real, Some("scene3_cube_push")));
+    assert_eq!(
+        (m.source.as_str(), m.kind, m.scene.as_deref()),
+        ("real", SourceKind::Real, Some("scene3_cube_push"))
+    );
     assert_eq!(store.runs().len(), 2);
     assert_eq!(store.runs()[0].status, RunStatus::Ok);
     assert_eq!(store.runs()[0].extra["gaps"], 0);
@@ -57,7 +80,10 @@ fn imports_real_captures() {
     let csv = std::fs::read_to_string(out.join("runs/CubeExp0001_6D.csv")).unwrap();
     assert!(csv.starts_with("t_s,base_x_m,"));
     assert_eq!(csv.lines().count(), 2001);
-    assert_eq!(read_run_csv(&out.join("runs/CubeExp0001_6D.csv")).unwrap(), t);
+    assert_eq!(
+        read_run_csv(&out.join("runs/CubeExp0001_6D.csv")).unwrap(),
+        t
+    );
 
     // Importing again replaces the runs; another scene in the same
     // directory is refused.
@@ -70,7 +96,11 @@ fn imports_real_captures() {
     other[scene_at] = "scene1_single_joint";
     let o = realitygap(&other);
     assert!(!o.status.success());
-    assert!(text(&o.stderr).contains("scene 'scene3_cube_push'"), "{}", text(&o.stderr));
+    assert!(
+        text(&o.stderr).contains("scene 'scene3_cube_push'"),
+        "{}",
+        text(&o.stderr)
+    );
 }
 
 #[test]
@@ -81,12 +111,25 @@ fn imports_recorded_simulators_and_reports_zero_rows() {
     let f4 = exp.join("Double_VRepBullet283_4.csv").display().to_string();
     let f5 = exp.join("Double_VRepBullet283_5.csv").display().to_string();
     let o = realitygap(&[
-        "import", "recorded", &f4, &f5, "--source", "VRepBullet283", "--quat-order", "xyzw", "--scene",
-        "scene2_two_joints", "--out", out.to_str().unwrap(),
+        "import",
+        "recorded",
+        &f4,
+        &f5,
+        "--source",
+        "VRepBullet283",
+        "--quat-order",
+        "xyzw",
+        "--scene",
+        "scene2_two_joints",
+        "--out",
+        out.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "stderr: {}", text(&o.stderr));
     let stdout = text(&o.stdout);
-    assert!(stdout.contains("Double_VRepBullet283_5: 400 samples"), "{stdout}");
+    assert!(
+        stdout.contains("Double_VRepBullet283_5: 400 samples"),
+        "{stdout}"
+    );
     assert!(stdout.contains("31 rows are all zero"), "{stdout}");
     let store = RunStore::open(&out).unwrap();
     assert_eq!(store.manifest().kind, SourceKind::Recorded);
@@ -94,7 +137,12 @@ fn imports_recorded_simulators_and_reports_zero_rows() {
     let run5 = store.run("Double_VRepBullet283_5").unwrap();
     assert_eq!(run5.extra["zero_rows"], 31);
     assert!(run5.message.as_deref().unwrap().contains("all zero"));
-    assert!(store.run("Double_VRepBullet283_4").unwrap().extra.get("zero_rows").is_none());
+    assert!(store
+        .run("Double_VRepBullet283_4")
+        .unwrap()
+        .extra
+        .get("zero_rows")
+        .is_none());
     assert_eq!(store.read_run("Double_VRepBullet283_4").unwrap().len(), 400);
 }
 
@@ -105,35 +153,90 @@ fn garbage_file_fails_naming_file_and_line() {
     let row = "0.1 0.2 0.8 1 0 0 0 0.5 0 0.0375 1 0 0 0\n";
     std::fs::write(&good, row.repeat(3)).unwrap();
     let bad = dir.join("bad.csv");
-    std::fs::write(&bad, format!("{row}0.1 0.2 oops 1 0 0 0 0.5 0 0.0375 1 0 0 0\n")).unwrap();
+    std::fs::write(
+        &bad,
+        format!("{row}0.1 0.2 oops 1 0 0 0 0.5 0 0.0375 1 0 0 0\n"),
+    )
+    .unwrap();
     let out = dir.join("out");
     let o = realitygap(&[
-        "import", "recorded", good.to_str().unwrap(), bad.to_str().unwrap(), "--source", "x", "--quat-order",
-        "wxyz", "--out", out.to_str().unwrap(),
+        "import",
+        "recorded",
+        good.to_str().unwrap(),
+        bad.to_str().unwrap(),
+        "--source",
+        "x",
+        "--quat-order",
+        "wxyz",
+        "--out",
+        out.to_str().unwrap(),
     ]);
     assert!(!o.status.success());
     let stderr = text(&o.stderr);
-    assert!(stderr.contains(&format!("{}:2: column 3 (wrist z): expected a number, found \"oops\"", bad.display())), "{stderr}");
-    assert!(stderr.contains("1 of 2 files could not be imported"), "{stderr}");
+    assert!(
+        stderr.contains(&format!(
+            "{}:2: column 3 (wrist z): expected a number, found \"oops\"",
+            bad.display()
+        )),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("1 of 2 files could not be imported"),
+        "{stderr}"
+    );
     // The good file was still imported.
     assert_eq!(RunStore::open(&out).unwrap().runs().len(), 1);
 
     // A Qualisys file of garbage, and a missing file.
     let tsv = dir.join("noise.tsv");
     std::fs::write(&tsv, b"1\t0.0\t\xff\xfe garbage\n").unwrap();
-    let o = realitygap(&["import", "qualisys", tsv.to_str().unwrap(), "--scene", "s", "--out", out.to_str().unwrap()]);
+    let o = realitygap(&[
+        "import",
+        "qualisys",
+        tsv.to_str().unwrap(),
+        "--scene",
+        "s",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     assert!(!o.status.success());
     let stderr = text(&o.stderr);
-    assert!(stderr.contains("source 'x'"), "the directory holds another source: {stderr}");
+    assert!(
+        stderr.contains("source 'x'"),
+        "the directory holds another source: {stderr}"
+    );
     let out2 = dir.join("out2");
-    let o = realitygap(&["import", "qualisys", tsv.to_str().unwrap(), "--scene", "s", "--out", out2.to_str().unwrap()]);
+    let o = realitygap(&[
+        "import",
+        "qualisys",
+        tsv.to_str().unwrap(),
+        "--scene",
+        "s",
+        "--out",
+        out2.to_str().unwrap(),
+    ]);
     assert!(!o.status.success());
-    assert!(text(&o.stderr).contains(&format!("{}:1: expected 53", tsv.display())), "{}", text(&o.stderr));
+    assert!(
+        text(&o.stderr).contains(&format!("{}:1: expected 53", tsv.display())),
+        "{}",
+        text(&o.stderr)
+    );
     let missing = dir.join("missing.tsv");
-    let o =
-        realitygap(&["import", "qualisys", missing.to_str().unwrap(), "--scene", "s", "--out", out2.to_str().unwrap()]);
+    let o = realitygap(&[
+        "import",
+        "qualisys",
+        missing.to_str().unwrap(),
+        "--scene",
+        "s",
+        "--out",
+        out2.to_str().unwrap(),
+    ]);
     assert!(!o.status.success());
-    assert!(text(&o.stderr).contains("missing.tsv: cannot read the file"), "{}", text(&o.stderr));
+    assert!(
+        text(&o.stderr).contains("missing.tsv: cannot read the file"),
+        "{}",
+        text(&o.stderr)
+    );
 }
 
 #[test]
@@ -143,12 +246,28 @@ fn bad_arguments_are_refused() {
     std::fs::write(&f, "0 0 1 1 0 0 0 0.5 0 0.0375 1 0 0 0\n").unwrap();
     let out = dir.join("out");
     let o = realitygap(&[
-        "import", "recorded", f.to_str().unwrap(), "--source", "x", "--quat-order", "wxz", "--out", out.to_str().unwrap(),
+        "import",
+        "recorded",
+        f.to_str().unwrap(),
+        "--source",
+        "x",
+        "--quat-order",
+        "wxz",
+        "--out",
+        out.to_str().unwrap(),
     ]);
     assert!(!o.status.success());
     assert!(text(&o.stderr).contains("wxyz"), "{}", text(&o.stderr));
     let o = realitygap(&[
-        "import", "qualisys", f.to_str().unwrap(), "--scene", "s", "--role", "wrist", "--out", out.to_str().unwrap(),
+        "import",
+        "qualisys",
+        f.to_str().unwrap(),
+        "--scene",
+        "s",
+        "--role",
+        "wrist",
+        "--out",
+        out.to_str().unwrap(),
     ]);
     assert!(!o.status.success());
     assert!(text(&o.stderr).contains("NAME=ROLE"), "{}", text(&o.stderr));
@@ -158,9 +277,21 @@ fn bad_arguments_are_refused() {
     let g = sub.join("a.csv");
     std::fs::copy(&f, &g).unwrap();
     let o = realitygap(&[
-        "import", "recorded", f.to_str().unwrap(), g.to_str().unwrap(), "--source", "x", "--quat-order", "wxyz",
-        "--out", out.to_str().unwrap(),
+        "import",
+        "recorded",
+        f.to_str().unwrap(),
+        g.to_str().unwrap(),
+        "--source",
+        "x",
+        "--quat-order",
+        "wxyz",
+        "--out",
+        out.to_str().unwrap(),
     ]);
     assert!(!o.status.success());
-    assert!(text(&o.stderr).contains("would both be run 'a'"), "{}", text(&o.stderr));
+    assert!(
+        text(&o.stderr).contains("would both be run 'a'"),
+        "{}",
+        text(&o.stderr)
+    );
 }

@@ -49,12 +49,23 @@ fn report_on_the_paper_data() {
     let out = out_dir("default");
     let stdout = run_report(&data, &out, "default");
     let index = out.join("index.html");
-    assert_eq!(stdout.trim(), index.display().to_string(), "stdout names index.html");
+    assert_eq!(
+        stdout.trim(),
+        index.display().to_string(),
+        "stdout names index.html"
+    );
     let html = std::fs::read_to_string(&index).unwrap();
 
     assert_eq!(html.matches("<section id=\"scene-").count(), 3);
-    for scene in ["scene1_single_joint", "scene2_two_joints", "scene3_cube_push"] {
-        assert!(html.contains(&format!("<h2>{scene}</h2>")), "no section for {scene}");
+    for scene in [
+        "scene1_single_joint",
+        "scene2_two_joints",
+        "scene3_cube_push",
+    ] {
+        assert!(
+            html.contains(&format!("<h2>{scene}</h2>")),
+            "no section for {scene}"
+        );
     }
     let table = tbody(&html, "accumulated-error");
     assert_eq!(table.matches("<tr>").count(), 7, "one row per source");
@@ -82,8 +93,17 @@ fn report_on_the_paper_data() {
     assert_eq!(pngs.len(), svgs, "a PNG per figure");
     for p in &pngs {
         let bytes = std::fs::read(p).unwrap();
-        assert!(bytes.starts_with(b"\x89PNG\r\n\x1a\n"), "{} is not a PNG", p.display());
-        assert!(bytes.len() > 10_000, "{}: only {} bytes", p.display(), bytes.len());
+        assert!(
+            bytes.starts_with(b"\x89PNG\r\n\x1a\n"),
+            "{} is not a PNG",
+            p.display()
+        );
+        assert!(
+            bytes.len() > 10_000,
+            "{}: only {} bytes",
+            p.display(),
+            bytes.len()
+        );
         assert!(out
             .join("figures")
             .join(p.file_name().unwrap())

@@ -7,12 +7,18 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 fn chromium() -> Option<PathBuf> {
-    for p in ["/usr/bin/chromium", "/usr/bin/chromium-browser", "/usr/bin/google-chrome"] {
+    for p in [
+        "/usr/bin/chromium",
+        "/usr/bin/chromium-browser",
+        "/usr/bin/google-chrome",
+    ] {
         if Path::new(p).is_file() {
             return Some(PathBuf::from(p));
         }
     }
-    if std::env::var_os("CI").is_some() || std::env::var_os("REALITYGAP_REQUIRE_PAPER_DATA").is_some() {
+    if std::env::var_os("CI").is_some()
+        || std::env::var_os("REALITYGAP_REQUIRE_PAPER_DATA").is_some()
+    {
         panic!("Chromium not found (scripts/setup --tests installs the Debian package `chromium`)");
     }
     eprintln!("SKIPPED: Chromium not found; run scripts/setup --tests");
@@ -42,7 +48,9 @@ fn headless(browser: &Path, profile: &Path, extra: &[&str], url: &str) -> std::p
 
 #[test]
 fn reproduce_renders_every_figure_and_table_in_chromium() {
-    let Some(data) = realitygap::paper_data_for_tests() else { return };
+    let Some(data) = realitygap::paper_data_for_tests() else {
+        return;
+    };
     let Some(browser) = chromium() else { return };
     let tmp = tempfile::tempdir().unwrap();
     let out_dir = tmp.path().join("study");
@@ -59,11 +67,18 @@ fn reproduce_renders_every_figure_and_table_in_chromium() {
     let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
     assert!(out.status.success(), "reproduce failed: {stderr}");
     let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
-    assert!(stdout.contains("| V-Rep Newton |"), "table on stdout: {stdout}");
+    assert!(
+        stdout.contains("| V-Rep Newton |"),
+        "table on stdout: {stdout}"
+    );
     let timings: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out_dir.join("timings.json")).unwrap()).unwrap();
+        serde_json::from_str(&std::fs::read_to_string(out_dir.join("timings.json")).unwrap())
+            .unwrap();
     for stage in ["simulate_s", "compare_s", "report_s", "total_s"] {
-        assert!(timings[stage].as_f64().is_some(), "timings.json has {stage}");
+        assert!(
+            timings[stage].as_f64().is_some(),
+            "timings.json has {stage}"
+        );
     }
 
     // The rendered DOM: Chromium loads the page and prints the DOM it built.
@@ -71,28 +86,61 @@ fn reproduce_renders_every_figure_and_table_in_chromium() {
     let url = format!("file://{}", index.display());
     let profile = tmp.path().join("profile");
     let dom = headless(&browser, &profile, &["--dump-dom"], &url);
-    assert!(dom.status.success(), "chromium --dump-dom: {}", String::from_utf8_lossy(&dom.stderr));
+    assert!(
+        dom.status.success(),
+        "chromium --dump-dom: {}",
+        String::from_utf8_lossy(&dom.stderr)
+    );
     let dom = String::from_utf8_lossy(&dom.stdout).into_owned();
     let svgs = dom.matches("<svg").count();
     // 8 figures (2 + 2 + 4) for the three scenes.
     assert!(svgs >= 8, "{svgs} <svg> elements in the DOM");
     // The accumulated-error table: the 7 recorded simulators and every
     // engine simulated here.
-    let engines = Command::new(env!("CARGO_BIN_EXE_realitygap")).arg("engines").output().unwrap();
-    let engine_count = String::from_utf8_lossy(&engines.stdout).lines().filter(|l| !l.starts_with(' ')).count();
+    let engines = Command::new(env!("CARGO_BIN_EXE_realitygap"))
+        .arg("engines")
+        .output()
+        .unwrap();
+    let engine_count = String::from_utf8_lossy(&engines.stdout)
+        .lines()
+        .filter(|l| !l.starts_with(' '))
+        .count();
     let first_table = &dom[dom.find("<table").unwrap()..];
     let first_table = &first_table[..first_table.find("</table>").unwrap()];
     let rows = first_table.matches("<tr").count();
-    assert_eq!(rows, 1 + 7 + engine_count, "table rows (header + sources): {first_table}");
-    for scene in ["scene1_single_joint", "scene2_two_joints", "scene3_cube_push"] {
+    assert_eq!(
+        rows,
+        1 + 7 + engine_count,
+        "table rows (header + sources): {first_table}"
+    );
+    for scene in [
+        "scene1_single_joint",
+        "scene2_two_joints",
+        "scene3_cube_push",
+    ] {
         assert!(dom.contains(scene), "{scene} in the page");
     }
-    assert!(dom.contains("(this tool)"), "the simulated engines are in the page");
+    assert!(
+        dom.contains("(this tool)"),
+        "the simulated engines are in the page"
+    );
 
     // A screenshot that is not blank: many distinct colours, not one.
     let shot = tmp.path().join("shot.png");
-    let s = headless(&browser, &profile, &[&format!("--screenshot={}", shot.display()), "--window-size=1280,2000"], &url);
-    assert!(shot.is_file(), "no screenshot: {}", String::from_utf8_lossy(&s.stderr));
+    let s = headless(
+        &browser,
+        &profile,
+        &[
+            &format!("--screenshot={}", shot.display()),
+            "--window-size=1280,2000",
+        ],
+        &url,
+    );
+    assert!(
+        shot.is_file(),
+        "no screenshot: {}",
+        String::from_utf8_lossy(&s.stderr)
+    );
     let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&shot).unwrap()));
     let mut reader = decoder.read_info().unwrap();
     let mut buf = vec![0; reader.output_buffer_size().unwrap()];
@@ -100,11 +148,21 @@ fn reproduce_renders_every_figure_and_table_in_chromium() {
     let px = &buf[..info.buffer_size()];
     let step = info.color_type.samples();
     let mut colours: Vec<[u8; 3]> = px.chunks(step).map(|c| [c[0], c[1], c[2]]).collect();
-    let non_white = colours.iter().filter(|c| c.iter().any(|&v| v < 240)).count();
+    let non_white = colours
+        .iter()
+        .filter(|c| c.iter().any(|&v| v < 240))
+        .count();
     colours.sort_unstable();
     colours.dedup();
-    assert!(colours.len() > 50, "screenshot has only {} colours", colours.len());
-    assert!(non_white * 100 > px.len() / step, "screenshot is almost blank ({non_white} non-white pixels)");
+    assert!(
+        colours.len() > 50,
+        "screenshot has only {} colours",
+        colours.len()
+    );
+    assert!(
+        non_white * 100 > px.len() / step,
+        "screenshot is almost blank ({non_white} non-white pixels)"
+    );
 
     // A rerun resumes: nothing is simulated again.
     let again = run();

@@ -56,51 +56,135 @@ fn bad_scenes_are_reported_with_file_line_and_field() {
 
     // Missing scene file.
     let missing = tmp.path().join("nope.toml");
-    fails_with(&[os(&missing), os("--out"), os(&out)], &["cannot read scene file", "nope.toml"]);
+    fails_with(
+        &[os(&missing), os("--out"), os(&out)],
+        &["cannot read scene file", "nope.toml"],
+    );
 
     // Malformed TOML: line and column.
-    let bad = write_scene(tmp.path(), "bad.toml", &mico2, |t| t.replace("duration_s = 6.0", "duration_s = 6.0.0"));
-    fails_with(&[os(&bad), os("--out"), os(&out)], &["bad.toml:5:17:", "expected newline"]);
+    let bad = write_scene(tmp.path(), "bad.toml", &mico2, |t| {
+        t.replace("duration_s = 6.0", "duration_s = 6.0.0")
+    });
+    fails_with(
+        &[os(&bad), os("--out"), os(&out)],
+        &["bad.toml:5:17:", "expected newline"],
+    );
 
     // A target for a joint without actuator (file-level check).
     let unknown = write_scene(tmp.path(), "unknown.toml", &mico2, |t| {
         t.replace("m1n6s300_joint_2 = -100.0", "m1n6s300_joint_9 = -100.0")
     });
-    fails_with(&[os(&unknown), os("--out"), os(&out)], &["unknown.toml:", "schedule[0].targets_deg.m1n6s300_joint_9", "no [[actuator]]"]);
+    fails_with(
+        &[os(&unknown), os("--out"), os(&out)],
+        &[
+            "unknown.toml:",
+            "schedule[0].targets_deg.m1n6s300_joint_9",
+            "no [[actuator]]",
+        ],
+    );
 
     // An actuator on a joint the robot does not have (robot-level check).
     let no_joint = write_scene(tmp.path(), "nojoint.toml", &mico2, |t| {
         t.replace("joint = \"m1n6s300_joint_6\"", "joint = \"elbow\"")
     });
-    fails_with(&[os(&no_joint), os("--out"), os(&out)], &["nojoint.toml:", "actuator[5].joint", "has no joint \"elbow\""]);
+    fails_with(
+        &[os(&no_joint), os("--out"), os(&out)],
+        &[
+            "nojoint.toml:",
+            "actuator[5].joint",
+            "has no joint \"elbow\"",
+        ],
+    );
 
     // A target beyond the joint's limits.
-    let limits = write_scene(tmp.path(), "limits.toml", &mico2, |t| t.replace("-100.0", "-150.0"));
-    fails_with(&[os(&limits), os("--out"), os(&out)], &["limits.toml:", "outside the limits", "m1n6s300_joint_2"]);
+    let limits = write_scene(tmp.path(), "limits.toml", &mico2, |t| {
+        t.replace("-100.0", "-150.0")
+    });
+    fails_with(
+        &[os(&limits), os("--out"), os(&out)],
+        &["limits.toml:", "outside the limits", "m1n6s300_joint_2"],
+    );
 
     // Non-positive duration.
-    let duration = write_scene(tmp.path(), "duration.toml", &mico2, |t| t.replace("duration_s = 6.0", "duration_s = -1.0"));
-    fails_with(&[os(&duration), os("--out"), os(&out)], &["duration.toml:5:14:", "duration_s: must be greater than 0"]);
+    let duration = write_scene(tmp.path(), "duration.toml", &mico2, |t| {
+        t.replace("duration_s = 6.0", "duration_s = -1.0")
+    });
+    fails_with(
+        &[os(&duration), os("--out"), os(&out)],
+        &["duration.toml:5:14:", "duration_s: must be greater than 0"],
+    );
 
     // A tracked link the robot does not have.
-    let link = write_scene(tmp.path(), "link.toml", &mico2, |t| t.replace("link = \"m1n6s300_link_6\"", "link = \"hand\""));
-    fails_with(&[os(&link), os("--out"), os(&out)], &["link.toml:", "track[0].link", "no link \"hand\""]);
+    let link = write_scene(tmp.path(), "link.toml", &mico2, |t| {
+        t.replace("link = \"m1n6s300_link_6\"", "link = \"hand\"")
+    });
+    fails_with(
+        &[os(&link), os("--out"), os(&out)],
+        &["link.toml:", "track[0].link", "no link \"hand\""],
+    );
 
     // The control period is not a whole number of timesteps.
     let scene = assets().join("scenes/scene1_single_joint.toml");
     fails_with(
-        &[os(&scene), os("--engine"), os("mujoco"), os("--set"), os("timestep_s=0.03"), os("--out"), os(&out)],
-        &["scene1_single_joint.toml", "controller.period_s", "not a whole number of engine timesteps"],
+        &[
+            os(&scene),
+            os("--engine"),
+            os("mujoco"),
+            os("--set"),
+            os("timestep_s=0.03"),
+            os("--out"),
+            os(&out),
+        ],
+        &[
+            "scene1_single_joint.toml",
+            "controller.period_s",
+            "not a whole number of engine timesteps",
+        ],
     );
 
     // Unknown engine setting, unknown engine, bad perturbation, bad package.
     fails_with(
-        &[os(&scene), os("--engine"), os("mujoco"), os("--set"), os("bogus=1"), os("--out"), os(&out)],
+        &[
+            os(&scene),
+            os("--engine"),
+            os("mujoco"),
+            os("--set"),
+            os("bogus=1"),
+            os("--out"),
+            os(&out),
+        ],
         &["setting `bogus`", "timestep_s"],
     );
-    fails_with(&[os(&scene), os("--engine"), os("warp"), os("--out"), os(&out)], &["unknown engine \"warp\"", "mujoco"]);
-    fails_with(&[os(&scene), os("--perturb"), os("mass_scale=2"), os("--out"), os(&out)], &["mass_scale must be below 1"]);
-    fails_with(&[os(&scene), os("--package"), os("noequals"), os("--out"), os(&out)], &["expected NAME=DIR"]);
+    fails_with(
+        &[
+            os(&scene),
+            os("--engine"),
+            os("warp"),
+            os("--out"),
+            os(&out),
+        ],
+        &["unknown engine \"warp\"", "mujoco"],
+    );
+    fails_with(
+        &[
+            os(&scene),
+            os("--perturb"),
+            os("mass_scale=2"),
+            os("--out"),
+            os(&out),
+        ],
+        &["mass_scale must be below 1"],
+    );
+    fails_with(
+        &[
+            os(&scene),
+            os("--package"),
+            os("noequals"),
+            os("--out"),
+            os(&out),
+        ],
+        &["expected NAME=DIR"],
+    );
 
     // Nothing was written for any of these.
     assert!(!out.exists() || std::fs::read_dir(&out).unwrap().next().is_none());
@@ -113,13 +197,34 @@ fn bad_urdfs_are_reported() {
     let scene = assets().join("scenes/scene1_single_joint.toml");
 
     // Missing URDF file.
-    let missing = write_scene(tmp.path(), "s1.toml", &tmp.path().join("absent.urdf"), |t| t);
-    fails_with(&[os(&missing), os("--out"), os(&out)], &["cannot read URDF file", "absent.urdf"]);
-    fails_with(&[os(&scene), os("--robot"), os(&tmp.path().join("absent.urdf")), os("--out"), os(&out)], &["absent.urdf"]);
+    let missing = write_scene(
+        tmp.path(),
+        "s1.toml",
+        &tmp.path().join("absent.urdf"),
+        |t| t,
+    );
+    fails_with(
+        &[os(&missing), os("--out"), os(&out)],
+        &["cannot read URDF file", "absent.urdf"],
+    );
+    fails_with(
+        &[
+            os(&scene),
+            os("--robot"),
+            os(&tmp.path().join("absent.urdf")),
+            os("--out"),
+            os(&out),
+        ],
+        &["absent.urdf"],
+    );
 
     // Malformed XML.
     let broken = tmp.path().join("broken.urdf");
-    std::fs::write(&broken, "<robot name=\"x\">\n  <link name=\"a\">\n</robot>\n").unwrap();
+    std::fs::write(
+        &broken,
+        "<robot name=\"x\">\n  <link name=\"a\">\n</robot>\n",
+    )
+    .unwrap();
     let s = write_scene(tmp.path(), "s2.toml", &broken, |t| t);
     fails_with(&[os(&s), os("--out"), os(&out)], &["broken.urdf"]);
 
@@ -136,19 +241,34 @@ fn bad_urdfs_are_reported() {
     let text = with_mesh("meshes/base.stl");
     assert_ne!(text, mico2, "the test's URDF edit no longer applies");
     std::fs::write(&meshy, text).unwrap();
-    fails_with(&[os(&scene), os("--robot"), os(&meshy), os("--out"), os(&out)], &["meshy.urdf", "meshes/base.stl", "not found"]);
+    fails_with(
+        &[os(&scene), os("--robot"), os(&meshy), os("--out"), os(&out)],
+        &["meshy.urdf", "meshes/base.stl", "not found"],
+    );
     let pkg = tmp.path().join("pkg.urdf");
     std::fs::write(&pkg, with_mesh("package://no_such_pkg/meshes/base.stl")).unwrap();
-    fails_with(&[os(&scene), os("--robot"), os(&pkg), os("--out"), os(&out)], &["pkg.urdf", "no_such_pkg", "--package"]);
+    fails_with(
+        &[os(&scene), os("--robot"), os(&pkg), os("--out"), os(&out)],
+        &["pkg.urdf", "no_such_pkg", "--package"],
+    );
 
     // The official robot without its package.
     let out_official = Command::new(exe())
         .env_remove("ROS_PACKAGE_PATH")
-        .args([os("run"), os(&scene), os("--robot"), os("official"), os("--out"), os(&out)])
+        .args([
+            os("run"),
+            os(&scene),
+            os("--robot"),
+            os("official"),
+            os("--out"),
+            os(&out),
+        ])
         .output()
         .unwrap();
     assert!(!out_official.status.success());
-    assert!(String::from_utf8_lossy(&out_official.stderr).contains("--package kinova_description=DIR"));
+    assert!(
+        String::from_utf8_lossy(&out_official.stderr).contains("--package kinova_description=DIR")
+    );
 }
 
 /// A model whose engine dies in native code (MuJoCo's arena is too small
@@ -167,11 +287,18 @@ fn a_crashing_engine_fails_only_its_runs() {
     let xml = realitygap_engine_mujoco::mjcf::scene_to_mjcf(&scene, &robot).unwrap();
     // Enough memory to load, too little once the cube touches the ground.
     let mjcf = tmp.path().join("tiny_arena.xml");
-    std::fs::write(&mjcf, xml.replacen("<compiler", "<size memory=\"24K\"/>\n  <compiler", 1)).unwrap();
+    std::fs::write(
+        &mjcf,
+        xml.replacen("<compiler", "<size memory=\"24K\"/>\n  <compiler", 1),
+    )
+    .unwrap();
     let mico2 = assets().join("robots/mico2/mico2.urdf");
     let crashing = write_scene(tmp.path(), "crash.toml", &mico2, |t| {
         t.replace("name = \"scene1_single_joint\"", "name = \"crashing\"")
-            .replace("base_rpy_deg", &format!("mjcf = {:?}\nbase_rpy_deg", mjcf.display().to_string()))
+            .replace(
+                "base_rpy_deg",
+                &format!("mjcf = {:?}\nbase_rpy_deg", mjcf.display().to_string()),
+            )
     });
     let result = run(&[
         os(&crashing),
@@ -189,13 +316,23 @@ fn a_crashing_engine_fails_only_its_runs() {
     let stderr = String::from_utf8_lossy(&result.stderr);
     assert!(!result.status.success());
     assert!(stderr.contains("2 of 4 runs failed"), "{stderr}");
-    assert!(stdout.contains("crashing/mujoco: 0 ok, 0 diverged, 2 failed"), "{stdout}");
-    assert!(stdout.contains("scene1_single_joint/mujoco: 2 ok, 0 diverged, 0 failed"), "{stdout}");
+    assert!(
+        stdout.contains("crashing/mujoco: 0 ok, 0 diverged, 2 failed"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("scene1_single_joint/mujoco: 2 ok, 0 diverged, 0 failed"),
+        "{stdout}"
+    );
     let manifest: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(out.join("crashing/mujoco/manifest.json")).unwrap()).unwrap();
+        serde_json::from_slice(&std::fs::read(out.join("crashing/mujoco/manifest.json")).unwrap())
+            .unwrap();
     for r in manifest["runs"].as_array().unwrap() {
         assert_eq!(r["status"], "failed");
         let m = r["message"].as_str().unwrap();
-        assert!(m.contains("exited with code 1") && m.contains("MuJoCo error") && m.contains("memory"), "{m}");
+        assert!(
+            m.contains("exited with code 1") && m.contains("MuJoCo error") && m.contains("memory"),
+            "{m}"
+        );
     }
 }

@@ -11,7 +11,9 @@ fn exe() -> &'static str {
 }
 
 fn scene(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/scenes").join(format!("{name}.toml"))
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../assets/scenes")
+        .join(format!("{name}.toml"))
 }
 
 fn manifest(dir: &Path) -> serde_json::Value {
@@ -38,7 +40,13 @@ fn snapshot(dir: &Path) -> BTreeMap<String, (Vec<u8>, SystemTime)> {
         let e = e.unwrap();
         let name = e.file_name().to_string_lossy().into_owned();
         if name.ends_with(".csv") {
-            out.insert(name, (std::fs::read(e.path()).unwrap(), e.metadata().unwrap().modified().unwrap()));
+            out.insert(
+                name,
+                (
+                    std::fs::read(e.path()).unwrap(),
+                    e.metadata().unwrap().modified().unwrap(),
+                ),
+            );
         }
     }
     out
@@ -52,24 +60,45 @@ fn killed_batch_resumes_without_recomputing_finished_runs() {
     let args = |c: &mut Command| {
         c.arg("run")
             .arg(scene("scene1_single_joint"))
-            .args(["--engine", "mujoco", "--repeats", "5", "--jobs", "1", "--out"])
+            .args([
+                "--engine",
+                "mujoco",
+                "--repeats",
+                "5",
+                "--jobs",
+                "1",
+                "--out",
+            ])
             .arg(&out);
     };
 
     // Start the batch and kill it once a run has finished.
     let mut cmd = Command::new(exe());
     args(&mut cmd);
-    let mut child = cmd.stdout(Stdio::null()).stderr(Stdio::null()).spawn().unwrap();
+    let mut child = cmd
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
     let start = Instant::now();
     while finished(&dir).is_empty() {
-        assert!(start.elapsed() < Duration::from_secs(120), "no run finished within 120 s");
-        assert!(child.try_wait().unwrap().is_none(), "the batch ended before it could be interrupted");
+        assert!(
+            start.elapsed() < Duration::from_secs(120),
+            "no run finished within 120 s"
+        );
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "the batch ended before it could be interrupted"
+        );
         std::thread::sleep(Duration::from_millis(20));
     }
     child.kill().unwrap();
     child.wait().unwrap();
     let done_before = finished(&dir);
-    assert!(!done_before.is_empty() && done_before.len() < 5, "finished before the kill: {done_before:?}");
+    assert!(
+        !done_before.is_empty() && done_before.len() < 5,
+        "finished before the kill: {done_before:?}"
+    );
     let before = snapshot(&dir);
     let entries_before: Vec<serde_json::Value> = manifest(&dir)["runs"].as_array().unwrap().clone();
     std::thread::sleep(Duration::from_millis(50));
@@ -79,9 +108,17 @@ fn killed_batch_resumes_without_recomputing_finished_runs() {
     args(&mut cmd);
     let result = cmd.output().unwrap();
     let stdout = String::from_utf8_lossy(&result.stdout);
-    assert!(result.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&result.stderr));
     assert!(
-        stdout.contains(&format!("{} ok, 0 diverged, 0 failed, {} kept", 5 - done_before.len(), done_before.len())),
+        result.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&result.stderr)
+    );
+    assert!(
+        stdout.contains(&format!(
+            "{} ok, 0 diverged, 0 failed, {} kept",
+            5 - done_before.len(),
+            done_before.len()
+        )),
         "{stdout}"
     );
     let after = snapshot(&dir);
@@ -121,7 +158,15 @@ fn rerun_with_other_settings_is_refused() {
         Command::new(exe())
             .arg("run")
             .arg(scene("scene1_single_joint"))
-            .args(["--engine", "mujoco", "--repeats", "1", "--set", "timestep_s=0.0005", "--out"])
+            .args([
+                "--engine",
+                "mujoco",
+                "--repeats",
+                "1",
+                "--set",
+                "timestep_s=0.0005",
+                "--out",
+            ])
             .arg(tmp.path())
             .args(extra)
             .output()
@@ -141,8 +186,22 @@ fn perturbed_repeats_differ_and_are_seeded() {
         Command::new(exe())
             .arg("run")
             .arg(scene("scene1_single_joint"))
-            .args(["--engine", "mujoco", "--repeats", "3", "--set", "mujoco.timestep_s=0.00025", "--seed", "7"])
-            .args(["--perturb", "initial_offset_deg=2,sensor_noise_deg=0.2", "--perturb", "mass_scale=0.1"])
+            .args([
+                "--engine",
+                "mujoco",
+                "--repeats",
+                "3",
+                "--set",
+                "mujoco.timestep_s=0.00025",
+                "--seed",
+                "7",
+            ])
+            .args([
+                "--perturb",
+                "initial_offset_deg=2,sensor_noise_deg=0.2",
+                "--perturb",
+                "mass_scale=0.1",
+            ])
             .arg("--out")
             .arg(out)
             .output()
@@ -156,9 +215,16 @@ fn perturbed_repeats_differ_and_are_seeded() {
     let da = a.join("scene1_single_joint/mujoco");
     let m = manifest(&da);
     assert_eq!(m["settings"]["config"]["deterministic"], false);
-    assert_eq!(m["settings"]["config"]["engine_settings"]["timestep_s"], 0.00025);
+    assert_eq!(
+        m["settings"]["config"]["engine_settings"]["timestep_s"],
+        0.00025
+    );
     let runs = m["runs"].as_array().unwrap();
-    assert!(runs.iter().all(|r| r["seed"].is_u64() && r["status"] == "ok"), "{runs:?}");
+    assert!(
+        runs.iter()
+            .all(|r| r["seed"].is_u64() && r["status"] == "ok"),
+        "{runs:?}"
+    );
     let sa = snapshot(&da);
     let files: Vec<&Vec<u8>> = sa.values().map(|(b, _)| b).collect();
     assert_ne!(files[0], files[1]);
@@ -166,7 +232,10 @@ fn perturbed_repeats_differ_and_are_seeded() {
     // The same seed gives the same runs.
     let sb = snapshot(&b.join("scene1_single_joint/mujoco"));
     for (name, (bytes, _)) in &sa {
-        assert_eq!(&sb[name].0, bytes, "{name} differs between two batches with the same seed");
+        assert_eq!(
+            &sb[name].0, bytes,
+            "{name} differs between two batches with the same seed"
+        );
     }
 }
 
@@ -175,7 +244,11 @@ fn engines_lists_mujoco_with_its_version() {
     let out = Command::new(exe()).arg("engines").output().unwrap();
     assert!(out.status.success());
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(text.lines().any(|l| l.starts_with("mujoco ") && l.contains("MuJoCo 3.")), "{text}");
+    assert!(
+        text.lines()
+            .any(|l| l.starts_with("mujoco ") && l.contains("MuJoCo 3.")),
+        "{text}"
+    );
 }
 
 /// At dt = 1e-3 the velocity servos of the light wrist links are unstable
@@ -191,11 +264,18 @@ fn unstable_timestep_is_recorded_as_diverged() {
         .arg(tmp.path())
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let m = manifest(&tmp.path().join("scene1_single_joint/mujoco"));
     let run = &m["runs"][0];
     assert_eq!(run["status"], "diverged");
     let message = run["message"].as_str().unwrap();
-    assert!(message.contains("diverged at t = 0.0") && message.contains("QACC"), "{message}");
+    assert!(
+        message.contains("diverged at t = 0.0") && message.contains("QACC"),
+        "{message}"
+    );
     assert!(run["extra"]["diverged_at_s"].as_f64().unwrap() < 0.05);
 }

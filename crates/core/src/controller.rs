@@ -66,11 +66,23 @@ pub struct PerturbationError {
 
 /// Keys accepted by [`Perturbation::parse`], with their meaning.
 pub const PERTURBATION_KEYS: &[(&str, &str)] = &[
-    ("initial_offset_deg", "std. dev. of the initial joint-angle offsets, degrees"),
-    ("sensor_noise_deg", "std. dev. of the joint-angle reading noise, degrees"),
+    (
+        "initial_offset_deg",
+        "std. dev. of the initial joint-angle offsets, degrees",
+    ),
+    (
+        "sensor_noise_deg",
+        "std. dev. of the joint-angle reading noise, degrees",
+    ),
     ("delay_periods", "control delay, whole control periods"),
-    ("mass_scale", "mass and inertia scaled by U[1-s, 1+s], 0 <= s < 1"),
-    ("friction_scale", "friction scaled by U[1-s, 1+s], 0 <= s < 1"),
+    (
+        "mass_scale",
+        "mass and inertia scaled by U[1-s, 1+s], 0 <= s < 1",
+    ),
+    (
+        "friction_scale",
+        "friction scaled by U[1-s, 1+s], 0 <= s < 1",
+    ),
 ];
 
 impl Perturbation {
@@ -82,7 +94,10 @@ impl Perturbation {
     /// Parses `key=value[,key=value...]` (keys in [`PERTURBATION_KEYS`]),
     /// adding to `self`.
     pub fn parse_into(&mut self, spec: &str) -> Result<(), PerturbationError> {
-        let err = |message: String| PerturbationError { spec: spec.to_string(), message };
+        let err = |message: String| PerturbationError {
+            spec: spec.to_string(),
+            message,
+        };
         for part in spec.split(',').map(str::trim).filter(|p| !p.is_empty()) {
             let (key, value) = part
                 .split_once('=')
@@ -92,20 +107,26 @@ impl Perturbation {
                 .parse()
                 .map_err(|_| err(format!("the value of {key} is not a number: \"{value}\"")))?;
             if !number.is_finite() || number < 0.0 {
-                return Err(err(format!("{key} must be a finite number >= 0, found {value}")));
+                return Err(err(format!(
+                    "{key} must be a finite number >= 0, found {value}"
+                )));
             }
             match key {
                 "initial_offset_deg" => self.initial_offset_std_deg = number,
                 "sensor_noise_deg" => self.sensor_noise_std_deg = number,
                 "delay_periods" => {
                     if number.fract() != 0.0 || number > 1000.0 {
-                        return Err(err(format!("delay_periods must be a whole number <= 1000, found {value}")));
+                        return Err(err(format!(
+                            "delay_periods must be a whole number <= 1000, found {value}"
+                        )));
                     }
                     self.control_delay_periods = number as u32;
                 }
                 "mass_scale" | "friction_scale" => {
                     if number >= 1.0 {
-                        return Err(err(format!("{key} must be below 1 (a factor in [1-s, 1+s]), found {value}")));
+                        return Err(err(format!(
+                            "{key} must be below 1 (a factor in [1-s, 1+s]), found {value}"
+                        )));
                     }
                     if key == "mass_scale" {
                         self.mass_scale_spread = number;
@@ -116,7 +137,11 @@ impl Perturbation {
                 other => {
                     return Err(err(format!(
                         "unknown key \"{other}\" (expected one of: {})",
-                        PERTURBATION_KEYS.iter().map(|(k, _)| *k).collect::<Vec<_>>().join(", ")
+                        PERTURBATION_KEYS
+                            .iter()
+                            .map(|(k, _)| *k)
+                            .collect::<Vec<_>>()
+                            .join(", ")
                     )))
                 }
             }
@@ -127,9 +152,15 @@ impl Perturbation {
     /// The settings as key/value pairs for a manifest.
     pub fn describe(&self) -> BTreeMap<String, f64> {
         BTreeMap::from([
-            ("initial_offset_deg".to_string(), self.initial_offset_std_deg),
+            (
+                "initial_offset_deg".to_string(),
+                self.initial_offset_std_deg,
+            ),
             ("sensor_noise_deg".to_string(), self.sensor_noise_std_deg),
-            ("delay_periods".to_string(), self.control_delay_periods as f64),
+            (
+                "delay_periods".to_string(),
+                self.control_delay_periods as f64,
+            ),
             ("mass_scale".to_string(), self.mass_scale_spread),
             ("friction_scale".to_string(), self.friction_scale_spread),
         ])
@@ -149,7 +180,10 @@ impl Perturbation {
             initial_offsets_rad,
             sensor_noise_std_rad: self.sensor_noise_std_deg.to_radians(),
             control_delay_periods: self.control_delay_periods,
-            variation: ModelVariation { mass_scale, friction_scale },
+            variation: ModelVariation {
+                mass_scale,
+                friction_scale,
+            },
             noise_seed: rng.next_u64(),
         }
     }
@@ -221,7 +255,10 @@ pub struct RunOptions {
 
 impl Default for RunOptions {
     fn default() -> Self {
-        RunOptions { perturbation: None, divergence_bound_m: 10.0 }
+        RunOptions {
+            perturbation: None,
+            divergence_bound_m: 10.0,
+        }
     }
 }
 
@@ -298,7 +335,11 @@ fn divergence(angles: &[f64], poses: &[Pose], roles: &[String], bound_m: f64) ->
 }
 
 /// Runs `scene` on a freshly loaded `sim` (see the module documentation).
-pub fn run_scene(sim: &mut dyn Simulation, scene: &Scene, options: &RunOptions) -> Result<RunOutcome, RunError> {
+pub fn run_scene(
+    sim: &mut dyn Simulation,
+    scene: &Scene,
+    options: &RunOptions,
+) -> Result<RunOutcome, RunError> {
     let engine_name = "simulation";
     let steps_per_period = scene.steps_per_period(sim.timestep_s())?;
     let joints = scene.actuators.len();
@@ -324,10 +365,16 @@ pub fn run_scene(sim: &mut dyn Simulation, scene: &Scene, options: &RunOptions) 
     let (noise_std, delay, mut noise) = match &options.perturbation {
         Some(p) => {
             if p.initial_offsets_rad.iter().any(|&o| o != 0.0) {
-                let start: Vec<f64> = (0..joints).map(|j| p.initial_offsets_rad.get(j).copied().unwrap_or(0.0)).collect();
+                let start: Vec<f64> = (0..joints)
+                    .map(|j| p.initial_offsets_rad.get(j).copied().unwrap_or(0.0))
+                    .collect();
                 sim.set_joint_angles_rad(&start)?;
             }
-            (p.sensor_noise_std_rad, p.control_delay_periods as usize, SplitMix64::new(p.noise_seed))
+            (
+                p.sensor_noise_std_rad,
+                p.control_delay_periods as usize,
+                SplitMix64::new(p.noise_seed),
+            )
         }
         None => (0.0, 0, SplitMix64::new(0)),
     };
@@ -352,14 +399,22 @@ pub fn run_scene(sim: &mut dyn Simulation, scene: &Scene, options: &RunOptions) 
             status = RunStatus::Diverged { t_s, reason };
             break;
         }
-        let entry = scene.schedule.iter().rposition(|e| e.t_s <= t_s + 1e-9).unwrap_or(usize::MAX);
+        let entry = scene
+            .schedule
+            .iter()
+            .rposition(|e| e.t_s <= t_s + 1e-9)
+            .unwrap_or(usize::MAX);
         if entry != entry_in_force {
             targets_deg = scene.targets_deg_at_tick(tick);
             entry_in_force = entry;
         }
         let command: Vec<f64> = (0..joints)
             .map(|j| {
-                let reading = if noise_std > 0.0 { angles[j] + noise_std * noise.normal() } else { angles[j] };
+                let reading = if noise_std > 0.0 {
+                    angles[j] + noise_std * noise.normal()
+                } else {
+                    angles[j]
+                };
                 let error_deg = targets_deg[j] - reading.to_degrees();
                 (gain * error_deg).clamp(-max_speed, max_speed).to_radians()
             })
@@ -381,9 +436,14 @@ pub fn run_scene(sim: &mut dyn Simulation, scene: &Scene, options: &RunOptions) 
             Ok(()) => engine_steps += steps_per_period,
             Err(EngineError::Unstable { t_s, message, .. }) => {
                 // Steps taken in this period, up to and including the bad one.
-                let into_period = ((t_s - tick as f64 * period) / sim.timestep_s()).round().max(0.0) as u64;
+                let into_period = ((t_s - tick as f64 * period) / sim.timestep_s())
+                    .round()
+                    .max(0.0) as u64;
                 engine_steps += (into_period + 1).min(steps_per_period);
-                status = RunStatus::Diverged { t_s, reason: message };
+                status = RunStatus::Diverged {
+                    t_s,
+                    reason: message,
+                };
                 break;
             }
             Err(e) => return Err(e.into()),
@@ -392,7 +452,12 @@ pub fn run_scene(sim: &mut dyn Simulation, scene: &Scene, options: &RunOptions) 
     let wall_time_s = start.elapsed().as_secs_f64();
     trajectory.joint_angles_rad = Some(angle_rows);
     trajectory.joint_velocity_commands_rad_s = Some(command_rows);
-    Ok(RunOutcome { trajectory, status, engine_steps, wall_time_s })
+    Ok(RunOutcome {
+        trajectory,
+        status,
+        engine_steps,
+        wall_time_s,
+    })
 }
 
 /// Loads `scene` into `engine` (with the perturbation's mass and friction
@@ -404,7 +469,11 @@ pub fn simulate(
     settings: &EngineSettings,
     options: &RunOptions,
 ) -> Result<RunOutcome, RunError> {
-    let variation = options.perturbation.as_ref().map(|p| p.variation).unwrap_or_default();
+    let variation = options
+        .perturbation
+        .as_ref()
+        .map(|p| p.variation)
+        .unwrap_or_default();
     let mut sim = engine.load(scene, robot, settings, &variation)?;
     run_scene(sim.as_mut(), scene, options)
 }
@@ -493,7 +562,13 @@ link = "l2"
     }
 
     fn ideal(dt: f64) -> Ideal {
-        Ideal { dt, t: 0.0, q: vec![0.0; 2], v: vec![0.0; 2], blow_up_at: None }
+        Ideal {
+            dt,
+            t: 0.0,
+            q: vec![0.0; 2],
+            v: vec![0.0; 2],
+            blow_up_at: None,
+        }
     }
 
     fn scene() -> Scene {
@@ -519,19 +594,31 @@ link = "l2"
         assert!((c0[1] - 10f64.to_radians()).abs() < 1e-15);
         // After one period joint 1 moved -1.5 deg.
         let q1 = &t.joint_angles_rad.as_ref().unwrap()[1];
-        assert!((q1[0].to_degrees() + 1.5).abs() < 1e-9, "{}", q1[0].to_degrees());
+        assert!(
+            (q1[0].to_degrees() + 1.5).abs() < 1e-9,
+            "{}",
+            q1[0].to_degrees()
+        );
         // From 0.5 s joint 1 targets 0 (not named) and joint 2 targets 2 deg.
         let c10 = &t.joint_velocity_commands_rad_s.as_ref().unwrap()[10];
         assert!(c10[0] > 0.0);
         let q_last = t.joint_angles_rad.as_ref().unwrap()[19].clone();
-        assert!((q_last[1].to_degrees() - 2.0).abs() < 0.05, "{}", q_last[1].to_degrees());
+        assert!(
+            (q_last[1].to_degrees() - 2.0).abs() < 0.05,
+            "{}",
+            q_last[1].to_degrees()
+        );
         assert_eq!(t.positions("tip")[1].unwrap().x, q1[0]);
     }
 
     #[test]
     fn rejects_timestep_that_does_not_divide_the_period() {
         let err = run_scene(&mut ideal(0.03), &scene(), &RunOptions::default()).unwrap_err();
-        assert!(err.to_string().contains("not a whole number of engine timesteps"), "{err}");
+        assert!(
+            err.to_string()
+                .contains("not a whole number of engine timesteps"),
+            "{err}"
+        );
     }
 
     #[test]
@@ -552,11 +639,21 @@ link = "l2"
 
     #[test]
     fn delay_and_offsets_are_applied() {
-        let p = Perturbation { initial_offset_std_deg: 1.0, control_delay_periods: 2, ..Default::default() };
+        let p = Perturbation {
+            initial_offset_std_deg: 1.0,
+            control_delay_periods: 2,
+            ..Default::default()
+        };
         let sample = p.sample(7, 2);
         assert_eq!(sample, p.sample(7, 2), "same seed, same draw");
-        assert_ne!(sample.initial_offsets_rad, p.sample(8, 2).initial_offsets_rad);
-        let opts = RunOptions { perturbation: Some(sample.clone()), ..Default::default() };
+        assert_ne!(
+            sample.initial_offsets_rad,
+            p.sample(8, 2).initial_offsets_rad
+        );
+        let opts = RunOptions {
+            perturbation: Some(sample.clone()),
+            ..Default::default()
+        };
         let out = run_scene(&mut ideal(0.01), &scene(), &opts).unwrap();
         let t = &out.trajectory;
         let q0 = &t.joint_angles_rad.as_ref().unwrap()[0];
@@ -569,13 +666,22 @@ link = "l2"
 
     #[test]
     fn sensor_noise_changes_commands_but_not_recorded_angles_at_start() {
-        let p = Perturbation { sensor_noise_std_deg: 0.5, ..Default::default() };
-        let opts = RunOptions { perturbation: Some(p.sample(1, 2)), ..Default::default() };
+        let p = Perturbation {
+            sensor_noise_std_deg: 0.5,
+            ..Default::default()
+        };
+        let opts = RunOptions {
+            perturbation: Some(p.sample(1, 2)),
+            ..Default::default()
+        };
         let noisy = run_scene(&mut ideal(0.01), &scene(), &opts).unwrap();
         let clean = run_scene(&mut ideal(0.01), &scene(), &RunOptions::default()).unwrap();
         let n = noisy.trajectory.joint_velocity_commands_rad_s.unwrap();
         let c = clean.trajectory.joint_velocity_commands_rad_s.unwrap();
-        assert_eq!(noisy.trajectory.joint_angles_rad.unwrap()[0], vec![0.0, 0.0]);
+        assert_eq!(
+            noisy.trajectory.joint_angles_rad.unwrap()[0],
+            vec![0.0, 0.0]
+        );
         assert_ne!(n[0][1], c[0][1]);
     }
 
@@ -583,16 +689,28 @@ link = "l2"
     fn parses_perturbation_specs() {
         let mut p = Perturbation::default();
         assert!(p.is_none());
-        p.parse_into("initial_offset_deg=0.5, delay_periods=1").unwrap();
+        p.parse_into("initial_offset_deg=0.5, delay_periods=1")
+            .unwrap();
         p.parse_into("mass_scale=0.1").unwrap();
         assert_eq!(p.initial_offset_std_deg, 0.5);
         assert_eq!(p.control_delay_periods, 1);
         assert_eq!(p.mass_scale_spread, 0.1);
         assert!(!p.is_none());
-        for bad in ["bogus=1", "mass_scale=1.5", "delay_periods=0.5", "sensor_noise_deg=x", "x", "initial_offset_deg=-1"] {
+        for bad in [
+            "bogus=1",
+            "mass_scale=1.5",
+            "delay_periods=0.5",
+            "sensor_noise_deg=x",
+            "x",
+            "initial_offset_deg=-1",
+        ] {
             assert!(Perturbation::default().parse_into(bad).is_err(), "{bad}");
         }
-        let s = Perturbation { mass_scale_spread: 0.2, ..Default::default() }.sample(3, 6);
+        let s = Perturbation {
+            mass_scale_spread: 0.2,
+            ..Default::default()
+        }
+        .sample(3, 6);
         assert!((0.8..=1.2).contains(&s.variation.mass_scale));
         assert_eq!(s.variation.friction_scale, 1.0);
     }

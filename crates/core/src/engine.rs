@@ -120,7 +120,10 @@ pub struct ModelVariation {
 
 impl Default for ModelVariation {
     fn default() -> Self {
-        ModelVariation { mass_scale: 1.0, friction_scale: 1.0 }
+        ModelVariation {
+            mass_scale: 1.0,
+            friction_scale: 1.0,
+        }
     }
 }
 

@@ -24,8 +24,8 @@ pub mod robot;
 pub mod scene;
 pub mod trajectory;
 
-pub use pose::{Pose, Quat, Vec3};
 pub use engine::{Engine, EngineError, EngineSettings, Simulation};
+pub use pose::{Pose, Quat, Vec3};
 pub use robot::{RobotError, RobotModel};
 pub use scene::{Scene, SceneError};
 pub use trajectory::{BodyTrack, Trajectory, TrajectoryError};

@@ -27,7 +27,11 @@ pub struct Vec3 {
 
 impl Vec3 {
     /// The zero vector.
-    pub const ZERO: Vec3 = Vec3 { x: 0.0, y: 0.0, z: 0.0 };
+    pub const ZERO: Vec3 = Vec3 {
+        x: 0.0,
+        y: 0.0,
+        z: 0.0,
+    };
 
     /// Makes a vector from its components.
     pub const fn new(x: f64, y: f64, z: f64) -> Self {
@@ -116,7 +120,12 @@ impl Default for Quat {
 
 impl Quat {
     /// The identity rotation.
-    pub const IDENTITY: Quat = Quat { w: 1.0, x: 0.0, y: 0.0, z: 0.0 };
+    pub const IDENTITY: Quat = Quat {
+        w: 1.0,
+        x: 0.0,
+        y: 0.0,
+        z: 0.0,
+    };
 
     /// Makes a quaternion from `(w, x, y, z)`; no normalisation.
     pub const fn new(w: f64, x: f64, y: f64, z: f64) -> Self {
@@ -288,11 +297,17 @@ pub struct Pose {
 
 impl Pose {
     /// The identity pose.
-    pub const IDENTITY: Pose = Pose { position_m: Vec3::ZERO, orientation: Quat::IDENTITY };
+    pub const IDENTITY: Pose = Pose {
+        position_m: Vec3::ZERO,
+        orientation: Quat::IDENTITY,
+    };
 
     /// Makes a pose.
     pub fn new(position_m: Vec3, orientation: Quat) -> Self {
-        Pose { position_m, orientation }
+        Pose {
+            position_m,
+            orientation,
+        }
     }
     /// Composition: the pose of a frame given relative to `self`.
     pub fn compose(&self, child: &Pose) -> Pose {
@@ -359,15 +374,17 @@ mod tests {
     }
 
     fn arb_quat() -> impl Strategy<Value = Quat> {
-        (-1.0f64..1.0, -1.0f64..1.0, -1.0f64..1.0, -1.0f64..1.0)
-            .prop_filter_map("non-zero", |(w, x, y, z)| {
+        (-1.0f64..1.0, -1.0f64..1.0, -1.0f64..1.0, -1.0f64..1.0).prop_filter_map(
+            "non-zero",
+            |(w, x, y, z)| {
                 let q = Quat::new(w, x, y, z);
                 if q.norm() > 0.1 {
                     q.normalized()
                 } else {
                     None
                 }
-            })
+            },
+        )
     }
 
     proptest! {

@@ -174,7 +174,11 @@ impl SceneObject {
         match self.shape {
             ObjectShape::Box { size_m: s } => {
                 let k = self.mass_kg / 12.0;
-                Vec3::new(k * (s.y * s.y + s.z * s.z), k * (s.x * s.x + s.z * s.z), k * (s.x * s.x + s.y * s.y))
+                Vec3::new(
+                    k * (s.y * s.y + s.z * s.z),
+                    k * (s.x * s.x + s.z * s.z),
+                    k * (s.x * s.x + s.y * s.y),
+                )
             }
         }
     }
@@ -395,7 +399,12 @@ impl Builder<'_> {
         self.locations.insert(field.to_string(), lc);
     }
 
-    fn invalid<T>(&self, field: &str, s: Option<&Spanned<T>>, message: impl Into<String>) -> SceneError {
+    fn invalid<T>(
+        &self,
+        field: &str,
+        s: Option<&Spanned<T>>,
+        message: impl Into<String>,
+    ) -> SceneError {
         let (line, column) = match s {
             Some(s) => {
                 let (l, c) = line_col(self.text, s.span().start);
@@ -417,7 +426,11 @@ impl Builder<'_> {
         if v.is_finite() {
             Ok(v)
         } else {
-            Err(self.invalid(field, Some(s), format!("must be a finite number, found {v}")))
+            Err(self.invalid(
+                field,
+                Some(s),
+                format!("must be a finite number, found {v}"),
+            ))
         }
     }
 
@@ -453,7 +466,11 @@ impl Builder<'_> {
             None => Ok(Quat::IDENTITY),
             Some(s) => {
                 let v = self.vec3(field, s)?;
-                Ok(Quat::from_euler_rpy(v.x.to_radians(), v.y.to_radians(), v.z.to_radians()))
+                Ok(Quat::from_euler_rpy(
+                    v.x.to_radians(),
+                    v.y.to_radians(),
+                    v.z.to_radians(),
+                ))
             }
         }
     }
@@ -462,7 +479,11 @@ impl Builder<'_> {
     /// removed lexically (`/a/scenes/../robots/x` -> `/a/robots/x`).
     fn resolve(&self, rel: &str) -> PathBuf {
         let p = Path::new(rel);
-        let joined = if p.is_absolute() { p.to_path_buf() } else { self.path.parent().unwrap_or(Path::new(".")).join(p) };
+        let joined = if p.is_absolute() {
+            p.to_path_buf()
+        } else {
+            self.path.parent().unwrap_or(Path::new(".")).join(p)
+        };
         let mut out = PathBuf::new();
         for c in joined.components() {
             match c {
@@ -494,7 +515,9 @@ fn setting_value(v: &toml::Value) -> Option<SettingValue> {
 
 fn valid_name(name: &str) -> bool {
     !name.is_empty()
-        && name.chars().all(|c| c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.'))
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.'))
         && !name.starts_with('.')
 }
 
@@ -503,7 +526,10 @@ impl Scene {
     /// against the file's directory. The robot is not loaded: call
     /// [`Scene::validate`] with it.
     pub fn from_file(path: &Path) -> Result<Scene, SceneError> {
-        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io { path: path.to_path_buf(), source })?;
+        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
         let abs = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
         Scene::from_toml_str(&text, &abs)
     }
@@ -519,9 +545,18 @@ impl Scene {
                 }
                 None => (None, None),
             };
-            SceneError::Parse { path: path.to_path_buf(), line, column, message: e.message().trim().to_string() }
+            SceneError::Parse {
+                path: path.to_path_buf(),
+                line,
+                column,
+                message: e.message().trim().to_string(),
+            }
         })?;
-        let mut b = Builder { path, text, locations: HashMap::new() };
+        let mut b = Builder {
+            path,
+            text,
+            locations: HashMap::new(),
+        };
 
         let name = file.name.get_ref().clone();
         if !valid_name(&name) {
@@ -564,13 +599,20 @@ impl Scene {
         let ground = match &file.ground {
             Some(g) => {
                 if !g.height_m.is_finite() {
-                    return Err(b.invalid::<f64>("ground.height_m", None, "must be a finite number"));
+                    return Err(b.invalid::<f64>(
+                        "ground.height_m",
+                        None,
+                        "must be a finite number",
+                    ));
                 }
                 let friction = match &g.friction {
                     Some(f) => Some(b.non_negative("ground.friction", f)?),
                     None => None,
                 };
-                Some(Ground { height_m: g.height_m, friction })
+                Some(Ground {
+                    height_m: g.height_m,
+                    friction,
+                })
             }
             None => None,
         };
@@ -579,31 +621,56 @@ impl Scene {
             let f = |k: &str| format!("object[{i}].{k}");
             let name = o.name.get_ref().clone();
             if !valid_name(&name) {
-                return Err(b.invalid(&f("name"), Some(&o.name), format!("\"{name}\" is not a usable name (letters, digits, '_', '-', '.')")));
+                return Err(b.invalid(
+                    &f("name"),
+                    Some(&o.name),
+                    format!("\"{name}\" is not a usable name (letters, digits, '_', '-', '.')"),
+                ));
             }
             if objects.iter().any(|p| p.name == name) {
-                return Err(b.invalid(&f("name"), Some(&o.name), format!("another object is already named \"{name}\"")));
+                return Err(b.invalid(
+                    &f("name"),
+                    Some(&o.name),
+                    format!("another object is already named \"{name}\""),
+                ));
             }
             b.at(&f("name"), &o.name);
             let shape = match o.shape.get_ref().as_str() {
                 "box" => {
                     let s = b.vec3(&f("size_m"), &o.size_m)?;
                     if s.x <= 0.0 || s.y <= 0.0 || s.z <= 0.0 {
-                        return Err(b.invalid(&f("size_m"), Some(&o.size_m), "every edge length must be greater than 0"));
+                        return Err(b.invalid(
+                            &f("size_m"),
+                            Some(&o.size_m),
+                            "every edge length must be greater than 0",
+                        ));
                     }
                     ObjectShape::Box { size_m: s }
                 }
                 other => {
-                    return Err(b.invalid(&f("shape"), Some(&o.shape), format!("unknown shape \"{other}\" (expected \"box\")")))
+                    return Err(b.invalid(
+                        &f("shape"),
+                        Some(&o.shape),
+                        format!("unknown shape \"{other}\" (expected \"box\")"),
+                    ))
                 }
             };
             let mass_kg = b.positive(&f("mass_kg"), &o.mass_kg)?;
-            let pose = Pose::new(b.vec3(&f("position_m"), &o.position_m)?, b.rpy(&f("rpy_deg"), o.rpy_deg.as_ref())?);
+            let pose = Pose::new(
+                b.vec3(&f("position_m"), &o.position_m)?,
+                b.rpy(&f("rpy_deg"), o.rpy_deg.as_ref())?,
+            );
             let friction = match &o.friction {
                 Some(fr) => Some(b.non_negative(&f("friction"), fr)?),
                 None => None,
             };
-            objects.push(SceneObject { name, shape, mass_kg, pose, friction });
+            objects.push(SceneObject {
+                name,
+                shape,
+                mass_kg,
+                pose,
+                friction,
+            });
         }
 
         // Controller and actuators.
@@ -626,14 +693,22 @@ impl Scene {
             ));
         }
         if file.actuators.is_empty() {
-            return Err(b.invalid::<f64>("actuator", None, "the scene needs at least one [[actuator]] (a controlled joint)"));
+            return Err(b.invalid::<f64>(
+                "actuator",
+                None,
+                "the scene needs at least one [[actuator]] (a controlled joint)",
+            ));
         }
         let mut actuators: Vec<ActuatorSpec> = Vec::new();
         for (i, a) in file.actuators.iter().enumerate() {
             let f = |k: &str| format!("actuator[{i}].{k}");
             let joint = a.joint.get_ref().clone();
             if actuators.iter().any(|p| p.joint == joint) {
-                return Err(b.invalid(&f("joint"), Some(&a.joint), format!("joint \"{joint}\" already has an actuator")));
+                return Err(b.invalid(
+                    &f("joint"),
+                    Some(&a.joint),
+                    format!("joint \"{joint}\" already has an actuator"),
+                ));
             }
             b.at(&f("joint"), &a.joint);
             let kv = b.positive(&f("kv"), &a.kv)?;
@@ -641,29 +716,49 @@ impl Scene {
                 Some(fl) => {
                     let v = *fl.get_ref();
                     if v.is_nan() || v <= 0.0 {
-                        return Err(b.invalid(&f("force_limit"), Some(fl), format!("must be greater than 0, found {v}")));
+                        return Err(b.invalid(
+                            &f("force_limit"),
+                            Some(fl),
+                            format!("must be greater than 0, found {v}"),
+                        ));
                     }
                     v
                 }
                 None => f64::INFINITY,
             };
-            actuators.push(ActuatorSpec { joint, kv, force_limit });
+            actuators.push(ActuatorSpec {
+                joint,
+                kv,
+                force_limit,
+            });
         }
 
         // Schedule.
         if file.schedule.is_empty() {
-            return Err(b.invalid::<f64>("schedule", None, "the scene needs at least one [[schedule]] entry"));
+            return Err(b.invalid::<f64>(
+                "schedule",
+                None,
+                "the scene needs at least one [[schedule]] entry",
+            ));
         }
         let mut schedule: Vec<ScheduleEntry> = Vec::new();
         for (i, e) in file.schedule.iter().enumerate() {
             let field = format!("schedule[{i}].t_s");
             let t_s = b.non_negative(&field, &e.t_s)?;
             if t_s >= duration_s {
-                return Err(b.invalid(&field, Some(&e.t_s), format!("{t_s} s is not before the end of the run ({duration_s} s)")));
+                return Err(b.invalid(
+                    &field,
+                    Some(&e.t_s),
+                    format!("{t_s} s is not before the end of the run ({duration_s} s)"),
+                ));
             }
             if let Some(prev) = schedule.last() {
                 if t_s <= prev.t_s {
-                    return Err(b.invalid(&field, Some(&e.t_s), format!("times must increase: {t_s} s follows {} s", prev.t_s)));
+                    return Err(b.invalid(
+                        &field,
+                        Some(&e.t_s),
+                        format!("times must increase: {t_s} s follows {} s", prev.t_s),
+                    ));
                 }
             }
             let mut targets_deg = BTreeMap::new();
@@ -677,7 +772,11 @@ impl Scene {
                         format!(
                             "joint \"{}\" has no [[actuator]] (controlled joints: {})",
                             joint.get_ref(),
-                            actuators.iter().map(|a| a.joint.as_str()).collect::<Vec<_>>().join(", ")
+                            actuators
+                                .iter()
+                                .map(|a| a.joint.as_str())
+                                .collect::<Vec<_>>()
+                                .join(", ")
                         ),
                     ));
                 }
@@ -696,7 +795,11 @@ impl Scene {
                 return Err(b.invalid(&f("role"), Some(&t.role), "must not be empty"));
             }
             if tracked.iter().any(|p| p.role == role) {
-                return Err(b.invalid(&f("role"), Some(&t.role), format!("role \"{role}\" is tracked twice")));
+                return Err(b.invalid(
+                    &f("role"),
+                    Some(&t.role),
+                    format!("role \"{role}\" is tracked twice"),
+                ));
             }
             let target = match (&t.link, &t.object) {
                 (Some(l), None) => {
@@ -711,13 +814,27 @@ impl Scene {
                             format!(
                                 "no object is named \"{}\" (objects: {})",
                                 o.get_ref(),
-                                if objects.is_empty() { "none".to_string() } else { objects.iter().map(|x| x.name.as_str()).collect::<Vec<_>>().join(", ") }
+                                if objects.is_empty() {
+                                    "none".to_string()
+                                } else {
+                                    objects
+                                        .iter()
+                                        .map(|x| x.name.as_str())
+                                        .collect::<Vec<_>>()
+                                        .join(", ")
+                                }
                             ),
                         ));
                     }
                     TrackTarget::Object(o.get_ref().clone())
                 }
-                _ => return Err(b.invalid(&f("role"), Some(&t.role), "give exactly one of `link` or `object`")),
+                _ => {
+                    return Err(b.invalid(
+                        &f("role"),
+                        Some(&t.role),
+                        "give exactly one of `link` or `object`",
+                    ))
+                }
             };
             tracked.push(TrackedBody { role, target });
         }
@@ -729,7 +846,11 @@ impl Scene {
             for (key, value) in table {
                 let field = format!("engine.{engine}.{}", key.get_ref());
                 let v = setting_value(value.get_ref()).ok_or_else(|| {
-                    b.invalid(&field, Some(value), "must be a boolean, integer, float or string")
+                    b.invalid(
+                        &field,
+                        Some(value),
+                        "must be a boolean, integer, float or string",
+                    )
                 })?;
                 b.at(&field, key);
                 settings.insert(key.get_ref().clone(), v);
@@ -742,7 +863,12 @@ impl Scene {
             description: file.description.clone(),
             source: path.to_path_buf(),
             duration_s,
-            robot: RobotSpec { urdf, base, mjcf, held_joints_rad },
+            robot: RobotSpec {
+                urdf,
+                base,
+                mjcf,
+                held_joints_rad,
+            },
             ground,
             objects,
             controller,
@@ -761,7 +887,13 @@ impl Scene {
             Some(&(l, c)) => (Some(l), Some(c)),
             None => (None, None),
         };
-        SceneError::Invalid { path: self.source.clone(), line, column, field: field.to_string(), message: message.into() }
+        SceneError::Invalid {
+            path: self.source.clone(),
+            line,
+            column,
+            field: field.to_string(),
+            message: message.into(),
+        }
     }
 
     /// Checks the scene against its robot: every actuated, targeted, held and
@@ -779,38 +911,64 @@ impl Scene {
         };
         let movable = |field: &str, name: &str| -> Result<usize, SceneError> {
             let j = robot.joint_by_name(name).ok_or_else(|| {
-                self.error(field, format!("robot \"{}\" has no joint \"{name}\" (movable joints: {})", robot.name, joint_list()))
+                self.error(
+                    field,
+                    format!(
+                        "robot \"{}\" has no joint \"{name}\" (movable joints: {})",
+                        robot.name,
+                        joint_list()
+                    ),
+                )
             })?;
             if robot.joints[j].kind == JointKind::Fixed {
-                return Err(self.error(field, format!("joint \"{name}\" of robot \"{}\" is fixed and cannot move", robot.name)));
+                return Err(self.error(
+                    field,
+                    format!(
+                        "joint \"{name}\" of robot \"{}\" is fixed and cannot move",
+                        robot.name
+                    ),
+                ));
             }
             Ok(j)
         };
-        let within = |field: &str, j: usize, value_rad: f64, shown: String| -> Result<(), SceneError> {
-            if let Some(lim) = robot.joints[j].limits {
-                let eps = 1e-9;
-                if value_rad < lim.lower - eps || value_rad > lim.upper + eps {
-                    return Err(self.error(
-                        field,
-                        format!(
+        let within =
+            |field: &str, j: usize, value_rad: f64, shown: String| -> Result<(), SceneError> {
+                if let Some(lim) = robot.joints[j].limits {
+                    let eps = 1e-9;
+                    if value_rad < lim.lower - eps || value_rad > lim.upper + eps {
+                        return Err(self.error(
+                            field,
+                            format!(
                             "{shown} is outside the limits of joint \"{}\" ({:.4} to {:.4} deg)",
                             robot.joints[j].name,
                             lim.lower.to_degrees(),
                             lim.upper.to_degrees()
                         ),
-                    ));
+                        ));
+                    }
                 }
-            }
-            Ok(())
-        };
+                Ok(())
+            };
         for (i, a) in self.actuators.iter().enumerate() {
             let field = format!("actuator[{i}].joint");
             let j = movable(&field, &a.joint)?;
             if robot.joints[j].mimic.is_some() {
-                return Err(self.error(&field, format!("joint \"{}\" mimics another joint and cannot be actuated", a.joint)));
+                return Err(self.error(
+                    &field,
+                    format!(
+                        "joint \"{}\" mimics another joint and cannot be actuated",
+                        a.joint
+                    ),
+                ));
             }
             if robot.joints[j].kind == JointKind::Prismatic {
-                return Err(self.error(&field, format!("joint \"{}\" is prismatic; the controller drives revolute joints", a.joint)));
+                return Err(self.error(
+                    &field,
+                    format!(
+                        "joint \"{}\" is prismatic; the controller drives revolute joints",
+                        a.joint
+                    ),
+                ));
             }
         }
         for (i, e) in self.schedule.iter().enumerate() {
@@ -823,9 +981,17 @@ impl Scene {
         // Joints not named in an entry target 0: check 0 is reachable.
         for a in &self.actuators {
             if let Some(j) = robot.joint_by_name(&a.joint) {
-                let named_everywhere = self.schedule.iter().all(|e| e.targets_deg.contains_key(&a.joint));
+                let named_everywhere = self
+                    .schedule
+                    .iter()
+                    .all(|e| e.targets_deg.contains_key(&a.joint));
                 if !named_everywhere {
-                    within(&format!("actuator.{}", a.joint), j, 0.0, "the default target 0 deg".to_string())?;
+                    within(
+                        &format!("actuator.{}", a.joint),
+                        j,
+                        0.0,
+                        "the default target 0 deg".to_string(),
+                    )?;
                 }
             }
         }
@@ -833,7 +999,10 @@ impl Scene {
             let field = format!("robot.held_joints_deg.{joint}");
             let j = movable(&field, joint)?;
             if self.actuators.iter().any(|a| &a.joint == joint) {
-                return Err(self.error(&field, format!("joint \"{joint}\" has an actuator and cannot also be held")));
+                return Err(self.error(
+                    &field,
+                    format!("joint \"{joint}\" has an actuator and cannot also be held"),
+                ));
             }
             within(&field, j, rad, format!("{} deg", rad.to_degrees()))?;
         }
@@ -845,7 +1014,12 @@ impl Scene {
                         format!(
                             "robot \"{}\" has no link \"{link}\" (links: {})",
                             robot.name,
-                            robot.links.iter().map(|l| l.name.as_str()).collect::<Vec<_>>().join(", ")
+                            robot
+                                .links
+                                .iter()
+                                .map(|l| l.name.as_str())
+                                .collect::<Vec<_>>()
+                                .join(", ")
                         ),
                     ));
                 }
@@ -865,7 +1039,10 @@ impl Scene {
     /// not positive.
     pub fn steps_per_period(&self, timestep_s: f64) -> Result<u64, SceneError> {
         if !(timestep_s.is_finite() && timestep_s > 0.0) {
-            return Err(self.error("controller.period_s", format!("the engine timestep must be positive, found {timestep_s} s")));
+            return Err(self.error(
+                "controller.period_s",
+                format!("the engine timestep must be positive, found {timestep_s} s"),
+            ));
         }
         let ratio = self.controller.period_s / timestep_s;
         let n = ratio.round();
@@ -895,13 +1072,21 @@ impl Scene {
         let entry = self.schedule.iter().rev().find(|e| e.t_s <= t + 1e-9);
         self.actuators
             .iter()
-            .map(|a| entry.and_then(|e| e.targets_deg.get(&a.joint)).copied().unwrap_or(0.0))
+            .map(|a| {
+                entry
+                    .and_then(|e| e.targets_deg.get(&a.joint))
+                    .copied()
+                    .unwrap_or(0.0)
+            })
             .collect()
     }
 
     /// The settings of `engine` from the scene file (empty when none).
     pub fn settings_for(&self, engine: &str) -> EngineSettings {
-        self.engine_settings.get(engine).cloned().unwrap_or_default()
+        self.engine_settings
+            .get(engine)
+            .cloned()
+            .unwrap_or_default()
     }
 
     /// The object with this name.
@@ -969,7 +1154,8 @@ integrator = "euler"
     fn parses_minimal_scene() {
         let s = parse(MINIMAL).unwrap();
         assert_eq!(s.robot.urdf, PathBuf::from("/scenes/arm.urdf"));
-        let up = parse(&MINIMAL.replace("urdf = \"arm.urdf\"", "urdf = \"../robots/./arm.urdf\"")).unwrap();
+        let up = parse(&MINIMAL.replace("urdf = \"arm.urdf\"", "urdf = \"../robots/./arm.urdf\""))
+            .unwrap();
         assert_eq!(up.robot.urdf, PathBuf::from("/robots/arm.urdf"));
         assert_eq!(s.sample_count(), 20);
         assert_eq!(s.controlled_joints(), vec!["j1", "j2"]);
@@ -980,7 +1166,10 @@ integrator = "euler"
         assert_eq!(s.steps_per_period(1e-4).unwrap(), 500);
         assert_eq!(s.steps_per_period(0.01).unwrap(), 5);
         assert!(s.steps_per_period(0.03).is_err());
-        assert_eq!(s.settings_for("mujoco").get("timestep_s"), Some(&SettingValue::Float(1e-4)));
+        assert_eq!(
+            s.settings_for("mujoco").get("timestep_s"),
+            Some(&SettingValue::Float(1e-4))
+        );
         let inertia = s.objects[0].principal_inertia();
         assert!((inertia.x - 0.5 * 0.02 / 12.0).abs() < 1e-15);
     }
@@ -1003,43 +1192,70 @@ integrator = "euler"
 
     #[test]
     fn non_positive_duration_is_rejected() {
-        let msg = parse(&MINIMAL.replace("duration_s = 1.0", "duration_s = 0.0")).unwrap_err().to_string();
-        assert!(msg.contains(":3:14: duration_s: must be greater than 0"), "{msg}");
-        let msg = parse(&MINIMAL.replace("duration_s = 1.0", "duration_s = 1.02")).unwrap_err().to_string();
-        assert!(msg.contains("not a whole number of control periods"), "{msg}");
+        let msg = parse(&MINIMAL.replace("duration_s = 1.0", "duration_s = 0.0"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            msg.contains(":3:14: duration_s: must be greater than 0"),
+            "{msg}"
+        );
+        let msg = parse(&MINIMAL.replace("duration_s = 1.0", "duration_s = 1.02"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            msg.contains("not a whole number of control periods"),
+            "{msg}"
+        );
     }
 
     #[test]
     fn target_of_uncontrolled_joint_is_rejected() {
-        let msg = parse(&MINIMAL.replace("{ j2 = 45.0 }", "{ j9 = 45.0 }")).unwrap_err().to_string();
-        assert!(msg.contains("schedule[1].targets_deg.j9: joint \"j9\" has no [[actuator]]"), "{msg}");
+        let msg = parse(&MINIMAL.replace("{ j2 = 45.0 }", "{ j9 = 45.0 }"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            msg.contains("schedule[1].targets_deg.j9: joint \"j9\" has no [[actuator]]"),
+            "{msg}"
+        );
     }
 
     #[test]
     fn schedule_must_increase_and_fit() {
-        let msg = parse(&MINIMAL.replace("t_s = 0.5", "t_s = 0.0")).unwrap_err().to_string();
+        let msg = parse(&MINIMAL.replace("t_s = 0.5", "t_s = 0.0"))
+            .unwrap_err()
+            .to_string();
         assert!(msg.contains("times must increase"), "{msg}");
-        let msg = parse(&MINIMAL.replace("t_s = 0.5", "t_s = 1.5")).unwrap_err().to_string();
+        let msg = parse(&MINIMAL.replace("t_s = 0.5", "t_s = 1.5"))
+            .unwrap_err()
+            .to_string();
         assert!(msg.contains("not before the end of the run"), "{msg}");
     }
 
     #[test]
     fn unknown_tracked_object_and_bad_shape() {
-        let msg = parse(&MINIMAL.replace("object = \"cube\"", "object = \"ball\"")).unwrap_err().to_string();
+        let msg = parse(&MINIMAL.replace("object = \"cube\"", "object = \"ball\""))
+            .unwrap_err()
+            .to_string();
         assert!(msg.contains("no object is named \"ball\""), "{msg}");
-        let msg = parse(&MINIMAL.replace("shape = \"box\"", "shape = \"cone\"")).unwrap_err().to_string();
+        let msg = parse(&MINIMAL.replace("shape = \"box\"", "shape = \"cone\""))
+            .unwrap_err()
+            .to_string();
         assert!(msg.contains("unknown shape \"cone\""), "{msg}");
     }
 
     #[test]
     fn bad_engine_setting_type() {
-        let msg = parse(&MINIMAL.replace("integrator = \"euler\"", "integrator = [1, 2]")).unwrap_err().to_string();
+        let msg = parse(&MINIMAL.replace("integrator = \"euler\"", "integrator = [1, 2]"))
+            .unwrap_err()
+            .to_string();
         assert!(msg.contains("engine.mujoco.integrator"), "{msg}");
     }
 
     #[test]
     fn bad_name_is_rejected() {
-        let msg = parse(&MINIMAL.replace("name = \"t\"", "name = \"a/b\"")).unwrap_err().to_string();
+        let msg = parse(&MINIMAL.replace("name = \"t\"", "name = \"a/b\""))
+            .unwrap_err()
+            .to_string();
         assert!(msg.contains("name: \"a/b\" is not a usable name"), "{msg}");
     }
 }

@@ -82,7 +82,10 @@ impl Trajectory {
             time_s: Vec::new(),
             bodies: roles
                 .iter()
-                .map(|r| BodyTrack { role: r.as_ref().to_string(), poses: Vec::new() })
+                .map(|r| BodyTrack {
+                    role: r.as_ref().to_string(),
+                    poses: Vec::new(),
+                })
                 .collect(),
             joint_angles_rad: None,
             joint_velocity_commands_rad_s: None,
@@ -144,7 +147,10 @@ impl Trajectory {
         }
         for (what, rows) in [
             ("joint angles", &self.joint_angles_rad),
-            ("joint velocity commands", &self.joint_velocity_commands_rad_s),
+            (
+                "joint velocity commands",
+                &self.joint_velocity_commands_rad_s,
+            ),
         ] {
             if let Some(rows) = rows {
                 if rows.len() != n {
@@ -155,7 +161,9 @@ impl Trajectory {
                     });
                 }
                 let expected = rows.first().map_or(0, |r| r.len());
-                if let Some((sample, r)) = rows.iter().enumerate().find(|(_, r)| r.len() != expected) {
+                if let Some((sample, r)) =
+                    rows.iter().enumerate().find(|(_, r)| r.len() != expected)
+                {
                     return Err(TrajectoryError::JointCount {
                         what: what.to_string(),
                         sample,
@@ -179,11 +187,17 @@ mod tests {
         t.time_s = vec![0.0, 0.05];
         t.bodies[0].poses = vec![Some(Pose::IDENTITY), None];
         t.bodies[1].poses = vec![None];
-        assert!(matches!(t.validate(), Err(TrajectoryError::LengthMismatch { .. })));
+        assert!(matches!(
+            t.validate(),
+            Err(TrajectoryError::LengthMismatch { .. })
+        ));
         t.bodies[1].poses.push(None);
         assert_eq!(t.validate(), Ok(()));
         t.joint_angles_rad = Some(vec![vec![0.0; 6], vec![0.0; 5]]);
-        assert!(matches!(t.validate(), Err(TrajectoryError::JointCount { sample: 1, .. })));
+        assert!(matches!(
+            t.validate(),
+            Err(TrajectoryError::JointCount { sample: 1, .. })
+        ));
         assert_eq!(t.positions(WRIST), vec![Some(Vec3::ZERO), None]);
     }
 }

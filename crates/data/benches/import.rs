@@ -46,11 +46,23 @@ fn list(dir: &Path, ext: &str) -> Vec<PathBuf> {
 fn jobs(root: &Path) -> Vec<Job> {
     let mut jobs = Vec::new();
     for exp in ["Experiment1", "Experiment2", "Experiment3"] {
-        jobs.extend(list(&root.join("MotionCapture").join(exp), "tsv").into_iter().map(Job::Capture));
-        jobs.extend(list(&root.join("Simulation").join(exp), "csv").into_iter().map(|p| {
-            let order = if p.to_string_lossy().contains("_Mujoco_") { QuatOrder::Wxyz } else { QuatOrder::Xyzw };
-            Job::Recorded(p, order)
-        }));
+        jobs.extend(
+            list(&root.join("MotionCapture").join(exp), "tsv")
+                .into_iter()
+                .map(Job::Capture),
+        );
+        jobs.extend(
+            list(&root.join("Simulation").join(exp), "csv")
+                .into_iter()
+                .map(|p| {
+                    let order = if p.to_string_lossy().contains("_Mujoco_") {
+                        QuatOrder::Wxyz
+                    } else {
+                        QuatOrder::Xyzw
+                    };
+                    Job::Recorded(p, order)
+                }),
+        );
     }
     jobs
 }
@@ -93,18 +105,26 @@ fn timed(n: usize, threads: usize, work: &(dyn Fn(usize) + Sync)) -> Timing {
         handles.into_iter().map(|h| h.join().unwrap()).collect()
     });
     let wall_s = start.elapsed().as_secs_f64();
-    Timing { wall_s, cpu_s: cpu.into_iter().sum() }
+    Timing {
+        wall_s,
+        cpu_s: cpu.into_iter().sum(),
+    }
 }
 
 /// The run with the shortest wall time among `repeats` (the machine may be
 /// shared; the best run is the one least disturbed).
 fn best(repeats: usize, mut f: impl FnMut() -> Timing) -> Timing {
-    (0..repeats).map(|_| f()).min_by(|a, b| a.wall_s.total_cmp(&b.wall_s)).unwrap()
+    (0..repeats)
+        .map(|_| f())
+        .min_by(|a, b| a.wall_s.total_cmp(&b.wall_s))
+        .unwrap()
 }
 
 fn report(what: &str, files: usize, bytes: usize, t: Timing) {
     let mb = bytes as f64 / 1e6;
-    let cpu = t.cpu_s.map_or("-".to_string(), |c| format!("cpu {c:.4} s {:>5.0} MB/cpu-s", mb / c));
+    let cpu = t.cpu_s.map_or("-".to_string(), |c| {
+        format!("cpu {c:.4} s {:>5.0} MB/cpu-s", mb / c)
+    });
     println!(
         "{what:<38} {files:>4} files {mb:>6.1} MB  wall {:>7.4} s {:>6.0} MB/s  {cpu}",
         t.wall_s,
@@ -115,18 +135,33 @@ fn report(what: &str, files: usize, bytes: usize, t: Timing) {
 fn main() {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/paper-data");
     if !root.join("MotionCapture").is_dir() {
-        println!("SKIPPED: paper-data not found at {} (nothing to benchmark)", root.display());
+        println!(
+            "SKIPPED: paper-data not found at {} (nothing to benchmark)",
+            root.display()
+        );
         return;
     }
     let jobs = jobs(&root);
     let n = jobs.len();
     let threads = std::thread::available_parallelism().map_or(1, |p| p.get());
-    let contents: Vec<Vec<u8>> = jobs.iter().map(|j| std::fs::read(j.path()).unwrap()).collect();
+    let contents: Vec<Vec<u8>> = jobs
+        .iter()
+        .map(|j| std::fs::read(j.path()).unwrap())
+        .collect();
     let total: usize = contents.iter().map(Vec::len).sum();
-    let capture_bytes: usize =
-        jobs.iter().zip(&contents).filter(|(j, _)| matches!(j, Job::Capture(_))).map(|(_, c)| c.len()).sum();
+    let capture_bytes: usize = jobs
+        .iter()
+        .zip(&contents)
+        .filter(|(j, _)| matches!(j, Job::Capture(_)))
+        .map(|(_, c)| c.len())
+        .sum();
     let captures = jobs.iter().filter(|j| matches!(j, Job::Capture(_))).count();
-    println!("paper-data: {} capture + {} simulator files, {} threads available", captures, n - captures, threads);
+    println!(
+        "paper-data: {} capture + {} simulator files, {} threads available",
+        captures,
+        n - captures,
+        threads
+    );
 
     let repeats = 10;
     let read_and_parse = |i: usize| {
@@ -136,21 +171,58 @@ fn main() {
     let parse_only = |i: usize| {
         std::hint::black_box(jobs[i].parse(&contents[i]));
     };
-    report("read + parse, 1 thread", n, total, best(repeats, || timed(n, 1, &read_and_parse)));
-    report(&format!("read + parse, {threads} threads"), n, total, best(repeats, || timed(n, threads, &read_and_parse)));
-    report("parse only, 1 thread", n, total, best(repeats, || timed(n, 1, &parse_only)));
-    report(&format!("parse only, {threads} threads"), n, total, best(repeats, || timed(n, threads, &parse_only)));
+    report(
+        "read + parse, 1 thread",
+        n,
+        total,
+        best(repeats, || timed(n, 1, &read_and_parse)),
+    );
+    report(
+        &format!("read + parse, {threads} threads"),
+        n,
+        total,
+        best(repeats, || timed(n, threads, &read_and_parse)),
+    );
+    report(
+        "parse only, 1 thread",
+        n,
+        total,
+        best(repeats, || timed(n, 1, &parse_only)),
+    );
+    report(
+        &format!("parse only, {threads} threads"),
+        n,
+        total,
+        best(repeats, || timed(n, threads, &parse_only)),
+    );
 
-    let capture_idx: Vec<usize> = (0..n).filter(|&i| matches!(jobs[i], Job::Capture(_))).collect();
-    let recorded_idx: Vec<usize> = (0..n).filter(|&i| matches!(jobs[i], Job::Recorded(..))).collect();
+    let capture_idx: Vec<usize> = (0..n)
+        .filter(|&i| matches!(jobs[i], Job::Capture(_)))
+        .collect();
+    let recorded_idx: Vec<usize> = (0..n)
+        .filter(|&i| matches!(jobs[i], Job::Recorded(..)))
+        .collect();
     let subset = |idx: &[usize]| best(repeats, || timed(idx.len(), 1, &|k| parse_only(idx[k])));
-    report("  Qualisys TSV parse only, 1 thread", captures, capture_bytes, subset(&capture_idx));
-    report("  recorded CSV parse only, 1 thread", n - captures, total - capture_bytes, subset(&recorded_idx));
+    report(
+        "  Qualisys TSV parse only, 1 thread",
+        captures,
+        capture_bytes,
+        subset(&capture_idx),
+    );
+    report(
+        "  recorded CSV parse only, 1 thread",
+        n - captures,
+        total - capture_bytes,
+        subset(&recorded_idx),
+    );
 
     // The results-directory format: write every trajectory as run CSV and
     // read it back.
     let runs: Vec<ImportedRun> = (0..n).map(|i| jobs[i].parse(&contents[i])).collect();
-    let texts: Vec<String> = runs.iter().map(|r| format_run_csv(&r.trajectory).unwrap()).collect();
+    let texts: Vec<String> = runs
+        .iter()
+        .map(|r| format_run_csv(&r.trajectory).unwrap())
+        .collect();
     let csv_bytes: usize = texts.iter().map(String::len).sum();
     let format_s = best(repeats, || {
         timed(n, 1, &|i| {

@@ -26,12 +26,21 @@ pub struct ImportError {
 impl ImportError {
     /// An error about the whole file.
     pub fn new(file: &Path, message: impl Into<String>) -> Self {
-        ImportError { file: file.to_path_buf(), line: None, column: None, field: None, message: message.into() }
+        ImportError {
+            file: file.to_path_buf(),
+            line: None,
+            column: None,
+            field: None,
+            message: message.into(),
+        }
     }
 
     /// An error on one line (1-based).
     pub fn at_line(file: &Path, line: usize, message: impl Into<String>) -> Self {
-        ImportError { line: Some(line), ..ImportError::new(file, message) }
+        ImportError {
+            line: Some(line),
+            ..ImportError::new(file, message)
+        }
     }
 
     /// Sets the 1-based column.
@@ -83,10 +92,17 @@ mod tests {
 
     #[test]
     fn display_names_file_line_column_field() {
-        let e = ImportError::at_line(Path::new("path/to/file.tsv"), 1234, "expected a number, found \"abc\"")
-            .with_column(5)
-            .with_field("RB1(Orange) Y");
-        assert_eq!(e.to_string(), "path/to/file.tsv:1234: column 5 (RB1(Orange) Y): expected a number, found \"abc\"");
+        let e = ImportError::at_line(
+            Path::new("path/to/file.tsv"),
+            1234,
+            "expected a number, found \"abc\"",
+        )
+        .with_column(5)
+        .with_field("RB1(Orange) Y");
+        assert_eq!(
+            e.to_string(),
+            "path/to/file.tsv:1234: column 5 (RB1(Orange) Y): expected a number, found \"abc\""
+        );
         let e = ImportError::new(Path::new("a.csv"), "the file is empty");
         assert_eq!(e.to_string(), "a.csv: the file is empty");
         let e = ImportError::new(Path::new("a.csv"), "bad").with_field("cube qw");

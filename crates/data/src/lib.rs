@@ -24,8 +24,8 @@ pub use error::ImportError;
 pub use qualisys::QualisysOptions;
 pub use recorded::{QuatOrder, RecordedOptions};
 pub use runstore::{
-    discover, format_run_csv, parse_run_csv, read_run_csv, sanitize_run_id, validate_run_id, EngineInfo, Manifest,
-    RunEntry, RunStatus, RunStore, SourceKind, StoreError,
+    discover, format_run_csv, parse_run_csv, read_run_csv, sanitize_run_id, validate_run_id,
+    EngineInfo, Manifest, RunEntry, RunStatus, RunStore, SourceKind, StoreError,
 };
 
 use realitygap_core::Trajectory;
@@ -60,7 +60,11 @@ pub struct ImportedRun {
 impl ImportedRun {
     /// Number of gaps (samples without a pose) summed over all bodies.
     pub fn gap_count(&self) -> usize {
-        self.trajectory.bodies.iter().map(|b| b.poses.iter().filter(|p| p.is_none()).count()).sum()
+        self.trajectory
+            .bodies
+            .iter()
+            .map(|b| b.poses.iter().filter(|p| p.is_none()).count())
+            .sum()
     }
 }
 
@@ -74,9 +78,15 @@ pub(crate) fn paper_data() -> Option<PathBuf> {
     if dir.join("MotionCapture").is_dir() && dir.join("Simulation").is_dir() {
         Some(dir)
     } else if std::env::var_os("REALITYGAP_REQUIRE_PAPER_DATA").is_some() {
-        panic!("paper-data not found at {} but REALITYGAP_REQUIRE_PAPER_DATA is set", dir.display());
+        panic!(
+            "paper-data not found at {} but REALITYGAP_REQUIRE_PAPER_DATA is set",
+            dir.display()
+        );
     } else {
-        eprintln!("SKIPPED: paper-data not found at {} (tests on the study's recordings did not run)", dir.display());
+        eprintln!(
+            "SKIPPED: paper-data not found at {} (tests on the study's recordings did not run)",
+            dir.display()
+        );
         None
     }
 }

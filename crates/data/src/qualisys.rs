@@ -65,8 +65,8 @@ const STRIDE: usize = CELLS_PER_BODY + 1;
 /// Names of a body's cells in a column-name line (the first is prefixed
 /// with the body's name).
 const CELL_NAMES: [&str; CELLS_PER_BODY] = [
-    "X", "Y", "Z", "Roll", "Pitch", "Yaw", "Residual", "Rot[0]", "Rot[1]", "Rot[2]", "Rot[3]", "Rot[4]", "Rot[5]",
-    "Rot[6]", "Rot[7]", "Rot[8]",
+    "X", "Y", "Z", "Roll", "Pitch", "Yaw", "Residual", "Rot[0]", "Rot[1]", "Rot[2]", "Rot[3]",
+    "Rot[4]", "Rot[5]", "Rot[6]", "Rot[7]", "Rot[8]",
 ];
 /// Largest tolerated deviation of `R Rᵀ` from the identity.
 const ORTHONORMAL_TOLERANCE: f64 = 0.01;
@@ -92,7 +92,11 @@ impl QualisysOptions {
     pub fn collins2019() -> Self {
         QualisysOptions {
             frequency_hz: Some(100.0),
-            body_names: Some(vec!["RB2(Black)".into(), "RB1(Orange)".into(), "PCube".into()]),
+            body_names: Some(vec![
+                "RB2(Black)".into(),
+                "RB1(Orange)".into(),
+                "PCube".into(),
+            ]),
             roles: vec![
                 ("RB1(Orange)".into(), WRIST.into()),
                 ("RB2(Black)".into(), BASE.into()),
@@ -113,7 +117,8 @@ impl QualisysOptions {
 
 /// Reads a Qualisys 6DOF TSV file (see the module docs).
 pub fn read(path: &Path, opts: &QualisysOptions) -> Result<ImportedRun, ImportError> {
-    let bytes = std::fs::read(path).map_err(|e| ImportError::new(path, format!("cannot read the file: {e}")))?;
+    let bytes = std::fs::read(path)
+        .map_err(|e| ImportError::new(path, format!("cannot read the file: {e}")))?;
     parse(&bytes, path, opts)
 }
 
@@ -158,14 +163,22 @@ impl Layout {
             if self.frame_time { "frame, time, " } else { "" },
             self.bodies,
             STRIDE,
-            if self.trailing_separator { "" } else { " without the final empty column" }
+            if self.trailing_separator {
+                ""
+            } else {
+                " without the final empty column"
+            }
         )
     }
 }
 
 /// Parses the bytes of a Qualisys 6DOF TSV export; `file` is used in
 /// messages only. Never panics, whatever the bytes.
-pub fn parse(bytes: &[u8], file: &Path, opts: &QualisysOptions) -> Result<ImportedRun, ImportError> {
+pub fn parse(
+    bytes: &[u8],
+    file: &Path,
+    opts: &QualisysOptions,
+) -> Result<ImportedRun, ImportError> {
     let mut warnings = Vec::new();
     let mut lines = Lines::new(bytes);
 
@@ -185,7 +198,8 @@ pub fn parse(bytes: &[u8], file: &Path, opts: &QualisysOptions) -> Result<Import
         any_content = true;
         let first = line.bytes.split(|&b| b == b'\t').next().unwrap_or_default();
         let first = trim_spaces(first);
-        let wordy = first.first().is_some_and(u8::is_ascii_alphabetic) && parse_f64(first).is_none();
+        let wordy =
+            first.first().is_some_and(u8::is_ascii_alphabetic) && parse_f64(first).is_none();
         if !wordy || column_line.is_some() {
             first_data = Some(line);
             data = rest;
@@ -210,7 +224,10 @@ pub fn parse(bytes: &[u8], file: &Path, opts: &QualisysOptions) -> Result<Import
         return Err(ImportError::new(file, "the file is empty"));
     }
     let Some(first_data) = first_data else {
-        return Err(ImportError::new(file, "the file has a header but no data rows"));
+        return Err(ImportError::new(
+            file,
+            "the file has a header but no data rows",
+        ));
     };
 
     // Frequency and body names: header first, then options.
@@ -267,15 +284,25 @@ pub fn parse(bytes: &[u8], file: &Path, opts: &QualisysOptions) -> Result<Import
         if let Some(j) = roles[..i].iter().position(|r| r == role) {
             return Err(ImportError::new(
                 file,
-                format!("bodies '{}' and '{}' both have the role '{role}'", body_names[j], body_names[i]),
+                format!(
+                    "bodies '{}' and '{}' both have the role '{role}'",
+                    body_names[j], body_names[i]
+                ),
             ));
         }
     }
-    let mut unknown: Vec<&str> =
-        opts.roles.iter().map(|(n, _)| n.as_str()).filter(|n| !body_names.iter().any(|b| b == n)).collect();
+    let mut unknown: Vec<&str> = opts
+        .roles
+        .iter()
+        .map(|(n, _)| n.as_str())
+        .filter(|n| !body_names.iter().any(|b| b == n))
+        .collect();
     unknown.dedup();
     if !unknown.is_empty() {
-        warnings.push(format!("role given for bodies not in the file: {}", unknown.join(", ")));
+        warnings.push(format!(
+            "role given for bodies not in the file: {}",
+            unknown.join(", ")
+        ));
     }
 
     // Layout: from the column-name line if any, and the first row's width.
@@ -312,7 +339,11 @@ pub fn parse(bytes: &[u8], file: &Path, opts: &QualisysOptions) -> Result<Import
             Err(ImportError::at_line(
                 file,
                 number,
-                format!("expected {columns} columns ({}), found {}", layout.describe(), fields.len()),
+                format!(
+                    "expected {columns} columns ({}), found {}",
+                    layout.describe(),
+                    fields.len()
+                ),
             ))
         } else {
             parse_row(&fields, layout, &mut row_cells).map_err(|(col, what)| {
@@ -331,9 +362,13 @@ pub fn parse(bytes: &[u8], file: &Path, opts: &QualisysOptions) -> Result<Import
                 // A last line without a line end that stops early, or whose
                 // last cell is cut, is what an interrupted copy leaves.
                 let cut = !terminated
-                    && (fields.len() < columns || (fields.len() == columns && e.column == Some(columns)));
+                    && (fields.len() < columns
+                        || (fields.len() == columns && e.column == Some(columns)));
                 if cut {
-                    warnings.push(format!("line {}: the last line is cut short and was dropped", number));
+                    warnings.push(format!(
+                        "line {}: the last line is cut short and was dropped",
+                        number
+                    ));
                     break;
                 }
                 return Err(e);
@@ -345,7 +380,9 @@ pub fn parse(bytes: &[u8], file: &Path, opts: &QualisysOptions) -> Result<Import
                     return Err(ImportError::at_line(
                         file,
                         number,
-                        format!("frame numbers must increase, but frame {frame} follows frame {prev}"),
+                        format!(
+                            "frame numbers must increase, but frame {frame} follows frame {prev}"
+                        ),
                     )
                     .with_column(1)
                     .with_field("Frame"));
@@ -355,7 +392,10 @@ pub fn parse(bytes: &[u8], file: &Path, opts: &QualisysOptions) -> Result<Import
             match time {
                 Some(t) if t.is_finite() && times.last().is_none_or(|&p| t > p) => {}
                 Some(t) if time_problem.is_none() => {
-                    time_problem = Some(format!("line {}: time {t} does not follow the previous one", number));
+                    time_problem = Some(format!(
+                        "line {}: time {t} does not follow the previous one",
+                        number
+                    ));
                 }
                 None if time_problem.is_none() => {
                     time_problem = Some(format!("line {}: the time cell is empty", number));
@@ -400,7 +440,9 @@ pub fn parse(bytes: &[u8], file: &Path, opts: &QualisysOptions) -> Result<Import
                 times.iter().map(|t| t - times[0]).collect()
             }
             Some(problem) => {
-                warnings.push(format!("{problem}: times computed from frame numbers at {frequency_hz} Hz instead"));
+                warnings.push(format!(
+                    "{problem}: times computed from frame numbers at {frequency_hz} Hz instead"
+                ));
                 frames.iter().map(|&f| by_frame(f)).collect()
             }
         }
@@ -410,7 +452,9 @@ pub fn parse(bytes: &[u8], file: &Path, opts: &QualisysOptions) -> Result<Import
 
     if let Some((n, line)) = header.frames {
         if n != samples {
-            warnings.push(format!("line {line}: NO_OF_FRAMES says {n} but the file has {samples} data rows"));
+            warnings.push(format!(
+                "line {line}: NO_OF_FRAMES says {n} but the file has {samples} data rows"
+            ));
         }
     }
     for b in 0..n_bodies {
@@ -430,7 +474,11 @@ pub fn parse(bytes: &[u8], file: &Path, opts: &QualisysOptions) -> Result<Import
 
     let trajectory = Trajectory {
         time_s,
-        bodies: roles.into_iter().zip(poses).map(|(role, poses)| BodyTrack { role, poses }).collect(),
+        bodies: roles
+            .into_iter()
+            .zip(poses)
+            .map(|(role, poses)| BodyTrack { role, poses })
+            .collect(),
         joint_angles_rad: None,
         joint_velocity_commands_rad_s: None,
     };
@@ -458,7 +506,11 @@ fn parse_row(
     if layout.frame_time {
         let frame = parse_u64(trim_spaces(fields[0])).ok_or((0, "a frame number"))?;
         let cell = trim_spaces(fields[1]);
-        let time = if cell.is_empty() { None } else { Some(parse_f64(cell).ok_or((1, "a time in seconds"))?) };
+        let time = if cell.is_empty() {
+            None
+        } else {
+            Some(parse_f64(cell).ok_or((1, "a time in seconds"))?)
+        };
         frame_time = (frame, time);
     }
     for b in 0..layout.bodies {
@@ -512,21 +564,24 @@ fn pose_from_cells(cells: &[Option<f64>; CELLS_PER_BODY]) -> Cells {
 fn is_rotation(m: &[f64; 9]) -> bool {
     for i in 0..3 {
         for j in i..3 {
-            let dot = m[3 * i] * m[3 * j] + m[3 * i + 1] * m[3 * j + 1] + m[3 * i + 2] * m[3 * j + 2];
+            let dot =
+                m[3 * i] * m[3 * j] + m[3 * i + 1] * m[3 * j + 1] + m[3 * i + 2] * m[3 * j + 2];
             let target = if i == j { 1.0 } else { 0.0 };
             if (dot - target).abs() > ORTHONORMAL_TOLERANCE {
                 return false;
             }
         }
     }
-    let det = m[0] * (m[4] * m[8] - m[5] * m[7]) - m[1] * (m[3] * m[8] - m[5] * m[6]) + m[2] * (m[3] * m[7] - m[4] * m[6]);
+    let det = m[0] * (m[4] * m[8] - m[5] * m[7]) - m[1] * (m[3] * m[8] - m[5] * m[6])
+        + m[2] * (m[3] * m[7] - m[4] * m[6]);
     det > 0.0
 }
 
 /// `[A-Z][A-Z0-9_]*`: the shape of a header key.
 fn is_header_key(s: &[u8]) -> bool {
     s.first().is_some_and(u8::is_ascii_uppercase)
-        && s.iter().all(|&b| b.is_ascii_uppercase() || b.is_ascii_digit() || b == b'_')
+        && s.iter()
+            .all(|&b| b.is_ascii_uppercase() || b.is_ascii_digit() || b == b'_')
 }
 
 /// Reads one `KEY<TAB>value...` line into the header.
@@ -542,18 +597,29 @@ fn read_header_line(line: &Line, file: &Path, header: &mut Header) -> Result<(),
         ImportError::at_line(
             file,
             line.number,
-            format!("expected {what}, found {}", values.first().map_or("nothing".to_string(), |v| show_bytes(v, 40))),
+            format!(
+                "expected {what}, found {}",
+                values
+                    .first()
+                    .map_or("nothing".to_string(), |v| show_bytes(v, 40))
+            ),
         )
         .with_column(2)
         .with_field(key_name.clone())
     };
     match key {
         b"NO_OF_FRAMES" => {
-            let n = values.first().and_then(|v| parse_u64(v)).ok_or_else(|| bad("a frame count"))?;
+            let n = values
+                .first()
+                .and_then(|v| parse_u64(v))
+                .ok_or_else(|| bad("a frame count"))?;
             header.frames = Some((n as usize, line.number));
         }
         b"NO_OF_BODIES" => {
-            let n = values.first().and_then(|v| parse_u64(v)).ok_or_else(|| bad("a body count"))?;
+            let n = values
+                .first()
+                .and_then(|v| parse_u64(v))
+                .ok_or_else(|| bad("a body count"))?;
             header.bodies = Some((n as usize, line.number));
         }
         b"FREQUENCY" => {
@@ -568,11 +634,18 @@ fn read_header_line(line: &Line, file: &Path, header: &mut Header) -> Result<(),
             if values.is_empty() || values.iter().any(|v| v.is_empty()) {
                 return Err(bad("a non-empty body name in every column"));
             }
-            let names: Vec<String> = values.iter().map(|v| String::from_utf8_lossy(v).into_owned()).collect();
+            let names: Vec<String> = values
+                .iter()
+                .map(|v| String::from_utf8_lossy(v).into_owned())
+                .collect();
             for (i, n) in names.iter().enumerate() {
                 if names[..i].contains(n) {
-                    return Err(ImportError::at_line(file, line.number, format!("body name '{n}' appears twice"))
-                        .with_field("BODY_NAMES"));
+                    return Err(ImportError::at_line(
+                        file,
+                        line.number,
+                        format!("body name '{n}' appears twice"),
+                    )
+                    .with_field("BODY_NAMES"));
                 }
             }
             header.body_names = Some(names);
@@ -587,7 +660,11 @@ fn read_header_line(line: &Line, file: &Path, header: &mut Header) -> Result<(),
 
 /// Checks a column-name line against the body names; returns whether the
 /// rows start with frame number and time.
-fn check_column_names(line: &Line, file: &Path, body_names: &[String]) -> Result<bool, ImportError> {
+fn check_column_names(
+    line: &Line,
+    file: &Path,
+    body_names: &[String],
+) -> Result<bool, ImportError> {
     let fields: Vec<&[u8]> = line.bytes.split(|&b| b == b'\t').map(trim_spaces).collect();
     let frame_time = fields.first().is_some_and(|f| *f == b"Frame");
     let mut expected: Vec<String> = Vec::new();
@@ -605,7 +682,10 @@ fn check_column_names(line: &Line, file: &Path, body_names: &[String]) -> Result
             return Err(ImportError::at_line(
                 file,
                 line.number,
-                format!("expected the column name {want:?}, found {}", show_bytes(found, 40)),
+                format!(
+                    "expected the column name {want:?}, found {}",
+                    show_bytes(found, 40)
+                ),
             )
             .with_column(col + 1));
         }
@@ -635,7 +715,11 @@ fn choose_layout(
     let width = first.bytes.split(|&b| b == b'\t').count();
     let candidates = [(true, true), (true, false), (false, true), (false, false)];
     for (ft, trailing) in candidates {
-        let layout = Layout { frame_time: ft, trailing_separator: trailing, bodies };
+        let layout = Layout {
+            frame_time: ft,
+            trailing_separator: trailing,
+            bodies,
+        };
         if frame_time.is_none_or(|f| f == ft) && layout.columns() == width {
             return Ok(layout);
         }
@@ -643,7 +727,15 @@ fn choose_layout(
     let wanted: Vec<String> = candidates
         .iter()
         .filter(|(ft, _)| frame_time.is_none_or(|f| f == *ft))
-        .map(|&(ft, tr)| Layout { frame_time: ft, trailing_separator: tr, bodies }.columns().to_string())
+        .map(|&(ft, tr)| {
+            Layout {
+                frame_time: ft,
+                trailing_separator: tr,
+                bodies,
+            }
+            .columns()
+            .to_string()
+        })
         .collect();
     let mut message = format!(
         "expected {} columns for {bodies} bodies of {STRIDE} columns (plus frame and time), found {width}",
@@ -687,7 +779,10 @@ fn parse_u64(s: &[u8]) -> Option<u64> {
     if s.is_empty() || s.len() > 19 || !s.iter().all(u8::is_ascii_digit) {
         return None;
     }
-    Some(s.iter().fold(0u64, |acc, &b| acc * 10 + u64::from(b - b'0')))
+    Some(
+        s.iter()
+            .fold(0u64, |acc, &b| acc * 10 + u64::from(b - b'0')),
+    )
 }
 
 /// The cell without leading and trailing spaces.

@@ -86,7 +86,9 @@ impl FromStr for QuatOrder {
         match s.to_ascii_lowercase().as_str() {
             "wxyz" => Ok(QuatOrder::Wxyz),
             "xyzw" => Ok(QuatOrder::Xyzw),
-            _ => Err(format!("unknown quaternion order '{s}': expected wxyz or xyzw")),
+            _ => Err(format!(
+                "unknown quaternion order '{s}': expected wxyz or xyzw"
+            )),
         }
     }
 }
@@ -106,13 +108,18 @@ impl RecordedOptions {
     /// Options with the study's control period (0.05 s) and a norm
     /// tolerance of 1e-3.
     pub fn new(quat_order: QuatOrder) -> Self {
-        RecordedOptions { quat_order, control_period_s: 0.05, norm_tolerance: 1e-3 }
+        RecordedOptions {
+            quat_order,
+            control_period_s: 0.05,
+            norm_tolerance: 1e-3,
+        }
     }
 }
 
 /// Reads a recorded simulator file (see the module docs).
 pub fn read(path: &Path, opts: &RecordedOptions) -> Result<ImportedRun, ImportError> {
-    let bytes = std::fs::read(path).map_err(|e| ImportError::new(path, format!("cannot read the file: {e}")))?;
+    let bytes = std::fs::read(path)
+        .map_err(|e| ImportError::new(path, format!("cannot read the file: {e}")))?;
     parse(&bytes, path, opts)
 }
 
@@ -120,7 +127,11 @@ pub fn read(path: &Path, opts: &RecordedOptions) -> Result<ImportedRun, ImportEr
 fn field_name(order: QuatOrder, i: usize) -> String {
     let body = if i < 7 { "wrist" } else { "cube" };
     let k = i % 7;
-    let comp = if k < 3 { ["x", "y", "z"][k] } else { order.component_names()[k - 3] };
+    let comp = if k < 3 {
+        ["x", "y", "z"][k]
+    } else {
+        order.component_names()[k - 3]
+    };
     format!("{body} {comp}")
 }
 
@@ -142,7 +153,10 @@ fn split_cells(line: &[u8], out: &mut [(usize, usize)]) -> Result<usize, usize> 
         let n = line.iter().filter(|&&b| b == b',').count() + 1;
         let mut from = 0;
         for i in 0..n {
-            let to = line[from..].iter().position(|&b| b == b',').map_or(line.len(), |p| from + p);
+            let to = line[from..]
+                .iter()
+                .position(|&b| b == b',')
+                .map_or(line.len(), |p| from + p);
             let mut start = from;
             let mut end = to;
             while start < end && is_space(line[start]) {
@@ -179,12 +193,25 @@ fn split_cells(line: &[u8], out: &mut [(usize, usize)]) -> Result<usize, usize> 
 
 /// Parses the bytes of a recorded simulator file; `file` is used in
 /// messages only. Never panics, whatever the bytes.
-pub fn parse(bytes: &[u8], file: &Path, opts: &RecordedOptions) -> Result<ImportedRun, ImportError> {
+pub fn parse(
+    bytes: &[u8],
+    file: &Path,
+    opts: &RecordedOptions,
+) -> Result<ImportedRun, ImportError> {
     if !(opts.control_period_s.is_finite() && opts.control_period_s > 0.0) {
-        return Err(ImportError::new(file, format!("the control period {} s is not positive", opts.control_period_s)));
+        return Err(ImportError::new(
+            file,
+            format!(
+                "the control period {} s is not positive",
+                opts.control_period_s
+            ),
+        ));
     }
     if opts.norm_tolerance.is_nan() || opts.norm_tolerance < 0.0 {
-        return Err(ImportError::new(file, format!("the norm tolerance {} is not >= 0", opts.norm_tolerance)));
+        return Err(ImportError::new(
+            file,
+            format!("the norm tolerance {} is not >= 0", opts.norm_tolerance),
+        ));
     }
     let order = opts.quat_order;
     let mut warnings = Vec::new();
@@ -214,11 +241,17 @@ pub fn parse(bytes: &[u8], file: &Path, opts: &RecordedOptions) -> Result<Import
             }
         };
         let split = split_cells(text.as_bytes(), &mut ranges_buf);
-        let cells: [&str; NUMBERS] = std::array::from_fn(|i| text.get(ranges_buf[i].0..ranges_buf[i].1).unwrap_or(""));
+        let cells: [&str; NUMBERS] =
+            std::array::from_fn(|i| text.get(ranges_buf[i].0..ranges_buf[i].1).unwrap_or(""));
         // A column-name header before the data.
         if wrist.is_empty() && split.is_ok() {
             let first = cells[0];
-            if first.as_bytes().first().is_some_and(u8::is_ascii_alphabetic) && parse_f64_str(first).is_none() {
+            if first
+                .as_bytes()
+                .first()
+                .is_some_and(u8::is_ascii_alphabetic)
+                && parse_f64_str(first).is_none()
+            {
                 header_lines += 1;
                 continue;
             }
@@ -256,9 +289,13 @@ pub fn parse(bytes: &[u8], file: &Path, opts: &RecordedOptions) -> Result<Import
             Err(e) => {
                 // Cut short: too few cells, or the last cell present is not a
                 // number, on a last line without a line end.
-                let short = matches!(split, Ok(n) if n <= NUMBERS && e.column.is_some_and(|c| c >= n));
+                let short =
+                    matches!(split, Ok(n) if n <= NUMBERS && e.column.is_some_and(|c| c >= n));
                 if !line.terminated && short {
-                    warnings.push(format!("line {}: the last line is cut short and was dropped", line.number));
+                    warnings.push(format!(
+                        "line {}: the last line is cut short and was dropped",
+                        line.number
+                    ));
                     break;
                 }
                 return Err(e);
@@ -275,7 +312,10 @@ pub fn parse(bytes: &[u8], file: &Path, opts: &RecordedOptions) -> Result<Import
         if v.iter().any(|x| !x.is_finite()) {
             non_finite_rows.push(index);
         }
-        let farthest = [v[0], v[1], v[2], v[7], v[8], v[9]].iter().map(|x| x.abs()).fold(0.0, f64::max);
+        let farthest = [v[0], v[1], v[2], v[7], v[8], v[9]]
+            .iter()
+            .map(|x| x.abs())
+            .fold(0.0, f64::max);
         if farthest > FAR_M {
             far_rows.push((index, farthest));
         }
@@ -287,7 +327,11 @@ pub fn parse(bytes: &[u8], file: &Path, opts: &RecordedOptions) -> Result<Import
             if norm.is_nan() || (norm - 1.0).abs() > opts.norm_tolerance {
                 norm_off = true;
             }
-            let orientation = if norm == 0.0 { Quat::IDENTITY } else { q.normalized().unwrap_or(q) };
+            let orientation = if norm == 0.0 {
+                Quat::IDENTITY
+            } else {
+                q.normalized().unwrap_or(q)
+            };
             track.push(Some(Pose::new(position, orientation)));
         }
         if norm_off {
@@ -306,7 +350,9 @@ pub fn parse(bytes: &[u8], file: &Path, opts: &RecordedOptions) -> Result<Import
         return Err(ImportError::new(file, what));
     }
     if header_lines > 0 {
-        warnings.push(format!("skipped {header_lines} header line(s) before the data"));
+        warnings.push(format!(
+            "skipped {header_lines} header line(s) before the data"
+        ));
     }
     if !zero_rows.is_empty() {
         warnings.push(format!(
@@ -341,8 +387,19 @@ pub fn parse(bytes: &[u8], file: &Path, opts: &RecordedOptions) -> Result<Import
 
     let samples = wrist.len();
     let trajectory = Trajectory {
-        time_s: (0..samples).map(|i| i as f64 * opts.control_period_s).collect(),
-        bodies: vec![BodyTrack { role: WRIST.into(), poses: wrist }, BodyTrack { role: CUBE.into(), poses: cube }],
+        time_s: (0..samples)
+            .map(|i| i as f64 * opts.control_period_s)
+            .collect(),
+        bodies: vec![
+            BodyTrack {
+                role: WRIST.into(),
+                poses: wrist,
+            },
+            BodyTrack {
+                role: CUBE.into(),
+                poses: cube,
+            },
+        ],
         joint_angles_rad: None,
         joint_velocity_commands_rad_s: None,
     };
@@ -383,7 +440,11 @@ pub(crate) fn ranges(indices: &[usize]) -> String {
             parts.push("...".into());
             break;
         }
-        parts.push(if start == end { start.to_string() } else { format!("{start}-{end}") });
+        parts.push(if start == end {
+            start.to_string()
+        } else {
+            format!("{start}-{end}")
+        });
     }
     parts.join(", ")
 }

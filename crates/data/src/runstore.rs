@@ -239,7 +239,11 @@ pub enum StoreError {
 }
 
 fn io_err<'a>(action: &'static str, path: &'a Path) -> impl FnOnce(io::Error) -> StoreError + 'a {
-    move |source| StoreError::Io { action, path: path.to_path_buf(), source }
+    move |source| StoreError::Io {
+        action,
+        path: path.to_path_buf(),
+        source,
+    }
 }
 
 /// A results directory open for reading and writing.
@@ -264,7 +268,10 @@ impl RunStore {
             let m = &store.manifest;
             if m.source != source || m.kind != kind || m.scene.as_deref() != scene {
                 let describe = |s: &str, k: SourceKind, sc: Option<&str>| {
-                    format!("source '{s}' ({k}), scene {}", sc.map_or("(none)".to_string(), |s| format!("'{s}'")))
+                    format!(
+                        "source '{s}' ({k}), scene {}",
+                        sc.map_or("(none)".to_string(), |s| format!("'{s}'"))
+                    )
                 };
                 return Err(StoreError::Mismatch {
                     path: dir.to_path_buf(),
@@ -299,12 +306,13 @@ impl RunStore {
     pub fn open(dir: &Path) -> Result<Self, StoreError> {
         let path = dir.join(MANIFEST_FILE);
         let bytes = fs::read(&path).map_err(io_err("read", &path))?;
-        let manifest: Manifest = serde_json::from_slice(&bytes).map_err(|e| StoreError::Manifest {
-            path: path.clone(),
-            line: e.line(),
-            column: e.column(),
-            message: e.to_string(),
-        })?;
+        let manifest: Manifest =
+            serde_json::from_slice(&bytes).map_err(|e| StoreError::Manifest {
+                path: path.clone(),
+                line: e.line(),
+                column: e.column(),
+                message: e.to_string(),
+            })?;
         for (i, run) in manifest.runs.iter().enumerate() {
             if manifest.runs[..i].iter().any(|r| r.id == run.id) {
                 return Err(StoreError::Mismatch {
@@ -313,7 +321,10 @@ impl RunStore {
                 });
             }
         }
-        Ok(RunStore { dir: dir.to_path_buf(), manifest })
+        Ok(RunStore {
+            dir: dir.to_path_buf(),
+            manifest,
+        })
     }
 
     /// The directory.
@@ -361,12 +372,17 @@ impl RunStore {
     /// Stores a run: writes `runs/<id>.csv` atomically, then adds (or
     /// replaces) its manifest entry and rewrites the manifest atomically.
     /// `entry.file` is set by the store.
-    pub fn write_run(&mut self, mut entry: RunEntry, trajectory: &Trajectory) -> Result<(), StoreError> {
+    pub fn write_run(
+        &mut self,
+        mut entry: RunEntry,
+        trajectory: &Trajectory,
+    ) -> Result<(), StoreError> {
         validate_run_id(&entry.id)?;
         let text = format_run_csv(trajectory).map_err(|e| match e {
-            StoreError::InvalidTrajectory { message, .. } => {
-                StoreError::InvalidTrajectory { id: entry.id.clone(), message }
-            }
+            StoreError::InvalidTrajectory { message, .. } => StoreError::InvalidTrajectory {
+                id: entry.id.clone(),
+                message,
+            },
             other => other,
         })?;
         entry.file = format!("{RUNS_DIR}/{}.csv", entry.id);
@@ -387,7 +403,13 @@ impl RunStore {
         match fs::remove_file(&old) {
             Ok(()) => {}
             Err(e) if e.kind() == io::ErrorKind::NotFound => {}
-            Err(e) => return Err(StoreError::Io { action: "remove", path: old, source: e }),
+            Err(e) => {
+                return Err(StoreError::Io {
+                    action: "remove",
+                    path: old,
+                    source: e,
+                })
+            }
         }
         self.upsert(entry);
         self.save_manifest()
@@ -395,15 +417,31 @@ impl RunStore {
 
     /// Reads the trajectory of run `id`.
     pub fn read_run(&self, id: &str) -> Result<Trajectory, StoreError> {
-        let entry =
-            self.run(id).ok_or_else(|| StoreError::UnknownRun { dir: self.dir.clone(), id: id.to_string() })?;
-        let no = |message: String| StoreError::NoTrajectory { dir: self.dir.clone(), id: id.to_string(), message };
+        let entry = self.run(id).ok_or_else(|| StoreError::UnknownRun {
+            dir: self.dir.clone(),
+            id: id.to_string(),
+        })?;
+        let no = |message: String| StoreError::NoTrajectory {
+            dir: self.dir.clone(),
+            id: id.to_string(),
+            message,
+        };
         if entry.file.is_empty() {
-            return Err(no(format!("the run has no trajectory (status {})", entry.status)));
+            return Err(no(format!(
+                "the run has no trajectory (status {})",
+                entry.status
+            )));
         }
         let rel = Path::new(&entry.file);
-        if rel.is_absolute() || rel.components().any(|c| !matches!(c, std::path::Component::Normal(_))) {
-            return Err(no(format!("its file '{}' is not a path inside the directory", entry.file)));
+        if rel.is_absolute()
+            || rel
+                .components()
+                .any(|c| !matches!(c, std::path::Component::Normal(_)))
+        {
+            return Err(no(format!(
+                "its file '{}' is not a path inside the directory",
+                entry.file
+            )));
         }
         let path = self.dir.join(rel);
         let bytes = fs::read(&path).map_err(io_err("read", &path))?;
@@ -420,10 +458,11 @@ impl RunStore {
     fn save_manifest(&self) -> Result<(), StoreError> {
         let mut manifest = self.manifest.clone();
         manifest.tool_version = realitygap_core::TOOL_VERSION.to_string();
-        let mut text = serde_json::to_string_pretty(&manifest).map_err(|e| StoreError::InvalidTrajectory {
-            id: String::new(),
-            message: format!("cannot serialise the manifest: {e}"),
-        })?;
+        let mut text =
+            serde_json::to_string_pretty(&manifest).map_err(|e| StoreError::InvalidTrajectory {
+                id: String::new(),
+                message: format!("cannot serialise the manifest: {e}"),
+            })?;
         text.push('\n');
         write_atomic(&self.dir.join(MANIFEST_FILE), text.as_bytes())
     }
@@ -432,15 +471,25 @@ impl RunStore {
 /// Checks that a run id can be a file stem on every platform: 1-200
 /// characters from `A-Z a-z 0-9 . _ - + = @`, not starting with `.`.
 pub fn validate_run_id(id: &str) -> Result<(), StoreError> {
-    let bad = |reason: &str| Err(StoreError::InvalidRunId { id: id.to_string(), reason: reason.to_string() });
+    let bad = |reason: &str| {
+        Err(StoreError::InvalidRunId {
+            id: id.to_string(),
+            reason: reason.to_string(),
+        })
+    };
     if id.is_empty() || id.len() > 200 {
         return bad("it must have 1 to 200 characters");
     }
     if id.starts_with('.') {
         return bad("it must not start with '.'");
     }
-    if let Some(c) = id.chars().find(|c| !(c.is_ascii_alphanumeric() || "._-+=@".contains(*c))) {
-        return bad(&format!("'{c}' is not allowed (use letters, digits and . _ - + = @)"));
+    if let Some(c) = id
+        .chars()
+        .find(|c| !(c.is_ascii_alphanumeric() || "._-+=@".contains(*c)))
+    {
+        return bad(&format!(
+            "'{c}' is not allowed (use letters, digits and . _ - + = @)"
+        ));
     }
     Ok(())
 }
@@ -451,7 +500,13 @@ pub fn sanitize_run_id(text: &str) -> String {
     let mut id: String = text
         .trim_start_matches('.')
         .chars()
-        .map(|c| if c.is_ascii_alphanumeric() || "._-+=@".contains(c) { c } else { '_' })
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || "._-+=@".contains(c) {
+                c
+            } else {
+                '_'
+            }
+        })
         .take(200)
         .collect();
     if id.is_empty() {
@@ -465,8 +520,13 @@ static TEMP_COUNTER: AtomicU64 = AtomicU64::new(0);
 /// Writes a file atomically: a temporary file in the same directory,
 /// fsync, rename over the target, fsync of the directory.
 fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), StoreError> {
-    let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let name = path.file_name().map_or_else(|| "file".into(), |n| n.to_string_lossy().into_owned());
+    let dir = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let name = path
+        .file_name()
+        .map_or_else(|| "file".into(), |n| n.to_string_lossy().into_owned());
     let tmp = dir.join(format!(
         ".{name}.tmp-{}-{}",
         std::process::id(),
@@ -503,7 +563,9 @@ pub fn discover(root: &Path) -> Vec<PathBuf> {
         if depth == 3 {
             return;
         }
-        let Ok(entries) = fs::read_dir(dir) else { return };
+        let Ok(entries) = fs::read_dir(dir) else {
+            return;
+        };
         for entry in entries.flatten() {
             let path = entry.path();
             let hidden = entry.file_name().to_string_lossy().starts_with('.');
@@ -539,20 +601,37 @@ fn push_f64(out: &mut String, x: f64) {
 /// Formats a trajectory as run CSV text (see the module docs). Roles must
 /// be non-empty and free of `,`, `"` and line breaks.
 pub fn format_run_csv(trajectory: &Trajectory) -> Result<String, StoreError> {
-    let invalid = |message: String| StoreError::InvalidTrajectory { id: String::new(), message };
-    trajectory.validate().map_err(|e: TrajectoryError| invalid(e.to_string()))?;
+    let invalid = |message: String| StoreError::InvalidTrajectory {
+        id: String::new(),
+        message,
+    };
+    trajectory
+        .validate()
+        .map_err(|e: TrajectoryError| invalid(e.to_string()))?;
     for b in &trajectory.bodies {
         if b.role.is_empty() || b.role.contains([',', '"', '\n', '\r']) {
-            return Err(invalid(format!("body role {:?} cannot be a CSV column prefix", b.role)));
+            return Err(invalid(format!(
+                "body role {:?} cannot be a CSV column prefix",
+                b.role
+            )));
         }
     }
     if let Some(i) = trajectory.time_s.iter().position(|t| !t.is_finite()) {
         return Err(invalid(format!("sample {i} has a non-finite time")));
     }
-    let joints = trajectory.joint_angles_rad.as_ref().and_then(|r| r.first()).map_or(0, Vec::len);
-    let commands = trajectory.joint_velocity_commands_rad_s.as_ref().and_then(|r| r.first()).map_or(0, Vec::len);
+    let joints = trajectory
+        .joint_angles_rad
+        .as_ref()
+        .and_then(|r| r.first())
+        .map_or(0, Vec::len);
+    let commands = trajectory
+        .joint_velocity_commands_rad_s
+        .as_ref()
+        .and_then(|r| r.first())
+        .map_or(0, Vec::len);
 
-    let mut out = String::with_capacity(64 + trajectory.len() * (24 + 7 * 20 * trajectory.bodies.len()));
+    let mut out =
+        String::with_capacity(64 + trajectory.len() * (24 + 7 * 20 * trajectory.bodies.len()));
     out.push_str("t_s");
     for b in &trajectory.bodies {
         for s in BODY_SUFFIXES {
@@ -572,7 +651,15 @@ pub fn format_run_csv(trajectory: &Trajectory) -> Result<String, StoreError> {
             match &b.poses[i] {
                 Some(p) => {
                     let o = p.orientation;
-                    for v in [p.position_m.x, p.position_m.y, p.position_m.z, o.w, o.x, o.y, o.z] {
+                    for v in [
+                        p.position_m.x,
+                        p.position_m.y,
+                        p.position_m.z,
+                        o.w,
+                        o.x,
+                        o.y,
+                        o.z,
+                    ] {
                         out.push(',');
                         push_f64(&mut out, v);
                     }
@@ -580,7 +667,13 @@ pub fn format_run_csv(trajectory: &Trajectory) -> Result<String, StoreError> {
                 None => out.push_str(",,,,,,,"),
             }
         }
-        for rows in [&trajectory.joint_angles_rad, &trajectory.joint_velocity_commands_rad_s].into_iter().flatten() {
+        for rows in [
+            &trajectory.joint_angles_rad,
+            &trajectory.joint_velocity_commands_rad_s,
+        ]
+        .into_iter()
+        .flatten()
+        {
             for &v in &rows[i] {
                 out.push(',');
                 push_f64(&mut out, v);
@@ -601,7 +694,8 @@ enum Column {
 
 /// Reads a run CSV file.
 pub fn read_run_csv(path: &Path) -> Result<Trajectory, ImportError> {
-    let bytes = fs::read(path).map_err(|e| ImportError::new(path, format!("cannot read the file: {e}")))?;
+    let bytes =
+        fs::read(path).map_err(|e| ImportError::new(path, format!("cannot read the file: {e}")))?;
     parse_run_csv(&bytes, path)
 }
 
@@ -609,11 +703,21 @@ pub fn read_run_csv(path: &Path) -> Result<Trajectory, ImportError> {
 /// only. Never panics, whatever the bytes.
 pub fn parse_run_csv(bytes: &[u8], file: &Path) -> Result<Trajectory, ImportError> {
     let mut lines = Lines::new(bytes).filter(|l| !l.bytes.is_empty());
-    let header = lines.next().ok_or_else(|| ImportError::new(file, "the file is empty"))?;
+    let header = lines
+        .next()
+        .ok_or_else(|| ImportError::new(file, "the file is empty"))?;
     let names: Vec<&[u8]> = header.bytes.split(|&b| b == b',').map(unquote).collect();
-    let at = |col: usize, message: String| ImportError::at_line(file, header.number, message).with_column(col + 1);
+    let at = |col: usize, message: String| {
+        ImportError::at_line(file, header.number, message).with_column(col + 1)
+    };
     if names[0] != b"t_s" {
-        return Err(at(0, format!("expected the column name \"t_s\", found {}", show_bytes(names[0], 40))));
+        return Err(at(
+            0,
+            format!(
+                "expected the column name \"t_s\", found {}",
+                show_bytes(names[0], 40)
+            ),
+        ));
     }
     let mut columns: Vec<Column> = Vec::with_capacity(names.len());
     let mut roles: Vec<String> = Vec::new();
@@ -634,9 +738,20 @@ pub fn parse_run_csv(bytes: &[u8], file: &Path) -> Result<Trajectory, ImportErro
                 match names.get(i + k) {
                     Some(n) if *n == want.as_bytes() => columns.push(Column::Body(roles.len(), k)),
                     Some(n) => {
-                        return Err(at(i + k, format!("expected the column name {want:?}, found {}", show_bytes(n, 40))))
+                        return Err(at(
+                            i + k,
+                            format!(
+                                "expected the column name {want:?}, found {}",
+                                show_bytes(n, 40)
+                            ),
+                        ))
                     }
-                    None => return Err(at(i + k, format!("the header ends before the column {want:?}"))),
+                    None => {
+                        return Err(at(
+                            i + k,
+                            format!("the header ends before the column {want:?}"),
+                        ))
+                    }
                 }
             }
             roles.push(role_text);
@@ -700,16 +815,30 @@ pub fn parse_run_csv(bytes: &[u8], file: &Path) -> Result<Trajectory, ImportErro
             return Err(ImportError::at_line(
                 file,
                 line.number,
-                format!("expected {} columns as in the header, found {}", names.len(), fields.len()),
+                format!(
+                    "expected {} columns as in the header, found {}",
+                    names.len(),
+                    fields.len()
+                ),
             ));
         }
         let number = |col: usize| {
-            parse_f64_str(cell(col))
-                .ok_or_else(|| err(col, format!("expected a number, found {}", show_bytes(cell(col).as_bytes(), 40))))
+            parse_f64_str(cell(col)).ok_or_else(|| {
+                err(
+                    col,
+                    format!(
+                        "expected a number, found {}",
+                        show_bytes(cell(col).as_bytes(), 40)
+                    ),
+                )
+            })
         };
         let t = number(0)?;
         if !t.is_finite() || trajectory.time_s.last().is_some_and(|&p| t < p) {
-            return Err(err(0, format!("time {t} s is not finite or goes backwards")));
+            return Err(err(
+                0,
+                format!("time {t} s is not finite or goes backwards"),
+            ));
         }
         trajectory.time_s.push(t);
         let mut angle_row = Vec::with_capacity(joints);
@@ -718,7 +847,11 @@ pub fn parse_run_csv(bytes: &[u8], file: &Path) -> Result<Trajectory, ImportErro
             let col = col + 1;
             match *column {
                 Column::Body(b, k) => {
-                    body_cells[b][k] = if cell(col).is_empty() { None } else { Some(number(col)?) };
+                    body_cells[b][k] = if cell(col).is_empty() {
+                        None
+                    } else {
+                        Some(number(col)?)
+                    };
                 }
                 Column::Joint => angle_row.push(number(col)?),
                 Column::Command => command_row.push(number(col)?),
@@ -728,11 +861,20 @@ pub fn parse_run_csv(bytes: &[u8], file: &Path) -> Result<Trajectory, ImportErro
             let pose = if cells.iter().all(Option::is_none) {
                 None
             } else if let Some(k) = cells.iter().position(Option::is_none) {
-                let col = 1 + columns.iter().position(|c| matches!(c, Column::Body(bb, kk) if *bb == b && *kk == k)).unwrap_or(0);
-                return Err(err(col, "a pose needs all seven cells, or none for a gap; this one is empty".into()));
+                let col = 1 + columns
+                    .iter()
+                    .position(|c| matches!(c, Column::Body(bb, kk) if *bb == b && *kk == k))
+                    .unwrap_or(0);
+                return Err(err(
+                    col,
+                    "a pose needs all seven cells, or none for a gap; this one is empty".into(),
+                ));
             } else {
                 let v: [f64; 7] = std::array::from_fn(|k| cells[k].unwrap_or(f64::NAN));
-                Some(Pose::new(Vec3::new(v[0], v[1], v[2]), Quat::new(v[3], v[4], v[5], v[6])))
+                Some(Pose::new(
+                    Vec3::new(v[0], v[1], v[2]),
+                    Quat::new(v[3], v[4], v[5], v[6]),
+                ))
             };
             trajectory.bodies[b].poses.push(pose);
         }

@@ -22,7 +22,10 @@ impl<'a> Lines<'a> {
     /// Lines of `bytes`, after dropping a UTF-8 byte-order mark.
     pub fn new(bytes: &'a [u8]) -> Self {
         let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
-        Lines { rest: bytes, number: 0 }
+        Lines {
+            rest: bytes,
+            number: 0,
+        }
     }
 }
 
@@ -53,7 +56,11 @@ impl<'a> Iterator for Lines<'a> {
         if let [head @ .., b'\r'] = line {
             line = head;
         }
-        Some(Line { number: self.number, bytes: line, terminated })
+        Some(Line {
+            number: self.number,
+            bytes: line,
+            terminated,
+        })
     }
 }
 
@@ -141,8 +148,8 @@ pub(crate) fn split_tab_line<'a>(bytes: &'a [u8], fields: &mut Vec<&'a [u8]>) ->
 
 /// Powers of ten that are exact in an `f64`.
 const EXACT_POW10: [f64; 23] = [
-    1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16, 1e17, 1e18, 1e19,
-    1e20, 1e21, 1e22,
+    1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16,
+    1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
 ];
 
 /// Parses a decimal number (`-12.345`, `1e17`, `2.07E-19`, `nan`, `inf`,
@@ -214,8 +221,18 @@ mod tests {
 
     #[test]
     fn lines_handle_crlf_lf_and_missing_final_newline() {
-        let v: Vec<_> = Lines::new(b"\xEF\xBB\xBFa\r\nb\n\nc").map(|l| (l.number, l.bytes, l.terminated)).collect();
-        assert_eq!(v, vec![(1, &b"a"[..], true), (2, &b"b"[..], true), (3, &b""[..], true), (4, &b"c"[..], false)]);
+        let v: Vec<_> = Lines::new(b"\xEF\xBB\xBFa\r\nb\n\nc")
+            .map(|l| (l.number, l.bytes, l.terminated))
+            .collect();
+        assert_eq!(
+            v,
+            vec![
+                (1, &b"a"[..], true),
+                (2, &b"b"[..], true),
+                (3, &b""[..], true),
+                (4, &b"c"[..], false)
+            ]
+        );
         assert_eq!(Lines::new(b"").count(), 0);
         assert_eq!(Lines::new(b"x\n").count(), 1);
     }
@@ -253,9 +270,30 @@ mod tests {
     #[test]
     fn fast_path_agrees_with_std() {
         for s in [
-            "0", "-0", "-0.0", "1", "12.5", "-872.12345", "0.00001", "999999999999999", "0.999999999999999",
-            "123456789012345", "1234567890123456", "0.1234567890123456789", "1e17", "2.07310114618026E-19",
-            "+3.25", ".5", "5.", "-.5", "NaN", "nan", "inf", "-inf", "Infinity", "0.06706189529703803",
+            "0",
+            "-0",
+            "-0.0",
+            "1",
+            "12.5",
+            "-872.12345",
+            "0.00001",
+            "999999999999999",
+            "0.999999999999999",
+            "123456789012345",
+            "1234567890123456",
+            "0.1234567890123456789",
+            "1e17",
+            "2.07310114618026E-19",
+            "+3.25",
+            ".5",
+            "5.",
+            "-.5",
+            "NaN",
+            "nan",
+            "inf",
+            "-inf",
+            "Infinity",
+            "0.06706189529703803",
         ] {
             let ours = parse_f64(s.as_bytes());
             let std: Option<f64> = s.parse().ok();
@@ -270,13 +308,19 @@ mod tests {
     #[test]
     fn str_variant_agrees() {
         for s in ["1.5", "-0.06706189529703803", "nan", "1e17", "x", ""] {
-            assert_eq!(parse_f64_str(s).map(f64::to_bits), parse_f64(s.as_bytes()).map(f64::to_bits), "{s}");
+            assert_eq!(
+                parse_f64_str(s).map(f64::to_bits),
+                parse_f64(s.as_bytes()).map(f64::to_bits),
+                "{s}"
+            );
         }
     }
 
     #[test]
     fn rejects_non_numbers() {
-        for s in ["", "-", "+", ".", "abc", "1.2.3", "1,5", " 1", "1 ", "--1", "0x10", "1e", "\u{ff}"] {
+        for s in [
+            "", "-", "+", ".", "abc", "1.2.3", "1,5", " 1", "1 ", "--1", "0x10", "1e", "\u{ff}",
+        ] {
             assert_eq!(parse_f64(s.as_bytes()), None, "{s:?}");
         }
         assert_eq!(parse_f64(&[0xff, b'1']), None);

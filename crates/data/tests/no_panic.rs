@@ -4,9 +4,9 @@
 //! simulator importer and the run-CSV reader; each must return Ok or Err.
 
 use proptest::prelude::*;
+use realitygap_data::parse_run_csv;
 use realitygap_data::qualisys::{self, QualisysOptions};
 use realitygap_data::recorded::{self, QuatOrder, RecordedOptions};
-use realitygap_data::parse_run_csv;
 use std::path::Path;
 
 /// A small valid headerless Qualisys file in the study's layout.
@@ -15,7 +15,11 @@ fn qualisys_seed() -> Vec<u8> {
                 0.04239\t-0.99910\t-0.00082\t0.04547\t0.00275\t-0.99896";
     let mut s = String::new();
     for i in 0..4 {
-        s.push_str(&format!("{}\t{:.5}\t{body}\t\t{body}\t\t{body}\t\r\n", i + 1, i as f64 / 100.0));
+        s.push_str(&format!(
+            "{}\t{:.5}\t{body}\t\t{body}\t\t{body}\t\r\n",
+            i + 1,
+            i as f64 / 100.0
+        ));
     }
     s.into_bytes()
 }
@@ -25,7 +29,9 @@ fn qualisys_header_seed() -> Vec<u8> {
     let body = "501.08185\t6.15862\t41.20390\t1.01749\t-0.79782\t-0.28554\t0.23964\t0.99989\t-0.00523\t0.01383\t\
                 0.00498\t0.99983\t0.01783\t-0.01392\t-0.01776\t0.99975";
     let names = "X\tY\tZ\tRoll\tPitch\tYaw\tResidual\tRot[0]\tRot[1]\tRot[2]\tRot[3]\tRot[4]\tRot[5]\tRot[6]\tRot[7]\tRot[8]\t";
-    let mut s = String::from("NO_OF_FRAMES\t3\r\nFREQUENCY\t100\r\nDATA_INCLUDED\t6D\r\nBODY_NAMES\tA\tB\r\n");
+    let mut s = String::from(
+        "NO_OF_FRAMES\t3\r\nFREQUENCY\t100\r\nDATA_INCLUDED\t6D\r\nBODY_NAMES\tA\tB\r\n",
+    );
     s.push_str(&format!("A {names}\tB {names}\r\n"));
     for _ in 0..3 {
         s.push_str(&format!("{body}\t\t{body}\t\r\n"));
@@ -55,7 +61,9 @@ enum Mutation {
 }
 
 fn mutation() -> impl Strategy<Value = Mutation> {
-    let separator = prop::sample::select(vec![b'\t', b'\n', b'\r', b',', b' ', b'-', b'.', b'e', b'0', 0xff, 0]);
+    let separator = prop::sample::select(vec![
+        b'\t', b'\n', b'\r', b',', b' ', b'-', b'.', b'e', b'0', 0xff, 0,
+    ]);
     prop_oneof![
         any::<usize>().prop_map(Mutation::Truncate),
         (any::<usize>(), any::<u8>()).prop_map(|(i, b)| Mutation::Flip(i, b)),
@@ -129,7 +137,12 @@ fn seeds_are_valid() {
     let run = qualisys::parse(&qualisys_header_seed(), file, &QualisysOptions::default()).unwrap();
     assert_eq!(run.trajectory.len(), 3);
     assert!(run.warnings.is_empty(), "{:?}", run.warnings);
-    let run = recorded::parse(&recorded_seed(), file, &RecordedOptions::new(QuatOrder::Xyzw)).unwrap();
+    let run = recorded::parse(
+        &recorded_seed(),
+        file,
+        &RecordedOptions::new(QuatOrder::Xyzw),
+    )
+    .unwrap();
     assert_eq!(run.trajectory.len(), 4);
     assert_eq!(parse_run_csv(&run_csv_seed(), file).unwrap().len(), 3);
 }

@@ -32,7 +32,8 @@ struct Figures {
 fn measure(scene: &Scene, robot: &RobotModel, repeats: usize) -> Figures {
     scene.validate(robot).unwrap();
     let settings = scene.settings_for("bullet");
-    let load = || BulletSimulation::load(scene, robot, &settings, &ModelVariation::default()).unwrap();
+    let load =
+        || BulletSimulation::load(scene, robot, &settings, &ModelVariation::default()).unwrap();
     let mut best_loop = f64::INFINITY;
     let mut best_raw = f64::INFINITY;
     let mut steps = 0;
@@ -43,7 +44,11 @@ fn measure(scene: &Scene, robot: &RobotModel, repeats: usize) -> Figures {
         assert_eq!(out.status, RunStatus::Completed);
         best_loop = best_loop.min(out.wall_time_s);
         steps = out.engine_steps;
-        commands = out.trajectory.joint_velocity_commands_rad_s.clone().unwrap();
+        commands = out
+            .trajectory
+            .joint_velocity_commands_rad_s
+            .clone()
+            .unwrap();
     }
     let per_period = steps / commands.len() as u64;
     for _ in 0..repeats {
@@ -69,16 +74,26 @@ fn main() {
     let mut robots = vec![(
         "mico2",
         None,
-        RobotModel::from_urdf_file(&workspace().join("assets/robots/mico2/mico2.urdf"), &PackageResolver::new())
-            .unwrap(),
+        RobotModel::from_urdf_file(
+            &workspace().join("assets/robots/mico2/mico2.urdf"),
+            &PackageResolver::new(),
+        )
+        .unwrap(),
     )];
     if paper.join("kinova_description").is_dir() {
         let mut resolver = PackageResolver::new();
         resolver.insert("kinova_description", paper.join("kinova_description"));
         let urdf = paper.join("kinova_description/urdf/m1n6s300.urdf");
-        robots.push(("official", Some(urdf.clone()), RobotModel::from_urdf_file(&urdf, &resolver).unwrap()));
+        robots.push((
+            "official",
+            Some(urdf.clone()),
+            RobotModel::from_urdf_file(&urdf, &resolver).unwrap(),
+        ));
     } else {
-        eprintln!("paper data not found at {}: the official mesh model is left out", paper.display());
+        eprintln!(
+            "paper data not found at {}: the official mesh model is left out",
+            paper.display()
+        );
     }
     println!("Bullet: controller loop vs raw stepping loop (best of {repeats}, timestep 0.01 s)");
     println!(
@@ -86,9 +101,18 @@ fn main() {
         "scene", "robot", "loop step/s", "raw step/s", "overhead", "real-time x"
     );
     let mut worst: f64 = 0.0;
-    for name in ["scene1_single_joint", "scene2_two_joints", "scene3_cube_push"] {
+    for name in [
+        "scene1_single_joint",
+        "scene2_two_joints",
+        "scene3_cube_push",
+    ] {
         for (label, urdf, robot) in &robots {
-            let mut scene = Scene::from_file(&workspace().join("assets/scenes").join(format!("{name}.toml"))).unwrap();
+            let mut scene = Scene::from_file(
+                &workspace()
+                    .join("assets/scenes")
+                    .join(format!("{name}.toml")),
+            )
+            .unwrap();
             if let Some(u) = urdf {
                 scene.set_robot_urdf(u.clone());
             }
@@ -106,5 +130,8 @@ fn main() {
             );
         }
     }
-    println!("largest overhead of the controller loop over raw stepping: {:.1}% (target <= 5%)", worst * 100.0);
+    println!(
+        "largest overhead of the controller loop over raw stepping: {:.1}% (target <= 5%)",
+        worst * 100.0
+    );
 }

@@ -9,20 +9,24 @@ use std::ffi::{c_char, c_int};
 use std::sync::{Mutex, MutexGuard};
 
 pub(crate) use rubullet_sys::{
-    b3ChangeDynamicsInfoSetLateralFriction, b3ChangeDynamicsInfoSetLocalInertiaDiagonal, b3ChangeDynamicsInfoSetMass,
-    b3ConnectPhysicsDirect, b3ContactInformation, b3CreateCollisionShapeAddBox, b3CreateCollisionShapeAddPlane,
-    b3CreateCollisionShapeCommandInit, b3CreateMultiBodyBase, b3CreateMultiBodyCommandInit, b3CreatePoseCommandInit,
-    b3CreatePoseCommandSetJointPosition, b3CreatePoseCommandSetJointVelocity, b3DisconnectSharedMemory, b3DynamicsInfo,
-    b3GetContactPointInformation, b3GetDynamicsInfo, b3GetDynamicsInfoCommandInit, b3GetJointInfo, b3GetLinkState,
-    b3GetNumJoints, b3GetStatusAABB, b3GetStatusActualState, b3GetStatusBodyIndex, b3GetStatusCollisionShapeUniqueId,
-    b3GetStatusPhysicsSimulationParameters, b3GetStatusType, b3InitChangeDynamicsInfo, b3InitPhysicsParamCommand,
-    b3InitRequestContactPointInformation, b3InitRequestPhysicsParamCommand, b3InitStepSimulationCommand,
-    b3JointControlCommandInit2, b3JointControlSetDesiredPosition, b3JointControlSetDesiredVelocity,
-    b3JointControlSetKd, b3JointControlSetKp, b3JointControlSetMaximumForce, b3JointInfo, b3LinkState,
+    b3ChangeDynamicsInfoSetLateralFriction, b3ChangeDynamicsInfoSetLocalInertiaDiagonal,
+    b3ChangeDynamicsInfoSetMass, b3ConnectPhysicsDirect, b3ContactInformation,
+    b3CreateCollisionShapeAddBox, b3CreateCollisionShapeAddPlane,
+    b3CreateCollisionShapeCommandInit, b3CreateMultiBodyBase, b3CreateMultiBodyCommandInit,
+    b3CreatePoseCommandInit, b3CreatePoseCommandSetJointPosition,
+    b3CreatePoseCommandSetJointVelocity, b3DisconnectSharedMemory, b3DynamicsInfo,
+    b3GetContactPointInformation, b3GetDynamicsInfo, b3GetDynamicsInfoCommandInit, b3GetJointInfo,
+    b3GetLinkState, b3GetNumJoints, b3GetStatusAABB, b3GetStatusActualState, b3GetStatusBodyIndex,
+    b3GetStatusCollisionShapeUniqueId, b3GetStatusPhysicsSimulationParameters, b3GetStatusType,
+    b3InitChangeDynamicsInfo, b3InitPhysicsParamCommand, b3InitRequestContactPointInformation,
+    b3InitRequestPhysicsParamCommand, b3InitStepSimulationCommand, b3JointControlCommandInit2,
+    b3JointControlSetDesiredPosition, b3JointControlSetDesiredVelocity, b3JointControlSetKd,
+    b3JointControlSetKp, b3JointControlSetMaximumForce, b3JointInfo, b3LinkState,
     b3LoadUrdfCommandInit, b3LoadUrdfCommandSetFlags, b3LoadUrdfCommandSetStartOrientation,
     b3LoadUrdfCommandSetStartPosition, b3LoadUrdfCommandSetUseFixedBase, b3PhysicsClientHandle,
-    b3PhysicsParamSetContactBreakingThreshold, b3PhysicsParamSetDefaultContactERP, b3PhysicsParamSetDefaultFrictionERP,
-    b3PhysicsParamSetDefaultGlobalCFM, b3PhysicsParamSetDefaultNonContactERP, b3PhysicsParamSetEnableConeFriction,
+    b3PhysicsParamSetContactBreakingThreshold, b3PhysicsParamSetDefaultContactERP,
+    b3PhysicsParamSetDefaultFrictionERP, b3PhysicsParamSetDefaultGlobalCFM,
+    b3PhysicsParamSetDefaultNonContactERP, b3PhysicsParamSetEnableConeFriction,
     b3PhysicsParamSetGravity, b3PhysicsParamSetNumSolverIterations, b3PhysicsParamSetNumSubSteps,
     b3PhysicsParamSetSolverResidualThreshold, b3PhysicsParamSetSplitImpulsePenetrationThreshold,
     b3PhysicsParamSetTimeStep, b3PhysicsParamSetUseSplitImpulse, b3PhysicsSimulationParameters,
@@ -33,17 +37,25 @@ pub(crate) use rubullet_sys::{
 
 // Server status codes (SharedMemoryPublic.h, enum EnumSharedMemoryServerStatus;
 // rubullet-sys declares the enum in the same order, checked by a test).
-pub(crate) const CMD_CLIENT_COMMAND_COMPLETED: c_int = Status::CMD_CLIENT_COMMAND_COMPLETED as c_int;
+pub(crate) const CMD_CLIENT_COMMAND_COMPLETED: c_int =
+    Status::CMD_CLIENT_COMMAND_COMPLETED as c_int;
 pub(crate) const CMD_URDF_LOADING_COMPLETED: c_int = Status::CMD_URDF_LOADING_COMPLETED as c_int;
-pub(crate) const CMD_ACTUAL_STATE_UPDATE_COMPLETED: c_int = Status::CMD_ACTUAL_STATE_UPDATE_COMPLETED as c_int;
-pub(crate) const CMD_DESIRED_STATE_RECEIVED_COMPLETED: c_int = Status::CMD_DESIRED_STATE_RECEIVED_COMPLETED as c_int;
-pub(crate) const CMD_STEP_FORWARD_SIMULATION_COMPLETED: c_int = Status::CMD_STEP_FORWARD_SIMULATION_COMPLETED as c_int;
+pub(crate) const CMD_ACTUAL_STATE_UPDATE_COMPLETED: c_int =
+    Status::CMD_ACTUAL_STATE_UPDATE_COMPLETED as c_int;
+pub(crate) const CMD_DESIRED_STATE_RECEIVED_COMPLETED: c_int =
+    Status::CMD_DESIRED_STATE_RECEIVED_COMPLETED as c_int;
+pub(crate) const CMD_STEP_FORWARD_SIMULATION_COMPLETED: c_int =
+    Status::CMD_STEP_FORWARD_SIMULATION_COMPLETED as c_int;
 pub(crate) const CMD_CONTACT_POINT_INFORMATION_COMPLETED: c_int =
     Status::CMD_CONTACT_POINT_INFORMATION_COMPLETED as c_int;
-pub(crate) const CMD_REQUEST_COLLISION_INFO_COMPLETED: c_int = Status::CMD_REQUEST_COLLISION_INFO_COMPLETED as c_int;
-pub(crate) const CMD_GET_DYNAMICS_INFO_COMPLETED: c_int = Status::CMD_GET_DYNAMICS_INFO_COMPLETED as c_int;
-pub(crate) const CMD_CREATE_COLLISION_SHAPE_COMPLETED: c_int = Status::CMD_CREATE_COLLISION_SHAPE_COMPLETED as c_int;
-pub(crate) const CMD_CREATE_MULTI_BODY_COMPLETED: c_int = Status::CMD_CREATE_MULTI_BODY_COMPLETED as c_int;
+pub(crate) const CMD_REQUEST_COLLISION_INFO_COMPLETED: c_int =
+    Status::CMD_REQUEST_COLLISION_INFO_COMPLETED as c_int;
+pub(crate) const CMD_GET_DYNAMICS_INFO_COMPLETED: c_int =
+    Status::CMD_GET_DYNAMICS_INFO_COMPLETED as c_int;
+pub(crate) const CMD_CREATE_COLLISION_SHAPE_COMPLETED: c_int =
+    Status::CMD_CREATE_COLLISION_SHAPE_COMPLETED as c_int;
+pub(crate) const CMD_CREATE_MULTI_BODY_COMPLETED: c_int =
+    Status::CMD_CREATE_MULTI_BODY_COMPLETED as c_int;
 pub(crate) const CMD_REQUEST_PHYSICS_SIMULATION_PARAMETERS_COMPLETED: c_int =
     Status::CMD_REQUEST_PHYSICS_SIMULATION_PARAMETERS_COMPLETED as c_int;
 
@@ -61,11 +73,13 @@ pub(crate) const JOINT_REVOLUTE: c_int = 0;
 pub(crate) const JOINT_PRISMATIC: c_int = 1;
 
 // URDF loading flags (SharedMemoryPublic.h, enum eURDF_Flags).
-pub(crate) const URDF_USE_INERTIA_FROM_FILE: c_int = eURDF_Flags::URDF_USE_INERTIA_FROM_FILE as c_int;
+pub(crate) const URDF_USE_INERTIA_FROM_FILE: c_int =
+    eURDF_Flags::URDF_USE_INERTIA_FROM_FILE as c_int;
 pub(crate) const URDF_USE_SELF_COLLISION: c_int = eURDF_Flags::URDF_USE_SELF_COLLISION as c_int;
 pub(crate) const URDF_USE_SELF_COLLISION_EXCLUDE_PARENT: c_int =
     eURDF_Flags::URDF_USE_SELF_COLLISION_EXCLUDE_PARENT as c_int;
-pub(crate) const URDF_USE_IMPLICIT_CYLINDER: c_int = eURDF_Flags::URDF_USE_IMPLICIT_CYLINDER as c_int;
+pub(crate) const URDF_USE_IMPLICIT_CYLINDER: c_int =
+    eURDF_Flags::URDF_USE_IMPLICIT_CYLINDER as c_int;
 
 /// Bullet's clamp on every generalized velocity of a multibody
 /// (`btMultiBody::m_maxCoordinateVelocity`, 100 rad/s or m/s by default):
@@ -116,7 +130,9 @@ pub(crate) fn lock() -> BulletLock {
     if HELD.with(Cell::get) {
         return BulletLock { guard: None };
     }
-    let guard = BULLET.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+    let guard = BULLET
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner());
     HELD.with(|h| h.set(true));
     BulletLock { guard: Some(guard) }
 }
@@ -160,7 +176,11 @@ impl Client {
     /// this client and not submitted before.
     pub(crate) unsafe fn submit(&self, command: b3SharedMemoryCommandHandle) -> Reply {
         let handle = b3SubmitClientCommandAndWaitStatus(self.handle, command);
-        let kind = if handle.is_null() { -1 } else { b3GetStatusType(handle) };
+        let kind = if handle.is_null() {
+            -1
+        } else {
+            b3GetStatusType(handle)
+        };
         Reply { handle, kind }
     }
 }
@@ -178,12 +198,30 @@ impl Drop for Client {
 pub(crate) fn status_name(kind: c_int) -> String {
     let names: &[(c_int, &str)] = &[
         (-1, "no status"),
-        (Status::CMD_URDF_LOADING_FAILED as c_int, "CMD_URDF_LOADING_FAILED"),
-        (Status::CMD_CREATE_COLLISION_SHAPE_FAILED as c_int, "CMD_CREATE_COLLISION_SHAPE_FAILED"),
-        (Status::CMD_CREATE_MULTI_BODY_FAILED as c_int, "CMD_CREATE_MULTI_BODY_FAILED"),
-        (Status::CMD_ACTUAL_STATE_UPDATE_FAILED as c_int, "CMD_ACTUAL_STATE_UPDATE_FAILED"),
-        (Status::CMD_GET_DYNAMICS_INFO_FAILED as c_int, "CMD_GET_DYNAMICS_INFO_FAILED"),
-        (Status::CMD_UNKNOWN_COMMAND_FLUSHED as c_int, "CMD_UNKNOWN_COMMAND_FLUSHED"),
+        (
+            Status::CMD_URDF_LOADING_FAILED as c_int,
+            "CMD_URDF_LOADING_FAILED",
+        ),
+        (
+            Status::CMD_CREATE_COLLISION_SHAPE_FAILED as c_int,
+            "CMD_CREATE_COLLISION_SHAPE_FAILED",
+        ),
+        (
+            Status::CMD_CREATE_MULTI_BODY_FAILED as c_int,
+            "CMD_CREATE_MULTI_BODY_FAILED",
+        ),
+        (
+            Status::CMD_ACTUAL_STATE_UPDATE_FAILED as c_int,
+            "CMD_ACTUAL_STATE_UPDATE_FAILED",
+        ),
+        (
+            Status::CMD_GET_DYNAMICS_INFO_FAILED as c_int,
+            "CMD_GET_DYNAMICS_INFO_FAILED",
+        ),
+        (
+            Status::CMD_UNKNOWN_COMMAND_FLUSHED as c_int,
+            "CMD_UNKNOWN_COMMAND_FLUSHED",
+        ),
         (Status::CMD_INVALID_STATUS as c_int, "CMD_INVALID_STATUS"),
     ];
     match names.iter().find(|(k, _)| *k == kind) {
@@ -194,7 +232,11 @@ pub(crate) fn status_name(kind: c_int) -> String {
 
 /// A NUL-terminated C string buffer as text (lossy).
 pub(crate) fn c_text(buffer: &[c_char]) -> String {
-    let bytes: Vec<u8> = buffer.iter().take_while(|&&c| c != 0).map(|&c| c as u8).collect();
+    let bytes: Vec<u8> = buffer
+        .iter()
+        .take_while(|&&c| c != 0)
+        .map(|&c| c as u8)
+        .collect();
     String::from_utf8_lossy(&bytes).into_owned()
 }
 

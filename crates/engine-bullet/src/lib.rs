@@ -73,7 +73,9 @@ mod urdf_file;
 
 pub use messages::{install_message_handler, take_messages, BulletMessage, Level};
 
-use realitygap_core::engine::{Engine, EngineError, EngineSettings, ModelVariation, SettingInfo, Simulation};
+use realitygap_core::engine::{
+    Engine, EngineError, EngineSettings, ModelVariation, SettingInfo, Simulation,
+};
 use realitygap_core::pose::{Pose, Quat, Vec3};
 use realitygap_core::robot::stl::TriangleMesh;
 use realitygap_core::robot::{Geometry, RobotModel};
@@ -201,58 +203,87 @@ impl Default for Options {
 }
 
 fn setting_error(key: &str, message: impl Into<String>) -> EngineError {
-    EngineError::Setting { engine: ENGINE_NAME.to_string(), key: key.to_string(), message: message.into() }
+    EngineError::Setting {
+        engine: ENGINE_NAME.to_string(),
+        key: key.to_string(),
+        message: message.into(),
+    }
 }
 
 fn load_error(message: impl Into<String>) -> EngineError {
-    EngineError::Load { engine: ENGINE_NAME.to_string(), message: message.into() }
+    EngineError::Load {
+        engine: ENGINE_NAME.to_string(),
+        message: message.into(),
+    }
 }
 
 fn parse_options(settings: &EngineSettings) -> Result<Options, EngineError> {
     let mut o = Options::default();
     for (key, value) in settings {
         let number = |min: f64, max: f64, min_inclusive: bool| -> Result<f64, EngineError> {
-            let v =
-                value.as_f64().ok_or_else(|| setting_error(key, format!("expected a number, found \"{value}\"")))?;
+            let v = value.as_f64().ok_or_else(|| {
+                setting_error(key, format!("expected a number, found \"{value}\""))
+            })?;
             let above = if min_inclusive { v >= min } else { v > min };
             if v.is_finite() && above && v <= max {
                 Ok(v)
             } else {
-                let low = if min_inclusive { format!(">= {min}") } else { format!("> {min}") };
-                let high = if max.is_finite() { format!(" and <= {max}") } else { String::new() };
-                Err(setting_error(key, format!("must be a number {low}{high}, found {v}")))
+                let low = if min_inclusive {
+                    format!(">= {min}")
+                } else {
+                    format!("> {min}")
+                };
+                let high = if max.is_finite() {
+                    format!(" and <= {max}")
+                } else {
+                    String::new()
+                };
+                Err(setting_error(
+                    key,
+                    format!("must be a number {low}{high}, found {v}"),
+                ))
             }
         };
         let any_number = || -> Result<f64, EngineError> {
-            value
-                .as_f64()
-                .filter(|v| v.is_finite())
-                .ok_or_else(|| setting_error(key, format!("expected a finite number, found \"{value}\"")))
+            value.as_f64().filter(|v| v.is_finite()).ok_or_else(|| {
+                setting_error(key, format!("expected a finite number, found \"{value}\""))
+            })
         };
         let whole = |min: i64| -> Result<i32, EngineError> {
-            let v = value
-                .as_i64()
-                .ok_or_else(|| setting_error(key, format!("expected a whole number, found \"{value}\"")))?;
+            let v = value.as_i64().ok_or_else(|| {
+                setting_error(key, format!("expected a whole number, found \"{value}\""))
+            })?;
             if v >= min && v <= i32::MAX as i64 {
                 Ok(v as i32)
             } else {
-                Err(setting_error(key, format!("must be a whole number >= {min}, found {v}")))
+                Err(setting_error(
+                    key,
+                    format!("must be a whole number >= {min}, found {v}"),
+                ))
             }
         };
         let boolean = || -> Result<bool, EngineError> {
-            value.as_bool().ok_or_else(|| setting_error(key, format!("expected true or false, found \"{value}\"")))
+            value.as_bool().ok_or_else(|| {
+                setting_error(key, format!("expected true or false, found \"{value}\""))
+            })
         };
         match key.as_str() {
             "timestep_s" => o.timestep_s = number(0.0, f64::INFINITY, false)?,
             "solver_iterations" => o.solver_iterations = Some(whole(1)?),
-            "solver_residual_threshold" => o.solver_residual_threshold = Some(number(0.0, f64::INFINITY, true)?),
+            "solver_residual_threshold" => {
+                o.solver_residual_threshold = Some(number(0.0, f64::INFINITY, true)?)
+            }
             "contact_erp" => o.contact_erp = Some(number(0.0, 1.0, true)?),
             "non_contact_erp" => o.non_contact_erp = Some(number(0.0, 1.0, true)?),
             "friction_erp" => o.friction_erp = Some(number(0.0, 1.0, true)?),
             "global_cfm" => o.global_cfm = Some(number(0.0, f64::INFINITY, true)?),
             "split_impulse" => o.split_impulse = Some(boolean()?),
-            "split_impulse_penetration_threshold_m" => o.split_impulse_penetration_threshold_m = Some(any_number()?),
-            "contact_breaking_threshold_m" => o.contact_breaking_threshold_m = Some(number(0.0, f64::INFINITY, false)?),
+            "split_impulse_penetration_threshold_m" => {
+                o.split_impulse_penetration_threshold_m = Some(any_number()?)
+            }
+            "contact_breaking_threshold_m" => {
+                o.contact_breaking_threshold_m = Some(number(0.0, f64::INFINITY, false)?)
+            }
             "cone_friction" => o.cone_friction = Some(boolean()?),
             "max_force_n_m" => o.max_force_n_m = Some(number(0.0, f64::INFINITY, false)?),
             "velocity_gain" => o.velocity_gain = number(0.0, 1.0, false)?,
@@ -264,7 +295,11 @@ fn parse_options(settings: &EngineSettings) -> Result<Options, EngineError> {
                     other,
                     format!(
                         "unknown setting (Bullet accepts: {})",
-                        SETTINGS.iter().map(|s| s.key).collect::<Vec<_>>().join(", ")
+                        SETTINGS
+                            .iter()
+                            .map(|s| s.key)
+                            .collect::<Vec<_>>()
+                            .join(", ")
                     ),
                 ))
             }
@@ -305,7 +340,9 @@ impl Engine for BulletEngine {
         settings: &EngineSettings,
         variation: &ModelVariation,
     ) -> Result<Box<dyn Simulation>, EngineError> {
-        Ok(Box::new(BulletSimulation::load(scene, robot, settings, variation)?))
+        Ok(Box::new(BulletSimulation::load(
+            scene, robot, settings, variation,
+        )?))
     }
 }
 
@@ -391,7 +428,11 @@ pub struct BulletSimulation {
 /// The messages Bullet reported, for an error message.
 fn bullet_said() -> String {
     let m = take_messages();
-    let interesting: Vec<String> = m.iter().filter(|m| m.level != Level::Info).map(|m| m.text.clone()).collect();
+    let interesting: Vec<String> = m
+        .iter()
+        .filter(|m| m.level != Level::Info)
+        .map(|m| m.text.clone())
+        .collect();
     if interesting.is_empty() {
         String::new()
     } else {
@@ -405,11 +446,22 @@ fn bullet_said() -> String {
 /// by the C API with Bullet3Common's single-precision `b3Transform` in this
 /// build, which would round positions to about 1e-7 m.)
 fn link_frame(state: &ffi::b3LinkState) -> Pose {
-    let pose = |p: [f64; 3], q: [f64; 4]| Pose::new(Vec3::new(p[0], p[1], p[2]), Quat::new(q[3], q[0], q[1], q[2]));
+    let pose = |p: [f64; 3], q: [f64; 4]| {
+        Pose::new(
+            Vec3::new(p[0], p[1], p[2]),
+            Quat::new(q[3], q[0], q[1], q[2]),
+        )
+    };
     let com = pose(state.m_world_position, state.m_world_orientation);
-    let inertial = pose(state.m_local_inertial_position, state.m_local_inertial_orientation);
+    let inertial = pose(
+        state.m_local_inertial_position,
+        state.m_local_inertial_orientation,
+    );
     let inverse_rotation = inertial.orientation.conjugate();
-    let inverse = Pose::new(inverse_rotation.rotate(inertial.position_m).scale(-1.0), inverse_rotation);
+    let inverse = Pose::new(
+        inverse_rotation.rotate(inertial.position_m).scale(-1.0),
+        inverse_rotation,
+    );
     com.compose(&inverse)
 }
 
@@ -433,7 +485,9 @@ impl BulletSimulation {
             && variation.friction_scale.is_finite()
             && variation.friction_scale >= 0.0;
         if !usable {
-            return Err(load_error(format!("unusable model variation {variation:?}")));
+            return Err(load_error(format!(
+                "unusable model variation {variation:?}"
+            )));
         }
         install_message_handler();
         check_meshes(robot)?;
@@ -441,8 +495,12 @@ impl BulletSimulation {
         let urdf_c_path = urdf.c_path().map_err(load_error)?;
         let _guard = ffi::lock();
         take_messages();
-        let client = ffi::Client::connect()
-            .ok_or_else(|| load_error(format!("cannot start a Bullet physics server{}", bullet_said())))?;
+        let client = ffi::Client::connect().ok_or_else(|| {
+            load_error(format!(
+                "cannot start a Bullet physics server{}",
+                bullet_said()
+            ))
+        })?;
         let h = client.handle();
 
         // 1. Physics parameters.
@@ -484,7 +542,11 @@ impl BulletSimulation {
             if let Some(v) = options.cone_friction {
                 ffi::b3PhysicsParamSetEnableConeFriction(cmd, v as c_int);
             }
-            expect(client.submit(cmd).kind, ffi::CMD_CLIENT_COMMAND_COMPLETED, "setting the physics parameters")?;
+            expect(
+                client.submit(cmd).kind,
+                ffi::CMD_CLIENT_COMMAND_COMPLETED,
+                "setting the physics parameters",
+            )?;
         }
 
         // 2. The ground.
@@ -495,7 +557,11 @@ impl BulletSimulation {
                     let cmd = ffi::b3CreateCollisionShapeCommandInit(h);
                     ffi::b3CreateCollisionShapeAddPlane(cmd, [0.0, 0.0, 1.0].as_ptr(), 0.0);
                     let r = client.submit(cmd);
-                    expect(r.kind, ffi::CMD_CREATE_COLLISION_SHAPE_COMPLETED, "creating the ground plane")?;
+                    expect(
+                        r.kind,
+                        ffi::CMD_CREATE_COLLISION_SHAPE_COMPLETED,
+                        "creating the ground plane",
+                    )?;
                     ffi::b3GetStatusCollisionShapeUniqueId(r.handle)
                 };
                 let body = create_body(
@@ -593,8 +659,13 @@ impl BulletSimulation {
                 )?;
                 ffi::b3GetStatusCollisionShapeUniqueId(r.handle)
             };
-            let body =
-                create_body(&client, object.mass_kg, shape, object.pose, &format!("object \"{}\"", object.name))?;
+            let body = create_body(
+                &client,
+                object.mass_kg,
+                shape,
+                object.pose,
+                &format!("object \"{}\"", object.name),
+            )?;
             if let Some(f) = object.friction {
                 set_friction(&client, body, -1, f)?;
             }
@@ -606,18 +677,30 @@ impl BulletSimulation {
         // movable joints are held.
         let mut joints = Vec::new();
         for a in &scene.actuators {
-            let j = joint_names.iter().position(|n| *n == a.joint).ok_or_else(|| {
-                load_error(format!("Bullet's model of {} has no joint \"{}\"", robot.source.display(), a.joint))
-            })?;
+            let j = joint_names
+                .iter()
+                .position(|n| *n == a.joint)
+                .ok_or_else(|| {
+                    load_error(format!(
+                        "Bullet's model of {} has no joint \"{}\"",
+                        robot.source.display(),
+                        a.joint
+                    ))
+                })?;
             let info = &infos[j];
-            if info.m_joint_type != ffi::JOINT_REVOLUTE && info.m_joint_type != ffi::JOINT_PRISMATIC {
+            if info.m_joint_type != ffi::JOINT_REVOLUTE && info.m_joint_type != ffi::JOINT_PRISMATIC
+            {
                 return Err(load_error(format!(
                     "joint \"{}\" is not a revolute or prismatic joint in Bullet",
                     a.joint
                 )));
             }
             let limit = options.max_force_n_m.unwrap_or(a.force_limit);
-            let max_force = if limit.is_finite() { limit } else { UNLIMITED_FORCE_N_M };
+            let max_force = if limit.is_finite() {
+                limit
+            } else {
+                UNLIMITED_FORCE_N_M
+            };
             joints.push(MotorJoint {
                 index: j as c_int,
                 q_index: info.m_q_index as usize,
@@ -633,8 +716,17 @@ impl BulletSimulation {
                     && !scene.actuators.iter().any(|a| a.joint == joint_names[*j])
             })
             .map(|(j, i)| {
-                let angle = scene.robot.held_joints_rad.get(&joint_names[j]).copied().unwrap_or(0.0);
-                let force = if i.m_joint_max_force > 0.0 { i.m_joint_max_force } else { HELD_JOINT_DEFAULT_FORCE_N_M };
+                let angle = scene
+                    .robot
+                    .held_joints_rad
+                    .get(&joint_names[j])
+                    .copied()
+                    .unwrap_or(0.0);
+                let force = if i.m_joint_max_force > 0.0 {
+                    i.m_joint_max_force
+                } else {
+                    HELD_JOINT_DEFAULT_FORCE_N_M
+                };
                 (j, angle, force)
             })
             .collect();
@@ -645,10 +737,18 @@ impl BulletSimulation {
                     ffi::b3CreatePoseCommandSetJointPosition(h, cmd, j as c_int, angle);
                     ffi::b3CreatePoseCommandSetJointVelocity(h, cmd, j as c_int, 0.0);
                 }
-                expect(client.submit(cmd).kind, ffi::CMD_CLIENT_COMMAND_COMPLETED, "setting the held joints")?;
+                expect(
+                    client.submit(cmd).kind,
+                    ffi::CMD_CLIENT_COMMAND_COMPLETED,
+                    "setting the held joints",
+                )?;
             }
             if !held.is_empty() {
-                let cmd = ffi::b3JointControlCommandInit2(h, robot_id, ffi::CONTROL_MODE_POSITION_VELOCITY_PD);
+                let cmd = ffi::b3JointControlCommandInit2(
+                    h,
+                    robot_id,
+                    ffi::CONTROL_MODE_POSITION_VELOCITY_PD,
+                );
                 for &(j, angle, force) in &held {
                     let info = &infos[j];
                     ffi::b3JointControlSetDesiredPosition(cmd, info.m_q_index, angle);
@@ -657,24 +757,45 @@ impl BulletSimulation {
                     ffi::b3JointControlSetKd(cmd, info.m_u_index, 1.0);
                     ffi::b3JointControlSetMaximumForce(cmd, info.m_u_index, force);
                 }
-                expect(client.submit(cmd).kind, ffi::CMD_DESIRED_STATE_RECEIVED_COMPLETED, "locking the held joints")?;
+                expect(
+                    client.submit(cmd).kind,
+                    ffi::CMD_DESIRED_STATE_RECEIVED_COMPLETED,
+                    "locking the held joints",
+                )?;
             }
         }
 
         // Model variation.
         if !variation.is_identity() {
-            let mut bodies: Vec<(c_int, c_int)> = (-1..joint_count).map(|l| (robot_id, l)).collect();
+            let mut bodies: Vec<(c_int, c_int)> =
+                (-1..joint_count).map(|l| (robot_id, l)).collect();
             bodies.extend(objects.iter().map(|&b| (b, -1)));
             if variation.mass_scale != 1.0 {
                 for &(body, link) in &bodies {
                     let info = dynamics_info(&client, body, link)?;
                     if info.m_mass > 0.0 {
-                        let inertia = info.m_localInertialDiagonal.map(|i| i * variation.mass_scale);
+                        let inertia = info
+                            .m_localInertialDiagonal
+                            .map(|i| i * variation.mass_scale);
                         unsafe {
                             let cmd = ffi::b3InitChangeDynamicsInfo(h);
-                            ffi::b3ChangeDynamicsInfoSetMass(cmd, body, link, info.m_mass * variation.mass_scale);
-                            ffi::b3ChangeDynamicsInfoSetLocalInertiaDiagonal(cmd, body, link, inertia.as_ptr());
-                            expect(client.submit(cmd).kind, ffi::CMD_CLIENT_COMMAND_COMPLETED, "scaling masses")?;
+                            ffi::b3ChangeDynamicsInfoSetMass(
+                                cmd,
+                                body,
+                                link,
+                                info.m_mass * variation.mass_scale,
+                            );
+                            ffi::b3ChangeDynamicsInfoSetLocalInertiaDiagonal(
+                                cmd,
+                                body,
+                                link,
+                                inertia.as_ptr(),
+                            );
+                            expect(
+                                client.submit(cmd).kind,
+                                ffi::CMD_CLIENT_COMMAND_COMPLETED,
+                                "scaling masses",
+                            )?;
                         }
                     }
                 }
@@ -706,10 +827,9 @@ impl BulletSimulation {
                     Tracked::Link(l as c_int)
                 }
                 TrackTarget::Object(name) => {
-                    let i = object_names
-                        .iter()
-                        .position(|n| n == name)
-                        .ok_or_else(|| load_error(format!("tracked object \"{name}\" is not in the scene")))?;
+                    let i = object_names.iter().position(|n| n == name).ok_or_else(|| {
+                        load_error(format!("tracked object \"{name}\" is not in the scene"))
+                    })?;
                     Tracked::Object(i)
                 }
             });
@@ -783,13 +903,21 @@ impl BulletSimulation {
             let cmd = ffi::b3RequestActualStateCommandInit(h, self.robot);
             ffi::b3RequestActualStateCommandComputeForwardKinematics(cmd, 1);
             let r = self.client.submit(cmd);
-            expect(r.kind, ffi::CMD_ACTUAL_STATE_UPDATE_COMPLETED, "reading the robot's state")?;
+            expect(
+                r.kind,
+                ffi::CMD_ACTUAL_STATE_UPDATE_COMPLETED,
+                "reading the robot's state",
+            )?;
             let (q, qdot) = actual_state(r)?;
             for (out, joint) in self.angles_rad.iter_mut().zip(&self.joints) {
                 *out = q.get(joint.q_index).copied().unwrap_or(f64::NAN);
             }
             for v in qdot {
-                max_speed = max_speed.max(if v.is_finite() { v.abs() } else { f64::INFINITY });
+                max_speed = max_speed.max(if v.is_finite() {
+                    v.abs()
+                } else {
+                    f64::INFINITY
+                });
             }
             for (out, t) in self.poses.iter_mut().zip(&self.tracked) {
                 match *t {
@@ -805,8 +933,14 @@ impl BulletSimulation {
                 }
             }
             for (i, &body) in self.objects.iter().enumerate() {
-                let r = self.client.submit(ffi::b3RequestActualStateCommandInit(h, body));
-                expect(r.kind, ffi::CMD_ACTUAL_STATE_UPDATE_COMPLETED, "reading an object's state")?;
+                let r = self
+                    .client
+                    .submit(ffi::b3RequestActualStateCommandInit(h, body));
+                expect(
+                    r.kind,
+                    ffi::CMD_ACTUAL_STATE_UPDATE_COMPLETED,
+                    "reading an object's state",
+                )?;
                 let (q, qdot) = actual_state(r)?;
                 if q.len() < 7 {
                     return Err(self.unstable(format!(
@@ -815,9 +949,16 @@ impl BulletSimulation {
                         self.object_names[i]
                     )));
                 }
-                let pose = Pose::new(Vec3::new(q[0], q[1], q[2]), Quat::new(q[6], q[3], q[4], q[5]));
+                let pose = Pose::new(
+                    Vec3::new(q[0], q[1], q[2]),
+                    Quat::new(q[6], q[3], q[4], q[5]),
+                );
                 for v in qdot {
-                    max_speed = max_speed.max(if v.is_finite() { v.abs() } else { f64::INFINITY });
+                    max_speed = max_speed.max(if v.is_finite() {
+                        v.abs()
+                    } else {
+                        f64::INFINITY
+                    });
                 }
                 for (out, t) in self.poses.iter_mut().zip(&self.tracked) {
                     if matches!(*t, Tracked::Object(k) if k == i) {
@@ -831,7 +972,11 @@ impl BulletSimulation {
     }
 
     fn unstable(&self, message: String) -> EngineError {
-        EngineError::Unstable { engine: ENGINE_NAME.to_string(), t_s: self.time_s(), message }
+        EngineError::Unstable {
+            engine: ENGINE_NAME.to_string(),
+            t_s: self.time_s(),
+            message,
+        }
     }
 
     /// An instability Bullet papers over: a generalized velocity at Bullet's
@@ -866,9 +1011,17 @@ impl BulletSimulation {
 
     fn step_once(&mut self) -> Result<(), EngineError> {
         // SAFETY: see `load`.
-        let kind = unsafe { self.client.submit(ffi::b3InitStepSimulationCommand(self.client.handle())).kind };
+        let kind = unsafe {
+            self.client
+                .submit(ffi::b3InitStepSimulationCommand(self.client.handle()))
+                .kind
+        };
         if kind != ffi::CMD_STEP_FORWARD_SIMULATION_COMPLETED {
-            return Err(self.unstable(format!("Bullet did not step ({}){}", ffi::status_name(kind), bullet_said())));
+            return Err(self.unstable(format!(
+                "Bullet did not step ({}){}",
+                ffi::status_name(kind),
+                bullet_said()
+            )));
         }
         self.steps += 1;
         Ok(())
@@ -883,13 +1036,24 @@ impl BulletSimulation {
         // SAFETY: see `load`; the contact array is read within the count
         // Bullet reported.
         unsafe {
-            let r = self.client.submit(ffi::b3InitRequestContactPointInformation(h));
-            expect(r.kind, ffi::CMD_CONTACT_POINT_INFORMATION_COMPLETED, "reading the contacts")?;
-            let mut info = ffi::b3ContactInformation { m_numContactPoints: 0, m_contactPointData: ptr::null_mut() };
+            let r = self
+                .client
+                .submit(ffi::b3InitRequestContactPointInformation(h));
+            expect(
+                r.kind,
+                ffi::CMD_CONTACT_POINT_INFORMATION_COMPLETED,
+                "reading the contacts",
+            )?;
+            let mut info = ffi::b3ContactInformation {
+                m_numContactPoints: 0,
+                m_contactPointData: ptr::null_mut(),
+            };
             ffi::b3GetContactPointInformation(h, &mut info);
             if !info.m_contactPointData.is_null() {
-                let points =
-                    std::slice::from_raw_parts(info.m_contactPointData, info.m_numContactPoints.max(0) as usize);
+                let points = std::slice::from_raw_parts(
+                    info.m_contactPointData,
+                    info.m_numContactPoints.max(0) as usize,
+                );
                 for c in points {
                     pairs.push((
                         self.body_name(c.m_bodyUniqueIdA, c.m_linkIndexA),
@@ -908,7 +1072,10 @@ impl BulletSimulation {
             if link < 0 {
                 self.root_link_name.clone()
             } else {
-                self.link_names.get(link as usize).cloned().unwrap_or_else(|| format!("link {link}"))
+                self.link_names
+                    .get(link as usize)
+                    .cloned()
+                    .unwrap_or_else(|| format!("link {link}"))
             }
         } else if Some(body) == self.ground {
             "ground".into()
@@ -932,7 +1099,11 @@ impl BulletSimulation {
             let cmd = ffi::b3RequestActualStateCommandInit(h, self.robot);
             ffi::b3RequestActualStateCommandComputeForwardKinematics(cmd, 1);
             let r = self.client.submit(cmd);
-            expect(r.kind, ffi::CMD_ACTUAL_STATE_UPDATE_COMPLETED, "reading the robot's state")?;
+            expect(
+                r.kind,
+                ffi::CMD_ACTUAL_STATE_UPDATE_COMPLETED,
+                "reading the robot's state",
+            )?;
             let mut state = ffi::b3LinkState::default();
             if ffi::b3GetLinkState(h, r.handle, l as c_int, &mut state) == 0 {
                 return Ok(None);
@@ -946,11 +1117,17 @@ impl BulletSimulation {
     pub fn mass_and_friction(&mut self, name: &str) -> Result<Option<(f64, f64)>, EngineError> {
         let _guard = ffi::lock();
         let target = if let Some(object) = name.strip_prefix("object:") {
-            self.object_names.iter().position(|n| n == object).map(|i| (self.objects[i], -1))
+            self.object_names
+                .iter()
+                .position(|n| n == object)
+                .map(|i| (self.objects[i], -1))
         } else if name == self.root_link_name {
             Some((self.robot, -1))
         } else {
-            self.link_names.iter().position(|n| n == name).map(|l| (self.robot, l as c_int))
+            self.link_names
+                .iter()
+                .position(|n| n == name)
+                .map(|l| (self.robot, l as c_int))
         };
         match target {
             None => Ok(None),
@@ -969,7 +1146,11 @@ impl BulletSimulation {
         // SAFETY: see `load`; `p` has the C layout (checked by a test).
         unsafe {
             let r = self.client.submit(ffi::b3InitRequestPhysicsParamCommand(h));
-            expect(r.kind, ffi::CMD_REQUEST_PHYSICS_SIMULATION_PARAMETERS_COMPLETED, "reading the physics parameters")?;
+            expect(
+                r.kind,
+                ffi::CMD_REQUEST_PHYSICS_SIMULATION_PARAMETERS_COMPLETED,
+                "reading the physics parameters",
+            )?;
             ffi::b3GetStatusPhysicsSimulationParameters(r.handle, &mut p);
         }
         Ok(PhysicsParameters {
@@ -995,7 +1176,11 @@ fn expect(kind: c_int, expected: c_int, what: &str) -> Result<(), EngineError> {
     if kind == expected {
         Ok(())
     } else {
-        Err(load_error(format!("Bullet failed {what} ({}){}", ffi::status_name(kind), bullet_said())))
+        Err(load_error(format!(
+            "Bullet failed {what} ({}){}",
+            ffi::status_name(kind),
+            bullet_said()
+        )))
     }
 }
 
@@ -1021,11 +1206,20 @@ unsafe fn actual_state<'a>(reply: ffi::Reply) -> Result<(&'a [f64], &'a [f64]), 
     if ok == 0 || q.is_null() || qdot.is_null() {
         return Err(load_error("Bullet returned no state"));
     }
-    Ok((std::slice::from_raw_parts(q, nq.max(0) as usize), std::slice::from_raw_parts(qdot, nu.max(0) as usize)))
+    Ok((
+        std::slice::from_raw_parts(q, nq.max(0) as usize),
+        std::slice::from_raw_parts(qdot, nu.max(0) as usize),
+    ))
 }
 
 /// Creates a single-body multibody with a collision shape. Lock held.
-fn create_body(client: &ffi::Client, mass_kg: f64, shape: c_int, pose: Pose, what: &str) -> Result<c_int, EngineError> {
+fn create_body(
+    client: &ffi::Client,
+    mass_kg: f64,
+    shape: c_int,
+    pose: Pose,
+    what: &str,
+) -> Result<c_int, EngineError> {
     let p = pose.position_m.to_array();
     let q = xyzw(pose.orientation);
     let inertial_p = [0.0; 3];
@@ -1044,28 +1238,53 @@ fn create_body(client: &ffi::Client, mass_kg: f64, shape: c_int, pose: Pose, wha
             inertial_q.as_ptr(),
         );
         let r = client.submit(cmd);
-        expect(r.kind, ffi::CMD_CREATE_MULTI_BODY_COMPLETED, &format!("creating {what}"))?;
+        expect(
+            r.kind,
+            ffi::CMD_CREATE_MULTI_BODY_COMPLETED,
+            &format!("creating {what}"),
+        )?;
         Ok(ffi::b3GetStatusBodyIndex(r.handle))
     }
 }
 
 /// Sets the lateral friction coefficient of a body's link. Lock held.
-fn set_friction(client: &ffi::Client, body: c_int, link: c_int, friction: f64) -> Result<(), EngineError> {
+fn set_friction(
+    client: &ffi::Client,
+    body: c_int,
+    link: c_int,
+    friction: f64,
+) -> Result<(), EngineError> {
     // SAFETY: see `BulletSimulation::load`.
     unsafe {
         let cmd = ffi::b3InitChangeDynamicsInfo(client.handle());
         ffi::b3ChangeDynamicsInfoSetLateralFriction(cmd, body, link, friction);
-        expect(client.submit(cmd).kind, ffi::CMD_CLIENT_COMMAND_COMPLETED, "setting a friction coefficient")
+        expect(
+            client.submit(cmd).kind,
+            ffi::CMD_CLIENT_COMMAND_COMPLETED,
+            "setting a friction coefficient",
+        )
     }
 }
 
 /// The dynamics of a body's link. Lock held.
-fn dynamics_info(client: &ffi::Client, body: c_int, link: c_int) -> Result<ffi::b3DynamicsInfo, EngineError> {
+fn dynamics_info(
+    client: &ffi::Client,
+    body: c_int,
+    link: c_int,
+) -> Result<ffi::b3DynamicsInfo, EngineError> {
     // SAFETY: see `BulletSimulation::load`; b3DynamicsInfo has the C layout
     // (checked by a test) and is plain data, so zeroed is a valid value.
     unsafe {
-        let r = client.submit(ffi::b3GetDynamicsInfoCommandInit(client.handle(), body, link));
-        expect(r.kind, ffi::CMD_GET_DYNAMICS_INFO_COMPLETED, "reading masses and frictions")?;
+        let r = client.submit(ffi::b3GetDynamicsInfoCommandInit(
+            client.handle(),
+            body,
+            link,
+        ));
+        expect(
+            r.kind,
+            ffi::CMD_GET_DYNAMICS_INFO_COMPLETED,
+            "reading masses and frictions",
+        )?;
         let mut info: ffi::b3DynamicsInfo = std::mem::zeroed();
         ffi::b3GetDynamicsInfo(r.handle, &mut info);
         Ok(info)
@@ -1083,7 +1302,9 @@ fn dynamics_info(client: &ffi::Client, body: c_int, link: c_int) -> Result<ffi::
 fn check_meshes(robot: &RobotModel) -> Result<(), EngineError> {
     for link in &robot.links {
         for c in &link.collisions {
-            let Geometry::Mesh { path, .. } = &c.geometry else { continue };
+            let Geometry::Mesh { path, .. } = &c.geometry else {
+                continue;
+            };
             let fail = |what: String| {
                 load_error(format!(
                     "URDF file {}: link \"{}\": collision mesh {what}",
@@ -1091,7 +1312,10 @@ fn check_meshes(robot: &RobotModel) -> Result<(), EngineError> {
                     link.name
                 ))
             };
-            let extension = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+            let extension = path
+                .extension()
+                .map(|e| e.to_string_lossy().to_ascii_lowercase())
+                .unwrap_or_default();
             match extension.as_str() {
                 "stl" => {
                     let mesh = TriangleMesh::read(path).map_err(|e| fail(e.to_string()))?;
@@ -1132,8 +1356,15 @@ fn check_colliders(
 ) -> Result<(), EngineError> {
     // SAFETY: see `BulletSimulation::load`.
     unsafe {
-        let r = client.submit(ffi::b3RequestCollisionInfoCommandInit(client.handle(), body));
-        expect(r.kind, ffi::CMD_REQUEST_COLLISION_INFO_COMPLETED, "reading the collision shapes")?;
+        let r = client.submit(ffi::b3RequestCollisionInfoCommandInit(
+            client.handle(),
+            body,
+        ));
+        expect(
+            r.kind,
+            ffi::CMD_REQUEST_COLLISION_INFO_COMPLETED,
+            "reading the collision shapes",
+        )?;
         for link in robot.links.iter().filter(|l| !l.collisions.is_empty()) {
             let index = if link.name == robot.links[robot.root_link].name {
                 -1
@@ -1185,7 +1416,11 @@ impl Simulation for BulletSimulation {
         if rad.len() != self.joints.len() {
             return Err(EngineError::Usage {
                 engine: ENGINE_NAME.to_string(),
-                message: format!("{} joint angles given for {} joints", rad.len(), self.joints.len()),
+                message: format!(
+                    "{} joint angles given for {} joints",
+                    rad.len(),
+                    self.joints.len()
+                ),
             });
         }
         let _guard = ffi::lock();
@@ -1197,7 +1432,11 @@ impl Simulation for BulletSimulation {
                 ffi::b3CreatePoseCommandSetJointPosition(h, cmd, joint.index, angle);
                 ffi::b3CreatePoseCommandSetJointVelocity(h, cmd, joint.index, 0.0);
             }
-            expect(self.client.submit(cmd).kind, ffi::CMD_CLIENT_COMMAND_COMPLETED, "setting the joint angles")?;
+            expect(
+                self.client.submit(cmd).kind,
+                ffi::CMD_CLIENT_COMMAND_COMPLETED,
+                "setting the joint angles",
+            )?;
         }
         self.refresh()
     }
@@ -1240,7 +1479,10 @@ mod tests {
     use realitygap_core::engine::SettingValue;
 
     fn settings(pairs: &[(&str, SettingValue)]) -> EngineSettings {
-        pairs.iter().map(|(k, v)| (k.to_string(), v.clone())).collect()
+        pairs
+            .iter()
+            .map(|(k, v)| (k.to_string(), v.clone()))
+            .collect()
     }
 
     #[test]
@@ -1251,7 +1493,10 @@ mod tests {
             ("max_force_n_m", SettingValue::Integer(10)),
             ("velocity_gain", SettingValue::Float(0.5)),
             ("split_impulse", SettingValue::Bool(false)),
-            ("split_impulse_penetration_threshold_m", SettingValue::Float(-0.02)),
+            (
+                "split_impulse_penetration_threshold_m",
+                SettingValue::Float(-0.02),
+            ),
         ]))
         .unwrap();
         assert_eq!(o.timestep_s, 0.005);
@@ -1261,27 +1506,61 @@ mod tests {
         assert_eq!(o.split_impulse, Some(false));
         assert_eq!(o.split_impulse_penetration_threshold_m, Some(-0.02));
         assert!(o.inertia_from_file);
-        assert_eq!(BulletEngine.check_settings(&EngineSettings::new()).unwrap(), 0.01);
+        assert_eq!(
+            BulletEngine.check_settings(&EngineSettings::new()).unwrap(),
+            0.01
+        );
     }
 
     #[test]
     fn rejects_bad_settings() {
         let cases: &[(&str, SettingValue, &str)] = &[
-            ("timestep_s", SettingValue::Float(0.0), "must be a number > 0"),
-            ("timestep_s", SettingValue::Text("fast".into()), "expected a number"),
-            ("solver_iterations", SettingValue::Integer(0), "whole number >= 1"),
-            ("solver_iterations", SettingValue::Float(2.5), "expected a whole number"),
+            (
+                "timestep_s",
+                SettingValue::Float(0.0),
+                "must be a number > 0",
+            ),
+            (
+                "timestep_s",
+                SettingValue::Text("fast".into()),
+                "expected a number",
+            ),
+            (
+                "solver_iterations",
+                SettingValue::Integer(0),
+                "whole number >= 1",
+            ),
+            (
+                "solver_iterations",
+                SettingValue::Float(2.5),
+                "expected a whole number",
+            ),
             ("contact_erp", SettingValue::Float(1.5), "<= 1"),
             ("velocity_gain", SettingValue::Float(0.0), "> 0"),
             ("max_force_n_m", SettingValue::Float(-1.0), "> 0"),
-            ("split_impulse", SettingValue::Integer(1), "expected true or false"),
-            ("split_impulse_penetration_threshold_m", SettingValue::Float(f64::NAN), "finite"),
-            ("integrator", SettingValue::Text("rk4".into()), "unknown setting (Bullet accepts: timestep_s"),
+            (
+                "split_impulse",
+                SettingValue::Integer(1),
+                "expected true or false",
+            ),
+            (
+                "split_impulse_penetration_threshold_m",
+                SettingValue::Float(f64::NAN),
+                "finite",
+            ),
+            (
+                "integrator",
+                SettingValue::Text("rk4".into()),
+                "unknown setting (Bullet accepts: timestep_s",
+            ),
         ];
         for (key, value, expected) in cases {
             let e = parse_options(&settings(&[(key, value.clone())])).unwrap_err();
             let text = e.to_string();
-            assert!(text.starts_with(&format!("engine bullet: setting `{key}`:")), "{text}");
+            assert!(
+                text.starts_with(&format!("engine bullet: setting `{key}`:")),
+                "{text}"
+            );
             assert!(text.contains(expected), "{key}={value}: {text}");
         }
     }
@@ -1290,13 +1569,13 @@ mod tests {
     fn every_setting_is_documented_and_accepted() {
         for s in SETTINGS {
             let value = match s.key {
-                "split_impulse" | "cone_friction" | "inertia_from_file" | "self_collision" | "implicit_cylinders" => {
-                    SettingValue::Bool(true)
-                }
+                "split_impulse" | "cone_friction" | "inertia_from_file" | "self_collision"
+                | "implicit_cylinders" => SettingValue::Bool(true),
                 "solver_iterations" => SettingValue::Integer(10),
                 _ => SettingValue::Float(0.5),
             };
-            parse_options(&settings(&[(s.key, value)])).unwrap_or_else(|e| panic!("{}: {e}", s.key));
+            parse_options(&settings(&[(s.key, value)]))
+                .unwrap_or_else(|e| panic!("{}: {e}", s.key));
             assert!(!s.help.is_empty());
         }
     }
@@ -1307,7 +1586,10 @@ mod tests {
         assert_eq!(std::mem::size_of::<ffi::b3JointInfo>(), 2272);
         assert_eq!(std::mem::size_of::<ffi::b3LinkState>(), 264);
         assert_eq!(std::mem::size_of::<ffi::b3DynamicsInfo>(), 200);
-        assert_eq!(std::mem::size_of::<ffi::b3PhysicsSimulationParameters>(), 224);
+        assert_eq!(
+            std::mem::size_of::<ffi::b3PhysicsSimulationParameters>(),
+            224
+        );
         assert_eq!(std::mem::size_of::<rubullet_sys::b3ContactPointData>(), 176);
     }
 }

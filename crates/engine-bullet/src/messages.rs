@@ -59,7 +59,11 @@ struct Log {
     partial_line: String,
 }
 
-static LOG: Mutex<Log> = Mutex::new(Log { kept: Vec::new(), pending_location: None, partial_line: String::new() });
+static LOG: Mutex<Log> = Mutex::new(Log {
+    kept: Vec::new(),
+    pending_location: None,
+    partial_line: String::new(),
+});
 
 fn with_log<R>(f: impl FnOnce(&mut Log) -> R) -> R {
     let mut log = LOG.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
@@ -84,7 +88,9 @@ fn keep(log: &mut Log, level: Level, text: String) {
 
 /// `b3Warning[examples/Importers/X.cpp,126]:` -> `X.cpp:126`.
 fn location(fragment: &str) -> Option<String> {
-    let rest = fragment.strip_prefix("b3Warning[").or_else(|| fragment.strip_prefix("b3Error["))?;
+    let rest = fragment
+        .strip_prefix("b3Warning[")
+        .or_else(|| fragment.strip_prefix("b3Error["))?;
     let inside = rest.trim_end().strip_suffix("]:")?;
     let (file, line) = inside.rsplit_once(',')?;
     let file = file.rsplit('/').next().unwrap_or(file);
@@ -120,7 +126,9 @@ fn fragment(message: *const c_char) -> String {
         return String::new();
     }
     // SAFETY: Bullet passes a NUL-terminated buffer valid for this call.
-    unsafe { CStr::from_ptr(message) }.to_string_lossy().into_owned()
+    unsafe { CStr::from_ptr(message) }
+        .to_string_lossy()
+        .into_owned()
 }
 
 unsafe extern "C" fn on_printf(message: *const c_char) {
@@ -173,7 +181,10 @@ mod tests {
     fn joins_locations_and_lines() {
         let _guard = crate::ffi::lock();
         take_messages();
-        record(Level::Warning, "b3Warning[examples/Importers/ImportURDFDemo/BulletUrdfImporter.cpp,126]:\n");
+        record(
+            Level::Warning,
+            "b3Warning[examples/Importers/ImportURDFDemo/BulletUrdfImporter.cpp,126]:\n",
+        );
         record(Level::Warning, "No inertial data for link, using mass=1");
         record(Level::Info, "first ");
         record(Level::Info, "line\nsecond");
@@ -185,11 +196,21 @@ mod tests {
             vec![
                 BulletMessage {
                     level: Level::Warning,
-                    text: "BulletUrdfImporter.cpp:126: No inertial data for link, using mass=1".into()
+                    text: "BulletUrdfImporter.cpp:126: No inertial data for link, using mass=1"
+                        .into()
                 },
-                BulletMessage { level: Level::Info, text: "first line".into() },
-                BulletMessage { level: Level::Error, text: "X.cpp:7: bad".into() },
-                BulletMessage { level: Level::Info, text: "second".into() },
+                BulletMessage {
+                    level: Level::Info,
+                    text: "first line".into()
+                },
+                BulletMessage {
+                    level: Level::Error,
+                    text: "X.cpp:7: bad".into()
+                },
+                BulletMessage {
+                    level: Level::Info,
+                    text: "second".into()
+                },
             ]
         );
         assert!(take_messages().is_empty());

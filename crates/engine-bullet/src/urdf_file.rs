@@ -55,7 +55,10 @@ pub(crate) fn c_path(path: &Path) -> Result<CString, String> {
     use std::os::unix::ffi::OsStrExt;
     let bytes = path.as_os_str().as_bytes();
     if bytes.len() > BULLET_MAX_PATH {
-        return Err(format!("the path {} is longer than Bullet's limit of {BULLET_MAX_PATH} bytes", path.display()));
+        return Err(format!(
+            "the path {} is longer than Bullet's limit of {BULLET_MAX_PATH} bytes",
+            path.display()
+        ));
     }
     CString::new(bytes).map_err(|_| format!("the path {} contains a NUL byte", path.display()))
 }
@@ -70,7 +73,9 @@ fn mesh_paths(robot: &RobotModel) -> BTreeMap<String, PathBuf> {
                 let absolute = if path.is_absolute() {
                     path.clone()
                 } else {
-                    std::env::current_dir().map(|d| d.join(path)).unwrap_or_else(|_| path.clone())
+                    std::env::current_dir()
+                        .map(|d| d.join(path))
+                        .unwrap_or_else(|_| path.clone())
                 };
                 map.insert(uri.clone(), absolute);
             }
@@ -162,7 +167,11 @@ fn xml_unescape(value: &str) -> Option<String> {
 }
 
 fn xml_escape(value: &str) -> String {
-    value.replace('&', "&amp;").replace('"', "&quot;").replace('<', "&lt;").replace('>', "&gt;")
+    value
+        .replace('&', "&amp;")
+        .replace('"', "&quot;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
 }
 
 /// Replaces the value of every `filename` attribute found in `meshes` by
@@ -177,11 +186,14 @@ fn rewrite(text: &str, meshes: &BTreeMap<String, PathBuf>) -> (String, Vec<Strin
         let preceded_by_space = before.chars().last().is_none_or(|c| c.is_whitespace());
         let after_name = &from_name["filename".len()..];
         let trimmed = after_name.trim_start();
-        let parsed = trimmed.strip_prefix('=').map(str::trim_start).and_then(|v| {
-            let quote = v.chars().next().filter(|&q| q == '"' || q == '\'')?;
-            let end = v[1..].find(quote)?;
-            Some((quote, &v[1..1 + end], &v[1 + end + 1..]))
-        });
+        let parsed = trimmed
+            .strip_prefix('=')
+            .map(str::trim_start)
+            .and_then(|v| {
+                let quote = v.chars().next().filter(|&q| q == '"' || q == '\'')?;
+                let end = v[1..].find(quote)?;
+                Some((quote, &v[1..1 + end], &v[1 + end + 1..]))
+            });
         match parsed {
             Some((quote, raw, tail)) if preceded_by_space => {
                 match xml_unescape(raw).and_then(|uri| meshes.get(&uri).map(|p| (uri, p))) {
@@ -189,7 +201,11 @@ fn rewrite(text: &str, meshes: &BTreeMap<String, PathBuf>) -> (String, Vec<Strin
                         out.push_str("filename=");
                         out.push(quote);
                         let escaped = xml_escape(&path.to_string_lossy());
-                        out.push_str(&if quote == '\'' { escaped.replace('\'', "&apos;") } else { escaped });
+                        out.push_str(&if quote == '\'' {
+                            escaped.replace('\'', "&apos;")
+                        } else {
+                            escaped
+                        });
                         out.push(quote);
                         replaced.push(uri);
                     }
@@ -216,12 +232,18 @@ static COPIES: AtomicU64 = AtomicU64::new(0);
 pub(crate) fn prepare(robot: &RobotModel) -> Result<UrdfForBullet, String> {
     let meshes = mesh_paths(robot);
     if meshes.is_empty() && robot.links.iter().all(|l| l.visuals.is_empty()) {
-        return Ok(UrdfForBullet { path: robot.source.clone(), temporary: false });
+        return Ok(UrdfForBullet {
+            path: robot.source.clone(),
+            temporary: false,
+        });
     }
     let text = std::fs::read_to_string(&robot.source)
         .map_err(|e| format!("cannot read URDF file {}: {e}", robot.source.display()))?;
     let without_visuals = blank_visuals(&text).ok_or_else(|| {
-        format!("URDF file {}: a <visual> element or a comment is not closed", robot.source.display())
+        format!(
+            "URDF file {}: a <visual> element or a comment is not closed",
+            robot.source.display()
+        )
     })?;
     let (copy, replaced) = rewrite(&without_visuals, &meshes);
     if let Some(missing) = meshes.keys().find(|uri| !replaced.contains(uri)) {
@@ -234,16 +256,32 @@ pub(crate) fn prepare(robot: &RobotModel) -> Result<UrdfForBullet, String> {
     loop {
         let n = COPIES.fetch_add(1, Ordering::Relaxed);
         let path = dir.join(format!("realitygap-bullet-{}-{n}.urdf", std::process::id()));
-        match std::fs::OpenOptions::new().write(true).create_new(true).open(&path) {
+        match std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&path)
+        {
             Ok(mut file) => {
                 use std::io::Write;
-                let result = UrdfForBullet { path, temporary: true };
-                file.write_all(copy.as_bytes())
-                    .map_err(|e| format!("cannot write the temporary URDF copy {}: {e}", result.path.display()))?;
+                let result = UrdfForBullet {
+                    path,
+                    temporary: true,
+                };
+                file.write_all(copy.as_bytes()).map_err(|e| {
+                    format!(
+                        "cannot write the temporary URDF copy {}: {e}",
+                        result.path.display()
+                    )
+                })?;
                 return Ok(result);
             }
             Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
-            Err(e) => return Err(format!("cannot create a temporary URDF copy in {}: {e}", dir.display())),
+            Err(e) => {
+                return Err(format!(
+                    "cannot create a temporary URDF copy in {}: {e}",
+                    dir.display()
+                ))
+            }
         }
     }
 }
@@ -253,7 +291,10 @@ mod tests {
     use super::*;
 
     fn map(pairs: &[(&str, &str)]) -> BTreeMap<String, PathBuf> {
-        pairs.iter().map(|(u, p)| (u.to_string(), PathBuf::from(p))).collect()
+        pairs
+            .iter()
+            .map(|(u, p)| (u.to_string(), PathBuf::from(p)))
+            .collect()
     }
 
     #[test]
@@ -261,7 +302,10 @@ mod tests {
         let text = r#"<robot><gazebo><plugin filename="libx.so"/></gazebo>
 <mesh filename="package://kin/meshes/a.STL"/><mesh  filename = 'rel/b&amp;c.stl' scale="1 1 1"/>
 <mesh filename="package://kin/meshes/a.STL"/><!-- myfilename="package://kin/meshes/a.STL" --></robot>"#;
-        let m = map(&[("package://kin/meshes/a.STL", "/data/kin/meshes/a.STL"), ("rel/b&c.stl", "/u/rel/b&c's.stl")]);
+        let m = map(&[
+            ("package://kin/meshes/a.STL", "/data/kin/meshes/a.STL"),
+            ("rel/b&c.stl", "/u/rel/b&c's.stl"),
+        ]);
         let (out, replaced) = rewrite(text, &m);
         assert_eq!(
             out,
@@ -284,7 +328,10 @@ mod tests {
     fn blanks_visuals_but_keeps_lines_and_comments() {
         let text = "<link>\n<visual name=\"a\">\n <geometry><mesh filename=\"v.dae\"/></geometry>\n</visual >\n<visualx/>\n<!-- <visual> -->\n<visual/><collision/>\n</link>";
         let out = blank_visuals(text).unwrap();
-        assert_eq!(out, "<link>\n\n\n\n<visualx/>\n<!-- <visual> -->\n<collision/>\n</link>");
+        assert_eq!(
+            out,
+            "<link>\n\n\n\n<visualx/>\n<!-- <visual> -->\n<collision/>\n</link>"
+        );
         assert_eq!(out.lines().count(), text.lines().count());
         assert_eq!(blank_visuals("<visual><geometry/>"), None);
         assert_eq!(blank_visuals("<!-- open"), None);
@@ -292,7 +339,10 @@ mod tests {
 
     #[test]
     fn unescapes_entities() {
-        assert_eq!(xml_unescape("a&amp;b&#65;&#x42;&lt;").as_deref(), Some("a&bAB<"));
+        assert_eq!(
+            xml_unescape("a&amp;b&#65;&#x42;&lt;").as_deref(),
+            Some("a&bAB<")
+        );
         assert_eq!(xml_unescape("a&bogus;"), None);
         assert_eq!(xml_unescape("a&amp"), None);
     }

@@ -4,7 +4,9 @@
 mod common;
 
 use common::*;
-use realitygap_core::engine::{Engine, EngineError, EngineSettings, ModelVariation, SettingValue, Simulation};
+use realitygap_core::engine::{
+    Engine, EngineError, EngineSettings, ModelVariation, SettingValue, Simulation,
+};
 use realitygap_core::robot::{PackageResolver, RobotModel};
 use realitygap_core::scene::Scene;
 use realitygap_engine_bullet::{BulletEngine, BulletSimulation};
@@ -12,7 +14,10 @@ use std::path::{Path, PathBuf};
 
 /// A fresh directory under the system's temporary directory.
 fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("realitygap-bullet-test-{}-{name}", std::process::id()));
+    let dir = std::env::temp_dir().join(format!(
+        "realitygap-bullet-test-{}-{name}",
+        std::process::id()
+    ));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     dir
@@ -65,7 +70,12 @@ link = "upper"
 fn one_triangle_stl() -> Vec<u8> {
     let mut b = vec![0u8; 80];
     b.extend_from_slice(&1u32.to_le_bytes());
-    for v in [[0.0f32, 0.0, 1.0], [0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [0.0, 0.1, 0.0]] {
+    for v in [
+        [0.0f32, 0.0, 1.0],
+        [0.0, 0.0, 0.0],
+        [0.1, 0.0, 0.0],
+        [0.0, 0.1, 0.0],
+    ] {
         for c in v {
             b.extend_from_slice(&c.to_le_bytes());
         }
@@ -86,7 +96,12 @@ fn arm(dir: &Path, mesh_bytes: &[u8]) -> (Scene, RobotModel) {
 }
 
 fn load(scene: &Scene, robot: &RobotModel) -> Result<BulletSimulation, EngineError> {
-    BulletSimulation::load(scene, robot, &EngineSettings::new(), &ModelVariation::default())
+    BulletSimulation::load(
+        scene,
+        robot,
+        &EngineSettings::new(),
+        &ModelVariation::default(),
+    )
 }
 
 fn load_error(result: Result<BulletSimulation, EngineError>) -> String {
@@ -114,9 +129,16 @@ fn a_good_mesh_arm_loads_and_moves() {
     let leftovers: Vec<_> = std::fs::read_dir(std::env::temp_dir())
         .unwrap()
         .filter_map(|e| e.ok())
-        .filter(|e| e.file_name().to_string_lossy().starts_with(&format!("realitygap-bullet-{}-", std::process::id())))
+        .filter(|e| {
+            e.file_name()
+                .to_string_lossy()
+                .starts_with(&format!("realitygap-bullet-{}-", std::process::id()))
+        })
         .collect();
-    assert!(leftovers.is_empty(), "temporary URDF copies left: {leftovers:?}");
+    assert!(
+        leftovers.is_empty(),
+        "temporary URDF copies left: {leftovers:?}"
+    );
 }
 
 #[test]
@@ -124,7 +146,10 @@ fn unreadable_mesh_is_a_clear_error() {
     let dir = temp_dir("garbage");
     let (scene, robot) = arm(&dir, b"this is not an STL file\n");
     let msg = load_error(load(&scene, &robot));
-    assert!(msg.contains("engine bullet: cannot load the scene"), "{msg}");
+    assert!(
+        msg.contains("engine bullet: cannot load the scene"),
+        "{msg}"
+    );
     assert!(msg.contains("arm.urdf"), "{msg}");
     assert!(msg.contains("upper"), "{msg}");
 }
@@ -144,7 +169,10 @@ fn arm_with_mesh_file(dir: &Path, name: &str, content: &str) -> (Scene, RobotMod
 fn empty_obj_mesh_is_a_clear_error() {
     let (scene, robot) = arm_with_mesh_file(&temp_dir("obj"), "upper.obj", "this is not a mesh\n");
     let msg = load_error(load(&scene, &robot));
-    assert!(msg.contains("arm.urdf: link \"upper\": collision mesh"), "{msg}");
+    assert!(
+        msg.contains("arm.urdf: link \"upper\": collision mesh"),
+        "{msg}"
+    );
     assert!(msg.contains("upper.obj has no vertices and faces"), "{msg}");
 }
 
@@ -152,17 +180,31 @@ fn empty_obj_mesh_is_a_clear_error() {
 /// dereferences missing elements and crashes on a malformed file).
 #[test]
 fn collada_mesh_is_refused() {
-    let (scene, robot) = arm_with_mesh_file(&temp_dir("dae"), "upper.dae", "<COLLADA>not a mesh</COLLADA>\n");
+    let (scene, robot) = arm_with_mesh_file(
+        &temp_dir("dae"),
+        "upper.dae",
+        "<COLLADA>not a mesh</COLLADA>\n",
+    );
     let msg = load_error(load(&scene, &robot));
-    assert!(msg.contains("arm.urdf: link \"upper\": collision mesh"), "{msg}");
-    assert!(msg.contains("upper.dae: COLLADA meshes are not accepted"), "{msg}");
+    assert!(
+        msg.contains("arm.urdf: link \"upper\": collision mesh"),
+        "{msg}"
+    );
+    assert!(
+        msg.contains("upper.dae: COLLADA meshes are not accepted"),
+        "{msg}"
+    );
 }
 
 /// A mesh format the engine leaves to Bullet (here an unknown extension):
 /// Bullet's own complaint is caught.
 #[test]
 fn unknown_mesh_format_is_a_clear_error() {
-    let (scene, robot) = arm_with_mesh_file(&temp_dir("ply"), "upper.ply", "ply\nformat ascii 1.0\nend_header\n");
+    let (scene, robot) = arm_with_mesh_file(
+        &temp_dir("ply"),
+        "upper.ply",
+        "ply\nformat ascii 1.0\nend_header\n",
+    );
     let msg = load_error(load(&scene, &robot));
     assert!(msg.contains("arm.urdf"), "{msg}");
     assert!(msg.contains("upper"), "{msg}");
@@ -207,10 +249,17 @@ fn urdf_malformed_after_reading_the_model_is_a_clear_error() {
     assert!(msg.contains("arm.urdf"), "{msg}");
     assert!(msg.contains("Bullet said:"), "{msg}");
     // A URDF that no longer names the model's mesh.
-    std::fs::write(dir.join("arm.urdf"), "<robot name=\"arm\"><link name=\"base\"></robot>").unwrap();
+    std::fs::write(
+        dir.join("arm.urdf"),
+        "<robot name=\"arm\"><link name=\"base\"></robot>",
+    )
+    .unwrap();
     let msg = load_error(load(&scene, &robot));
     assert!(msg.contains("arm.urdf"), "{msg}");
-    assert!(msg.contains("no collision mesh filename attribute \"upper.stl\""), "{msg}");
+    assert!(
+        msg.contains("no collision mesh filename attribute \"upper.stl\""),
+        "{msg}"
+    );
 }
 
 const MALFORMED_ARM: &str = r#"<robot name="arm"><link name="base">
@@ -222,7 +271,10 @@ fn urdf_removed_after_reading_the_model_is_a_clear_error() {
     let dir = temp_dir("gone");
     std::fs::write(
         dir.join("arm.urdf"),
-        arm_urdf("upper.stl").replace(r#"<mesh filename="upper.stl"/>"#, r#"<sphere radius="0.05"/>"#),
+        arm_urdf("upper.stl").replace(
+            r#"<mesh filename="upper.stl"/>"#,
+            r#"<sphere radius="0.05"/>"#,
+        ),
     )
     .unwrap();
     let scene = Scene::from_toml_str(ARM_SCENE, &dir.join("arm.toml")).unwrap();
@@ -238,11 +290,18 @@ fn urdf_removed_after_reading_the_model_is_a_clear_error() {
 fn bad_settings_are_rejected_before_loading() {
     let dir = temp_dir("settings");
     let (scene, robot) = arm(&dir, &one_triangle_stl());
-    let bad: EngineSettings = [("solver".to_string(), SettingValue::Text("dantzig".into()))].into_iter().collect();
-    let e = BulletEngine.load(&scene, &robot, &bad, &ModelVariation::default()).err().unwrap();
+    let bad: EngineSettings = [("solver".to_string(), SettingValue::Text("dantzig".into()))]
+        .into_iter()
+        .collect();
+    let e = BulletEngine
+        .load(&scene, &robot, &bad, &ModelVariation::default())
+        .err()
+        .unwrap();
     assert!(matches!(e, EngineError::Setting { .. }), "{e:?}");
     assert!(e.to_string().contains("unknown setting"), "{e}");
-    let bad: EngineSettings = [("timestep_s".to_string(), SettingValue::Float(-0.01))].into_iter().collect();
+    let bad: EngineSettings = [("timestep_s".to_string(), SettingValue::Float(-0.01))]
+        .into_iter()
+        .collect();
     assert!(BulletEngine.check_settings(&bad).is_err());
 }
 
@@ -272,16 +331,28 @@ const CHILD_ENV: &str = "REALITYGAP_BULLET_STDOUT_CHILD";
 fn bullet_writes_nothing_to_stdout() {
     let exe = std::env::current_exe().unwrap();
     let out = std::process::Command::new(exe)
-        .args(["--exact", "stdout_child", "--nocapture", "--test-threads=1", "-q"])
+        .args([
+            "--exact",
+            "stdout_child",
+            "--nocapture",
+            "--test-threads=1",
+            "-q",
+        ])
         .env(CHILD_ENV, "1")
         .output()
         .unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "child failed:\n{stdout}\n{stderr}");
-    assert!(stderr.contains("stdout_child: done"), "the child did not run: {stderr}");
+    assert!(
+        stderr.contains("stdout_child: done"),
+        "the child did not run: {stderr}"
+    );
     let foreign: Vec<&str> = stdout.lines().filter(|l| !is_harness_line(l)).collect();
-    assert!(foreign.is_empty(), "Bullet wrote to standard output: {foreign:?}");
+    assert!(
+        foreign.is_empty(),
+        "Bullet wrote to standard output: {foreign:?}"
+    );
 }
 
 /// The child of `bullet_writes_nothing_to_stdout` (does nothing otherwise).

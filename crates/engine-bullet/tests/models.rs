@@ -13,7 +13,12 @@ use realitygap_core::scene::Scene;
 use realitygap_engine_bullet::{BulletEngine, BulletSimulation};
 use std::collections::HashMap;
 
-fn load(scene: &Scene, robot: &RobotModel, settings: &EngineSettings, variation: &ModelVariation) -> BulletSimulation {
+fn load(
+    scene: &Scene,
+    robot: &RobotModel,
+    settings: &EngineSettings,
+    variation: &ModelVariation,
+) -> BulletSimulation {
     scene.validate(robot).unwrap();
     BulletSimulation::load(scene, robot, settings, variation).unwrap()
 }
@@ -21,7 +26,12 @@ fn load(scene: &Scene, robot: &RobotModel, settings: &EngineSettings, variation:
 /// Places the arm at random configurations and compares every link's frame
 /// with the URDF forward kinematics (fingers held at their scene angles).
 fn check_kinematics(scene: &Scene, robot: &RobotModel) {
-    let mut sim = load(scene, robot, &EngineSettings::new(), &ModelVariation::default());
+    let mut sim = load(
+        scene,
+        robot,
+        &EngineSettings::new(),
+        &ModelVariation::default(),
+    );
     let mut rng = SplitMix64::new(5);
     let controlled = scene.controlled_joints();
     let mut worst: (f64, f64) = (0.0, 0.0);
@@ -29,7 +39,9 @@ fn check_kinematics(scene: &Scene, robot: &RobotModel) {
         let angles: Vec<f64> = controlled
             .iter()
             .map(|name| {
-                let lim = robot.joints[robot.joint_by_name(name).unwrap()].limits.unwrap();
+                let lim = robot.joints[robot.joint_by_name(name).unwrap()]
+                    .limits
+                    .unwrap();
                 let (lo, hi) = (lim.lower.max(-3.0), lim.upper.min(3.0));
                 lo + (hi - lo) * rng.uniform()
             })
@@ -38,20 +50,35 @@ fn check_kinematics(scene: &Scene, robot: &RobotModel) {
         let mut read = vec![0.0; angles.len()];
         sim.joint_angles_rad(&mut read);
         assert_eq!(read, angles);
-        let mut named: HashMap<String, f64> =
-            controlled.iter().zip(&angles).map(|(n, &a)| (n.to_string(), a)).collect();
+        let mut named: HashMap<String, f64> = controlled
+            .iter()
+            .zip(&angles)
+            .map(|(n, &a)| (n.to_string(), a))
+            .collect();
         for (n, &a) in &scene.robot.held_joints_rad {
             named.insert(n.clone(), a);
         }
-        let fk = robot.forward_kinematics(&scene.robot.base, &robot.positions_from_names(&named).unwrap());
+        let fk = robot.forward_kinematics(
+            &scene.robot.base,
+            &robot.positions_from_names(&named).unwrap(),
+        );
         for (link, expected) in robot.links.iter().zip(&fk) {
             let Some(got) = sim.link_pose(&link.name).unwrap() else {
-                assert_eq!(link.name, robot.links[robot.root_link].name, "link {} missing", link.name);
+                assert_eq!(
+                    link.name, robot.links[robot.root_link].name,
+                    "link {} missing",
+                    link.name
+                );
                 continue;
             };
             let d = got.position_m.distance(expected.position_m);
             let a = got.orientation.angle_to(expected.orientation);
-            assert!(d < 1e-12 && a < 1e-9, "{}: link {} off by {d} m, {a} rad", robot.name, link.name);
+            assert!(
+                d < 1e-12 && a < 1e-9,
+                "{}: link {} off by {d} m, {a} rad",
+                robot.name,
+                link.name
+            );
             worst = (worst.0.max(d), worst.1.max(a));
         }
         let mut poses = [Pose::IDENTITY; 2];
@@ -60,7 +87,10 @@ fn check_kinematics(scene: &Scene, robot: &RobotModel) {
         assert!(poses[0].position_m.distance(w.position_m) < 1e-12);
         assert!(poses[0].orientation.angle_to(w.orientation) < 1e-9);
     }
-    eprintln!("{}: largest gap to the URDF kinematics {:.2e} m, {:.2e} rad", robot.name, worst.0, worst.1);
+    eprintln!(
+        "{}: largest gap to the URDF kinematics {:.2e} m, {:.2e} rad",
+        robot.name, worst.0, worst.1
+    );
 }
 
 #[test]
@@ -71,7 +101,10 @@ fn mico2_follows_urdf_kinematics() {
 #[test]
 fn official_model_follows_urdf_kinematics() {
     let Some(paper) = paper_data() else { return };
-    check_kinematics(&official_scene("scene1_single_joint", &paper), &official_robot(&paper));
+    check_kinematics(
+        &official_scene("scene1_single_joint", &paper),
+        &official_robot(&paper),
+    );
 }
 
 /// At rest the only contact is the cube on the ground; the initial state
@@ -80,15 +113,29 @@ fn official_model_follows_urdf_kinematics() {
 fn at_rest_only_the_cube_touches_the_ground() {
     for (s, robot) in [(scene("scene1_single_joint"), mico2())]
         .into_iter()
-        .chain(paper_data().map(|p| (official_scene("scene1_single_joint", &p), official_robot(&p))))
+        .chain(paper_data().map(|p| {
+            (
+                official_scene("scene1_single_joint", &p),
+                official_robot(&p),
+            )
+        }))
     {
-        let mut sim = load(&s, &robot, &EngineSettings::new(), &ModelVariation::default());
+        let mut sim = load(
+            &s,
+            &robot,
+            &EngineSettings::new(),
+            &ModelVariation::default(),
+        );
         let mut poses = [Pose::IDENTITY; 2];
         sim.tracked_poses(&mut poses);
         assert!(poses[1].position_m.distance(s.objects[0].pose.position_m) < 1e-12);
         sim.step_n(10).unwrap();
         let contacts = sim.contacts().unwrap();
-        assert!(!contacts.is_empty(), "{}: the cube should rest on the ground", robot.name);
+        assert!(
+            !contacts.is_empty(),
+            "{}: the cube should rest on the ground",
+            robot.name
+        );
         for (a, b) in &contacts {
             let pair = [a.as_str(), b.as_str()];
             assert!(
@@ -98,7 +145,11 @@ fn at_rest_only_the_cube_touches_the_ground() {
             );
         }
         sim.tracked_poses(&mut poses);
-        assert!(poses[1].position_m.distance(s.objects[0].pose.position_m) < 1e-3, "cube moved: {:?}", poses[1]);
+        assert!(
+            poses[1].position_m.distance(s.objects[0].pose.position_m) < 1e-3,
+            "cube moved: {:?}",
+            poses[1]
+        );
     }
 }
 
@@ -113,21 +164,40 @@ fn at_rest_only_the_cube_touches_the_ground() {
 fn sweeping_hand_pushes_the_cube() {
     let runs = [("mico2", scene("scene3_cube_push"), mico2())]
         .into_iter()
-        .chain(paper_data().map(|p| ("official", official_scene("scene3_cube_push", &p), official_robot(&p))))
+        .chain(paper_data().map(|p| {
+            (
+                "official",
+                official_scene("scene3_cube_push", &p),
+                official_robot(&p),
+            )
+        }))
         .map(|(label, mut s, robot)| {
             s.objects[0].pose.position_m = realitygap_core::Vec3::new(0.575, -0.12, 0.0375);
             (label, s, robot)
         });
     for (label, s, robot) in runs {
-        let mut sim = load(&s, &robot, &EngineSettings::new(), &ModelVariation::default());
-        sim.set_joint_angles_rad(&[0.0, (-85f64).to_radians(), 30f64.to_radians(), 90f64.to_radians(), 0.0, 0.0])
-            .unwrap();
+        let mut sim = load(
+            &s,
+            &robot,
+            &EngineSettings::new(),
+            &ModelVariation::default(),
+        );
+        sim.set_joint_angles_rad(&[
+            0.0,
+            (-85f64).to_radians(),
+            30f64.to_radians(),
+            90f64.to_radians(),
+            0.0,
+            0.0,
+        ])
+        .unwrap();
         sim.set_joint_velocity_targets(&[0.3, 0.0, 0.0, 0.0, 0.0, 0.0]);
         let mut touched = None;
         for tick in 0..40 {
             sim.step_n(5).unwrap();
             let hand_on_cube = sim.contacts().unwrap().into_iter().find(|(a, b)| {
-                (a == "object:cube" && b.starts_with("m1n6s300")) || (b == "object:cube" && a.starts_with("m1n6s300"))
+                (a == "object:cube" && b.starts_with("m1n6s300"))
+                    || (b == "object:cube" && a.starts_with("m1n6s300"))
             });
             if let (None, Some(pair)) = (&touched, hand_on_cube) {
                 touched = Some((tick, pair));
@@ -136,8 +206,14 @@ fn sweeping_hand_pushes_the_cube() {
         let mut poses = [Pose::IDENTITY; 2];
         sim.tracked_poses(&mut poses);
         let moved = poses[1].position_m.distance(s.objects[0].pose.position_m);
-        eprintln!("{label}: first hand-cube contact {touched:?}; the cube moved {:.1} mm", moved * 1e3);
-        assert!(touched.is_some(), "{label}: the hand never touched the cube");
+        eprintln!(
+            "{label}: first hand-cube contact {touched:?}; the cube moved {:.1} mm",
+            moved * 1e3
+        );
+        assert!(
+            touched.is_some(),
+            "{label}: the hand never touched the cube"
+        );
         assert!(moved > 0.01, "{label}: the cube moved only {moved} m");
     }
 }
@@ -145,7 +221,11 @@ fn sweeping_hand_pushes_the_cube() {
 #[test]
 fn every_scene_runs_with_both_robots() {
     let paper = paper_data();
-    for name in ["scene1_single_joint", "scene2_two_joints", "scene3_cube_push"] {
+    for name in [
+        "scene1_single_joint",
+        "scene2_two_joints",
+        "scene3_cube_push",
+    ] {
         let mut runs = vec![("mico2", scene(name), mico2())];
         if let Some(p) = &paper {
             runs.push(("official", official_scene(name, p), official_robot(p)));
@@ -155,7 +235,14 @@ fn every_scene_runs_with_both_robots() {
             assert_eq!(out.trajectory.len(), s.sample_count());
             out.trajectory.validate().unwrap();
             let w = wrist(&out);
-            let goal_reached = out.trajectory.joint_angles_rad.as_ref().unwrap().last().unwrap().clone();
+            let goal_reached = out
+                .trajectory
+                .joint_angles_rad
+                .as_ref()
+                .unwrap()
+                .last()
+                .unwrap()
+                .clone();
             eprintln!(
                 "{name} / {label}: final wrist ({:.4}, {:.4}, {:.4}) m, joints {:?} rad, {:.0} steps/s",
                 w.last().unwrap().x,
@@ -193,18 +280,32 @@ fn settings_reach_bullet() {
     assert_eq!(p.contact_breaking_threshold_m, 0.01);
     assert_eq!(sim.timestep_s(), 0.005);
     // The defaults the settings' help texts state are Bullet's.
-    let mut defaults = load(&s, &mico2(), &EngineSettings::new(), &ModelVariation::default());
+    let mut defaults = load(
+        &s,
+        &mico2(),
+        &EngineSettings::new(),
+        &ModelVariation::default(),
+    );
     let d = defaults.physics_parameters().unwrap();
     eprintln!("Bullet defaults: {d:?}");
     assert_eq!(d.timestep_s, 0.01);
     assert_eq!(d.solver_iterations, 50);
     assert_eq!(d.solver_residual_threshold, 1e-7);
     assert_eq!(d.contact_erp, 0.08);
-    assert_eq!((d.non_contact_erp, d.friction_erp, d.global_cfm), (0.2, 0.2, 0.0));
+    assert_eq!(
+        (d.non_contact_erp, d.friction_erp, d.global_cfm),
+        (0.2, 0.2, 0.0)
+    );
     assert!(d.split_impulse && d.cone_friction);
     assert!((d.split_impulse_penetration_threshold_m + 0.04).abs() < 1e-8);
     assert_eq!(d.contact_breaking_threshold_m, 0.01);
-    let help = |key: &str| realitygap_engine_bullet::SETTINGS.iter().find(|s| s.key == key).unwrap().help;
+    let help = |key: &str| {
+        realitygap_engine_bullet::SETTINGS
+            .iter()
+            .find(|s| s.key == key)
+            .unwrap()
+            .help
+    };
     assert!(help("contact_erp").ends_with("default 0.08"));
     assert!(help("contact_breaking_threshold_m").ends_with("default 0.01"));
     assert!(help("solver_iterations").ends_with("default 50"));
@@ -214,14 +315,25 @@ fn settings_reach_bullet() {
 fn variations_scale_masses_and_frictions() {
     let s = scene("scene1_single_joint");
     let robot = mico2();
-    let mut plain = load(&s, &robot, &EngineSettings::new(), &ModelVariation::default());
-    let variation = ModelVariation { mass_scale: 1.5, friction_scale: 0.25 };
+    let mut plain = load(
+        &s,
+        &robot,
+        &EngineSettings::new(),
+        &ModelVariation::default(),
+    );
+    let variation = ModelVariation {
+        mass_scale: 1.5,
+        friction_scale: 0.25,
+    };
     let mut varied = load(&s, &robot, &EngineSettings::new(), &variation);
     for name in ["m1n6s300_link_3", "object:cube"] {
         let (m0, f0) = plain.mass_and_friction(name).unwrap().unwrap();
         let (m1, f1) = varied.mass_and_friction(name).unwrap().unwrap();
         assert!((m1 - 1.5 * m0).abs() < 1e-12, "{name}: mass {m0} -> {m1}");
-        assert!((f1 - 0.5 * f0).abs() < 1e-12, "{name}: friction {f0} -> {f1} (sqrt of 0.25 per body)");
+        assert!(
+            (f1 - 0.5 * f0).abs() < 1e-12,
+            "{name}: friction {f0} -> {f1} (sqrt of 0.25 per body)"
+        );
     }
     let (cube_mass, cube_friction) = plain.mass_and_friction("object:cube").unwrap().unwrap();
     assert_eq!(cube_mass, 0.0884);
@@ -235,10 +347,15 @@ fn variations_scale_masses_and_frictions() {
 fn weak_motors_let_the_arm_fall() {
     let s = scene("scene1_single_joint");
     let robot = mico2();
-    let weak: EngineSettings = [("max_force_n_m".to_string(), SettingValue::Float(1e-3))].into_iter().collect();
+    let weak: EngineSettings = [("max_force_n_m".to_string(), SettingValue::Float(1e-3))]
+        .into_iter()
+        .collect();
     let out = simulate(&BulletEngine, &s, &robot, &weak, &RunOptions::default()).unwrap();
     assert_eq!(out.status, RunStatus::Completed);
     let strong = run(&s, &robot);
     let (a, b) = (wrist(&out), wrist(&strong));
-    assert!(a.last().unwrap().distance(*b.last().unwrap()) > 0.05, "a weak arm should end elsewhere");
+    assert!(
+        a.last().unwrap().distance(*b.last().unwrap()) > 0.05,
+        "a weak arm should end elsewhere"
+    );
 }

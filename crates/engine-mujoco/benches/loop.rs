@@ -27,7 +27,10 @@ fn workspace() -> PathBuf {
 /// Seconds for the controller loop and for the bare loop (best of `repeats`).
 fn measure(scene: &Scene, robot: &RobotModel, repeats: usize) -> (f64, f64, u64) {
     let settings = scene.settings_for("mujoco");
-    let load = || MujocoSimulation::load(scene, robot, &settings, &ModelVariation::default()).expect("the model loads");
+    let load = || {
+        MujocoSimulation::load(scene, robot, &settings, &ModelVariation::default())
+            .expect("the model loads")
+    };
     let mut best_loop = f64::INFINITY;
     let mut best_raw = f64::INFINITY;
     let mut steps = 0;
@@ -37,7 +40,10 @@ fn measure(scene: &Scene, robot: &RobotModel, repeats: usize) -> (f64, f64, u64)
         let out = run_scene(&mut sim, scene, &RunOptions::default()).expect("the scene runs");
         best_loop = best_loop.min(start.elapsed().as_secs_f64());
         steps = out.engine_steps;
-        let commands = out.trajectory.joint_velocity_commands_rad_s.expect("recorded");
+        let commands = out
+            .trajectory
+            .joint_velocity_commands_rad_s
+            .expect("recorded");
         let per_period = steps / commands.len() as u64;
 
         let mut sim = load();
@@ -54,26 +60,51 @@ fn measure(scene: &Scene, robot: &RobotModel, repeats: usize) -> (f64, f64, u64)
 fn main() {
     // `cargo bench` passes `--bench`; nothing else is understood.
     realitygap_engine_mujoco::install_message_handler();
-    let repeats: usize = std::env::var("REPEATS").ok().and_then(|v| v.parse().ok()).unwrap_or(3);
+    let repeats: usize = std::env::var("REPEATS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(3);
     let scene_names: Vec<String> = std::env::var("SCENES")
         .map(|s| s.split(',').map(str::to_string).collect())
-        .unwrap_or_else(|_| vec!["scene1_single_joint".into(), "scene2_two_joints".into(), "scene3_cube_push".into()]);
+        .unwrap_or_else(|_| {
+            vec![
+                "scene1_single_joint".into(),
+                "scene2_two_joints".into(),
+                "scene3_cube_push".into(),
+            ]
+        });
     let paper = workspace().join("../shared/paper-data");
-    let mico2 = RobotModel::from_urdf_file(&workspace().join("assets/robots/mico2/mico2.urdf"), &PackageResolver::new())
-        .expect("the Mico2 URDF loads");
+    let mico2 = RobotModel::from_urdf_file(
+        &workspace().join("assets/robots/mico2/mico2.urdf"),
+        &PackageResolver::new(),
+    )
+    .expect("the Mico2 URDF loads");
     let official = paper.join("kinova_description").is_dir().then(|| {
         let mut r = PackageResolver::new();
         r.insert("kinova_description", paper.join("kinova_description"));
-        RobotModel::from_urdf_file(&paper.join("kinova_description/urdf/m1n6s300.urdf"), &r).expect("the official URDF loads")
+        RobotModel::from_urdf_file(&paper.join("kinova_description/urdf/m1n6s300.urdf"), &r)
+            .expect("the official URDF loads")
     });
     if official.is_none() {
-        println!("(paper data not found at {}: the study's MJCF is left out)", paper.display());
+        println!(
+            "(paper data not found at {}: the study's MJCF is left out)",
+            paper.display()
+        );
     }
-    println!("{:<22} {:<20} {:>12} {:>12} {:>9}", "scene", "model", "loop steps/s", "raw steps/s", "overhead");
+    println!(
+        "{:<22} {:<20} {:>12} {:>12} {:>9}",
+        "scene", "model", "loop steps/s", "raw steps/s", "overhead"
+    );
     let mut worst: f64 = 0.0;
     for name in &scene_names {
-        let scene = Scene::from_file(&workspace().join("assets/scenes").join(format!("{name}.toml"))).expect("the scene loads");
-        let mut cases: Vec<(&str, Scene, &RobotModel)> = vec![("mico2 (URDF)", scene.clone(), &mico2)];
+        let scene = Scene::from_file(
+            &workspace()
+                .join("assets/scenes")
+                .join(format!("{name}.toml")),
+        )
+        .expect("the scene loads");
+        let mut cases: Vec<(&str, Scene, &RobotModel)> =
+            vec![("mico2 (URDF)", scene.clone(), &mico2)];
         if let Some(official) = &official {
             let mut study = scene.clone();
             study.robot.mjcf = Some(paper.join("kinova_description/urdf/m1n6s300.xml"));
@@ -94,5 +125,8 @@ fn main() {
             );
         }
     }
-    println!("largest overhead of the controller loop: {:.2}% (target: at most 5%)", worst * 100.0);
+    println!(
+        "largest overhead of the controller loop: {:.2}% (target: at most 5%)",
+        worst * 100.0
+    );
 }

@@ -35,7 +35,9 @@ pub mod mjcf;
 
 use mujoco_rs::mujoco_c;
 use mujoco_rs::prelude::*;
-use realitygap_core::engine::{Engine, EngineError, EngineSettings, ModelVariation, SettingInfo, Simulation};
+use realitygap_core::engine::{
+    Engine, EngineError, EngineSettings, ModelVariation, SettingInfo, Simulation,
+};
 use realitygap_core::pose::{Pose, Quat, Vec3};
 use realitygap_core::robot::RobotModel;
 use realitygap_core::scene::{Scene, TrackTarget};
@@ -51,14 +53,38 @@ pub const MUJOCO_DEFAULT_TIMESTEP_S: f64 = 0.002;
 
 /// The settings accepted in `[engine.mujoco]` and by `--set`.
 pub const SETTINGS: &[SettingInfo] = &[
-    SettingInfo { key: "timestep_s", help: "integration timestep, s (> 0); default 0.002, or the MJCF file's own" },
-    SettingInfo { key: "integrator", help: "euler | rk4 | implicit | implicitfast; default euler" },
-    SettingInfo { key: "solver", help: "constraint solver: pgs | cg | newton; default newton" },
-    SettingInfo { key: "iterations", help: "maximum solver iterations (>= 1); default 100" },
-    SettingInfo { key: "tolerance", help: "solver tolerance (>= 0); default 1e-8" },
-    SettingInfo { key: "cone", help: "friction cone: pyramidal | elliptic; default pyramidal" },
-    SettingInfo { key: "impratio", help: "frictional-to-normal impedance ratio (> 0); default 1" },
-    SettingInfo { key: "noslip_iterations", help: "no-slip solver iterations (>= 0); default 0" },
+    SettingInfo {
+        key: "timestep_s",
+        help: "integration timestep, s (> 0); default 0.002, or the MJCF file's own",
+    },
+    SettingInfo {
+        key: "integrator",
+        help: "euler | rk4 | implicit | implicitfast; default euler",
+    },
+    SettingInfo {
+        key: "solver",
+        help: "constraint solver: pgs | cg | newton; default newton",
+    },
+    SettingInfo {
+        key: "iterations",
+        help: "maximum solver iterations (>= 1); default 100",
+    },
+    SettingInfo {
+        key: "tolerance",
+        help: "solver tolerance (>= 0); default 1e-8",
+    },
+    SettingInfo {
+        key: "cone",
+        help: "friction cone: pyramidal | elliptic; default pyramidal",
+    },
+    SettingInfo {
+        key: "impratio",
+        help: "frictional-to-normal impedance ratio (> 0); default 1",
+    },
+    SettingInfo {
+        key: "noslip_iterations",
+        help: "no-slip solver iterations (>= 0); default 0",
+    },
 ];
 
 /// The messages MuJoCo reported through its log since the last
@@ -104,13 +130,18 @@ pub fn install_message_handler() {
 
 /// The MuJoCo messages collected since the last call.
 pub fn take_messages() -> Vec<String> {
-    MESSAGES.lock().map(|mut m| std::mem::take(&mut *m)).unwrap_or_default()
+    MESSAGES
+        .lock()
+        .map(|mut m| std::mem::take(&mut *m))
+        .unwrap_or_default()
 }
 
 /// The linked MuJoCo library's version, e.g. `3.17.0`.
 pub fn mujoco_version() -> String {
     // SAFETY: mj_versionString returns a pointer to a static NUL-terminated string.
-    unsafe { CStr::from_ptr(mujoco_c::mj_versionString()) }.to_string_lossy().into_owned()
+    unsafe { CStr::from_ptr(mujoco_c::mj_versionString()) }
+        .to_string_lossy()
+        .into_owned()
 }
 
 /// The MuJoCo engine.
@@ -131,44 +162,72 @@ struct Options {
 }
 
 fn setting_error(key: &str, message: impl Into<String>) -> EngineError {
-    EngineError::Setting { engine: ENGINE_NAME.to_string(), key: key.to_string(), message: message.into() }
+    EngineError::Setting {
+        engine: ENGINE_NAME.to_string(),
+        key: key.to_string(),
+        message: message.into(),
+    }
 }
 
 fn load_error(message: impl Into<String>) -> EngineError {
-    EngineError::Load { engine: ENGINE_NAME.to_string(), message: message.into() }
+    EngineError::Load {
+        engine: ENGINE_NAME.to_string(),
+        message: message.into(),
+    }
 }
 
 fn parse_options(settings: &EngineSettings) -> Result<Options, EngineError> {
     let mut o = Options::default();
     for (key, value) in settings {
         let number = |min: f64, inclusive: bool| -> Result<f64, EngineError> {
-            let v = value.as_f64().ok_or_else(|| setting_error(key, format!("expected a number, found \"{value}\"")))?;
+            let v = value.as_f64().ok_or_else(|| {
+                setting_error(key, format!("expected a number, found \"{value}\""))
+            })?;
             let ok = v.is_finite() && if inclusive { v >= min } else { v > min };
             if ok {
                 Ok(v)
             } else {
-                Err(setting_error(key, format!("must be {} {min}, found {v}", if inclusive { ">=" } else { ">" })))
+                Err(setting_error(
+                    key,
+                    format!(
+                        "must be {} {min}, found {v}",
+                        if inclusive { ">=" } else { ">" }
+                    ),
+                ))
             }
         };
         let whole = |min: i64| -> Result<i32, EngineError> {
-            let v = value.as_i64().ok_or_else(|| setting_error(key, format!("expected a whole number, found \"{value}\"")))?;
+            let v = value.as_i64().ok_or_else(|| {
+                setting_error(key, format!("expected a whole number, found \"{value}\""))
+            })?;
             if v >= min && v <= i32::MAX as i64 {
                 Ok(v as i32)
             } else {
-                Err(setting_error(key, format!("must be a whole number >= {min}, found {v}")))
+                Err(setting_error(
+                    key,
+                    format!("must be a whole number >= {min}, found {v}"),
+                ))
             }
         };
         let choice = |choices: &[(&str, i32)]| -> Result<i32, EngineError> {
             let text = value.as_str().map(str::to_ascii_lowercase);
-            choices.iter().find(|(n, _)| Some(*n) == text.as_deref()).map(|(_, v)| *v).ok_or_else(|| {
-                setting_error(
-                    key,
-                    format!(
-                        "\"{value}\" is not one of {}",
-                        choices.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ")
-                    ),
-                )
-            })
+            choices
+                .iter()
+                .find(|(n, _)| Some(*n) == text.as_deref())
+                .map(|(_, v)| *v)
+                .ok_or_else(|| {
+                    setting_error(
+                        key,
+                        format!(
+                            "\"{value}\" is not one of {}",
+                            choices
+                                .iter()
+                                .map(|(n, _)| *n)
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        ),
+                    )
+                })
         };
         match key.as_str() {
             "timestep_s" => o.timestep_s = Some(number(0.0, false)?),
@@ -177,7 +236,10 @@ fn parse_options(settings: &EngineSettings) -> Result<Options, EngineError> {
                     ("euler", mujoco_c::mjtIntegrator::mjINT_EULER as i32),
                     ("rk4", mujoco_c::mjtIntegrator::mjINT_RK4 as i32),
                     ("implicit", mujoco_c::mjtIntegrator::mjINT_IMPLICIT as i32),
-                    ("implicitfast", mujoco_c::mjtIntegrator::mjINT_IMPLICITFAST as i32),
+                    (
+                        "implicitfast",
+                        mujoco_c::mjtIntegrator::mjINT_IMPLICITFAST as i32,
+                    ),
                 ])?)
             }
             "solver" => {
@@ -202,7 +264,11 @@ fn parse_options(settings: &EngineSettings) -> Result<Options, EngineError> {
                     other,
                     format!(
                         "unknown setting (MuJoCo accepts: {})",
-                        SETTINGS.iter().map(|s| s.key).collect::<Vec<_>>().join(", ")
+                        SETTINGS
+                            .iter()
+                            .map(|s| s.key)
+                            .collect::<Vec<_>>()
+                            .join(", ")
                     ),
                 ))
             }
@@ -229,7 +295,9 @@ impl Engine for MujocoEngine {
     }
 
     fn check_settings(&self, settings: &EngineSettings) -> Result<f64, EngineError> {
-        Ok(parse_options(settings)?.timestep_s.unwrap_or(MUJOCO_DEFAULT_TIMESTEP_S))
+        Ok(parse_options(settings)?
+            .timestep_s
+            .unwrap_or(MUJOCO_DEFAULT_TIMESTEP_S))
     }
 
     fn load(
@@ -239,7 +307,9 @@ impl Engine for MujocoEngine {
         settings: &EngineSettings,
         variation: &ModelVariation,
     ) -> Result<Box<dyn Simulation>, EngineError> {
-        Ok(Box::new(MujocoSimulation::load(scene, robot, settings, variation)?))
+        Ok(Box::new(MujocoSimulation::load(
+            scene, robot, settings, variation,
+        )?))
     }
 }
 
@@ -259,9 +329,18 @@ pub struct MujocoSimulation {
 }
 
 const INSTABILITY_WARNINGS: [(mujoco_c::mjtWarning, &str); 3] = [
-    (mujoco_c::mjtWarning::mjWARN_BADQPOS, "bad joint position (NaN or huge), state reset by MuJoCo"),
-    (mujoco_c::mjtWarning::mjWARN_BADQVEL, "bad joint velocity (NaN or huge), state reset by MuJoCo"),
-    (mujoco_c::mjtWarning::mjWARN_BADQACC, "bad joint acceleration (NaN or huge), state reset by MuJoCo"),
+    (
+        mujoco_c::mjtWarning::mjWARN_BADQPOS,
+        "bad joint position (NaN or huge), state reset by MuJoCo",
+    ),
+    (
+        mujoco_c::mjtWarning::mjWARN_BADQVEL,
+        "bad joint velocity (NaN or huge), state reset by MuJoCo",
+    ),
+    (
+        mujoco_c::mjtWarning::mjWARN_BADQACC,
+        "bad joint acceleration (NaN or huge), state reset by MuJoCo",
+    ),
 ];
 
 impl MujocoSimulation {
@@ -278,14 +357,22 @@ impl MujocoSimulation {
         let model = match &scene.robot.mjcf {
             Some(path) => {
                 if !path.is_file() {
-                    return Err(load_error(format!("MJCF file {} not found", path.display())));
+                    return Err(load_error(format!(
+                        "MJCF file {} not found",
+                        path.display()
+                    )));
                 }
-                MjModel::from_xml(path).map_err(|e| load_error(format!("MJCF file {}: {e}", path.display())))?
+                MjModel::from_xml(path)
+                    .map_err(|e| load_error(format!("MJCF file {}: {e}", path.display())))?
             }
             None => {
                 let xml = mjcf::scene_to_mjcf(scene, robot).map_err(|e| load_error(e.0))?;
-                MjModel::from_xml_string(&xml)
-                    .map_err(|e| load_error(format!("MuJoCo rejected the model built from {}: {e}", robot.source.display())))?
+                MjModel::from_xml_string(&xml).map_err(|e| {
+                    load_error(format!(
+                        "MuJoCo rejected the model built from {}: {e}",
+                        robot.source.display()
+                    ))
+                })?
             }
         };
         let mut model = Box::new(model);
@@ -340,11 +427,19 @@ impl MujocoSimulation {
         let mut ctrl_index = Vec::new();
         for a in &scene.actuators {
             let j = by_name(MjtObjBase::mjOBJ_JOINT, &a.joint).ok_or_else(|| {
-                load_error(format!("the model has no joint named \"{}\"{}", a.joint, mjcf_note(scene)))
+                load_error(format!(
+                    "the model has no joint named \"{}\"{}",
+                    a.joint,
+                    mjcf_note(scene)
+                ))
             })?;
             let jtype = model.jnt_type()[j];
-            if jtype != mujoco_c::mjtJoint::mjJNT_HINGE && jtype != mujoco_c::mjtJoint::mjJNT_SLIDE {
-                return Err(load_error(format!("joint \"{}\" is not a hinge or slide joint in the model", a.joint)));
+            if jtype != mujoco_c::mjtJoint::mjJNT_HINGE && jtype != mujoco_c::mjtJoint::mjJNT_SLIDE
+            {
+                return Err(load_error(format!(
+                    "joint \"{}\" is not a hinge or slide joint in the model",
+                    a.joint
+                )));
             }
             qpos_adr.push(model.jnt_qposadr()[j] as usize);
             dof_adr.push(model.jnt_dofadr()[j] as usize);
@@ -353,25 +448,42 @@ impl MujocoSimulation {
                     model.actuator_trntype()[u] == mujoco_c::mjtTrn::mjTRN_JOINT
                         && model.actuator_trnid()[u][0] as usize == j
                 })
-                .ok_or_else(|| load_error(format!("no actuator drives joint \"{}\"{}", a.joint, mjcf_note(scene))))?;
+                .ok_or_else(|| {
+                    load_error(format!(
+                        "no actuator drives joint \"{}\"{}",
+                        a.joint,
+                        mjcf_note(scene)
+                    ))
+                })?;
             ctrl_index.push(actuator);
         }
         let mut tracked_body = Vec::new();
         for t in &scene.tracked {
             let body = match &t.target {
                 TrackTarget::Link(link) => by_name(MjtObjBase::mjOBJ_BODY, &mjcf::body_name(link))
-                    .ok_or_else(|| load_error(format!("tracked link \"{link}\" is not a body of the model{}", mjcf_note(scene))))?,
+                    .ok_or_else(|| {
+                        load_error(format!(
+                            "tracked link \"{link}\" is not a body of the model{}",
+                            mjcf_note(scene)
+                        ))
+                    })?,
                 TrackTarget::Object(object) => {
                     let generated = format!("{}{object}", mjcf::OBJECT_BODY_PREFIX);
-                    by_name(MjtObjBase::mjOBJ_BODY, &generated).or_else(|| by_name(MjtObjBase::mjOBJ_BODY, object)).ok_or_else(|| {
-                        load_error(format!("tracked object \"{object}\" is not a body of the model{}", mjcf_note(scene)))
-                    })?
+                    by_name(MjtObjBase::mjOBJ_BODY, &generated)
+                        .or_else(|| by_name(MjtObjBase::mjOBJ_BODY, object))
+                        .ok_or_else(|| {
+                            load_error(format!(
+                                "tracked object \"{object}\" is not a body of the model{}",
+                                mjcf_note(scene)
+                            ))
+                        })?
                 }
             };
             tracked_body.push(body);
         }
 
-        let mut data = MjData::try_new(model).map_err(|e| load_error(format!("cannot allocate the simulation data: {e}")))?;
+        let mut data = MjData::try_new(model)
+            .map_err(|e| load_error(format!("cannot allocate the simulation data: {e}")))?;
         if scaled {
             // SAFETY: model and data belong together and are not in use elsewhere.
             unsafe {
@@ -381,7 +493,14 @@ impl MujocoSimulation {
             }
         }
         data.forward();
-        let mut sim = MujocoSimulation { data, qpos_adr, dof_adr, ctrl_index, tracked_body, warnings_seen: [0; 3] };
+        let mut sim = MujocoSimulation {
+            data,
+            qpos_adr,
+            dof_adr,
+            ctrl_index,
+            tracked_body,
+            warnings_seen: [0; 3],
+        };
         sim.warnings_seen = sim.warning_counts();
         Ok(sim)
     }
@@ -398,13 +517,19 @@ impl MujocoSimulation {
         if counts == self.warnings_seen {
             return Ok(());
         }
-        let i = (0..3).find(|&i| counts[i] > self.warnings_seen[i]).unwrap_or(2);
+        let i = (0..3)
+            .find(|&i| counts[i] > self.warnings_seen[i])
+            .unwrap_or(2);
         self.warnings_seen = counts;
         let mut message = INSTABILITY_WARNINGS[i].1.to_string();
         if let Some(m) = take_messages().into_iter().last() {
             message.push_str(&format!(" ({m})"));
         }
-        Err(EngineError::Unstable { engine: ENGINE_NAME.to_string(), t_s, message })
+        Err(EngineError::Unstable {
+            engine: ENGINE_NAME.to_string(),
+            t_s,
+            message,
+        })
     }
 
     /// Steps `n` times with `mj_step` and nothing else: no checks, no
@@ -429,9 +554,16 @@ impl MujocoSimulation {
         let model = self.data.model();
         let body_of = |g: i32| {
             let b = model.geom_bodyid()[g as usize] as usize;
-            model.id_to_name(MjtObjBase::mjOBJ_BODY, b).unwrap_or("world").to_string()
+            model
+                .id_to_name(MjtObjBase::mjOBJ_BODY, b)
+                .unwrap_or("world")
+                .to_string()
         };
-        self.data.contact().iter().map(|c| (body_of(c.geom[0]), body_of(c.geom[1]))).collect()
+        self.data
+            .contact()
+            .iter()
+            .map(|c| (body_of(c.geom[0]), body_of(c.geom[1])))
+            .collect()
     }
 
     /// The MuJoCo model.
@@ -442,14 +574,20 @@ impl MujocoSimulation {
     /// World pose of the body of a URDF link, or of any MuJoCo body by its
     /// MuJoCo name (for tests and tools).
     pub fn body_pose(&self, name: &str) -> Option<Pose> {
-        let b = self.data.model().name_to_id(MjtObjBase::mjOBJ_BODY, &mjcf::body_name(name))?;
+        let b = self
+            .data
+            .model()
+            .name_to_id(MjtObjBase::mjOBJ_BODY, &mjcf::body_name(name))?;
         Some(self.body_pose_by_index(b))
     }
 
     fn body_pose_by_index(&self, b: usize) -> Pose {
         let p = self.data.xpos()[b];
         let q = self.data.xquat()[b];
-        Pose::new(Vec3::new(p[0], p[1], p[2]), Quat::new(q[0], q[1], q[2], q[3]))
+        Pose::new(
+            Vec3::new(p[0], p[1], p[2]),
+            Quat::new(q[0], q[1], q[2], q[3]),
+        )
     }
 }
 
@@ -481,7 +619,11 @@ impl Simulation for MujocoSimulation {
         if rad.len() != self.qpos_adr.len() {
             return Err(EngineError::Usage {
                 engine: ENGINE_NAME.to_string(),
-                message: format!("{} joint angles given for {} joints", rad.len(), self.qpos_adr.len()),
+                message: format!(
+                    "{} joint angles given for {} joints",
+                    rad.len(),
+                    self.qpos_adr.len()
+                ),
             });
         }
         let qpos = self.data.qpos_mut();
@@ -510,9 +652,12 @@ impl Simulation for MujocoSimulation {
         for _ in 0..n {
             let t_s = self.data.ffi().time;
             self.data.step();
-            if self.data.ffi().warning[mujoco_c::mjtWarning::mjWARN_BADQACC as usize].number != self.warnings_seen[2]
-                || self.data.ffi().warning[mujoco_c::mjtWarning::mjWARN_BADQPOS as usize].number != self.warnings_seen[0]
-                || self.data.ffi().warning[mujoco_c::mjtWarning::mjWARN_BADQVEL as usize].number != self.warnings_seen[1]
+            if self.data.ffi().warning[mujoco_c::mjtWarning::mjWARN_BADQACC as usize].number
+                != self.warnings_seen[2]
+                || self.data.ffi().warning[mujoco_c::mjtWarning::mjWARN_BADQPOS as usize].number
+                    != self.warnings_seen[0]
+                || self.data.ffi().warning[mujoco_c::mjtWarning::mjWARN_BADQVEL as usize].number
+                    != self.warnings_seen[1]
             {
                 return self.check_stability(t_s);
             }
@@ -550,17 +695,27 @@ mod tests {
     }
 
     fn mico2() -> RobotModel {
-        RobotModel::from_urdf_file(&workspace().join("assets/robots/mico2/mico2.urdf"), &PackageResolver::new()).unwrap()
+        RobotModel::from_urdf_file(
+            &workspace().join("assets/robots/mico2/mico2.urdf"),
+            &PackageResolver::new(),
+        )
+        .unwrap()
     }
 
     fn settings(pairs: &[(&str, SettingValue)]) -> EngineSettings {
-        pairs.iter().map(|(k, v)| (k.to_string(), v.clone())).collect()
+        pairs
+            .iter()
+            .map(|(k, v)| (k.to_string(), v.clone()))
+            .collect()
     }
 
     #[test]
     fn settings_are_checked() {
         let e = MujocoEngine;
-        assert_eq!(e.check_settings(&EngineSettings::new()).unwrap(), MUJOCO_DEFAULT_TIMESTEP_S);
+        assert_eq!(
+            e.check_settings(&EngineSettings::new()).unwrap(),
+            MUJOCO_DEFAULT_TIMESTEP_S
+        );
         let ok = settings(&[
             ("timestep_s", SettingValue::Float(1e-4)),
             ("integrator", SettingValue::Text("RK4".into())),
@@ -574,13 +729,28 @@ mod tests {
         assert_eq!(e.check_settings(&ok).unwrap(), 1e-4);
         for (key, value, expected) in [
             ("timestep_s", SettingValue::Float(0.0), "must be > 0"),
-            ("timestep_s", SettingValue::Text("fast".into()), "expected a number"),
-            ("integrator", SettingValue::Text("verlet".into()), "not one of euler, rk4"),
-            ("iterations", SettingValue::Float(2.5), "expected a whole number"),
+            (
+                "timestep_s",
+                SettingValue::Text("fast".into()),
+                "expected a number",
+            ),
+            (
+                "integrator",
+                SettingValue::Text("verlet".into()),
+                "not one of euler, rk4",
+            ),
+            (
+                "iterations",
+                SettingValue::Float(2.5),
+                "expected a whole number",
+            ),
             ("iterations", SettingValue::Integer(0), ">= 1"),
             ("gravity", SettingValue::Float(1.0), "unknown setting"),
         ] {
-            let err = e.check_settings(&settings(&[(key, value)])).unwrap_err().to_string();
+            let err = e
+                .check_settings(&settings(&[(key, value)]))
+                .unwrap_err()
+                .to_string();
             assert!(err.contains(key) && err.contains(expected), "{err}");
         }
     }
@@ -597,7 +767,10 @@ mod tests {
         let sim = MujocoSimulation::load(&s, &robot, &set, &ModelVariation::default()).unwrap();
         let opt = sim.model().opt();
         assert_eq!(opt.timestep, 5e-4);
-        assert_eq!(opt.integrator, mujoco_c::mjtIntegrator::mjINT_IMPLICITFAST as i32);
+        assert_eq!(
+            opt.integrator,
+            mujoco_c::mjtIntegrator::mjINT_IMPLICITFAST as i32
+        );
         assert_eq!(opt.iterations, 7);
         assert_eq!(sim.joint_count(), 6);
         assert_eq!(sim.tracked_count(), 2);
@@ -607,7 +780,13 @@ mod tests {
     fn generated_model_has_urdf_masses_and_the_cube() {
         let s = scene1();
         let robot = mico2();
-        let sim = MujocoSimulation::load(&s, &robot, &EngineSettings::new(), &ModelVariation::default()).unwrap();
+        let sim = MujocoSimulation::load(
+            &s,
+            &robot,
+            &EngineSettings::new(),
+            &ModelVariation::default(),
+        )
+        .unwrap();
         let total: f64 = sim.model().body_mass().iter().sum();
         let expected = robot.total_mass_kg() + 0.0884;
         assert!((total - expected).abs() < 1e-9, "{total} vs {expected}");
@@ -621,8 +800,17 @@ mod tests {
     fn mass_and_friction_variation_scale_the_model() {
         let s = scene1();
         let robot = mico2();
-        let base = MujocoSimulation::load(&s, &robot, &EngineSettings::new(), &ModelVariation::default()).unwrap();
-        let v = ModelVariation { mass_scale: 1.1, friction_scale: 0.5 };
+        let base = MujocoSimulation::load(
+            &s,
+            &robot,
+            &EngineSettings::new(),
+            &ModelVariation::default(),
+        )
+        .unwrap();
+        let v = ModelVariation {
+            mass_scale: 1.1,
+            friction_scale: 0.5,
+        };
         let varied = MujocoSimulation::load(&s, &robot, &EngineSettings::new(), &v).unwrap();
         let sum = |m: &MujocoSimulation| m.model().body_mass().iter().sum::<f64>();
         assert!((sum(&varied) - 1.1 * sum(&base)).abs() < 1e-9);
@@ -635,8 +823,19 @@ mod tests {
         let mut s = scene1();
         let robot = mico2();
         s.robot.mjcf = Some(PathBuf::from("/nonexistent/model.xml"));
-        let err = MujocoSimulation::load(&s, &robot, &EngineSettings::new(), &ModelVariation::default()).err().unwrap();
-        assert!(err.to_string().contains("MJCF file /nonexistent/model.xml not found"), "{err}");
+        let err = MujocoSimulation::load(
+            &s,
+            &robot,
+            &EngineSettings::new(),
+            &ModelVariation::default(),
+        )
+        .err()
+        .unwrap();
+        assert!(
+            err.to_string()
+                .contains("MJCF file /nonexistent/model.xml not found"),
+            "{err}"
+        );
 
         // A model without the scene's joints.
         let dir = std::env::temp_dir().join(format!("rg-mjcf-{}", std::process::id()));
@@ -648,12 +847,30 @@ mod tests {
         )
         .unwrap();
         s.robot.mjcf = Some(file.clone());
-        let err = MujocoSimulation::load(&s, &robot, &EngineSettings::new(), &ModelVariation::default()).err().unwrap();
-        assert!(err.to_string().contains("no actuator drives joint \"m1n6s300_joint_1\""), "{err}");
+        let err = MujocoSimulation::load(
+            &s,
+            &robot,
+            &EngineSettings::new(),
+            &ModelVariation::default(),
+        )
+        .err()
+        .unwrap();
+        assert!(
+            err.to_string()
+                .contains("no actuator drives joint \"m1n6s300_joint_1\""),
+            "{err}"
+        );
 
         // Malformed XML: MuJoCo's parser message, with the file.
         std::fs::write(&file, "<mujoco><worldbody>").unwrap();
-        let err = MujocoSimulation::load(&s, &robot, &EngineSettings::new(), &ModelVariation::default()).err().unwrap();
+        let err = MujocoSimulation::load(
+            &s,
+            &robot,
+            &EngineSettings::new(),
+            &ModelVariation::default(),
+        )
+        .err()
+        .unwrap();
         assert!(err.to_string().contains("pendulum.xml"), "{err}");
         let _ = std::fs::remove_dir_all(&dir);
     }

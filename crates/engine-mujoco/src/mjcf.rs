@@ -75,7 +75,11 @@ fn quat(q: Quat) -> String {
 }
 
 fn pose_attrs(p: &Pose) -> String {
-    format!("pos=\"{}\" quat=\"{}\"", v3(p.position_m), quat(p.orientation))
+    format!(
+        "pos=\"{}\" quat=\"{}\"",
+        v3(p.position_m),
+        quat(p.orientation)
+    )
 }
 
 /// Why a scene and robot cannot be written as MJCF.
@@ -89,14 +93,20 @@ pub fn scene_to_mjcf(scene: &Scene, robot: &RobotModel) -> Result<String, MjcfEr
         .actuators
         .iter()
         .map(|a| {
-            robot
-                .joint_by_name(&a.joint)
-                .ok_or_else(|| MjcfError(format!("robot \"{}\" has no joint \"{}\"", robot.name, a.joint)))
+            robot.joint_by_name(&a.joint).ok_or_else(|| {
+                MjcfError(format!(
+                    "robot \"{}\" has no joint \"{}\"",
+                    robot.name, a.joint
+                ))
+            })
         })
         .collect::<Result<_, _>>()?;
     for link in &robot.links {
         if link.name.starts_with(OBJECT_BODY_PREFIX) || link.name == "urdf:world" {
-            return Err(MjcfError(format!("link name \"{}\" clashes with the names of scene objects", link.name)));
+            return Err(MjcfError(format!(
+                "link name \"{}\" clashes with the names of scene objects",
+                link.name
+            )));
         }
     }
 
@@ -104,8 +114,16 @@ pub fn scene_to_mjcf(scene: &Scene, robot: &RobotModel) -> Result<String, MjcfEr
     let mut mesh_count = 0usize;
     let mut world = String::new();
     if let Some(g) = &scene.ground {
-        let friction = g.friction.map(|f| format!(" friction=\"{} 0.005 0.0001\"", num(f))).unwrap_or_default();
-        writeln!(world, "    <geom name=\"ground\" type=\"plane\" size=\"0 0 1\" pos=\"0 0 {}\"{friction}/>", num(g.height_m)).unwrap();
+        let friction = g
+            .friction
+            .map(|f| format!(" friction=\"{} 0.005 0.0001\"", num(f)))
+            .unwrap_or_default();
+        writeln!(
+            world,
+            "    <geom name=\"ground\" type=\"plane\" size=\"0 0 1\" pos=\"0 0 {}\"{friction}/>",
+            num(g.height_m)
+        )
+        .unwrap();
     }
 
     // Robot bodies, depth first.
@@ -128,13 +146,37 @@ pub fn scene_to_mjcf(scene: &Scene, robot: &RobotModel) -> Result<String, MjcfEr
 
     for o in &scene.objects {
         let inertia = o.principal_inertia();
-        let friction = o.friction.map(|f| format!(" friction=\"{} 0.005 0.0001\"", num(f))).unwrap_or_default();
+        let friction = o
+            .friction
+            .map(|f| format!(" friction=\"{} 0.005 0.0001\"", num(f)))
+            .unwrap_or_default();
         let geom = match o.shape {
-            ObjectShape::Box { size_m } => format!("type=\"box\" size=\"{}\"", v3(size_m.scale(0.5))),
+            ObjectShape::Box { size_m } => {
+                format!("type=\"box\" size=\"{}\"", v3(size_m.scale(0.5)))
+            }
         };
-        writeln!(world, "    <body name=\"{}{}\" {}>", OBJECT_BODY_PREFIX, esc(&o.name), pose_attrs(&o.pose)).unwrap();
-        writeln!(world, "      <freejoint name=\"{}{}\"/>", OBJECT_BODY_PREFIX, esc(&o.name)).unwrap();
-        writeln!(world, "      <inertial pos=\"0 0 0\" mass=\"{}\" diaginertia=\"{}\"/>", num(o.mass_kg), v3(inertia)).unwrap();
+        writeln!(
+            world,
+            "    <body name=\"{}{}\" {}>",
+            OBJECT_BODY_PREFIX,
+            esc(&o.name),
+            pose_attrs(&o.pose)
+        )
+        .unwrap();
+        writeln!(
+            world,
+            "      <freejoint name=\"{}{}\"/>",
+            OBJECT_BODY_PREFIX,
+            esc(&o.name)
+        )
+        .unwrap();
+        writeln!(
+            world,
+            "      <inertial pos=\"0 0 0\" mass=\"{}\" diaginertia=\"{}\"/>",
+            num(o.mass_kg),
+            v3(inertia)
+        )
+        .unwrap();
         writeln!(world, "      <geom {geom}{friction}/>").unwrap();
         writeln!(world, "    </body>").unwrap();
     }
@@ -142,7 +184,11 @@ pub fn scene_to_mjcf(scene: &Scene, robot: &RobotModel) -> Result<String, MjcfEr
     let mut actuators = String::new();
     for a in &scene.actuators {
         let limit = if a.force_limit.is_finite() {
-            format!(" forcelimited=\"true\" forcerange=\"{} {}\"", num(-a.force_limit), num(a.force_limit))
+            format!(
+                " forcelimited=\"true\" forcerange=\"{} {}\"",
+                num(-a.force_limit),
+                num(a.force_limit)
+            )
         } else {
             String::new()
         };
@@ -157,8 +203,17 @@ pub fn scene_to_mjcf(scene: &Scene, robot: &RobotModel) -> Result<String, MjcfEr
     }
 
     let mut xml = String::new();
-    writeln!(xml, "<mujoco model=\"{}\">", esc(&format!("{} ({})", scene.name, robot.name))).unwrap();
-    writeln!(xml, "  <compiler angle=\"radian\" inertiafromgeom=\"false\" autolimits=\"true\"/>").unwrap();
+    writeln!(
+        xml,
+        "<mujoco model=\"{}\">",
+        esc(&format!("{} ({})", scene.name, robot.name))
+    )
+    .unwrap();
+    writeln!(
+        xml,
+        "  <compiler angle=\"radian\" inertiafromgeom=\"false\" autolimits=\"true\"/>"
+    )
+    .unwrap();
     if !assets.is_empty() {
         writeln!(xml, "  <asset>\n{assets}  </asset>").unwrap();
     }
@@ -166,7 +221,13 @@ pub fn scene_to_mjcf(scene: &Scene, robot: &RobotModel) -> Result<String, MjcfEr
     if !excludes.is_empty() {
         writeln!(xml, "  <contact>").unwrap();
         for (a, b) in &excludes {
-            writeln!(xml, "    <exclude body1=\"{}\" body2=\"{}\"/>", esc(a), esc(b)).unwrap();
+            writeln!(
+                xml,
+                "    <exclude body1=\"{}\" body2=\"{}\"/>",
+                esc(a),
+                esc(b)
+            )
+            .unwrap();
         }
         writeln!(xml, "  </contact>").unwrap();
     }
@@ -191,18 +252,36 @@ fn write_link(
 ) -> Result<(), MjcfError> {
     let link = &robot.links[link_index];
     let ind = "  ".repeat(depth);
-    writeln!(out, "{ind}<body name=\"{}\" {}>", esc(&body_name(&link.name)), pose_attrs(body_pose)).unwrap();
+    writeln!(
+        out,
+        "{ind}<body name=\"{}\" {}>",
+        esc(&body_name(&link.name)),
+        pose_attrs(body_pose)
+    )
+    .unwrap();
     if let Some(j) = joint_index.filter(|j| actuated.contains(j)) {
         let joint = &robot.joints[j];
         let kind = match joint.kind {
             JointKind::Revolute | JointKind::Continuous => "hinge",
             JointKind::Prismatic => "slide",
-            JointKind::Fixed => unreachable!("fixed joints are never actuated (the scene was validated)"),
+            JointKind::Fixed => {
+                unreachable!("fixed joints are never actuated (the scene was validated)")
+            }
         };
-        let mut attrs = format!("name=\"{}\" type=\"{kind}\" axis=\"{}\"", esc(&joint.name), v3(joint.axis));
+        let mut attrs = format!(
+            "name=\"{}\" type=\"{kind}\" axis=\"{}\"",
+            esc(&joint.name),
+            v3(joint.axis)
+        );
         if let Some(lim) = joint.limits {
             if lim.lower.is_finite() && lim.upper.is_finite() {
-                write!(attrs, " limited=\"true\" range=\"{} {}\"", num(lim.lower), num(lim.upper)).unwrap();
+                write!(
+                    attrs,
+                    " limited=\"true\" range=\"{} {}\"",
+                    num(lim.lower),
+                    num(lim.upper)
+                )
+                .unwrap();
             }
         }
         if joint.damping > 0.0 {
@@ -250,14 +329,26 @@ fn write_link(
         let shape = match &c.geometry {
             Geometry::Box { size_m } => format!("type=\"box\" size=\"{}\"", v3(size_m.scale(0.5))),
             Geometry::Cylinder { radius_m, length_m } => {
-                format!("type=\"cylinder\" size=\"{} {}\"", num(*radius_m), num(length_m / 2.0))
+                format!(
+                    "type=\"cylinder\" size=\"{} {}\"",
+                    num(*radius_m),
+                    num(length_m / 2.0)
+                )
             }
             Geometry::Capsule { radius_m, length_m } => {
-                format!("type=\"capsule\" size=\"{} {}\"", num(*radius_m), num(length_m / 2.0))
+                format!(
+                    "type=\"capsule\" size=\"{} {}\"",
+                    num(*radius_m),
+                    num(length_m / 2.0)
+                )
             }
             Geometry::Sphere { radius_m } => format!("type=\"sphere\" size=\"{}\"", num(*radius_m)),
             Geometry::Mesh { path, uri, scale } => {
-                let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+                let ext = path
+                    .extension()
+                    .and_then(|e| e.to_str())
+                    .unwrap_or("")
+                    .to_ascii_lowercase();
                 if !matches!(ext.as_str(), "stl" | "obj" | "msh") {
                     return Err(MjcfError(format!(
                         "link \"{}\": mesh \"{uri}\" ({}) is not a format MuJoCo reads (STL, OBJ or MSH)",
@@ -266,11 +357,21 @@ fn write_link(
                     )));
                 }
                 let file = path.to_str().ok_or_else(|| {
-                    MjcfError(format!("link \"{}\": mesh path {} is not valid UTF-8", link.name, path.display()))
+                    MjcfError(format!(
+                        "link \"{}\": mesh path {} is not valid UTF-8",
+                        link.name,
+                        path.display()
+                    ))
                 })?;
                 let name = format!("mesh{}", *mesh_count);
                 *mesh_count += 1;
-                writeln!(assets, "    <mesh name=\"{name}\" file=\"{}\" scale=\"{}\"/>", esc(file), v3(*scale)).unwrap();
+                writeln!(
+                    assets,
+                    "    <mesh name=\"{name}\" file=\"{}\" scale=\"{}\"/>",
+                    esc(file),
+                    v3(*scale)
+                )
+                .unwrap();
                 format!("type=\"mesh\" mesh=\"{name}\"")
             }
         };
@@ -290,11 +391,31 @@ fn write_link(
                     )));
                 }
             }
-            let held = scene.robot.held_joints_rad.get(&joint.name).copied().unwrap_or(0.0);
+            let held = scene
+                .robot
+                .held_joints_rad
+                .get(&joint.name)
+                .copied()
+                .unwrap_or(0.0);
             joint.transform(held)
         };
-        excludes.push((body_name(&link.name), body_name(&robot.links[joint.child].name)));
-        write_link(robot, joint.child, &child_pose, Some(j), depth + 1, scene, actuated, out, assets, mesh_count, excludes)?;
+        excludes.push((
+            body_name(&link.name),
+            body_name(&robot.links[joint.child].name),
+        ));
+        write_link(
+            robot,
+            joint.child,
+            &child_pose,
+            Some(j),
+            depth + 1,
+            scene,
+            actuated,
+            out,
+            assets,
+            mesh_count,
+            excludes,
+        )?;
     }
     writeln!(out, "{ind}</body>").unwrap();
     Ok(())
@@ -360,7 +481,8 @@ targets_deg = { j1 = 10.0 }
 "#;
 
     fn build() -> String {
-        let robot = RobotModel::from_urdf_str(ARM, Path::new("/tmp"), &PackageResolver::new()).unwrap();
+        let robot =
+            RobotModel::from_urdf_str(ARM, Path::new("/tmp"), &PackageResolver::new()).unwrap();
         let scene = Scene::from_toml_str(SCENE, Path::new("/tmp/t.toml")).unwrap();
         scene.validate(&robot).unwrap();
         scene_to_mjcf(&scene, &robot).unwrap()
@@ -371,7 +493,10 @@ targets_deg = { j1 = 10.0 }
         let xml = build();
         assert!(xml.contains("<body name=\"urdf:world\""), "{xml}");
         assert!(xml.contains("<joint name=\"j1\" type=\"hinge\" axis=\"0.0 1.0 0.0\" limited=\"true\" range=\"-1.0 1.0\" damping=\"0.2\"/>"), "{xml}");
-        assert!(!xml.contains("name=\"j2\""), "held joint must be welded: {xml}");
+        assert!(
+            !xml.contains("name=\"j2\""),
+            "held joint must be welded: {xml}"
+        );
         assert!(xml.contains("<velocity name=\"servo:j1\" joint=\"j1\" kv=\"5.0\" forcelimited=\"true\" forcerange=\"-3.0 3.0\"/>"));
         assert!(xml.contains("<freejoint name=\"object:block\"/>"));
         assert!(xml.contains("<geom type=\"box\" size=\"0.05 0.05 0.05\"/>"));
@@ -387,19 +512,35 @@ targets_deg = { j1 = 10.0 }
         let dir = std::env::temp_dir().join(format!("rg-dae-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         std::fs::write(dir.join("part.dae"), "<COLLADA/>").unwrap();
-        let urdf = ARM.replace("<box size=\"0.1 0.2 0.3\"/>", "<mesh filename=\"part.dae\"/>");
+        let urdf = ARM.replace(
+            "<box size=\"0.1 0.2 0.3\"/>",
+            "<mesh filename=\"part.dae\"/>",
+        );
         let robot = RobotModel::from_urdf_str(&urdf, &dir, &PackageResolver::new()).unwrap();
         let scene = Scene::from_toml_str(SCENE, &dir.join("t.toml")).unwrap();
         let err = scene_to_mjcf(&scene, &robot).unwrap_err();
-        assert!(err.0.contains("part.dae") && err.0.contains("STL, OBJ or MSH"), "{}", err.0);
+        assert!(
+            err.0.contains("part.dae") && err.0.contains("STL, OBJ or MSH"),
+            "{}",
+            err.0
+        );
         let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
     fn the_project_scenes_build() {
-        let robot = RobotModel::from_urdf_file(&workspace().join("assets/robots/mico2/mico2.urdf"), &PackageResolver::new()).unwrap();
-        for name in ["scene1_single_joint", "scene2_two_joints", "scene3_cube_push"] {
-            let scene = Scene::from_file(&workspace().join(format!("assets/scenes/{name}.toml"))).unwrap();
+        let robot = RobotModel::from_urdf_file(
+            &workspace().join("assets/robots/mico2/mico2.urdf"),
+            &PackageResolver::new(),
+        )
+        .unwrap();
+        for name in [
+            "scene1_single_joint",
+            "scene2_two_joints",
+            "scene3_cube_push",
+        ] {
+            let scene =
+                Scene::from_file(&workspace().join(format!("assets/scenes/{name}.toml"))).unwrap();
             scene.validate(&robot).unwrap();
             let xml = scene_to_mjcf(&scene, &robot).unwrap();
             assert_eq!(xml.matches("<velocity ").count(), 6, "{name}");

@@ -18,21 +18,32 @@ use std::collections::HashMap;
 /// positions).
 fn check_kinematics(scene: &Scene, robot: &RobotModel) {
     scene.validate(robot).unwrap();
-    let mut sim = MujocoSimulation::load(scene, robot, &EngineSettings::new(), &ModelVariation::default()).unwrap();
+    let mut sim = MujocoSimulation::load(
+        scene,
+        robot,
+        &EngineSettings::new(),
+        &ModelVariation::default(),
+    )
+    .unwrap();
     let mut rng = SplitMix64::new(11);
     let controlled = scene.controlled_joints();
     for _ in 0..20 {
         let angles: Vec<f64> = controlled
             .iter()
             .map(|name| {
-                let lim = robot.joints[robot.joint_by_name(name).unwrap()].limits.unwrap();
+                let lim = robot.joints[robot.joint_by_name(name).unwrap()]
+                    .limits
+                    .unwrap();
                 let (lo, hi) = (lim.lower.max(-3.0), lim.upper.min(3.0));
                 lo + (hi - lo) * rng.uniform()
             })
             .collect();
         sim.set_joint_angles_rad(&angles).unwrap();
-        let mut named: HashMap<String, f64> =
-            controlled.iter().zip(&angles).map(|(n, &a)| (n.to_string(), a)).collect();
+        let mut named: HashMap<String, f64> = controlled
+            .iter()
+            .zip(&angles)
+            .map(|(n, &a)| (n.to_string(), a))
+            .collect();
         for (n, &a) in &scene.robot.held_joints_rad {
             named.insert(n.clone(), a);
         }
@@ -42,7 +53,12 @@ fn check_kinematics(scene: &Scene, robot: &RobotModel) {
             let got: Pose = sim.body_pose(&link.name).unwrap();
             let d = got.position_m.distance(expected.position_m);
             let a = got.orientation.angle_to(expected.orientation);
-            assert!(d < 1e-9 && a < 1e-9, "{}: link {} off by {d} m, {a} rad", robot.name, link.name);
+            assert!(
+                d < 1e-9 && a < 1e-9,
+                "{}: link {} off by {d} m, {a} rad",
+                robot.name,
+                link.name
+            );
         }
         let mut wrist = [Pose::IDENTITY; 2];
         sim.tracked_poses(&mut wrist);
@@ -75,7 +91,11 @@ fn mico2_vs_official(name: &str) -> (f64, f64) {
     let official = run(&official_scene, &official_robot(&paper));
     let (a, b) = (wrist(&ours), wrist(&official));
     let last = a.last().unwrap().distance(*b.last().unwrap());
-    let max = a.iter().zip(&b).map(|(p, q)| p.distance(*q)).fold(0.0, f64::max);
+    let max = a
+        .iter()
+        .zip(&b)
+        .map(|(p, q)| p.distance(*q))
+        .fold(0.0, f64::max);
     let cube_shift = |o: &realitygap_core::controller::RunOutcome| {
         let c = cube(o);
         c.last().unwrap().distance(c[0])
@@ -108,10 +128,19 @@ fn no_contacts_at_rest_but_the_cube_on_the_ground() {
     let s = scene("scene1_single_joint");
     let robot = mico2();
     s.validate(&robot).unwrap();
-    let mut sim = MujocoSimulation::load(&s, &robot, &EngineSettings::new(), &ModelVariation::default()).unwrap();
+    let mut sim = MujocoSimulation::load(
+        &s,
+        &robot,
+        &EngineSettings::new(),
+        &ModelVariation::default(),
+    )
+    .unwrap();
     sim.step_raw(10);
     for (a, b) in sim.contacts() {
-        assert!(a == "object:cube" || b == "object:cube", "unexpected contact {a} - {b}");
+        assert!(
+            a == "object:cube" || b == "object:cube",
+            "unexpected contact {a} - {b}"
+        );
     }
 }
 

@@ -41,7 +41,10 @@ fn now_s() -> f64 {
         fn clock_gettime(clock: i32, ts: *mut Timespec) -> i32;
     }
     const CLOCK_THREAD_CPUTIME_ID: i32 = 3;
-    let mut ts = Timespec { tv_sec: 0, tv_nsec: 0 };
+    let mut ts = Timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
     // SAFETY: a plain system call writing into `ts`.
     let rc = unsafe { clock_gettime(CLOCK_THREAD_CPUTIME_ID, &mut ts) };
     assert_eq!(rc, 0, "clock_gettime");
@@ -52,7 +55,10 @@ fn now_s() -> f64 {
 fn now_s() -> f64 {
     use std::sync::OnceLock;
     static ORIGIN: OnceLock<std::time::Instant> = OnceLock::new();
-    ORIGIN.get_or_init(std::time::Instant::now).elapsed().as_secs_f64()
+    ORIGIN
+        .get_or_init(std::time::Instant::now)
+        .elapsed()
+        .as_secs_f64()
 }
 
 impl Stopwatch {
@@ -72,7 +78,10 @@ fn workspace() -> PathBuf {
 /// `repeats`), and the engine steps taken.
 fn measure(scene: &Scene, robot: &RobotModel, repeats: usize) -> (f64, f64, u64) {
     let settings = EngineSettings::new();
-    let load = || OdeSimulation::load(scene, robot, &settings, &ModelVariation::default()).expect("the model loads");
+    let load = || {
+        OdeSimulation::load(scene, robot, &settings, &ModelVariation::default())
+            .expect("the model loads")
+    };
     let mut best_loop = f64::INFINITY;
     let mut best_raw = f64::INFINITY;
     let mut steps = 0;
@@ -83,7 +92,10 @@ fn measure(scene: &Scene, robot: &RobotModel, repeats: usize) -> (f64, f64, u64)
         best_loop = best_loop.min(watch.elapsed_s());
         assert_eq!(out.status, RunStatus::Completed, "{}", scene.name);
         steps = out.engine_steps;
-        let commands = out.trajectory.joint_velocity_commands_rad_s.expect("recorded");
+        let commands = out
+            .trajectory
+            .joint_velocity_commands_rad_s
+            .expect("recorded");
         let per_period = steps / commands.len() as u64;
 
         let mut sim = load();
@@ -100,20 +112,36 @@ fn measure(scene: &Scene, robot: &RobotModel, repeats: usize) -> (f64, f64, u64)
 fn main() {
     // `cargo bench` passes `--bench`; nothing else is understood.
     realitygap_engine_ode::install_message_handler();
-    let repeats: usize = std::env::var("REPEATS").ok().and_then(|v| v.parse().ok()).unwrap_or(15);
+    let repeats: usize = std::env::var("REPEATS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(15);
     let scene_names: Vec<String> = std::env::var("SCENES")
         .map(|s| s.split(',').map(str::to_string).collect())
-        .unwrap_or_else(|_| vec!["scene1_single_joint".into(), "scene2_two_joints".into(), "scene3_cube_push".into()]);
+        .unwrap_or_else(|_| {
+            vec![
+                "scene1_single_joint".into(),
+                "scene2_two_joints".into(),
+                "scene3_cube_push".into(),
+            ]
+        });
     let paper = workspace().join("../shared/paper-data");
-    let mico2 = RobotModel::from_urdf_file(&workspace().join("assets/robots/mico2/mico2.urdf"), &PackageResolver::new())
-        .expect("the Mico2 URDF loads");
+    let mico2 = RobotModel::from_urdf_file(
+        &workspace().join("assets/robots/mico2/mico2.urdf"),
+        &PackageResolver::new(),
+    )
+    .expect("the Mico2 URDF loads");
     let official = paper.join("kinova_description").is_dir().then(|| {
         let mut r = PackageResolver::new();
         r.insert("kinova_description", paper.join("kinova_description"));
-        RobotModel::from_urdf_file(&paper.join("kinova_description/urdf/m1n6s300.urdf"), &r).expect("the official URDF loads")
+        RobotModel::from_urdf_file(&paper.join("kinova_description/urdf/m1n6s300.urdf"), &r)
+            .expect("the official URDF loads")
     });
     if official.is_none() {
-        println!("(paper data not found at {}: the official URDF is left out)", paper.display());
+        println!(
+            "(paper data not found at {}: the official URDF is left out)",
+            paper.display()
+        );
     }
     println!(
         "ODE {} with the default settings (world_step, dt = 0.01 s); thread CPU time, best of {repeats}",
@@ -125,7 +153,12 @@ fn main() {
     );
     let mut worst: f64 = f64::NEG_INFINITY;
     for name in &scene_names {
-        let scene = Scene::from_file(&workspace().join("assets/scenes").join(format!("{name}.toml"))).expect("the scene loads");
+        let scene = Scene::from_file(
+            &workspace()
+                .join("assets/scenes")
+                .join(format!("{name}.toml")),
+        )
+        .expect("the scene loads");
         let mut cases: Vec<(&str, Scene, &RobotModel)> = vec![("mico2", scene.clone(), &mico2)];
         if let Some(official) = &official {
             let mut s = scene.clone();
@@ -148,5 +181,8 @@ fn main() {
             );
         }
     }
-    println!("largest overhead of the controller loop: {:.2}% (target: at most 5%)", worst * 100.0);
+    println!(
+        "largest overhead of the controller loop: {:.2}% (target: at most 5%)",
+        worst * 100.0
+    );
 }

@@ -233,7 +233,10 @@ pub fn combine_masses(parts: &[(Vec3, f64, [f64; 9])]) -> Option<(MassPlan, Vec3
     if mass <= 0.0 {
         return None;
     }
-    let com = parts.iter().fold(Vec3::ZERO, |acc, (p, m, _)| acc + p.scale(*m)).scale(1.0 / mass);
+    let com = parts
+        .iter()
+        .fold(Vec3::ZERO, |acc, (p, m, _)| acc + p.scale(*m))
+        .scale(1.0 / mass);
     let mut inertia = [0.0; 9];
     for (p, m, i) in parts {
         let d = *p - com;
@@ -246,7 +249,13 @@ pub fn combine_masses(parts: &[(Vec3, f64, [f64; 9])]) -> Option<(MassPlan, Vec3
             }
         }
     }
-    Some((MassPlan { mass_kg: mass, inertia }, com))
+    Some((
+        MassPlan {
+            mass_kg: mass,
+            inertia,
+        },
+        com,
+    ))
 }
 
 /// Whether a symmetric 3x3 matrix is positive definite (Sylvester's
@@ -254,25 +263,41 @@ pub fn combine_masses(parts: &[(Vec3, f64, [f64; 9])]) -> Option<(MassPlan, Vec3
 pub fn is_positive_definite(m: &[f64; 9]) -> bool {
     let d1 = m[0];
     let d2 = m[0] * m[4] - m[1] * m[3];
-    let d3 = m[0] * (m[4] * m[8] - m[5] * m[7]) - m[1] * (m[3] * m[8] - m[5] * m[6]) + m[2] * (m[3] * m[7] - m[4] * m[6]);
+    let d3 = m[0] * (m[4] * m[8] - m[5] * m[7]) - m[1] * (m[3] * m[8] - m[5] * m[6])
+        + m[2] * (m[3] * m[7] - m[4] * m[6]);
     m.iter().all(|x| x.is_finite()) && d1 > 0.0 && d2 > 0.0 && d3 > 0.0
 }
 
 /// Reads an STL mesh, scales it, and welds equal vertices.
-pub fn mesh_plan(path: &std::path::Path, uri: &str, scale: Vec3, link_name: &str) -> Result<MeshPlan, PlanError> {
-    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+pub fn mesh_plan(
+    path: &std::path::Path,
+    uri: &str,
+    scale: Vec3,
+    link_name: &str,
+) -> Result<MeshPlan, PlanError> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
     if ext != "stl" {
         return Err(PlanError(format!(
             "link \"{link_name}\": mesh \"{uri}\" ({}) is not an STL file; the ODE engine reads STL meshes only",
             path.display()
         )));
     }
-    let mesh = TriangleMesh::read(path).map_err(|e| PlanError(format!("link \"{link_name}\": {e}")))?;
+    let mesh =
+        TriangleMesh::read(path).map_err(|e| PlanError(format!("link \"{link_name}\": {e}")))?;
     if mesh.triangles.is_empty() {
-        return Err(PlanError(format!("link \"{link_name}\": mesh {} has no triangles", path.display())));
+        return Err(PlanError(format!(
+            "link \"{link_name}\": mesh {} has no triangles",
+            path.display()
+        )));
     }
     if !(scale.x != 0.0 && scale.y != 0.0 && scale.z != 0.0 && scale.is_finite()) {
-        return Err(PlanError(format!("link \"{link_name}\": mesh \"{uri}\" has a zero or non-finite scale")));
+        return Err(PlanError(format!(
+            "link \"{link_name}\": mesh \"{uri}\" has a zero or non-finite scale"
+        )));
     }
     // A mirroring scale turns the triangles inside out: swap two corners.
     let mirrored = scale.x * scale.y * scale.z < 0.0;
@@ -280,15 +305,26 @@ pub fn mesh_plan(path: &std::path::Path, uri: &str, scale: Vec3, link_name: &str
     let mut vertices: Vec<f64> = Vec::new();
     let mut indices: Vec<u32> = Vec::with_capacity(mesh.triangles.len() * 3);
     for (t, tri) in mesh.triangles.iter().enumerate() {
-        let corners = if mirrored { [tri[0], tri[2], tri[1]] } else { *tri };
+        let corners = if mirrored {
+            [tri[0], tri[2], tri[1]]
+        } else {
+            *tri
+        };
         let mut ids = [0u32; 3];
         for (id, v) in ids.iter_mut().zip(corners) {
             let s = Vec3::new(v.x * scale.x, v.y * scale.y, v.z * scale.z);
             if !s.is_finite() {
-                return Err(PlanError(format!("link \"{link_name}\": mesh {} triangle {t} has a non-finite vertex", path.display())));
+                return Err(PlanError(format!(
+                    "link \"{link_name}\": mesh {} triangle {t} has a non-finite vertex",
+                    path.display()
+                )));
             }
             // +0.0 and -0.0 are the same vertex.
-            let key = [(s.x + 0.0).to_bits(), (s.y + 0.0).to_bits(), (s.z + 0.0).to_bits()];
+            let key = [
+                (s.x + 0.0).to_bits(),
+                (s.y + 0.0).to_bits(),
+                (s.z + 0.0).to_bits(),
+            ];
             let next = (vertices.len() / 3) as u32;
             *id = *index_of.entry(key).or_insert_with(|| {
                 vertices.extend_from_slice(&[s.x, s.y, s.z]);
@@ -301,12 +337,22 @@ pub fn mesh_plan(path: &std::path::Path, uri: &str, scale: Vec3, link_name: &str
         }
     }
     if indices.is_empty() {
-        return Err(PlanError(format!("link \"{link_name}\": mesh {} has only degenerate triangles", path.display())));
+        return Err(PlanError(format!(
+            "link \"{link_name}\": mesh {} has only degenerate triangles",
+            path.display()
+        )));
     }
     if vertices.len() / 3 > i32::MAX as usize || indices.len() > i32::MAX as usize {
-        return Err(PlanError(format!("link \"{link_name}\": mesh {} is too large for ODE", path.display())));
+        return Err(PlanError(format!(
+            "link \"{link_name}\": mesh {} is too large for ODE",
+            path.display()
+        )));
     }
-    Ok(MeshPlan { uri: uri.to_string(), vertices, indices })
+    Ok(MeshPlan {
+        uri: uri.to_string(),
+        vertices,
+        indices,
+    })
 }
 
 fn shape_plan(geometry: &Geometry, link_name: &str) -> Result<ShapePlan, PlanError> {
@@ -314,22 +360,33 @@ fn shape_plan(geometry: &Geometry, link_name: &str) -> Result<ShapePlan, PlanErr
         if v.is_finite() && v > 0.0 {
             Ok(v)
         } else {
-            Err(PlanError(format!("link \"{link_name}\": collision {what} must be positive and finite, found {v}")))
+            Err(PlanError(format!(
+                "link \"{link_name}\": collision {what} must be positive and finite, found {v}"
+            )))
         }
     };
     Ok(match geometry {
-        Geometry::Box { size_m } => {
-            ShapePlan::Box(Vec3::new(positive("box size", size_m.x)?, positive("box size", size_m.y)?, positive("box size", size_m.z)?))
-        }
+        Geometry::Box { size_m } => ShapePlan::Box(Vec3::new(
+            positive("box size", size_m.x)?,
+            positive("box size", size_m.y)?,
+            positive("box size", size_m.z)?,
+        )),
         Geometry::Sphere { radius_m } => ShapePlan::Sphere(positive("sphere radius", *radius_m)?),
-        Geometry::Cylinder { radius_m, length_m } => {
-            ShapePlan::Cylinder(positive("cylinder radius", *radius_m)?, positive("cylinder length", *length_m)?)
-        }
+        Geometry::Cylinder { radius_m, length_m } => ShapePlan::Cylinder(
+            positive("cylinder radius", *radius_m)?,
+            positive("cylinder length", *length_m)?,
+        ),
         Geometry::Capsule { radius_m, length_m } => {
-            let length = if *length_m == 0.0 { 0.0 } else { positive("capsule length", *length_m)? };
+            let length = if *length_m == 0.0 {
+                0.0
+            } else {
+                positive("capsule length", *length_m)?
+            };
             ShapePlan::Capsule(positive("capsule radius", *radius_m)?, length)
         }
-        Geometry::Mesh { path, uri, scale } => ShapePlan::Mesh(mesh_plan(path, uri, *scale, link_name)?),
+        Geometry::Mesh { path, uri, scale } => {
+            ShapePlan::Mesh(mesh_plan(path, uri, *scale, link_name)?)
+        }
     })
 }
 
@@ -345,9 +402,12 @@ pub fn plan(
         .actuators
         .iter()
         .map(|a| {
-            robot
-                .joint_by_name(&a.joint)
-                .ok_or_else(|| PlanError(format!("robot \"{}\" has no joint \"{}\"", robot.name, a.joint)))
+            robot.joint_by_name(&a.joint).ok_or_else(|| {
+                PlanError(format!(
+                    "robot \"{}\" has no joint \"{}\"",
+                    robot.name, a.joint
+                ))
+            })
         })
         .collect::<Result<_, _>>()?;
     for &j in &actuated {
@@ -386,7 +446,12 @@ pub fn plan(
                 )));
             }
         }
-        initial_positions[j] = scene.robot.held_joints_rad.get(&joint.name).copied().unwrap_or(0.0);
+        initial_positions[j] = scene
+            .robot
+            .held_joints_rad
+            .get(&joint.name)
+            .copied()
+            .unwrap_or(0.0);
     }
 
     // Bodies: a new one at the root and below every controlled joint.
@@ -415,7 +480,9 @@ pub fn plan(
 
     let mut bodies = Vec::with_capacity(roots.len());
     for (b, &root) in roots.iter().enumerate() {
-        let links: Vec<usize> = (0..robot.links.len()).filter(|&l| body_of_link[l] == b).collect();
+        let links: Vec<usize> = (0..robot.links.len())
+            .filter(|&l| body_of_link[l] == b)
+            .collect();
         let mut parts = Vec::new();
         for &l in &links {
             if let Some(inertial) = &robot.links[l].inertial {
@@ -423,11 +490,21 @@ pub fn plan(
                     let frame = link_in_root[l].compose(&inertial.origin);
                     let r = frame.orientation.to_rotation_matrix();
                     let i = rotate_inertia(&r, &inertial.inertia_matrix());
-                    parts.push((frame.position_m, inertial.mass_kg * variation.mass_scale, scaled(&i, variation.mass_scale)));
+                    parts.push((
+                        frame.position_m,
+                        inertial.mass_kg * variation.mass_scale,
+                        scaled(&i, variation.mass_scale),
+                    ));
                 }
             }
         }
-        let link_names = || links.iter().map(|&l| robot.links[l].name.as_str()).collect::<Vec<_>>().join(", ");
+        let link_names = || {
+            links
+                .iter()
+                .map(|&l| robot.links[l].name.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
         let (mass, com) = match combine_masses(&parts) {
             Some((m, c)) => (Some(m), c),
             None => (None, Vec3::ZERO),
@@ -442,19 +519,34 @@ pub fn plan(
                 )));
             }
         } else if !is_static {
-            let joint = robot.parent_joint(root).map(|j| robot.joints[j].name.as_str()).unwrap_or("?");
+            let joint = robot
+                .parent_joint(root)
+                .map(|j| robot.joints[j].name.as_str())
+                .unwrap_or("?");
             return Err(PlanError(format!(
                 "the links {} moved by joint \"{joint}\" have no mass (no <inertial>); ODE cannot simulate a massless moving body",
                 link_names()
             )));
         }
-        let body = BodyPlan { name: robot.links[root].name.clone(), root_link: root, links: links.clone(), mass, com_in_root_m: com, geoms: Vec::new(), is_static };
+        let body = BodyPlan {
+            name: robot.links[root].name.clone(),
+            root_link: root,
+            links: links.clone(),
+            mass,
+            com_in_root_m: com,
+            geoms: Vec::new(),
+            is_static,
+        };
         let mut geoms = Vec::new();
         for &l in &links {
             for c in &robot.links[l].collisions {
                 let shape = shape_plan(&c.geometry, &robot.links[l].name)?;
                 let offset = body.link_in_body(&link_in_root[l]).compose(&c.origin);
-                geoms.push(GeomPlan { link: l, shape, offset });
+                geoms.push(GeomPlan {
+                    link: l,
+                    shape,
+                    offset,
+                });
             }
         }
         bodies.push(BodyPlan { geoms, ..body });
@@ -495,7 +587,10 @@ pub fn plan(
             ObjectPlan {
                 name: o.name.clone(),
                 size_m,
-                mass: MassPlan { mass_kg: o.mass_kg * s, inertia: [p.x * s, 0.0, 0.0, 0.0, p.y * s, 0.0, 0.0, 0.0, p.z * s] },
+                mass: MassPlan {
+                    mass_kg: o.mass_kg * s,
+                    inertia: [p.x * s, 0.0, 0.0, 0.0, p.y * s, 0.0, 0.0, 0.0, p.z * s],
+                },
                 pose: o.pose,
                 mu: friction(o.friction),
             }
@@ -506,18 +601,26 @@ pub fn plan(
     for t in &scene.tracked {
         tracked.push(match &t.target {
             TrackTarget::Link(name) => {
-                let l = robot
-                    .link_by_name(name)
-                    .ok_or_else(|| PlanError(format!("robot \"{}\" has no link \"{name}\" to track", robot.name)))?;
+                let l = robot.link_by_name(name).ok_or_else(|| {
+                    PlanError(format!(
+                        "robot \"{}\" has no link \"{name}\" to track",
+                        robot.name
+                    ))
+                })?;
                 let b = body_of_link[l];
-                TrackedPlan::Link { body: b, link_in_body: bodies[b].link_in_body(&link_in_root[l]) }
+                TrackedPlan::Link {
+                    body: b,
+                    link_in_body: bodies[b].link_in_body(&link_in_root[l]),
+                }
             }
             TrackTarget::Object(name) => {
                 let i = scene
                     .objects
                     .iter()
                     .position(|o| &o.name == name)
-                    .ok_or_else(|| PlanError(format!("the scene has no object \"{name}\" to track")))?;
+                    .ok_or_else(|| {
+                        PlanError(format!("the scene has no object \"{name}\" to track"))
+                    })?;
                 TrackedPlan::Object(i)
             }
         });
@@ -547,7 +650,10 @@ impl ModelPlan {
             positions[h.joint] = a;
         }
         let world = robot.forward_kinematics(base, &positions);
-        self.bodies.iter().map(|b| b.body_pose_from_root(&world[b.root_link])).collect()
+        self.bodies
+            .iter()
+            .map(|b| b.body_pose_from_root(&world[b.root_link]))
+            .collect()
     }
 }
 
@@ -564,13 +670,21 @@ mod tests {
         // Two 1 kg point masses 2 m apart on x: centre in the middle,
         // inertia 2 kg m^2 about y and z, none about x.
         let zero = [0.0; 9];
-        let (m, c) = combine_masses(&[(Vec3::new(1.0, 0.0, 0.0), 1.0, zero), (Vec3::new(3.0, 0.0, 0.0), 1.0, zero)]).unwrap();
+        let (m, c) = combine_masses(&[
+            (Vec3::new(1.0, 0.0, 0.0), 1.0, zero),
+            (Vec3::new(3.0, 0.0, 0.0), 1.0, zero),
+        ])
+        .unwrap();
         assert_eq!(m.mass_kg, 2.0);
         assert!(close(c.x, 2.0) && close(c.y, 0.0));
         assert!(close(m.inertia[0], 0.0) && close(m.inertia[4], 2.0) && close(m.inertia[8], 2.0));
         assert!(combine_masses(&[(Vec3::ZERO, 0.0, zero)]).is_none());
         // Off-diagonal terms for an offset in x and y.
-        let (m, _) = combine_masses(&[(Vec3::new(1.0, 1.0, 0.0), 1.0, zero), (Vec3::new(-1.0, -1.0, 0.0), 1.0, zero)]).unwrap();
+        let (m, _) = combine_masses(&[
+            (Vec3::new(1.0, 1.0, 0.0), 1.0, zero),
+            (Vec3::new(-1.0, -1.0, 0.0), 1.0, zero),
+        ])
+        .unwrap();
         assert!(close(m.inertia[1], -2.0) && close(m.inertia[3], -2.0));
         assert!(!is_positive_definite(&m.inertia));
     }
@@ -586,7 +700,10 @@ mod tests {
 
     #[test]
     fn pose_inverse_undoes_a_pose() {
-        let p = Pose::new(Vec3::new(0.1, -0.2, 0.3), Quat::from_euler_rpy(0.3, -0.4, 1.2));
+        let p = Pose::new(
+            Vec3::new(0.1, -0.2, 0.3),
+            Quat::from_euler_rpy(0.3, -0.4, 1.2),
+        );
         let id = p.compose(&pose_inverse(&p));
         assert!(id.position_m.norm() < 1e-15 && id.orientation.angle_to(Quat::IDENTITY) < 1e-7);
     }
@@ -634,10 +751,24 @@ mod tests {
         assert!(e.0.contains("zero or non-finite scale"), "{}", e.0);
         let bad = dir.join("quad.dae");
         std::fs::write(&bad, "<COLLADA/>").unwrap();
-        let e = mesh_plan(&bad, "package://x/quad.dae", Vec3::new(1.0, 1.0, 1.0), "hand").unwrap_err();
-        assert!(e.0.contains("link \"hand\"") && e.0.contains("STL meshes only"), "{}", e.0);
+        let e = mesh_plan(
+            &bad,
+            "package://x/quad.dae",
+            Vec3::new(1.0, 1.0, 1.0),
+            "hand",
+        )
+        .unwrap_err();
+        assert!(
+            e.0.contains("link \"hand\"") && e.0.contains("STL meshes only"),
+            "{}",
+            e.0
+        );
         let broken = dir.join("broken.stl");
-        std::fs::write(&broken, b"solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0\n").unwrap();
+        std::fs::write(
+            &broken,
+            b"solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0\n",
+        )
+        .unwrap();
         let e = mesh_plan(&broken, "broken.stl", Vec3::new(1.0, 1.0, 1.0), "hand").unwrap_err();
         assert!(e.0.contains("broken.stl"), "{}", e.0);
         std::fs::remove_dir_all(&dir).ok();

@@ -152,7 +152,11 @@ impl Default for OdeSettings {
 }
 
 fn setting_error(key: &str, message: impl Into<String>) -> EngineError {
-    EngineError::Setting { engine: ENGINE_NAME.to_string(), key: key.to_string(), message: message.into() }
+    EngineError::Setting {
+        engine: ENGINE_NAME.to_string(),
+        key: key.to_string(),
+        message: message.into(),
+    }
 }
 
 /// A number from a setting: integers convert, and the text `inf` is
@@ -160,7 +164,10 @@ fn setting_error(key: &str, message: impl Into<String>) -> EngineError {
 fn number(key: &str, value: &SettingValue, allow_inf: bool) -> Result<f64, EngineError> {
     if allow_inf {
         if let Some(text) = value.as_str() {
-            if matches!(text.trim().to_ascii_lowercase().as_str(), "inf" | "infinity") {
+            if matches!(
+                text.trim().to_ascii_lowercase().as_str(),
+                "inf" | "infinity"
+            ) {
                 return Ok(f64::INFINITY);
             }
         }
@@ -169,19 +176,37 @@ fn number(key: &str, value: &SettingValue, allow_inf: bool) -> Result<f64, Engin
         .as_f64()
         .ok_or_else(|| setting_error(key, format!("expected a number, found \"{value}\"")))?;
     if v.is_nan() || (v.is_infinite() && !allow_inf) {
-        return Err(setting_error(key, format!("must be a finite number, found {v}")));
+        return Err(setting_error(
+            key,
+            format!("must be a finite number, found {v}"),
+        ));
     }
     Ok(v)
 }
 
-fn choice<T: Copy>(key: &str, value: &SettingValue, choices: &[(&str, T)]) -> Result<T, EngineError> {
+fn choice<T: Copy>(
+    key: &str,
+    value: &SettingValue,
+    choices: &[(&str, T)],
+) -> Result<T, EngineError> {
     let text = value.as_str().map(|t| t.trim().to_ascii_lowercase());
-    choices.iter().find(|(name, _)| Some(*name) == text.as_deref()).map(|(_, v)| *v).ok_or_else(|| {
-        setting_error(
-            key,
-            format!("\"{value}\" is not one of {}", choices.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ")),
-        )
-    })
+    choices
+        .iter()
+        .find(|(name, _)| Some(*name) == text.as_deref())
+        .map(|(_, v)| *v)
+        .ok_or_else(|| {
+            setting_error(
+                key,
+                format!(
+                    "\"{value}\" is not one of {}",
+                    choices
+                        .iter()
+                        .map(|(n, _)| *n)
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            )
+        })
 }
 
 impl OdeSettings {
@@ -204,14 +229,24 @@ impl OdeSettings {
                     o.timestep_s = range(v, v > 0.0, "greater than 0 s")?;
                 }
                 "stepper" => {
-                    o.stepper = choice(k, value, &[("world_step", Stepper::WorldStep), ("quick_step", Stepper::QuickStep)])?
+                    o.stepper = choice(
+                        k,
+                        value,
+                        &[
+                            ("world_step", Stepper::WorldStep),
+                            ("quick_step", Stepper::QuickStep),
+                        ],
+                    )?
                 }
                 "quick_step_iterations" => {
-                    let v = value
-                        .as_i64()
-                        .ok_or_else(|| setting_error(k, format!("expected a whole number, found \"{value}\"")))?;
+                    let v = value.as_i64().ok_or_else(|| {
+                        setting_error(k, format!("expected a whole number, found \"{value}\""))
+                    })?;
                     if !(1..=1_000_000).contains(&v) {
-                        return Err(setting_error(k, format!("must be a whole number from 1 to 1000000, found {v}")));
+                        return Err(setting_error(
+                            k,
+                            format!("must be a whole number from 1 to 1000000, found {v}"),
+                        ));
                     }
                     o.quick_step_iterations = v as u32;
                 }
@@ -232,36 +267,58 @@ impl OdeSettings {
                     o.contact_mu = range(v, v >= 0.0, ">= 0")?;
                 }
                 "max_contacts" => {
-                    let v = value
-                        .as_i64()
-                        .ok_or_else(|| setting_error(k, format!("expected a whole number, found \"{value}\"")))?;
+                    let v = value.as_i64().ok_or_else(|| {
+                        setting_error(k, format!("expected a whole number, found \"{value}\""))
+                    })?;
                     if !(1..=256).contains(&v) {
-                        return Err(setting_error(k, format!("must be a whole number from 1 to 256, found {v}")));
+                        return Err(setting_error(
+                            k,
+                            format!("must be a whole number from 1 to 256, found {v}"),
+                        ));
                     }
                     o.max_contacts = v as usize;
                 }
                 "contact_max_correcting_vel_m_s" => {
                     let v = number(k, value, true)?;
-                    o.contact_max_correcting_vel_m_s = range(v, v > 0.0, "greater than 0 (or inf)")?;
+                    o.contact_max_correcting_vel_m_s =
+                        range(v, v > 0.0, "greater than 0 (or inf)")?;
                 }
                 "contact_surface_layer_m" => {
                     let v = number(k, value, false)?;
                     o.contact_surface_layer_m = range(v, v >= 0.0, ">= 0 m")?;
                 }
                 "self_collision" => {
-                    o.self_collision = value
-                        .as_bool()
-                        .ok_or_else(|| setting_error(k, format!("expected true or false, found \"{value}\"")))?
+                    o.self_collision = value.as_bool().ok_or_else(|| {
+                        setting_error(k, format!("expected true or false, found \"{value}\""))
+                    })?
                 }
-                "servo" => o.servo = choice(k, value, &[("motor", Servo::Motor), ("kv", Servo::Kv)])?,
-                "weld" => o.weld = choice(k, value, &[("merge", Weld::Merge), ("fixed_joint", Weld::FixedJoint)])?,
-                "base" => o.base = choice(k, value, &[("fixed_joint", Base::FixedJoint), ("static", Base::Static)])?,
+                "servo" => {
+                    o.servo = choice(k, value, &[("motor", Servo::Motor), ("kv", Servo::Kv)])?
+                }
+                "weld" => {
+                    o.weld = choice(
+                        k,
+                        value,
+                        &[("merge", Weld::Merge), ("fixed_joint", Weld::FixedJoint)],
+                    )?
+                }
+                "base" => {
+                    o.base = choice(
+                        k,
+                        value,
+                        &[("fixed_joint", Base::FixedJoint), ("static", Base::Static)],
+                    )?
+                }
                 other => {
                     return Err(setting_error(
                         other,
                         format!(
                             "unknown setting (ODE accepts: {})",
-                            SETTINGS.iter().map(|s| s.key).collect::<Vec<_>>().join(", ")
+                            SETTINGS
+                                .iter()
+                                .map(|s| s.key)
+                                .collect::<Vec<_>>()
+                                .join(", ")
                         ),
                     ))
                 }
@@ -276,7 +333,10 @@ mod tests {
     use super::*;
 
     fn parse(pairs: &[(&str, &str)]) -> Result<OdeSettings, EngineError> {
-        let settings: EngineSettings = pairs.iter().map(|(k, v)| (k.to_string(), SettingValue::parse(v))).collect();
+        let settings: EngineSettings = pairs
+            .iter()
+            .map(|(k, v)| (k.to_string(), SettingValue::parse(v)))
+            .collect();
         OdeSettings::parse(&settings)
     }
 
@@ -309,12 +369,19 @@ mod tests {
         ];
         assert_eq!(values.len(), SETTINGS.len());
         for info in SETTINGS {
-            assert!(values.iter().any(|(k, _)| *k == info.key), "{} untested", info.key);
+            assert!(
+                values.iter().any(|(k, _)| *k == info.key),
+                "{} untested",
+                info.key
+            );
         }
         let o = parse(&values).unwrap();
         assert_eq!(o.stepper, Stepper::QuickStep);
         assert_eq!(o.contact_mu, f64::INFINITY);
-        assert_eq!((o.servo, o.base, o.self_collision, o.max_contacts), (Servo::Kv, Base::Static, true, 4));
+        assert_eq!(
+            (o.servo, o.base, o.self_collision, o.max_contacts),
+            (Servo::Kv, Base::Static, true, 4)
+        );
         assert_eq!(o.weld, Weld::FixedJoint);
     }
 
@@ -337,7 +404,11 @@ mod tests {
             ("servo", "pd", "is not one of motor, kv"),
             ("base", "floating", "is not one of fixed_joint, static"),
             ("weld", "glue", "is not one of merge, fixed_joint"),
-            ("timestep", "0.01", "unknown setting (ODE accepts: timestep_s, stepper"),
+            (
+                "timestep",
+                "0.01",
+                "unknown setting (ODE accepts: timestep_s, stepper",
+            ),
         ];
         for (key, value, expected) in cases {
             let msg = parse(&[(key, value)]).unwrap_err().to_string();

@@ -27,8 +27,14 @@ use std::cell::Cell;
 use std::ffi::{c_char, c_int, c_void, CStr};
 use std::sync::{Mutex, MutexGuard, OnceLock};
 
-const _: () = assert!(std::mem::size_of::<dReal>() == 8, "ODE must be built with double precision");
-const _: () = assert!(std::mem::size_of::<dTriIndex>() == 4, "ODE triangle indices must be 32-bit");
+const _: () = assert!(
+    std::mem::size_of::<dReal>() == 8,
+    "ODE must be built with double precision"
+);
+const _: () = assert!(
+    std::mem::size_of::<dTriIndex>() == 4,
+    "ODE triangle indices must be 32-bit"
+);
 
 /// The messages ODE reported since the last [`take_messages`] (at most 64).
 static MESSAGES: Mutex<Vec<String>> = Mutex::new(Vec::new());
@@ -53,7 +59,10 @@ unsafe fn format_message(fmt: *const c_char, ap: *mut __va_list_tag) -> String {
     if n < 0 {
         return CStr::from_ptr(fmt).to_string_lossy().into_owned();
     }
-    CStr::from_ptr(buf.as_ptr()).to_string_lossy().trim().to_string()
+    CStr::from_ptr(buf.as_ptr())
+        .to_string_lossy()
+        .trim()
+        .to_string()
 }
 
 fn record(text: String) {
@@ -83,7 +92,10 @@ unsafe extern "C" fn on_debug(num: c_int, fmt: *const c_char, ap: *mut __va_list
 
 /// The messages ODE reported since the last call.
 pub fn take_messages() -> Vec<String> {
-    MESSAGES.lock().map(|mut m| std::mem::take(&mut *m)).unwrap_or_default()
+    MESSAGES
+        .lock()
+        .map(|mut m| std::mem::take(&mut *m))
+        .unwrap_or_default()
 }
 
 /// Initialises ODE once per process (`dInitODE2`), installs the message
@@ -117,7 +129,9 @@ pub fn init() -> Result<(), String> {
 /// ODE's configuration string (`dGetConfiguration`).
 pub fn configuration() -> String {
     // SAFETY: returns a static NUL-terminated string; needs no initialisation.
-    unsafe { CStr::from_ptr(dGetConfiguration()) }.to_string_lossy().into_owned()
+    unsafe { CStr::from_ptr(dGetConfiguration()) }
+        .to_string_lossy()
+        .into_owned()
 }
 
 /// Holds the process-wide ODE lock (see [`ode_lock`]).
@@ -202,11 +216,17 @@ unsafe extern "C" fn near_callback(data: *mut c_void, o1: dGeomID, o2: dGeomID) 
     }
     let max = ctx.buffer.len() as c_int;
     let stride = std::mem::size_of::<dContact>() as c_int;
-    let Some(first) = ctx.buffer.first_mut() else { return };
+    let Some(first) = ctx.buffer.first_mut() else {
+        return;
+    };
     let n = dCollide(o1, o2, max, &mut first.geom, stride);
     let mu = mu1.min(mu2);
     for c in ctx.buffer.iter_mut().take(n.max(0) as usize) {
-        c.surface = dSurfaceParameters { mode: dContactApprox1 as c_int, mu, ..Default::default() };
+        c.surface = dSurfaceParameters {
+            mode: dContactApprox1 as c_int,
+            mu,
+            ..Default::default()
+        };
         let joint = dJointCreateContact(ctx.world, ctx.group, c);
         dJointAttach(joint, b1, b2);
     }
@@ -331,7 +351,13 @@ impl OdeWorld {
 
             if let Some((height, mu)) = plan.ground {
                 let g = dCreatePlane(space, 0.0, 0.0, 1.0, height);
-                w.register_geom(g, slot_of(Owner::Ground), mu, Owner::Ground, settings.self_collision);
+                w.register_geom(
+                    g,
+                    slot_of(Owner::Ground),
+                    mu,
+                    Owner::Ground,
+                    settings.self_collision,
+                );
             }
 
             for (b, body) in plan.bodies.iter().enumerate() {
@@ -340,7 +366,10 @@ impl OdeWorld {
                     std::ptr::null_mut()
                 } else {
                     let Some(m) = body.mass else {
-                        return Err(format!("the body of link {} has no mass and cannot move", body.name));
+                        return Err(format!(
+                            "the body of link {} has no mass and cannot move",
+                            body.name
+                        ));
                     };
                     let id = dBodyCreate(world);
                     w.set_mass(id, m.mass_kg, &m.inertia)
@@ -358,10 +387,21 @@ impl OdeWorld {
                         dGeomSetQuaternion(geom, quat(at.orientation).as_ptr());
                     } else {
                         dGeomSetBody(geom, id);
-                        dGeomSetOffsetPosition(geom, g.offset.position_m.x, g.offset.position_m.y, g.offset.position_m.z);
+                        dGeomSetOffsetPosition(
+                            geom,
+                            g.offset.position_m.x,
+                            g.offset.position_m.y,
+                            g.offset.position_m.z,
+                        );
                         dGeomSetOffsetQuaternion(geom, quat(g.offset.orientation).as_ptr());
                     }
-                    w.register_geom(geom, slot_of(Owner::Robot(b)), plan.robot_mu, Owner::Robot(b), settings.self_collision);
+                    w.register_geom(
+                        geom,
+                        slot_of(Owner::Robot(b)),
+                        plan.robot_mu,
+                        Owner::Robot(b),
+                        settings.self_collision,
+                    );
                 }
             }
             let base_is_body = !w.robot_bodies[0].is_null();
@@ -380,9 +420,18 @@ impl OdeWorld {
 
             for (h, (frame, axis)) in plan.hinges.iter().zip(joint_frames) {
                 let joint = dJointCreateHinge(world, std::ptr::null_mut());
-                dJointAttach(joint, w.robot_bodies[h.child_body], w.robot_bodies[h.parent_body]);
+                dJointAttach(
+                    joint,
+                    w.robot_bodies[h.child_body],
+                    w.robot_bodies[h.parent_body],
+                );
                 let a = frame.orientation.rotate(*axis);
-                dJointSetHingeAnchor(joint, frame.position_m.x, frame.position_m.y, frame.position_m.z);
+                dJointSetHingeAnchor(
+                    joint,
+                    frame.position_m.x,
+                    frame.position_m.y,
+                    frame.position_m.z,
+                );
                 dJointSetHingeAxis(joint, a.x, a.y, a.z);
                 if let Some(lo) = h.stops_rad.0 {
                     dJointSetHingeParam(joint, dParamLoStop as c_int, lo);
@@ -395,7 +444,11 @@ impl OdeWorld {
                 if settings.servo == crate::settings::Servo::Kv {
                     // torque = kv (v_target - v_next): the motor row's CFM is
                     // the inverse of the damper gain (see the README).
-                    let cfm = if h.kv > 0.0 { 1.0 / h.kv } else { f64::INFINITY };
+                    let cfm = if h.kv > 0.0 {
+                        1.0 / h.kv
+                    } else {
+                        f64::INFINITY
+                    };
                     if cfm.is_finite() {
                         dJointSetHingeParam(joint, dParamCFM as c_int, cfm);
                     } else {
@@ -406,7 +459,11 @@ impl OdeWorld {
                     // Coulomb joint friction: a second motor holding zero
                     // velocity with at most the friction torque.
                     let motor = dJointCreateAMotor(world, std::ptr::null_mut());
-                    dJointAttach(motor, w.robot_bodies[h.child_body], w.robot_bodies[h.parent_body]);
+                    dJointAttach(
+                        motor,
+                        w.robot_bodies[h.child_body],
+                        w.robot_bodies[h.parent_body],
+                    );
                     dJointSetAMotorMode(motor, dAMotorUser as c_int);
                     dJointSetAMotorNumAxes(motor, 1);
                     dJointSetAMotorAxis(motor, 0, 0, a.x, a.y, a.z);
@@ -419,12 +476,24 @@ impl OdeWorld {
 
             for (i, o) in plan.objects.iter().enumerate() {
                 let id = dBodyCreate(world);
-                w.set_mass(id, o.mass.mass_kg, &o.mass.inertia).map_err(|e| format!("object \"{}\": {e}", o.name))?;
-                dBodySetPosition(id, o.pose.position_m.x, o.pose.position_m.y, o.pose.position_m.z);
+                w.set_mass(id, o.mass.mass_kg, &o.mass.inertia)
+                    .map_err(|e| format!("object \"{}\": {e}", o.name))?;
+                dBodySetPosition(
+                    id,
+                    o.pose.position_m.x,
+                    o.pose.position_m.y,
+                    o.pose.position_m.z,
+                );
                 dBodySetQuaternion(id, quat(o.pose.orientation).as_ptr());
                 let geom = dCreateBox(space, o.size_m.x, o.size_m.y, o.size_m.z);
                 dGeomSetBody(geom, id);
-                w.register_geom(geom, slot_of(Owner::Object(i)), o.mu, Owner::Object(i), settings.self_collision);
+                w.register_geom(
+                    geom,
+                    slot_of(Owner::Object(i)),
+                    o.mu,
+                    Owner::Object(i),
+                    settings.self_collision,
+                );
                 w.object_bodies.push(id);
             }
 
@@ -468,10 +537,14 @@ impl OdeWorld {
     /// `id` is a body of this world.
     unsafe fn set_mass(&self, id: dBodyID, mass_kg: f64, i: &[f64; 9]) -> Result<(), String> {
         let mut m = dMass::default();
-        dMassSetParameters(&mut m, mass_kg, 0.0, 0.0, 0.0, i[0], i[4], i[8], i[1], i[2], i[5]);
+        dMassSetParameters(
+            &mut m, mass_kg, 0.0, 0.0, 0.0, i[0], i[4], i[8], i[1], i[2], i[5],
+        );
         if dMassCheck(&m) == 0 {
             let said = take_messages().join("; ");
-            return Err(format!("ODE rejects the mass {mass_kg} kg with inertia {i:?} kg m^2: {said}"));
+            return Err(format!(
+                "ODE rejects the mass {mass_kg} kg with inertia {i:?} kg m^2: {said}"
+            ));
         }
         dBodySetMass(id, &m);
         Ok(())
@@ -499,7 +572,11 @@ impl OdeWorld {
                     (3 * std::mem::size_of::<u32>()) as c_int,
                 );
                 let geom = dCreateTriMesh(self.space, data, None, None, None);
-                self.trimeshes.push(TriMeshStore { data, _vertices: vertices, _indices: indices });
+                self.trimeshes.push(TriMeshStore {
+                    data,
+                    _vertices: vertices,
+                    _indices: indices,
+                });
                 geom
             }
         }
@@ -507,16 +584,29 @@ impl OdeWorld {
 
     /// # Safety
     /// `geom` is a geom of this world's space.
-    unsafe fn register_geom(&mut self, geom: dGeomID, slot: usize, mu: f64, owner: Owner, self_collision: bool) {
+    unsafe fn register_geom(
+        &mut self,
+        geom: dGeomID,
+        slot: usize,
+        mu: f64,
+        owner: Owner,
+        self_collision: bool,
+    ) {
         self.ctx.geoms.push((slot, mu));
         dGeomSetData(geom, self.ctx.geoms.len() as *mut c_void);
         // Category bits let the space skip pairs that never touch before it
         // compares bounding boxes; the callback decides the rest.
         let (category, collide) = match owner {
             Owner::Ground => (CATEGORY_GROUND, CATEGORY_ROBOT | CATEGORY_OBJECT),
-            Owner::Robot(_) if self_collision => (CATEGORY_ROBOT, CATEGORY_GROUND | CATEGORY_ROBOT | CATEGORY_OBJECT),
+            Owner::Robot(_) if self_collision => (
+                CATEGORY_ROBOT,
+                CATEGORY_GROUND | CATEGORY_ROBOT | CATEGORY_OBJECT,
+            ),
             Owner::Robot(_) => (CATEGORY_ROBOT, CATEGORY_GROUND | CATEGORY_OBJECT),
-            Owner::Object(_) => (CATEGORY_OBJECT, CATEGORY_GROUND | CATEGORY_ROBOT | CATEGORY_OBJECT),
+            Owner::Object(_) => (
+                CATEGORY_OBJECT,
+                CATEGORY_GROUND | CATEGORY_ROBOT | CATEGORY_OBJECT,
+            ),
         };
         dGeomSetCategoryBits(geom, category);
         dGeomSetCollideBits(geom, collide);
@@ -586,7 +676,11 @@ impl OdeWorld {
             s if s <= robot => Owner::Robot(s - 1),
             s => Owner::Object(s - 1 - robot),
         };
-        self.ctx.pairs.iter().map(|&(a, b)| (owner(a), owner(b))).collect()
+        self.ctx
+            .pairs
+            .iter()
+            .map(|&(a, b)| (owner(a), owner(b)))
+            .collect()
     }
 
     fn body_pose_of(id: dBodyID) -> Pose {
@@ -641,13 +735,21 @@ impl OdeWorld {
             // SAFETY: `id` is a live body of this world.
             let (v, w) = unsafe { (vec3(dBodyGetLinearVel(id)), vec3(dBodyGetAngularVel(id))) };
             if !pose.is_finite() || !v.is_finite() || !w.is_finite() {
-                return Some(format!("{name}: position, orientation or velocity is not finite"));
+                return Some(format!(
+                    "{name}: position, orientation or velocity is not finite"
+                ));
             }
             if v.norm() > max_speed_m_s {
-                return Some(format!("{name} moves at {:.3e} m/s (bound {max_speed_m_s} m/s)", v.norm()));
+                return Some(format!(
+                    "{name} moves at {:.3e} m/s (bound {max_speed_m_s} m/s)",
+                    v.norm()
+                ));
             }
             if w.norm() > max_spin_rad_s {
-                return Some(format!("{name} spins at {:.3e} rad/s (bound {max_spin_rad_s} rad/s)", w.norm()));
+                return Some(format!(
+                    "{name} spins at {:.3e} rad/s (bound {max_spin_rad_s} rad/s)",
+                    w.norm()
+                ));
             }
         }
         None

@@ -37,7 +37,9 @@ fn check_kinematics(scene: &Scene, robot: &RobotModel, pairs: &[&str]) {
         let angles: Vec<f64> = controlled
             .iter()
             .map(|name| {
-                let lim = robot.joints[robot.joint_by_name(name).unwrap()].limits.unwrap();
+                let lim = robot.joints[robot.joint_by_name(name).unwrap()]
+                    .limits
+                    .unwrap();
                 // Continuous joints go beyond +-pi (up to +-5 rad).
                 let (lo, hi) = (lim.lower.max(-5.0), lim.upper.min(5.0));
                 lo + (hi - lo) * rng.uniform()
@@ -47,18 +49,33 @@ fn check_kinematics(scene: &Scene, robot: &RobotModel, pairs: &[&str]) {
         let mut read = vec![0.0; angles.len()];
         sim.joint_angles_rad(&mut read);
         for (a, b) in angles.iter().zip(&read) {
-            assert!((a - b).abs() < 1e-12, "round {round}: set {a} rad, read {b} rad");
+            assert!(
+                (a - b).abs() < 1e-12,
+                "round {round}: set {a} rad, read {b} rad"
+            );
         }
-        let mut named: HashMap<String, f64> = controlled.iter().zip(&angles).map(|(n, &a)| (n.to_string(), a)).collect();
+        let mut named: HashMap<String, f64> = controlled
+            .iter()
+            .zip(&angles)
+            .map(|(n, &a)| (n.to_string(), a))
+            .collect();
         for (n, &a) in &scene.robot.held_joints_rad {
             named.insert(n.clone(), a);
         }
-        let fk = robot.forward_kinematics(&scene.robot.base, &robot.positions_from_names(&named).unwrap());
+        let fk = robot.forward_kinematics(
+            &scene.robot.base,
+            &robot.positions_from_names(&named).unwrap(),
+        );
         for (link, expected) in robot.links.iter().zip(&fk) {
             let got: Pose = sim.link_pose(&link.name).unwrap();
             let d = got.position_m.distance(expected.position_m);
             let a = got.orientation.angle_to(expected.orientation);
-            assert!(d < 1e-9 && a < 1e-7, "{} {pairs:?}: link {} off by {d} m, {a} rad", robot.name, link.name);
+            assert!(
+                d < 1e-9 && a < 1e-7,
+                "{} {pairs:?}: link {} off by {d} m, {a} rad",
+                robot.name,
+                link.name
+            );
         }
         let mut tracked = [Pose::IDENTITY; 1];
         sim.tracked_poses(&mut tracked);
@@ -71,7 +88,10 @@ fn check_kinematics(scene: &Scene, robot: &RobotModel, pairs: &[&str]) {
         sim.step().unwrap();
         sim.joint_angles_rad(&mut read);
         for (a, b) in angles.iter().zip(&read) {
-            assert!((a - b).abs() < 1e-3, "round {round}: after a step {a} rad became {b} rad");
+            assert!(
+                (a - b).abs() < 1e-3,
+                "round {round}: after a step {a} rad became {b} rad"
+            );
         }
     }
 }
@@ -103,7 +123,11 @@ fn continuous_joint_angles_are_unwrapped() {
     sim.step_n(700).unwrap();
     let mut q = [0.0; 6];
     sim.joint_angles_rad(&mut q);
-    assert!((q[5] - 7.0).abs() < 1e-3, "joint 6 at {} rad after 7 s at 1 rad/s", q[5]);
+    assert!(
+        (q[5] - 7.0).abs() < 1e-3,
+        "joint 6 at {} rad after 7 s at 1 rad/s",
+        q[5]
+    );
     assert!(q[..5].iter().all(|a| a.abs() < 1e-3), "{q:?}");
     assert!((sim.time_s() - 7.0).abs() < 1e-9);
 }
@@ -121,7 +145,10 @@ const PENDULUM_TORQUE_NM: f64 = 0.981;
 const PENDULUM_INERTIA: f64 = 0.01 + 1e-4;
 
 fn pendulum(tag: &str, force_limit: f64, upper_limit_rad: f64) -> Pendulum {
-    let dir = std::env::temp_dir().join(format!("realitygap-ode-pendulum-{tag}-{}", std::process::id()));
+    let dir = std::env::temp_dir().join(format!(
+        "realitygap-ode-pendulum-{tag}-{}",
+        std::process::id()
+    ));
     std::fs::create_dir_all(&dir).unwrap();
     let urdf = format!(
         r#"<robot name="pendulum">
@@ -199,13 +226,20 @@ fn servo_mappings_behave_as_documented() {
     kv.step_n(10).unwrap();
     let v = velocity_over(&mut kv, 10);
     let expected = PENDULUM_TORQUE_NM / 10.0;
-    assert!((v - expected).abs() < 0.01 * expected, "kv servo creeps at {v} rad/s, expected {expected}");
+    assert!(
+        (v - expected).abs() < 0.01 * expected,
+        "kv servo creeps at {v} rad/s, expected {expected}"
+    );
 
     // A target velocity adds to the creep.
     kv.set_joint_velocity_targets(&[-0.5]);
     kv.step_n(5).unwrap();
     let v = velocity_over(&mut kv, 5);
-    assert!((v - (expected - 0.5)).abs() < 0.01, "kv servo at {v} rad/s, expected {}", expected - 0.5);
+    assert!(
+        (v - (expected - 0.5)).abs() < 0.01,
+        "kv servo at {v} rad/s, expected {}",
+        expected - 0.5
+    );
 
     let mut motor = load(&p.scene, &p.robot, &[]);
     motor.set_joint_velocity_targets(&[0.0]);
@@ -216,7 +250,10 @@ fn servo_mappings_behave_as_documented() {
     motor.set_joint_velocity_targets(&[-0.5]);
     motor.step_n(1).unwrap();
     let v = velocity_over(&mut motor, 5);
-    assert!((v + 0.5).abs() < 1e-4, "motor servo at {v} rad/s, target -0.5");
+    assert!(
+        (v + 0.5).abs() < 1e-4,
+        "motor servo at {v} rad/s, target -0.5"
+    );
 }
 
 /// The force limit bounds the motor torque: with 0.5 N m against 0.981 N m
@@ -232,7 +269,10 @@ fn force_limit_bounds_the_motor() {
     // constant acceleration (semi-implicit Euler: v_n = n a dt).
     let accel = (v5 - v1) / (2.5 * sim.timestep_s());
     let expected = (PENDULUM_TORQUE_NM - 0.5) / PENDULUM_INERTIA;
-    assert!((accel - expected).abs() < 0.02 * expected, "accelerates at {accel} rad/s^2, expected {expected}");
+    assert!(
+        (accel - expected).abs() < 0.02 * expected,
+        "accelerates at {accel} rad/s^2, expected {expected}"
+    );
 }
 
 /// The joint's upper limit is an ODE stop: the falling pendulum rests on it.
@@ -258,7 +298,11 @@ fn load_error(urdf: &str, tag: &str) -> String {
     let dir = std::env::temp_dir().join(format!("realitygap-ode-bad-{tag}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     write(&dir, "hand.dae", "<COLLADA/>");
-    write(&dir, "broken.stl", "solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0\nendloop\n");
+    write(
+        &dir,
+        "broken.stl",
+        "solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0\nendloop\n",
+    );
     let urdf_path = write(&dir, "arm.urdf", urdf);
     let toml = format!(
         "name = \"bad\"\nduration_s = 1.0\n[robot]\nurdf = {:?}\nbase_position_m = [0, 0, 0]\n[controller]\ngain_per_s = 10.0\nmax_speed_deg_s = 30.0\nperiod_s = 0.05\n[[actuator]]\njoint = \"hinge\"\nkv = 10.0\n[[schedule]]\nt_s = 0.0\n",
@@ -289,15 +333,37 @@ fn arm_urdf(arm_link_body: &str) -> String {
 #[test]
 fn models_ode_cannot_take_are_clear_errors() {
     let inertial = r#"<inertial><mass value="1"/><inertia ixx="1e-3" ixy="0" ixz="0" iyy="1e-3" iyz="0" izz="1e-3"/></inertial>"#;
-    let e = load_error(&arm_urdf(&format!(r#"{inertial}<collision><geometry><mesh filename="hand.dae"/></geometry></collision>"#)), "dae");
-    assert!(e.contains("engine ode") && e.contains("link \"arm\"") && e.contains("STL meshes only"), "{e}");
+    let e = load_error(
+        &arm_urdf(&format!(
+            r#"{inertial}<collision><geometry><mesh filename="hand.dae"/></geometry></collision>"#
+        )),
+        "dae",
+    );
+    assert!(
+        e.contains("engine ode") && e.contains("link \"arm\"") && e.contains("STL meshes only"),
+        "{e}"
+    );
     assert!(e.contains("arm.urdf"), "{e}");
 
-    let e = load_error(&arm_urdf(&format!(r#"{inertial}<collision><geometry><mesh filename="broken.stl"/></geometry></collision>"#)), "stl");
-    assert!(e.contains("link \"arm\"") && e.contains("broken.stl"), "{e}");
+    let e = load_error(
+        &arm_urdf(&format!(
+            r#"{inertial}<collision><geometry><mesh filename="broken.stl"/></geometry></collision>"#
+        )),
+        "stl",
+    );
+    assert!(
+        e.contains("link \"arm\"") && e.contains("broken.stl"),
+        "{e}"
+    );
 
-    let e = load_error(&arm_urdf(r#"<collision><geometry><sphere radius="0.1"/></geometry></collision>"#), "massless");
-    assert!(e.contains("the links arm moved by joint \"hinge\" have no mass"), "{e}");
+    let e = load_error(
+        &arm_urdf(r#"<collision><geometry><sphere radius="0.1"/></geometry></collision>"#),
+        "massless",
+    );
+    assert!(
+        e.contains("the links arm moved by joint \"hinge\" have no mass"),
+        "{e}"
+    );
 
     let bad_inertia = r#"<inertial><mass value="1"/><inertia ixx="1e-3" ixy="5e-3" ixz="0" iyy="1e-3" iyz="0" izz="1e-3"/></inertial>"#;
     let e = load_error(&arm_urdf(bad_inertia), "inertia");
@@ -309,26 +375,56 @@ fn bad_settings_are_clear_errors() {
     let s = scene("scene1_single_joint");
     let robot = mico2();
     let cases: &[(&[&str], &str)] = &[
-        (&["integrator=rk4"], "engine ode: setting `integrator`: unknown setting (ODE accepts: timestep_s"),
-        (&["stepper=pgs"], "setting `stepper`: \"pgs\" is not one of world_step, quick_step"),
-        (&["timestep_s=-0.01"], "setting `timestep_s`: must be greater than 0 s"),
+        (
+            &["integrator=rk4"],
+            "engine ode: setting `integrator`: unknown setting (ODE accepts: timestep_s",
+        ),
+        (
+            &["stepper=pgs"],
+            "setting `stepper`: \"pgs\" is not one of world_step, quick_step",
+        ),
+        (
+            &["timestep_s=-0.01"],
+            "setting `timestep_s`: must be greater than 0 s",
+        ),
         (&["erp=2"], "setting `erp`: must be in [0, 1]"),
     ];
     for (pairs, expected) in cases {
-        let e = OdeEngine.load(&s, &robot, &settings(pairs), &ModelVariation::default()).err().unwrap();
+        let e = OdeEngine
+            .load(&s, &robot, &settings(pairs), &ModelVariation::default())
+            .err()
+            .unwrap();
         assert!(matches!(e, EngineError::Setting { .. }), "{e}");
         assert!(e.to_string().contains(expected), "{}", e);
         assert_eq!(OdeEngine.check_settings(&settings(pairs)).unwrap_err(), e);
     }
     // A timestep that does not divide the control period is the scene's
     // error, found by the controller loop.
-    let mut sim = OdeEngine.load(&s, &robot, &settings(&["timestep_s=0.03"]), &ModelVariation::default()).unwrap();
-    let e = realitygap_core::controller::run_scene(sim.as_mut(), &s, &Default::default()).unwrap_err();
-    assert!(e.to_string().contains("not a whole number of engine timesteps"), "{e}");
+    let mut sim = OdeEngine
+        .load(
+            &s,
+            &robot,
+            &settings(&["timestep_s=0.03"]),
+            &ModelVariation::default(),
+        )
+        .unwrap();
+    let e =
+        realitygap_core::controller::run_scene(sim.as_mut(), &s, &Default::default()).unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("not a whole number of engine timesteps"),
+        "{e}"
+    );
     // Wrong-length or non-finite joint angles.
     let mut sim = load(&s, &robot, &[]);
-    assert!(matches!(sim.set_joint_angles_rad(&[0.0; 3]), Err(EngineError::Usage { .. })));
-    assert!(matches!(sim.set_joint_angles_rad(&[f64::NAN; 6]), Err(EngineError::Usage { .. })));
+    assert!(matches!(
+        sim.set_joint_angles_rad(&[0.0; 3]),
+        Err(EngineError::Usage { .. })
+    ));
+    assert!(matches!(
+        sim.set_joint_angles_rad(&[f64::NAN; 6]),
+        Err(EngineError::Usage { .. })
+    ));
 }
 
 /// At rest, upright, nothing touches but the cube and the ground, even with
@@ -345,7 +441,11 @@ fn no_contacts_at_rest_but_the_cube_on_the_ground() {
             let mut sim = load(s, robot, pairs);
             sim.step_raw(1);
             let contacts = sim.last_contacts();
-            assert!(!contacts.is_empty(), "{}: the cube does not touch the ground", robot.name);
+            assert!(
+                !contacts.is_empty(),
+                "{}: the cube does not touch the ground",
+                robot.name
+            );
             for (a, b) in contacts {
                 assert!(
                     (a == "object:cube" && b == "ground") || (a == "ground" && b == "object:cube"),
@@ -361,14 +461,26 @@ fn no_contacts_at_rest_but_the_cube_on_the_ground() {
 #[test]
 fn model_variation_scales_masses() {
     let p = pendulum("variation", 100.0, 1.0);
-    let heavy = ModelVariation { mass_scale: 2.0, friction_scale: 1.0 };
-    let mut sim = OdeSimulation::load(&p.scene, &p.robot, &settings(&["servo=kv"]), &heavy).unwrap();
+    let heavy = ModelVariation {
+        mass_scale: 2.0,
+        friction_scale: 1.0,
+    };
+    let mut sim =
+        OdeSimulation::load(&p.scene, &p.robot, &settings(&["servo=kv"]), &heavy).unwrap();
     sim.set_joint_velocity_targets(&[0.0]);
     sim.step_n(10).unwrap();
     let v = velocity_over(&mut sim, 10);
     let expected = 2.0 * PENDULUM_TORQUE_NM / 10.0;
-    assert!((v - expected).abs() < 0.01 * expected, "creeps at {v} rad/s, expected {expected}");
-    let bad = ModelVariation { mass_scale: 0.0, friction_scale: 1.0 };
-    let e = OdeSimulation::load(&p.scene, &p.robot, &settings(&[]), &bad).err().unwrap();
+    assert!(
+        (v - expected).abs() < 0.01 * expected,
+        "creeps at {v} rad/s, expected {expected}"
+    );
+    let bad = ModelVariation {
+        mass_scale: 0.0,
+        friction_scale: 1.0,
+    };
+    let e = OdeSimulation::load(&p.scene, &p.robot, &settings(&[]), &bad)
+        .err()
+        .unwrap();
     assert!(e.to_string().contains("positive"), "{e}");
 }

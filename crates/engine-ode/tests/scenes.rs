@@ -34,7 +34,11 @@ fn scene1_default_settings_reach_the_targets() {
         assert_eq!(out.trajectory.len(), 120);
         let q = final_angles_deg(&out);
         eprintln!("{label}: final joint angles {q:.4?} deg");
-        assert!((q[1] + 100.0).abs() < 1.0, "{label}: joint 2 ends at {} deg", q[1]);
+        assert!(
+            (q[1] + 100.0).abs() < 1.0,
+            "{label}: joint 2 ends at {} deg",
+            q[1]
+        );
         for (j, a) in q.iter().enumerate().filter(|(j, _)| *j != 1) {
             assert!(a.abs() < 1.0, "{label}: joint {} ends at {a} deg", j + 1);
         }
@@ -72,9 +76,16 @@ fn scene1_wrist_ends_where_mujoco_puts_it() {
         gap_kv * 1e3,
         gap_motor * 1e3
     );
-    assert!(gap_kv < 0.005, "ODE (servo=kv) ends {:.2} mm from MuJoCo", gap_kv * 1e3);
+    assert!(
+        gap_kv < 0.005,
+        "ODE (servo=kv) ends {:.2} mm from MuJoCo",
+        gap_kv * 1e3
+    );
     for (a, b) in qm.iter().zip(&qk) {
-        assert!((a - b).abs() < 0.05, "joint angles differ: MuJoCo {qm:?}, ODE {qk:?}");
+        assert!(
+            (a - b).abs() < 0.05,
+            "joint angles differ: MuJoCo {qm:?}, ODE {qk:?}"
+        );
     }
     // The default motor does not sag: it ends nearer the target than MuJoCo.
     assert!(gap_motor > gap_kv);
@@ -86,7 +97,11 @@ fn scene1_wrist_ends_where_mujoco_puts_it() {
 /// variant, ending at their last targets.
 #[test]
 fn all_scenes_run_with_both_robots() {
-    for name in ["scene1_single_joint", "scene2_two_joints", "scene3_cube_push"] {
+    for name in [
+        "scene1_single_joint",
+        "scene2_two_joints",
+        "scene3_cube_push",
+    ] {
         let base = scene(name);
         let last_targets = base.targets_deg_at_tick(base.sample_count() - 1);
         for (s, robot, label) in robots(&base) {
@@ -96,7 +111,11 @@ fn all_scenes_run_with_both_robots() {
             out.trajectory.validate().unwrap();
             let q = final_angles_deg(&out);
             for (j, (a, t)) in q.iter().zip(&last_targets).enumerate() {
-                assert!((a - t).abs() < 1.0, "{name} {label}: joint {} ends at {a} deg, target {t}", j + 1);
+                assert!(
+                    (a - t).abs() < 1.0,
+                    "{name} {label}: joint {} ends at {a} deg, target {t}",
+                    j + 1
+                );
             }
             eprintln!("{name} {label}: {:.0} steps/s", out.steps_per_second());
         }
@@ -113,23 +132,47 @@ fn scene3_hand_pushes_the_cube_over_the_floor() {
             assert_eq!(out.status, RunStatus::Completed);
             let c = cube(&out);
             let (start, end) = (c[0], *c.last().unwrap());
-            let rot = out.trajectory.bodies[1].poses[0].unwrap().orientation.angle_to(
-                out.trajectory.bodies[1].poses.last().unwrap().unwrap().orientation,
-            );
+            let rot = out.trajectory.bodies[1].poses[0]
+                .unwrap()
+                .orientation
+                .angle_to(
+                    out.trajectory.bodies[1]
+                        .poses
+                        .last()
+                        .unwrap()
+                        .unwrap()
+                        .orientation,
+                );
             eprintln!(
                 "{label} {pairs:?}: cube moved {:.1} mm along x, {:.1} mm along y, turned {:.2} deg",
                 (end.x - start.x) * 1e3,
                 (end.y - start.y) * 1e3,
                 rot.to_degrees()
             );
-            assert!(end.x - start.x > 0.002, "{label} {pairs:?}: the cube did not move along +x ({start:?} -> {end:?})");
-            let (zmin, zmax) = c.iter().fold((f64::MAX, f64::MIN), |(lo, hi), p| (lo.min(p.z), hi.max(p.z)));
+            assert!(
+                end.x - start.x > 0.002,
+                "{label} {pairs:?}: the cube did not move along +x ({start:?} -> {end:?})"
+            );
+            let (zmin, zmax) = c.iter().fold((f64::MAX, f64::MIN), |(lo, hi), p| {
+                (lo.min(p.z), hi.max(p.z))
+            });
             eprintln!("{label} {pairs:?}: cube centre between z = {zmin:.4} m and {zmax:.4} m");
             // Pressed into the floor by less than 2 mm, resting on it at the end
             // (the hand may tilt it up on the way).
-            assert!(zmin > 0.0375 - 0.002, "{label} {pairs:?}: the cube sank to z = {zmin} m");
-            assert!((end.z - 0.0375).abs() < 0.001, "{label} {pairs:?}: the cube ends at z = {} m", end.z);
-            assert!(rot.to_degrees() < 10.0, "{label}: the cube turned {} deg", rot.to_degrees());
+            assert!(
+                zmin > 0.0375 - 0.002,
+                "{label} {pairs:?}: the cube sank to z = {zmin} m"
+            );
+            assert!(
+                (end.z - 0.0375).abs() < 0.001,
+                "{label} {pairs:?}: the cube ends at z = {} m",
+                end.z
+            );
+            assert!(
+                rot.to_degrees() < 10.0,
+                "{label}: the cube turned {} deg",
+                rot.to_degrees()
+            );
         }
     }
 }
@@ -141,14 +184,23 @@ fn base_motion(pairs: &[&str]) -> (f64, f64) {
     let s = scene("scene2_two_joints");
     let robot = mico2();
     s.validate(&robot).unwrap();
-    let mut sim = OdeSimulation::load(&s, &robot, &settings(pairs), &ModelVariation::default()).unwrap();
+    let mut sim =
+        OdeSimulation::load(&s, &robot, &settings(pairs), &ModelVariation::default()).unwrap();
     let base_link = &robot.links[robot.root_link].name;
     let (mut worst_m, mut worst_rad): (f64, f64) = (0.0, 0.0);
     for tick in 0..s.sample_count() {
-        let targets: Vec<f64> = s.targets_deg_at_tick(tick).iter().map(|t| t.to_radians()).collect();
+        let targets: Vec<f64> = s
+            .targets_deg_at_tick(tick)
+            .iter()
+            .map(|t| t.to_radians())
+            .collect();
         let mut q = vec![0.0; 6];
         sim.joint_angles_rad(&mut q);
-        let command: Vec<f64> = q.iter().zip(&targets).map(|(a, t)| (10.0 * (t - a)).clamp(-0.52, 0.52)).collect();
+        let command: Vec<f64> = q
+            .iter()
+            .zip(&targets)
+            .map(|(a, t)| (10.0 * (t - a)).clamp(-0.52, 0.52))
+            .collect();
         sim.set_joint_velocity_targets(&command);
         sim.step_n(5).unwrap();
         let p = sim.link_pose(base_link).unwrap();
@@ -165,9 +217,15 @@ fn base_motion(pairs: &[&str]) -> (f64, f64) {
 fn base_stays_at_the_base_pose() {
     let (m, rad) = base_motion(&[]);
     eprintln!("fixed-joint base moved at most {m:.3e} m and turned at most {rad:.3e} rad");
-    assert!(m < 1e-4 && rad < 1e-3, "the base moved {m} m, turned {rad} rad");
+    assert!(
+        m < 1e-4 && rad < 1e-3,
+        "the base moved {m} m, turned {rad} rad"
+    );
     let (m, rad) = base_motion(&["base=static"]);
-    assert!(m < 1e-12 && rad < 1e-7, "the static base moved {m} m, turned {rad} rad");
+    assert!(
+        m < 1e-12 && rad < 1e-7,
+        "the static base moved {m} m, turned {rad} rad"
+    );
 }
 
 /// ODE's iterative solver is the setting that fails on this arm: with its
@@ -180,7 +238,10 @@ fn quick_step_converges_to_world_step_with_iterations() {
     let exact = final_angles_deg(&run_ode(&s, &robot, &[]));
     let error = |pairs: &[&str]| {
         let q = final_angles_deg(&run_ode(&s, &robot, pairs));
-        q.iter().zip(&exact).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max)
+        q.iter()
+            .zip(&exact)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max)
     };
     let coarse = error(&["stepper=quick_step"]);
     let fine = error(&["stepper=quick_step", "quick_step_iterations=1000"]);
@@ -222,12 +283,25 @@ fn quick_step_runs_do_not_depend_on_each_other() {
 fn unstable_setting_is_reported_as_diverged() {
     let s = scene("scene1_single_joint");
     let robot = mico2();
-    let out = run_ode(&s, &robot, &["timestep_s=0.05", "stepper=quick_step", "quick_step_iterations=1"]);
+    let out = run_ode(
+        &s,
+        &robot,
+        &[
+            "timestep_s=0.05",
+            "stepper=quick_step",
+            "quick_step_iterations=1",
+        ],
+    );
     match &out.status {
         RunStatus::Diverged { t_s, reason } => {
             eprintln!("diverged at {t_s} s: {reason}");
             assert!(*t_s > 0.0 && *t_s < s.duration_s, "{t_s}");
-            assert!(reason.contains("moves at") || reason.contains("spins at") || reason.contains("not finite"), "{reason}");
+            assert!(
+                reason.contains("moves at")
+                    || reason.contains("spins at")
+                    || reason.contains("not finite"),
+                "{reason}"
+            );
             assert!(out.trajectory.len() < s.sample_count());
             assert!(out.trajectory.len() as f64 * s.controller.period_s <= t_s + 1e-9);
         }

@@ -27,7 +27,10 @@ use std::path::{Path, PathBuf};
 
 /// CPU time used by this thread so far, s.
 fn thread_cpu_s() -> f64 {
-    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
     // SAFETY: clock_gettime writes into the timespec it is given.
     let rc = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) };
     assert_eq!(rc, 0, "clock_gettime(CLOCK_THREAD_CPUTIME_ID) failed");
@@ -50,18 +53,27 @@ fn measure(scene: &Scene, robot: &RobotModel, repeats: usize) -> Measure {
     let mut load_s = f64::INFINITY;
     let mut load = || {
         let start = thread_cpu_s();
-        let sim = RapierSimulation::load(scene, robot, &settings, &ModelVariation::default()).expect("the model loads");
+        let sim = RapierSimulation::load(scene, robot, &settings, &ModelVariation::default())
+            .expect("the model loads");
         load_s = load_s.min(thread_cpu_s() - start);
         sim
     };
-    let mut m = Measure { loop_s: f64::INFINITY, raw_s: f64::INFINITY, load_s: 0.0, steps: 0 };
+    let mut m = Measure {
+        loop_s: f64::INFINITY,
+        raw_s: f64::INFINITY,
+        load_s: 0.0,
+        steps: 0,
+    };
     for _ in 0..repeats {
         let mut sim = load();
         let start = thread_cpu_s();
         let out = run_scene(&mut sim, scene, &RunOptions::default()).expect("the scene runs");
         m.loop_s = m.loop_s.min(thread_cpu_s() - start);
         m.steps = out.engine_steps;
-        let commands = out.trajectory.joint_velocity_commands_rad_s.expect("recorded");
+        let commands = out
+            .trajectory
+            .joint_velocity_commands_rad_s
+            .expect("recorded");
         let per_period = m.steps / commands.len() as u64;
 
         let mut sim = load();
@@ -78,20 +90,37 @@ fn measure(scene: &Scene, robot: &RobotModel, repeats: usize) -> Measure {
 
 fn main() {
     // `cargo bench` passes `--bench`; nothing else is understood.
-    let repeats: usize = std::env::var("REPEATS").ok().and_then(|v| v.parse().ok()).unwrap_or(5).max(1);
+    let repeats: usize = std::env::var("REPEATS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(5)
+        .max(1);
     let scene_names: Vec<String> = std::env::var("SCENES")
         .map(|s| s.split(',').map(str::to_string).collect())
-        .unwrap_or_else(|_| vec!["scene1_single_joint".into(), "scene2_two_joints".into(), "scene3_cube_push".into()]);
+        .unwrap_or_else(|_| {
+            vec![
+                "scene1_single_joint".into(),
+                "scene2_two_joints".into(),
+                "scene3_cube_push".into(),
+            ]
+        });
     let paper = workspace().join("../shared/paper-data");
-    let mico2 = RobotModel::from_urdf_file(&workspace().join("assets/robots/mico2/mico2.urdf"), &PackageResolver::new())
-        .expect("the Mico2 URDF loads");
+    let mico2 = RobotModel::from_urdf_file(
+        &workspace().join("assets/robots/mico2/mico2.urdf"),
+        &PackageResolver::new(),
+    )
+    .expect("the Mico2 URDF loads");
     let official = paper.join("kinova_description").is_dir().then(|| {
         let mut r = PackageResolver::new();
         r.insert("kinova_description", paper.join("kinova_description"));
-        RobotModel::from_urdf_file(&paper.join("kinova_description/urdf/m1n6s300.urdf"), &r).expect("the official URDF loads")
+        RobotModel::from_urdf_file(&paper.join("kinova_description/urdf/m1n6s300.urdf"), &r)
+            .expect("the official URDF loads")
     });
     if official.is_none() {
-        println!("(paper data not found at {}: the official URDF is left out)", paper.display());
+        println!(
+            "(paper data not found at {}: the official URDF is left out)",
+            paper.display()
+        );
     }
     println!(
         "{:<20} {:<16} {:>12} {:>12} {:>9} {:>11} {:>8}",
@@ -99,7 +128,12 @@ fn main() {
     );
     let mut worst: f64 = f64::NEG_INFINITY;
     for name in &scene_names {
-        let scene = Scene::from_file(&workspace().join("assets/scenes").join(format!("{name}.toml"))).expect("the scene loads");
+        let scene = Scene::from_file(
+            &workspace()
+                .join("assets/scenes")
+                .join(format!("{name}.toml")),
+        )
+        .expect("the scene loads");
         let mut cases: Vec<(&str, Scene, &RobotModel)> = vec![("mico2", scene.clone(), &mico2)];
         if let Some(official) = &official {
             let mut s = scene.clone();
@@ -123,5 +157,8 @@ fn main() {
             );
         }
     }
-    println!("largest overhead of the controller loop: {:.2}% (target: at most 5%)", worst * 100.0);
+    println!(
+        "largest overhead of the controller loop: {:.2}% (target: at most 5%)",
+        worst * 100.0
+    );
 }

@@ -36,7 +36,8 @@ use crate::shapes::ShapeBuilder;
 use rapier3d::dynamics::{GenericJointBuilder, JointAxesMask, JointAxis, MotorModel};
 use rapier3d::math::{Pose as RPose, Rotation, Vector};
 use rapier3d::prelude::{
-    ColliderBuilder, MassProperties, MultibodyJointHandle, PhysicsWorld, RigidBodyBuilder, RigidBodyHandle,
+    ColliderBuilder, MassProperties, MultibodyJointHandle, PhysicsWorld, RigidBodyBuilder,
+    RigidBodyHandle,
 };
 use realitygap_core::engine::ModelVariation;
 use realitygap_core::pose::{Pose, Quat, Vec3};
@@ -100,7 +101,11 @@ struct Group {
 pub(crate) fn to_rapier_pose(p: &Pose) -> RPose {
     let q = p.orientation.normalized().unwrap_or(Quat::IDENTITY);
     RPose::from_parts(
-        Vector::new(p.position_m.x as f32, p.position_m.y as f32, p.position_m.z as f32),
+        Vector::new(
+            p.position_m.x as f32,
+            p.position_m.y as f32,
+            p.position_m.z as f32,
+        ),
         Rotation::from_xyzw(q.x as f32, q.y as f32, q.z as f32, q.w as f32).normalize(),
     )
 }
@@ -108,7 +113,10 @@ pub(crate) fn to_rapier_pose(p: &Pose) -> RPose {
 pub(crate) fn from_rapier_pose(p: &RPose) -> Pose {
     let t = p.translation;
     let q = p.rotation;
-    Pose::new(Vec3::new(t.x as f64, t.y as f64, t.z as f64), Quat::new(q.w as f64, q.x as f64, q.y as f64, q.z as f64))
+    Pose::new(
+        Vec3::new(t.x as f64, t.y as f64, t.z as f64),
+        Quat::new(q.w as f64, q.x as f64, q.y as f64, q.z as f64),
+    )
 }
 
 /// The rotation that takes the x axis onto the unit vector `axis` (the
@@ -122,7 +130,9 @@ fn x_onto(axis: Vec3) -> Quat {
         return Quat::new(0.0, 0.0, 0.0, 1.0);
     }
     let c = x.cross(a);
-    Quat::new(1.0 + d, c.x, c.y, c.z).normalized().unwrap_or(Quat::IDENTITY)
+    Quat::new(1.0 + d, c.x, c.y, c.z)
+        .normalized()
+        .unwrap_or(Quat::IDENTITY)
 }
 
 fn mat_mul(a: &[f64; 9], b: &[f64; 9]) -> [f64; 9] {
@@ -142,23 +152,35 @@ fn transpose(a: &[f64; 9]) -> [f64; 9] {
 /// Combined mass properties of a group in its frame: (mass kg, centre of
 /// mass m, inertia about the centre of mass, row-major kg m^2), scaled by
 /// `mass_scale`. Links without an inertial or with zero mass add nothing.
-fn group_mass(robot: &RobotModel, members: &[(usize, Pose)], mass_scale: f64) -> (f64, Vec3, [f64; 9]) {
+fn group_mass(
+    robot: &RobotModel,
+    members: &[(usize, Pose)],
+    mass_scale: f64,
+) -> (f64, Vec3, [f64; 9]) {
     let mut parts = Vec::new();
     for &(link, offset) in members {
-        let Some(inertial) = robot.links[link].inertial else { continue };
+        let Some(inertial) = robot.links[link].inertial else {
+            continue;
+        };
         if inertial.mass_kg <= 0.0 {
             continue;
         }
         let frame = offset.compose(&inertial.origin);
         let r = frame.orientation.to_rotation_matrix();
         let i = mat_mul(&mat_mul(&r, &inertial.inertia_matrix()), &transpose(&r));
-        parts.push((inertial.mass_kg * mass_scale, frame.position_m, i.map(|v| v * mass_scale)));
+        parts.push((
+            inertial.mass_kg * mass_scale,
+            frame.position_m,
+            i.map(|v| v * mass_scale),
+        ));
     }
     let mass: f64 = parts.iter().map(|p| p.0).sum();
     if mass <= 0.0 {
         return (0.0, Vec3::ZERO, [0.0; 9]);
     }
-    let com = parts.iter().fold(Vec3::ZERO, |acc, p| acc + p.1.scale(p.0 / mass));
+    let com = parts
+        .iter()
+        .fold(Vec3::ZERO, |acc, p| acc + p.1.scale(p.0 / mass));
     let mut inertia = [0.0; 9];
     for (m, c, i) in &parts {
         let d = *c - com;
@@ -183,10 +205,16 @@ pub fn assemble(
     variation: &ModelVariation,
 ) -> Result<Assembly, String> {
     if !(variation.mass_scale.is_finite() && variation.mass_scale > 0.0) {
-        return Err(format!("the mass factor must be positive and finite, found {}", variation.mass_scale));
+        return Err(format!(
+            "the mass factor must be positive and finite, found {}",
+            variation.mass_scale
+        ));
     }
     if !(variation.friction_scale.is_finite() && variation.friction_scale >= 0.0) {
-        return Err(format!("the friction factor must be >= 0 and finite, found {}", variation.friction_scale));
+        return Err(format!(
+            "the friction factor must be >= 0 and finite, found {}",
+            variation.friction_scale
+        ));
     }
 
     // Controlled joints, in scene order.
@@ -197,16 +225,28 @@ pub fn assemble(
             .ok_or_else(|| format!("robot \"{}\" has no joint \"{}\"", robot.name, a.joint))?;
         let joint = &robot.joints[j];
         if !joint.kind.is_movable() {
-            return Err(format!("joint \"{}\" is fixed and cannot carry an actuator", a.joint));
+            return Err(format!(
+                "joint \"{}\" is fixed and cannot carry an actuator",
+                a.joint
+            ));
         }
         if joint.mimic.is_some() {
-            return Err(format!("joint \"{}\" mimics another joint and cannot carry an actuator", a.joint));
+            return Err(format!(
+                "joint \"{}\" mimics another joint and cannot carry an actuator",
+                a.joint
+            ));
         }
         if !(a.kv.is_finite() && a.kv > 0.0) {
-            return Err(format!("actuator of joint \"{}\": kv must be positive and finite, found {}", a.joint, a.kv));
+            return Err(format!(
+                "actuator of joint \"{}\": kv must be positive and finite, found {}",
+                a.joint, a.kv
+            ));
         }
         if a.force_limit.is_nan() || a.force_limit <= 0.0 {
-            return Err(format!("actuator of joint \"{}\": force limit must be positive, found {}", a.joint, a.force_limit));
+            return Err(format!(
+                "actuator of joint \"{}\": force limit must be positive, found {}",
+                a.joint, a.force_limit
+            ));
         }
         if actuated.insert(j, i).is_some() {
             return Err(format!("joint \"{}\" has two actuators", a.joint));
@@ -217,7 +257,11 @@ pub fn assemble(
     let mut group_of = vec![usize::MAX; robot.links.len()];
     let mut offset = vec![Pose::IDENTITY; robot.links.len()];
     let mut link_world = vec![scene.robot.base; robot.links.len()];
-    let mut groups = vec![Group { top_link: robot.root_link, world_pose: scene.robot.base, members: vec![] }];
+    let mut groups = vec![Group {
+        top_link: robot.root_link,
+        world_pose: scene.robot.base,
+        members: vec![],
+    }];
     group_of[robot.root_link] = 0;
     groups[0].members.push((robot.root_link, Pose::IDENTITY));
     let held = |j: usize| -> f64 {
@@ -227,7 +271,14 @@ pub fn assemble(
             None => match &joint.mimic {
                 Some(m) => {
                     let leader = &robot.joints[m.joint].name;
-                    m.multiplier * scene.robot.held_joints_rad.get(leader).copied().unwrap_or(0.0) + m.offset
+                    m.multiplier
+                        * scene
+                            .robot
+                            .held_joints_rad
+                            .get(leader)
+                            .copied()
+                            .unwrap_or(0.0)
+                        + m.offset
                 }
                 None => 0.0,
             },
@@ -248,9 +299,17 @@ pub fn assemble(
             link_world[child] = link_world[parent].compose(&joint.origin);
             group_of[child] = groups.len();
             offset[child] = Pose::IDENTITY;
-            groups.push(Group { top_link: child, world_pose: link_world[child], members: vec![(child, Pose::IDENTITY)] });
+            groups.push(Group {
+                top_link: child,
+                world_pose: link_world[child],
+                members: vec![(child, Pose::IDENTITY)],
+            });
         } else {
-            let position = if joint.kind.is_movable() { held(j) } else { 0.0 };
+            let position = if joint.kind.is_movable() {
+                held(j)
+            } else {
+                0.0
+            };
             let transform = joint.transform(position);
             link_world[child] = link_world[parent].compose(&transform);
             group_of[child] = group_of[parent];
@@ -267,7 +326,9 @@ pub fn assemble(
     p.num_internal_pgs_iterations = settings.internal_pgs_iterations;
     p.num_internal_stabilization_iterations = settings.stabilization_iterations;
 
-    let friction = |f: Option<f64>| (f.unwrap_or(ColliderBuilder::default_friction() as f64) * variation.friction_scale) as f32;
+    let friction = |f: Option<f64>| {
+        (f.unwrap_or(ColliderBuilder::default_friction() as f64) * variation.friction_scale) as f32
+    };
 
     // 2 and 3. Bodies and colliders.
     let mut shapes = ShapeBuilder::new();
@@ -304,13 +365,28 @@ pub fn assemble(
         let body = world.bodies.insert(builder.build());
         for &(link, link_offset) in &group.members {
             for (c, collision) in robot.links[link].collisions.iter().enumerate() {
-                let (shape, shape_pose) = shapes.shape(&collision.geometry, settings.mesh_shape).map_err(|e| {
-                    let name = collision.name.as_deref().map(|n| format!(" \"{n}\"")).unwrap_or_default();
-                    format!("link \"{}\", collision {}{name}: {e}", robot.links[link].name, c + 1)
-                })?;
+                let (shape, shape_pose) = shapes
+                    .shape(&collision.geometry, settings.mesh_shape)
+                    .map_err(|e| {
+                        let name = collision
+                            .name
+                            .as_deref()
+                            .map(|n| format!(" \"{n}\""))
+                            .unwrap_or_default();
+                        format!(
+                            "link \"{}\", collision {}{name}: {e}",
+                            robot.links[link].name,
+                            c + 1
+                        )
+                    })?;
                 let pose = to_rapier_pose(&link_offset.compose(&collision.origin)) * shape_pose;
-                let collider = ColliderBuilder::new(shape).position(pose).density(0.0).friction(friction(None));
-                world.colliders.insert_with_parent(collider.build(), body, &mut world.bodies);
+                let collider = ColliderBuilder::new(shape)
+                    .position(pose)
+                    .density(0.0)
+                    .friction(friction(None));
+                world
+                    .colliders
+                    .insert_with_parent(collider.build(), body, &mut world.bodies);
             }
         }
         bodies.push(body);
@@ -325,11 +401,17 @@ pub fn assemble(
         let basis = Pose::new(Vec3::ZERO, x_onto(joint.axis));
         let frame1 = offset[joint.parent].compose(&joint.origin).compose(&basis);
         let (locked, axis) = match joint.kind {
-            JointKind::Revolute | JointKind::Continuous => (JointAxesMask::LOCKED_REVOLUTE_AXES, JointAxis::AngX),
+            JointKind::Revolute | JointKind::Continuous => {
+                (JointAxesMask::LOCKED_REVOLUTE_AXES, JointAxis::AngX)
+            }
             JointKind::Prismatic => (JointAxesMask::LOCKED_PRISMATIC_AXES, JointAxis::LinX),
             JointKind::Fixed => unreachable!("fixed joints were refused above"),
         };
-        let max_force = if spec.force_limit.is_finite() { spec.force_limit as f32 } else { f32::MAX };
+        let max_force = if spec.force_limit.is_finite() {
+            spec.force_limit as f32
+        } else {
+            f32::MAX
+        };
         let mut builder = GenericJointBuilder::new(locked)
             .local_frame1(to_rapier_pose(&frame1))
             .local_frame2(to_rapier_pose(&basis))
@@ -344,7 +426,12 @@ pub fn assemble(
         }
         let handle = world
             .multibody_joints
-            .insert(bodies[group_of[joint.parent]], bodies[group_of[joint.child]], builder.build(), true)
+            .insert(
+                bodies[group_of[joint.parent]],
+                bodies[group_of[joint.child]],
+                builder.build(),
+                true,
+            )
             .ok_or_else(|| format!("Rapier refused the multibody joint \"{}\"", joint.name))?;
         handles.insert(j, handle);
     }
@@ -353,13 +440,19 @@ pub fn assemble(
     // damping and friction (DoF indices are final only once the root is
     // known to be fixed).
     if let Some(first) = handles.values().next() {
-        let (mb, _) = world.multibody_joints.get_mut(*first).expect("the handle was just inserted");
+        let (mb, _) = world
+            .multibody_joints
+            .get_mut(*first)
+            .expect("the handle was just inserted");
         mb.forward_kinematics(&world.bodies, true);
         mb.update_rigid_bodies(&mut world.bodies, true);
     }
     for (&j, &handle) in &handles {
         let joint = &robot.joints[j];
-        let (mb, link_id) = world.multibody_joints.get_mut(handle).expect("the handle was just inserted");
+        let (mb, link_id) = world
+            .multibody_joints
+            .get_mut(handle)
+            .expect("the handle was just inserted");
         let dof = mb.link(link_id).expect("the link exists").assembly_id();
         mb.damping_mut()[dof] = joint.damping as f32;
         mb.frictions_mut()[dof] = joint.friction as f32;
@@ -370,7 +463,11 @@ pub fn assemble(
         .iter()
         .map(|a| {
             let j = robot.joint_by_name(&a.joint).expect("checked above");
-            let axis = if robot.joints[j].kind == JointKind::Prismatic { JointAxis::LinX } else { JointAxis::AngX };
+            let axis = if robot.joints[j].kind == JointKind::Prismatic {
+                JointAxis::LinX
+            } else {
+                JointAxis::AngX
+            };
             ControlledJoint {
                 name: a.joint.clone(),
                 handle: handles[&j],
@@ -385,23 +482,48 @@ pub fn assemble(
         .links
         .iter()
         .enumerate()
-        .map(|(l, link)| (link.name.clone(), BodyFrame { body: bodies[group_of[l]], offset: offset[l] }))
+        .map(|(l, link)| {
+            (
+                link.name.clone(),
+                BodyFrame {
+                    body: bodies[group_of[l]],
+                    offset: offset[l],
+                },
+            )
+        })
         .collect();
-    let mut body_names: HashMap<RigidBodyHandle, String> =
-        groups.iter().zip(&bodies).map(|(g, &b)| (b, robot.links[g.top_link].name.clone())).collect();
+    let mut body_names: HashMap<RigidBodyHandle, String> = groups
+        .iter()
+        .zip(&bodies)
+        .map(|(g, &b)| (b, robot.links[g.top_link].name.clone()))
+        .collect();
 
     // 5. Ground and objects.
     if let Some(ground) = &scene.ground {
-        let body = world.bodies.insert(RigidBodyBuilder::fixed().translation(Vector::new(0.0, 0.0, ground.height_m as f32)));
-        let collider = ColliderBuilder::halfspace(rapier3d::na::Unit::new_unchecked(Vector::Z)).friction(friction(ground.friction));
-        world.colliders.insert_with_parent(collider.build(), body, &mut world.bodies);
+        let body = world
+            .bodies
+            .insert(RigidBodyBuilder::fixed().translation(Vector::new(
+                0.0,
+                0.0,
+                ground.height_m as f32,
+            )));
+        let collider = ColliderBuilder::halfspace(rapier3d::na::Unit::new_unchecked(Vector::Z))
+            .friction(friction(ground.friction));
+        world
+            .colliders
+            .insert_with_parent(collider.build(), body, &mut world.bodies);
         body_names.insert(body, "ground".to_string());
     }
     let mut objects = HashMap::new();
     for o in &scene.objects {
         let shape = match o.shape {
-            ObjectShape::Box { size_m } if !(size_m.is_finite() && size_m.x > 0.0 && size_m.y > 0.0 && size_m.z > 0.0) => {
-                return Err(format!("object \"{}\": box size ({}, {}, {}) m must be positive", o.name, size_m.x, size_m.y, size_m.z));
+            ObjectShape::Box { size_m }
+                if !(size_m.is_finite() && size_m.x > 0.0 && size_m.y > 0.0 && size_m.z > 0.0) =>
+            {
+                return Err(format!(
+                    "object \"{}\": box size ({}, {}, {}) m must be positive",
+                    o.name, size_m.x, size_m.y, size_m.z
+                ));
             }
             ObjectShape::Box { size_m } => ColliderBuilder::cuboid(
                 (size_m.x / 2.0) as f32,
@@ -409,13 +531,21 @@ pub fn assemble(
                 (size_m.z / 2.0) as f32,
             ),
         };
-        let body = world.bodies.insert(RigidBodyBuilder::dynamic().pose(to_rapier_pose(&o.pose)));
+        let body = world
+            .bodies
+            .insert(RigidBodyBuilder::dynamic().pose(to_rapier_pose(&o.pose)));
         let mass = (o.mass_kg * variation.mass_scale) as f32;
         if !mass.is_normal() || mass < 0.0 {
-            return Err(format!("object \"{}\": mass {} kg is not a positive single-precision number", o.name, o.mass_kg * variation.mass_scale));
+            return Err(format!(
+                "object \"{}\": mass {} kg is not a positive single-precision number",
+                o.name,
+                o.mass_kg * variation.mass_scale
+            ));
         }
         let collider = shape.mass(mass).friction(friction(o.friction));
-        world.colliders.insert_with_parent(collider.build(), body, &mut world.bodies);
+        world
+            .colliders
+            .insert_with_parent(collider.build(), body, &mut world.bodies);
         objects.insert(o.name.clone(), body);
         body_names.insert(body, format!("object:{}", o.name));
     }
@@ -424,17 +554,29 @@ pub fn assemble(
         .tracked
         .iter()
         .map(|t| match &t.target {
-            TrackTarget::Link(link) => {
-                links.get(link).copied().ok_or_else(|| format!("tracked link \"{link}\" is not a link of robot \"{}\"", robot.name))
-            }
+            TrackTarget::Link(link) => links.get(link).copied().ok_or_else(|| {
+                format!(
+                    "tracked link \"{link}\" is not a link of robot \"{}\"",
+                    robot.name
+                )
+            }),
             TrackTarget::Object(name) => objects
                 .get(name)
-                .map(|&body| BodyFrame { body, offset: Pose::IDENTITY })
+                .map(|&body| BodyFrame {
+                    body,
+                    offset: Pose::IDENTITY,
+                })
                 .ok_or_else(|| format!("tracked object \"{name}\" is not an object of the scene")),
         })
         .collect::<Result<Vec<_>, _>>()?;
 
-    Ok(Assembly { world, joints, tracked, links, body_names })
+    Ok(Assembly {
+        world,
+        joints,
+        tracked,
+        links,
+        body_names,
+    })
 }
 
 #[cfg(test)]
@@ -459,7 +601,10 @@ mod tests {
 
     #[test]
     fn rapier_pose_round_trip() {
-        let p = Pose::new(Vec3::new(0.1, -0.2, 0.3), Quat::from_euler_rpy(0.3, -0.2, 1.1));
+        let p = Pose::new(
+            Vec3::new(0.1, -0.2, 0.3),
+            Quat::from_euler_rpy(0.3, -0.2, 1.1),
+        );
         let back = from_rapier_pose(&to_rapier_pose(&p));
         assert!(back.position_m.distance(p.position_m) < 1e-7);
         assert!(back.orientation.angle_to(p.orientation) < 1e-6);
@@ -476,7 +621,9 @@ mod tests {
           <link name="b"><inertial><mass value="1"/><inertia ixx="0.001" ixy="0" ixz="0" iyy="0.002" iyz="0" izz="0.003"/></inertial></link>
           <joint name="ab" type="fixed"><parent link="a"/><child link="b"/><origin xyz="0.2 0 0" rpy="0 0 1.5707963267948966"/></joint>
         </robot>"#;
-        let robot = RobotModel::from_urdf_str(urdf, std::path::Path::new("."), &PackageResolver::new()).unwrap();
+        let robot =
+            RobotModel::from_urdf_str(urdf, std::path::Path::new("."), &PackageResolver::new())
+                .unwrap();
         let b_offset = robot.joints[0].transform(0.0);
         let (mass, com, i) = group_mass(&robot, &[(0, Pose::IDENTITY), (1, b_offset)], 1.0);
         assert!((mass - 2.0).abs() < 1e-12);

@@ -28,7 +28,9 @@ pub mod shapes;
 
 use assemble::{from_rapier_pose, Assembly, BodyFrame, ControlledJoint};
 use rapier3d::prelude::PhysicsWorld;
-use realitygap_core::engine::{Engine, EngineError, EngineSettings, ModelVariation, SettingInfo, Simulation};
+use realitygap_core::engine::{
+    Engine, EngineError, EngineSettings, ModelVariation, SettingInfo, Simulation,
+};
 use realitygap_core::pose::Pose;
 use realitygap_core::robot::RobotModel;
 use realitygap_core::scene::Scene;
@@ -74,7 +76,9 @@ impl Engine for RapierEngine {
         settings: &EngineSettings,
         variation: &ModelVariation,
     ) -> Result<Box<dyn Simulation>, EngineError> {
-        Ok(Box::new(RapierSimulation::load(scene, robot, settings, variation)?))
+        Ok(Box::new(RapierSimulation::load(
+            scene, robot, settings, variation,
+        )?))
     }
 }
 
@@ -90,11 +94,17 @@ pub struct RapierSimulation {
 }
 
 fn load_error(message: impl Into<String>) -> EngineError {
-    EngineError::Load { engine: ENGINE_NAME.to_string(), message: message.into() }
+    EngineError::Load {
+        engine: ENGINE_NAME.to_string(),
+        message: message.into(),
+    }
 }
 
 fn usage_error(message: impl Into<String>) -> EngineError {
-    EngineError::Usage { engine: ENGINE_NAME.to_string(), message: message.into() }
+    EngineError::Usage {
+        engine: ENGINE_NAME.to_string(),
+        message: message.into(),
+    }
 }
 
 impl RapierSimulation {
@@ -108,11 +118,28 @@ impl RapierSimulation {
         variation: &ModelVariation,
     ) -> Result<RapierSimulation, EngineError> {
         let settings = RapierSettings::parse(settings)?;
-        let Assembly { world, joints, tracked, links, body_names } =
-            assemble::assemble(scene, robot, &settings, variation).map_err(|m| {
-                load_error(format!("{m} (robot {}, scene {})", robot.source.display(), scene.source.display()))
-            })?;
-        Ok(RapierSimulation { world, joints, tracked, links, body_names, settings, steps: 0 })
+        let Assembly {
+            world,
+            joints,
+            tracked,
+            links,
+            body_names,
+        } = assemble::assemble(scene, robot, &settings, variation).map_err(|m| {
+            load_error(format!(
+                "{m} (robot {}, scene {})",
+                robot.source.display(),
+                scene.source.display()
+            ))
+        })?;
+        Ok(RapierSimulation {
+            world,
+            joints,
+            tracked,
+            links,
+            body_names,
+            settings,
+            steps: 0,
+        })
     }
 
     /// The checked settings in force.
@@ -144,8 +171,14 @@ impl RapierSimulation {
     /// rigid group, `object:NAME` for a scene object, `ground`.
     pub fn contacts(&self) -> Vec<(String, String)> {
         let name = |c| {
-            let body = self.world.colliders.get(c).and_then(|c: &rapier3d::prelude::Collider| c.parent());
-            body.and_then(|b| self.body_names.get(&b)).cloned().unwrap_or_else(|| "?".to_string())
+            let body = self
+                .world
+                .colliders
+                .get(c)
+                .and_then(|c: &rapier3d::prelude::Collider| c.parent());
+            body.and_then(|b| self.body_names.get(&b))
+                .cloned()
+                .unwrap_or_else(|| "?".to_string())
         };
         self.world
             .narrow_phase
@@ -164,7 +197,10 @@ impl RapierSimulation {
     /// The Rapier body of a scene object, by the object's name.
     pub fn object_body(&self, object: &str) -> Option<rapier3d::prelude::RigidBodyHandle> {
         let key = format!("object:{object}");
-        self.body_names.iter().find(|(_, n)| **n == key).map(|(&b, _)| b)
+        self.body_names
+            .iter()
+            .find(|(_, n)| **n == key)
+            .map(|(&b, _)| b)
     }
 
     fn frame_pose(&self, frame: &BodyFrame) -> Pose {
@@ -173,7 +209,10 @@ impl RapierSimulation {
                 // Single-precision rotations compose to a norm a few 1e-7
                 // off 1: renormalize (a non-finite one stays as it is).
                 let pose = from_rapier_pose(body.position()).compose(&frame.offset);
-                Pose::new(pose.position_m, pose.orientation.normalized().unwrap_or(pose.orientation))
+                Pose::new(
+                    pose.position_m,
+                    pose.orientation.normalized().unwrap_or(pose.orientation),
+                )
             }
             None => Pose::new(
                 realitygap_core::pose::Vec3::new(f64::NAN, f64::NAN, f64::NAN),
@@ -184,7 +223,9 @@ impl RapierSimulation {
 
     fn joint_coordinate(&self, joint: &ControlledJoint) -> f64 {
         match self.world.multibody_joints.get(joint.handle) {
-            Some((mb, link)) => mb.link(link).map_or(f64::NAN, |l| l.joint().coords()[joint.coordinate] as f64),
+            Some((mb, link)) => mb
+                .link(link)
+                .map_or(f64::NAN, |l| l.joint().coords()[joint.coordinate] as f64),
             None => f64::NAN,
         }
     }
@@ -226,20 +267,33 @@ impl Simulation for RapierSimulation {
 
     fn set_joint_angles_rad(&mut self, rad: &[f64]) -> Result<(), EngineError> {
         if rad.len() != self.joints.len() {
-            return Err(usage_error(format!("{} joint angles given for {} joints", rad.len(), self.joints.len())));
+            return Err(usage_error(format!(
+                "{} joint angles given for {} joints",
+                rad.len(),
+                self.joints.len()
+            )));
         }
         if let Some(i) = rad.iter().position(|a| !a.is_finite()) {
-            return Err(usage_error(format!("the angle of joint \"{}\" is not finite", self.joints[i].name)));
+            return Err(usage_error(format!(
+                "the angle of joint \"{}\" is not finite",
+                self.joints[i].name
+            )));
         }
         let world = &mut self.world;
         for (joint, &target) in self.joints.iter().zip(rad) {
-            let (mb, link_id) = world.multibody_joints.get_mut(joint.handle).expect("controlled joints exist");
+            let (mb, link_id) = world
+                .multibody_joints
+                .get_mut(joint.handle)
+                .expect("controlled joints exist");
             let link = mb.link_mut(link_id).expect("controlled joints have a link");
             let current = link.joint.coords()[joint.coordinate];
             link.joint.apply_displacement(&[target as f32 - current]);
         }
         if let Some(joint) = self.joints.first() {
-            let (mb, _) = world.multibody_joints.get_mut(joint.handle).expect("controlled joints exist");
+            let (mb, _) = world
+                .multibody_joints
+                .get_mut(joint.handle)
+                .expect("controlled joints exist");
             mb.generalized_velocity_mut().fill(0.0);
             mb.forward_kinematics(&world.bodies, false);
             mb.update_rigid_bodies(&mut world.bodies, true);
@@ -252,7 +306,9 @@ impl Simulation for RapierSimulation {
         for (joint, &v) in self.joints.iter().zip(rad_s) {
             if let Some((mb, link_id)) = world.multibody_joints.get_mut(joint.handle) {
                 if let Some(link) = mb.link_mut(link_id) {
-                    link.joint.data.set_motor_velocity(joint.axis, v as f32, joint.kv);
+                    link.joint
+                        .data
+                        .set_motor_velocity(joint.axis, v as f32, joint.kv);
                 }
             }
         }

@@ -97,7 +97,11 @@ impl Default for RapierSettings {
 }
 
 fn setting_error(key: &str, message: impl Into<String>) -> EngineError {
-    EngineError::Setting { engine: ENGINE_NAME.to_string(), key: key.to_string(), message: message.into() }
+    EngineError::Setting {
+        engine: ENGINE_NAME.to_string(),
+        key: key.to_string(),
+        message: message.into(),
+    }
 }
 
 fn whole(key: &str, value: &SettingValue, min: i64) -> Result<usize, EngineError> {
@@ -107,7 +111,10 @@ fn whole(key: &str, value: &SettingValue, min: i64) -> Result<usize, EngineError
     if (min..=MAX_ITERATIONS).contains(&v) {
         Ok(v as usize)
     } else {
-        Err(setting_error(key, format!("must be a whole number from {min} to {MAX_ITERATIONS}, found {v}")))
+        Err(setting_error(
+            key,
+            format!("must be a whole number from {min} to {MAX_ITERATIONS}, found {v}"),
+        ))
     }
 }
 
@@ -119,11 +126,14 @@ impl RapierSettings {
         for (key, value) in settings {
             match key.as_str() {
                 "timestep_s" => {
-                    let v = value
-                        .as_f64()
-                        .ok_or_else(|| setting_error(key, format!("expected a number, found \"{value}\"")))?;
+                    let v = value.as_f64().ok_or_else(|| {
+                        setting_error(key, format!("expected a number, found \"{value}\""))
+                    })?;
                     if !(v.is_finite() && v > 0.0 && v <= 1.0) {
-                        return Err(setting_error(key, format!("must be > 0 and at most 1 s, found {v}")));
+                        return Err(setting_error(
+                            key,
+                            format!("must be > 0 and at most 1 s, found {v}"),
+                        ));
                     }
                     s.timestep_s = v;
                 }
@@ -147,7 +157,11 @@ impl RapierSettings {
                         other,
                         format!(
                             "unknown setting (Rapier accepts: {})",
-                            SETTINGS.iter().map(|s| s.key).collect::<Vec<_>>().join(", ")
+                            SETTINGS
+                                .iter()
+                                .map(|s| s.key)
+                                .collect::<Vec<_>>()
+                                .join(", ")
                         ),
                     ))
                 }
@@ -162,7 +176,10 @@ mod tests {
     use super::*;
 
     fn settings(pairs: &[(&str, SettingValue)]) -> EngineSettings {
-        pairs.iter().map(|(k, v)| (k.to_string(), v.clone())).collect()
+        pairs
+            .iter()
+            .map(|(k, v)| (k.to_string(), v.clone()))
+            .collect()
     }
 
     #[test]
@@ -195,7 +212,12 @@ mod tests {
             }
         );
         // An integer timestep is a number too.
-        assert_eq!(RapierSettings::parse(&settings(&[("timestep_s", SettingValue::Integer(1))])).unwrap().timestep_s, 1.0);
+        assert_eq!(
+            RapierSettings::parse(&settings(&[("timestep_s", SettingValue::Integer(1))]))
+                .unwrap()
+                .timestep_s,
+            1.0
+        );
     }
 
     #[test]
@@ -204,19 +226,50 @@ mod tests {
             ("timestep_s", SettingValue::Float(0.0), "must be > 0"),
             ("timestep_s", SettingValue::Float(f64::NAN), "must be > 0"),
             ("timestep_s", SettingValue::Float(2.0), "at most 1"),
-            ("timestep_s", SettingValue::Text("fast".into()), "expected a number"),
+            (
+                "timestep_s",
+                SettingValue::Text("fast".into()),
+                "expected a number",
+            ),
             ("solver_iterations", SettingValue::Integer(0), "from 1 to"),
-            ("solver_iterations", SettingValue::Float(4.5), "whole number"),
-            ("internal_pgs_iterations", SettingValue::Integer(1_000_000), "from 1 to 10000"),
-            ("stabilization_iterations", SettingValue::Integer(-1), "from 0 to"),
-            ("mesh_shape", SettingValue::Text("voxels".into()), "convex_hull, trimesh"),
-            ("mesh_shape", SettingValue::Bool(true), "convex_hull, trimesh"),
-            ("iterations", SettingValue::Integer(3), "unknown setting (Rapier accepts: timestep_s"),
+            (
+                "solver_iterations",
+                SettingValue::Float(4.5),
+                "whole number",
+            ),
+            (
+                "internal_pgs_iterations",
+                SettingValue::Integer(1_000_000),
+                "from 1 to 10000",
+            ),
+            (
+                "stabilization_iterations",
+                SettingValue::Integer(-1),
+                "from 0 to",
+            ),
+            (
+                "mesh_shape",
+                SettingValue::Text("voxels".into()),
+                "convex_hull, trimesh",
+            ),
+            (
+                "mesh_shape",
+                SettingValue::Bool(true),
+                "convex_hull, trimesh",
+            ),
+            (
+                "iterations",
+                SettingValue::Integer(3),
+                "unknown setting (Rapier accepts: timestep_s",
+            ),
         ];
         for (key, value, expected) in cases {
             let err = RapierSettings::parse(&settings(&[(key, value.clone())])).unwrap_err();
             let text = err.to_string();
-            assert!(text.contains(&format!("setting `{key}`")) && text.contains(expected), "{key}={value}: {text}");
+            assert!(
+                text.contains(&format!("setting `{key}`")) && text.contains(expected),
+                "{key}={value}: {text}"
+            );
         }
     }
 }

@@ -23,7 +23,11 @@ fn check_scene1(label: &str, scene: &Scene, robot: &RobotModel) {
     let (r, m) = (final_angles_deg(&rapier), final_angles_deg(&mujoco));
     let (wr, wm) = (wrist(&rapier), wrist(&mujoco));
     let last = wr.last().unwrap().distance(*wm.last().unwrap());
-    let max = wr.iter().zip(&wm).map(|(a, b)| a.distance(*b)).fold(0.0, f64::max);
+    let max = wr
+        .iter()
+        .zip(&wm)
+        .map(|(a, b)| a.distance(*b))
+        .fold(0.0, f64::max);
     eprintln!("{label}: final angles (deg) rapier {r:.2?}");
     eprintln!("{label}:                    mujoco {m:.2?}");
     eprintln!("{label}:  servo/gravity balance {equilibrium:.2?}");
@@ -46,15 +50,42 @@ fn check_scene1(label: &str, scene: &Scene, robot: &RobotModel) {
             r[j],
             equilibrium[j]
         );
-        assert!((r[j] - targets[j]).abs() < 2.5, "{label}: joint {} is {:.2} deg off its target", j + 1, r[j] - targets[j]);
-        assert!((r[j] - m[j]).abs() < 0.1, "{label}: joint {} ends {:.3} deg from MuJoCo", j + 1, r[j] - m[j]);
+        assert!(
+            (r[j] - targets[j]).abs() < 2.5,
+            "{label}: joint {} is {:.2} deg off its target",
+            j + 1,
+            r[j] - targets[j]
+        );
+        assert!(
+            (r[j] - m[j]).abs() < 0.1,
+            "{label}: joint {} ends {:.3} deg from MuJoCo",
+            j + 1,
+            r[j] - m[j]
+        );
     }
     // Joints 1 and 6 carry no gravity load: they hold their target.
-    assert!(r[0].abs() < 0.05 && r[5].abs() < 0.1, "{label}: joints 1 and 6 at {:.3} and {:.3} deg", r[0], r[5]);
+    assert!(
+        r[0].abs() < 0.05 && r[5].abs() < 0.1,
+        "{label}: joints 1 and 6 at {:.3} and {:.3} deg",
+        r[0],
+        r[5]
+    );
     // Joint 2 reaches -100 within its gravity droop.
-    assert!((r[1] + 100.0).abs() < 1.5, "{label}: joint 2 ends at {:.2} deg", r[1]);
-    assert!(last < 0.005, "{label}: the final wrist is {:.2} mm from MuJoCo's", last * 1e3);
-    assert!(max < 0.01, "{label}: the wrist strays {:.2} mm from MuJoCo's", max * 1e3);
+    assert!(
+        (r[1] + 100.0).abs() < 1.5,
+        "{label}: joint 2 ends at {:.2} deg",
+        r[1]
+    );
+    assert!(
+        last < 0.005,
+        "{label}: the final wrist is {:.2} mm from MuJoCo's",
+        last * 1e3
+    );
+    assert!(
+        max < 0.01,
+        "{label}: the wrist strays {:.2} mm from MuJoCo's",
+        max * 1e3
+    );
 }
 
 #[test]
@@ -65,11 +96,18 @@ fn mico2_tracks_scene1_like_mujoco() {
 #[test]
 fn official_model_tracks_scene1_like_mujoco() {
     let Some(paper) = paper_data() else { return };
-    check_scene1("official", &official_scene("scene1_single_joint", &paper), &official_robot(&paper));
+    check_scene1(
+        "official",
+        &official_scene("scene1_single_joint", &paper),
+        &official_robot(&paper),
+    );
 }
 
 fn settings(pairs: &[(&str, i64)]) -> EngineSettings {
-    pairs.iter().map(|(k, v)| (k.to_string(), SettingValue::Integer(*v))).collect()
+    pairs
+        .iter()
+        .map(|(k, v)| (k.to_string(), SettingValue::Integer(*v)))
+        .collect()
 }
 
 /// Why the default raises the Gauss-Seidel iterations: with Rapier's stock
@@ -80,11 +118,24 @@ fn settings(pairs: &[(&str, i64)]) -> EngineSettings {
 fn stock_solver_settings_let_the_arm_sag() {
     let s = scene("scene1_single_joint");
     let robot = mico2();
-    let stock = run_with_settings(&RapierEngine, &s, &robot, &settings(&[("solver_iterations", 4), ("internal_pgs_iterations", 1)]));
+    let stock = run_with_settings(
+        &RapierEngine,
+        &s,
+        &robot,
+        &settings(&[("solver_iterations", 4), ("internal_pgs_iterations", 1)]),
+    );
     let equilibrium = static_equilibrium_deg(&s, &robot, &s.targets_deg_at_tick(119));
-    let sag: Vec<f64> = final_angles_deg(&stock).iter().zip(&equilibrium).map(|(a, e)| a - e).collect();
+    let sag: Vec<f64> = final_angles_deg(&stock)
+        .iter()
+        .zip(&equilibrium)
+        .map(|(a, e)| a - e)
+        .collect();
     eprintln!("stock settings: final angles off the servo/gravity balance by {sag:.2?} deg");
-    assert!(sag[2] > 10.0, "joint 3 sags only {:.2} deg with the stock settings", sag[2]);
+    assert!(
+        sag[2] > 10.0,
+        "joint 3 sags only {:.2} deg with the stock settings",
+        sag[2]
+    );
 }
 
 /// Heavier links droop more: with every mass 1.5 times larger the arm ends
@@ -105,14 +156,24 @@ fn mass_variation_changes_the_droop() {
     }
     let targets = s.targets_deg_at_tick(119);
     for (mass_scale, model) in [(1.0, &robot), (1.5, &heavy)] {
-        let variation = ModelVariation { mass_scale, friction_scale: 1.0 };
-        let mut sim = RapierSimulation::load(&s, &robot, &EngineSettings::new(), &variation).unwrap();
+        let variation = ModelVariation {
+            mass_scale,
+            friction_scale: 1.0,
+        };
+        let mut sim =
+            RapierSimulation::load(&s, &robot, &EngineSettings::new(), &variation).unwrap();
         let out = run_scene(&mut sim, &s, &RunOptions::default()).unwrap();
         let got = final_angles_deg(&out);
         let want = static_equilibrium_deg(&s, model, &targets);
         eprintln!("masses x{mass_scale}: final {got:.2?} deg, balance {want:.2?} deg");
         for j in 0..6 {
-            assert!((got[j] - want[j]).abs() < 0.1, "masses x{mass_scale}: joint {} at {:.3}, balance {:.3}", j + 1, got[j], want[j]);
+            assert!(
+                (got[j] - want[j]).abs() < 0.1,
+                "masses x{mass_scale}: joint {} at {:.3}, balance {:.3}",
+                j + 1,
+                got[j],
+                want[j]
+            );
         }
     }
 }

@@ -20,13 +20,29 @@ fn mico2_scene2_follows_mujoco() {
     let robot = mico2();
     let rapier = run_with_settings(&RapierEngine, &s, &robot, &EngineSettings::new());
     let mut implicit = s.settings_for("mujoco");
-    implicit.insert("integrator".into(), SettingValue::Text("implicitfast".into()));
+    implicit.insert(
+        "integrator".into(),
+        SettingValue::Text("implicitfast".into()),
+    );
     let mujoco = run_with_settings(&MujocoEngine, &s, &robot, &implicit);
     let (a, b) = (wrist(&rapier), wrist(&mujoco));
-    let max = a.iter().zip(&b).map(|(p, q)| p.distance(*q)).fold(0.0, f64::max);
+    let max = a
+        .iter()
+        .zip(&b)
+        .map(|(p, q)| p.distance(*q))
+        .fold(0.0, f64::max);
     let last = a.last().unwrap().distance(*b.last().unwrap());
-    eprintln!("scene 2 (mico2): wrist vs MuJoCo implicitfast: largest gap {:.2} mm, final {:.3} mm", max * 1e3, last * 1e3);
-    assert!(max < 0.002 && last < 0.001, "largest gap {:.2} mm, final {:.2} mm", max * 1e3, last * 1e3);
+    eprintln!(
+        "scene 2 (mico2): wrist vs MuJoCo implicitfast: largest gap {:.2} mm, final {:.3} mm",
+        max * 1e3,
+        last * 1e3
+    );
+    assert!(
+        max < 0.002 && last < 0.001,
+        "largest gap {:.2} mm, final {:.2} mm",
+        max * 1e3,
+        last * 1e3
+    );
     // No contact moves the cube.
     let c = cube(&rapier);
     assert!(c.last().unwrap().distance(c[0]) < 1e-4);
@@ -41,7 +57,11 @@ fn official_scene2_ends_upright() {
     let fk = robot.forward_kinematics(&s.robot.base, &vec![0.0; robot.joints.len()]);
     let upright = fk[robot.link_by_name("m1n6s300_link_6").unwrap()].position_m;
     let end = *wrist(&out).last().unwrap();
-    eprintln!("scene 2 (official): final wrist {:.3} mm from upright; {:.0} steps/s", end.distance(upright) * 1e3, out.steps_per_second());
+    eprintln!(
+        "scene 2 (official): final wrist {:.3} mm from upright; {:.0} steps/s",
+        end.distance(upright) * 1e3,
+        out.steps_per_second()
+    );
     assert!(end.distance(upright) < 0.001);
 }
 
@@ -53,7 +73,9 @@ fn cube_motion(out: &RunOutcome) -> (realitygap_core::Vec3, f64) {
     let tilt = poses
         .iter()
         .map(|p| {
-            let z = p.orientation.rotate(realitygap_core::Vec3::new(0.0, 0.0, 1.0));
+            let z = p
+                .orientation
+                .rotate(realitygap_core::Vec3::new(0.0, 0.0, 1.0));
             z.z.clamp(-1.0, 1.0).acos()
         })
         .fold(0.0, f64::max);
@@ -67,9 +89,26 @@ fn cube_motion(out: &RunOutcome) -> (realitygap_core::Vec3, f64) {
 fn check_push(label: &str, out: &RunOutcome) -> f64 {
     let (d, tilt) = cube_motion(out);
     let c = cube(out);
-    let contact_at = c.iter().position(|p| p.distance(c[0]) > 0.001).map(|i| i as f64 * 0.05).unwrap_or(f64::INFINITY);
-    let last = out.trajectory.body("cube").unwrap().poses.last().unwrap().unwrap();
-    let final_tilt = last.orientation.rotate(realitygap_core::Vec3::new(0.0, 0.0, 1.0)).z.clamp(-1.0, 1.0).acos().to_degrees();
+    let contact_at = c
+        .iter()
+        .position(|p| p.distance(c[0]) > 0.001)
+        .map(|i| i as f64 * 0.05)
+        .unwrap_or(f64::INFINITY);
+    let last = out
+        .trajectory
+        .body("cube")
+        .unwrap()
+        .poses
+        .last()
+        .unwrap()
+        .unwrap();
+    let final_tilt = last
+        .orientation
+        .rotate(realitygap_core::Vec3::new(0.0, 0.0, 1.0))
+        .z
+        .clamp(-1.0, 1.0)
+        .acos()
+        .to_degrees();
     eprintln!(
         "scene 3 ({label}): cube pushed by ({:.4}, {:.4}, {:.4}) m, tilted at most {:.1} deg and {:.1} deg at the end, \
          moving from t = {contact_at:.2} s; {:.0} steps/s",
@@ -80,12 +119,23 @@ fn check_push(label: &str, out: &RunOutcome) -> f64 {
         final_tilt,
         out.steps_per_second()
     );
-    assert!(d.x > 0.05, "{label}: the cube moved only {:.4} m along x", d.x);
+    assert!(
+        d.x > 0.05,
+        "{label}: the cube moved only {:.4} m along x",
+        d.x
+    );
     assert!(d.y.abs() < 0.02, "{label}: the cube went sideways: {d:?}");
     // It ends at rest on one of its faces, on the table.
     let on_face = (final_tilt / 90.0 - (final_tilt / 90.0).round()).abs() * 90.0;
-    assert!(on_face < 2.0 && d.z.abs() < 0.001, "{label}: the cube ends tilted {final_tilt:.1} deg, {:.4} m up", d.z);
-    assert!((10.0..20.0).contains(&contact_at), "{label}: the cube starts moving at {contact_at} s");
+    assert!(
+        on_face < 2.0 && d.z.abs() < 0.001,
+        "{label}: the cube ends tilted {final_tilt:.1} deg, {:.4} m up",
+        d.z
+    );
+    assert!(
+        (10.0..20.0).contains(&contact_at),
+        "{label}: the cube starts moving at {contact_at} s"
+    );
     contact_at
 }
 
@@ -98,8 +148,15 @@ fn mico2_pushes_the_cube_and_ends_where_mujoco_does() {
     let mujoco = run_with(&MujocoEngine, &s, &robot);
     let (mx, mtilt) = cube_motion(&mujoco);
     let mc = cube(&mujoco);
-    let mujoco_contact_at = mc.iter().position(|p| p.distance(mc[0]) > 0.001).map(|i| i as f64 * 0.05).unwrap_or(f64::INFINITY);
-    let last = wrist(&rapier).last().unwrap().distance(*wrist(&mujoco).last().unwrap());
+    let mujoco_contact_at = mc
+        .iter()
+        .position(|p| p.distance(mc[0]) > 0.001)
+        .map(|i| i as f64 * 0.05)
+        .unwrap_or(f64::INFINITY);
+    let last = wrist(&rapier)
+        .last()
+        .unwrap()
+        .distance(*wrist(&mujoco).last().unwrap());
     eprintln!(
         "scene 3 (mico2): MuJoCo pushes the cube {:.4} m (tilting it at most {:.1} deg) from t = {mujoco_contact_at:.2} s; \
          final wrist {:.3} mm from MuJoCo's",
@@ -108,14 +165,26 @@ fn mico2_pushes_the_cube_and_ends_where_mujoco_does() {
         last * 1e3
     );
     // The same arm motion reaches the cube at the same moment.
-    assert!((contact_at - mujoco_contact_at).abs() <= 0.1, "contact at {contact_at} s, in MuJoCo at {mujoco_contact_at} s");
-    assert!(last < 0.005, "final wrist {:.2} mm from MuJoCo's", last * 1e3);
+    assert!(
+        (contact_at - mujoco_contact_at).abs() <= 0.1,
+        "contact at {contact_at} s, in MuJoCo at {mujoco_contact_at} s"
+    );
+    assert!(
+        last < 0.005,
+        "final wrist {:.2} mm from MuJoCo's",
+        last * 1e3
+    );
 }
 
 #[test]
 fn official_model_pushes_the_cube() {
     let Some(paper) = paper_data() else { return };
     let s = official_scene("scene3_cube_push", &paper);
-    let out = run_with_settings(&RapierEngine, &s, &official_robot(&paper), &EngineSettings::new());
+    let out = run_with_settings(
+        &RapierEngine,
+        &s,
+        &official_robot(&paper),
+        &EngineSettings::new(),
+    );
     check_push("official", &out);
 }

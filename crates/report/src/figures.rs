@@ -67,7 +67,13 @@ pub const PALETTE: [(u8, u8, u8); 7] = [
 
 /// Dash patterns cycled over sources: `None` is a solid line, else
 /// (dash, gap) lengths in pixels.
-const DASHES: [Option<(u32, u32)>; 5] = [None, Some((8, 4)), Some((3, 3)), Some((14, 4)), Some((6, 2))];
+const DASHES: [Option<(u32, u32)>; 5] = [
+    None,
+    Some((8, 4)),
+    Some((3, 3)),
+    Some((14, 4)),
+    Some((6, 2)),
+];
 
 /// Marker drawn at regular steps along a line, so that lines stay apart in
 /// grey-scale print.
@@ -162,7 +168,11 @@ impl SourceStyles {
     /// The style of a source; a source not seen in the reports gets the
     /// next free style.
     pub fn get(&self, source: &str) -> LineStyle {
-        let i = self.names.iter().position(|n| n == source).unwrap_or(self.names.len());
+        let i = self
+            .names
+            .iter()
+            .position(|n| n == source)
+            .unwrap_or(self.names.len());
         LineStyle::for_source(i)
     }
 }
@@ -276,7 +286,10 @@ pub struct Line {
 
 impl Line {
     fn finite_values(&self) -> impl Iterator<Item = f64> + '_ {
-        self.points.iter().filter_map(|p| p.1).filter(|v| v.is_finite())
+        self.points
+            .iter()
+            .filter_map(|p| p.1)
+            .filter(|v| v.is_finite())
     }
     fn max_abs(&self) -> Option<f64> {
         let mut it = self.points.iter().filter_map(|p| p.1);
@@ -407,7 +420,10 @@ fn omission_reason(s: &SourceSummary, kind: FigureKind) -> Option<String> {
         if excluded.is_empty() {
             return Some(format!("no usable runs ({} given)", s.runs_total));
         }
-        let mut names: Vec<&str> = excluded.iter().flat_map(|f| f.flags.iter().map(|x| x.name())).collect();
+        let mut names: Vec<&str> = excluded
+            .iter()
+            .flat_map(|f| f.flags.iter().map(|x| x.name()))
+            .collect();
         names.sort_unstable();
         names.dedup();
         return Some(format!(
@@ -487,8 +503,13 @@ pub fn build_figure(report: &SceneReport, kind: FigureKind, styles: &SourceStyle
                         .iter()
                         .enumerate()
                         .map(|(i, t)| {
-                            let b = match (ref_goal.get(i).copied().flatten(), spread.get(i).copied().flatten()) {
-                                (Some(d), Some(s)) if d.is_finite() && s.is_finite() => Some(((d - s).max(0.0), d + s)),
+                            let b = match (
+                                ref_goal.get(i).copied().flatten(),
+                                spread.get(i).copied().flatten(),
+                            ) {
+                                (Some(d), Some(s)) if d.is_finite() && s.is_finite() => {
+                                    Some(((d - s).max(0.0), d + s))
+                                }
                                 _ => None,
                             };
                             (*t, b)
@@ -534,7 +555,10 @@ pub fn build_figure(report: &SceneReport, kind: FigureKind, styles: &SourceStyle
         .iter()
         .chain([reference])
         .filter_map(|s| s.series.t_s.last().copied())
-        .fold((report.steps.max(1) - 1) as f64 * report.control_period_s, f64::max);
+        .fold(
+            (report.steps.max(1) - 1) as f64 * report.control_period_s,
+            f64::max,
+        );
     // The whole scene: up to steps x period, so the last tick is labelled.
     let x_end = t_end.max(report.steps as f64 * report.control_period_s);
     let x_range = (0.0, if x_end > 0.0 { x_end } else { 1.0 });
@@ -590,19 +614,35 @@ fn caption(
     }
     if !phases.is_empty() {
         let p: Vec<String> = phases.iter().map(|t| format!("{t} s")).collect();
-        c.push_str(&format!("; vertical lines: new targets at {}", p.join(", ")));
+        c.push_str(&format!(
+            "; vertical lines: new targets at {}",
+            p.join(", ")
+        ));
     }
     c.push('.');
     if !omitted.is_empty() {
-        let o: Vec<String> = omitted.iter().map(|o| format!("{} ({})", o.source, o.reason)).collect();
+        let o: Vec<String> = omitted
+            .iter()
+            .map(|o| format!("{} ({})", o.source, o.reason))
+            .collect();
         c.push_str(&format!(" Not plotted: {}.", o.join("; ")));
     }
     if !off_scale.is_empty() {
         let o: Vec<String> = off_scale
             .iter()
-            .map(|o| format!("{} (up to {} {})", o.source, fmt_mag(o.max_abs), kind.unit()))
+            .map(|o| {
+                format!(
+                    "{} (up to {} {})",
+                    o.source,
+                    fmt_mag(o.max_abs),
+                    kind.unit()
+                )
+            })
             .collect();
-        c.push_str(&format!(" Clipped at the edge of the plot: {}.", o.join("; ")));
+        c.push_str(&format!(
+            " Clipped at the edge of the plot: {}.",
+            o.join("; ")
+        ));
     }
     c
 }
@@ -651,7 +691,14 @@ fn y_range(kind: FigureKind, lines: &[Line], band: Option<&Band>) -> ((f64, f64)
     }
     if !lo.is_finite() || !hi.is_finite() {
         // Nothing sane to show: a unit range.
-        return (if kind.non_negative() { (0.0, 1.0) } else { (-1.0, 1.0) }, off);
+        return (
+            if kind.non_negative() {
+                (0.0, 1.0)
+            } else {
+                (-1.0, 1.0)
+            },
+            off,
+        );
     }
     if kind.non_negative() {
         lo = lo.min(0.0);
@@ -669,7 +716,11 @@ fn y_range(kind: FigureKind, lines: &[Line], band: Option<&Band>) -> ((f64, f64)
 /// Clips a polyline with gaps (`None`) to the box `x` by `y`: returns the
 /// visible pieces, each with at least two points. Segments crossing the
 /// edge are cut at the edge.
-pub fn clip_polyline(points: &[(f64, Option<f64>)], x: (f64, f64), y: (f64, f64)) -> Vec<Vec<(f64, f64)>> {
+pub fn clip_polyline(
+    points: &[(f64, Option<f64>)],
+    x: (f64, f64),
+    y: (f64, f64),
+) -> Vec<Vec<(f64, f64)>> {
     let mut pieces: Vec<Vec<(f64, f64)>> = Vec::new();
     let mut current: Vec<(f64, f64)> = Vec::new();
     let flush = |current: &mut Vec<(f64, f64)>, pieces: &mut Vec<Vec<(f64, f64)>>| {
@@ -681,7 +732,10 @@ pub fn clip_polyline(points: &[(f64, Option<f64>)], x: (f64, f64), y: (f64, f64)
     };
     let mut prev: Option<(f64, f64)> = None;
     for &(t, v) in points {
-        let p = v.filter(|v| v.is_finite()).map(|v| (t, v)).filter(|p| p.0.is_finite());
+        let p = v
+            .filter(|v| v.is_finite())
+            .map(|v| (t, v))
+            .filter(|p| p.0.is_finite());
         match (prev, p) {
             (Some(a), Some(b)) => match clip_segment(a, b, x, y) {
                 Some((c, d)) => {
@@ -711,10 +765,20 @@ pub fn clip_polyline(points: &[(f64, Option<f64>)], x: (f64, f64), y: (f64, f64)
 }
 
 /// Liang-Barsky clipping of segment a-b to the box; `None` when it misses.
-fn clip_segment(a: (f64, f64), b: (f64, f64), x: (f64, f64), y: (f64, f64)) -> Option<((f64, f64), (f64, f64))> {
+fn clip_segment(
+    a: (f64, f64),
+    b: (f64, f64),
+    x: (f64, f64),
+    y: (f64, f64),
+) -> Option<((f64, f64), (f64, f64))> {
     let (dx, dy) = (b.0 - a.0, b.1 - a.1);
     let (mut t0, mut t1) = (0.0f64, 1.0f64);
-    for (p, q) in [(-dx, a.0 - x.0), (dx, x.1 - a.0), (-dy, a.1 - y.0), (dy, y.1 - a.1)] {
+    for (p, q) in [
+        (-dx, a.0 - x.0),
+        (dx, x.1 - a.0),
+        (-dy, a.1 - y.0),
+        (dy, y.1 - a.1),
+    ] {
         if p == 0.0 {
             if q < 0.0 {
                 return None;
@@ -779,7 +843,8 @@ impl Figure {
         ensure_font().map_err(|m| self.error(m))?;
         let mut rgb = vec![255u8; (WIDTH_PX * HEIGHT_PX * 3) as usize];
         {
-            let root = BitMapBackend::with_buffer(&mut rgb, (WIDTH_PX, HEIGHT_PX)).into_drawing_area();
+            let root =
+                BitMapBackend::with_buffer(&mut rgb, (WIDTH_PX, HEIGHT_PX)).into_drawing_area();
             self.draw(&root).map_err(|m| self.error(m))?;
             root.present().map_err(|e| self.error(e.to_string()))?;
         }
@@ -789,7 +854,8 @@ impl Figure {
             enc.set_color(png::ColorType::Rgb);
             enc.set_depth(png::BitDepth::Eight);
             let mut w = enc.write_header().map_err(|e| self.error(e.to_string()))?;
-            w.write_image_data(&rgb).map_err(|e| self.error(e.to_string()))?;
+            w.write_image_data(&rgb)
+                .map_err(|e| self.error(e.to_string()))?;
             w.finish().map_err(|e| self.error(e.to_string()))?;
         }
         Ok(out)
@@ -828,7 +894,8 @@ impl Figure {
             .build_cartesian_2d(x0..x1, y0..y1)
             .map_err(e)?;
         let decimals = tick_decimals(y1 - y0);
-        let y_fmt = move |v: &f64| format!("{:.*}", decimals, if v.abs() < 1e-12 { 0.0 } else { *v });
+        let y_fmt =
+            move |v: &f64| format!("{:.*}", decimals, if v.abs() < 1e-12 { 0.0 } else { *v });
         let x_fmt = |v: &f64| {
             let r = v.round();
             if (v - r).abs() < 1e-9 {
@@ -874,7 +941,12 @@ impl Figure {
                 .map_err(e)?;
         }
         // Sources first, the reference on top.
-        let order: Vec<&Line> = self.lines.iter().skip(1).chain(self.lines.first()).collect();
+        let order: Vec<&Line> = self
+            .lines
+            .iter()
+            .skip(1)
+            .chain(self.lines.first())
+            .collect();
         let source_count = self.lines.len();
         for (k, line) in order.into_iter().enumerate() {
             let style = line.style.color().stroke_width(line.style.width_px);
@@ -911,7 +983,15 @@ impl Figure {
         }
         let omitted: Vec<String> = self.omitted.iter().map(|o| o.source.clone()).collect();
         let clipped: Vec<String> = self.off_scale.iter().map(|o| o.source.clone()).collect();
-        draw_legend(&legend, &self.lines, self.band.as_ref(), band_color, &omitted, &clipped).map_err(e)?;
+        draw_legend(
+            &legend,
+            &self.lines,
+            self.band.as_ref(),
+            band_color,
+            &omitted,
+            &clipped,
+        )
+        .map_err(e)?;
         Ok(())
     }
 }
@@ -932,7 +1012,9 @@ fn band_pieces(points: &[(f64, Option<(f64, f64)>)], y: (f64, f64)) -> Vec<Vec<(
     };
     for (t, b) in points {
         match b {
-            Some((l, u)) if l.is_finite() && u.is_finite() && t.is_finite() => run.push((*t, *l, *u)),
+            Some((l, u)) if l.is_finite() && u.is_finite() && t.is_finite() => {
+                run.push((*t, *l, *u))
+            }
             _ => flush(&mut run),
         }
     }
@@ -962,16 +1044,22 @@ impl<C, DB: DrawingBackend> Drawable<DB> for MarkerElement<C> {
         backend: &mut DB,
         _parent: (u32, u32),
     ) -> Result<(), DrawingErrorKind<DB::ErrorType>> {
-        let Some((x, y)) = pos.next() else { return Ok(()) };
+        let Some((x, y)) = pos.next() else {
+            return Ok(());
+        };
         let color = self.style.color();
         let thick = color.stroke_width(2);
         match self.style.marker {
             Marker::None => Ok(()),
             Marker::Circle => backend.draw_circle((x, y), 4, &color, true),
             Marker::Ring => backend.draw_circle((x, y), 4, &thick, false),
-            Marker::Triangle => backend.fill_polygon([(x, y - 4), (x + 4, y + 3), (x - 4, y + 3)], &color),
+            Marker::Triangle => {
+                backend.fill_polygon([(x, y - 4), (x + 4, y + 3), (x - 4, y + 3)], &color)
+            }
             Marker::Square => backend.draw_rect((x - 3, y - 3), (x + 3, y + 3), &color, true),
-            Marker::Diamond => backend.fill_polygon([(x, y - 4), (x + 4, y), (x, y + 4), (x - 4, y)], &color),
+            Marker::Diamond => {
+                backend.fill_polygon([(x, y - 4), (x + 4, y), (x, y + 4), (x - 4, y)], &color)
+            }
             Marker::Cross => {
                 backend.draw_line((x - 3, y - 3), (x + 3, y + 3), &thick)?;
                 backend.draw_line((x - 3, y + 3), (x + 3, y - 3), &thick)
@@ -1002,7 +1090,10 @@ fn draw_legend<DB: DrawingBackend>(
     for line in lines {
         let style = line.style.color().stroke_width(line.style.width_px);
         match line.style.dash {
-            None => area.draw(&PathElement::new(vec![(sample_x0, y), (sample_x1, y)], style))?,
+            None => area.draw(&PathElement::new(
+                vec![(sample_x0, y), (sample_x1, y)],
+                style,
+            ))?,
             Some((d, g)) => area.draw(&DashedPathElement::new(
                 vec![(sample_x0, y), (sample_x1, y)],
                 d,
@@ -1038,7 +1129,11 @@ fn draw_legend<DB: DrawingBackend>(
             continue;
         }
         y += row / 2;
-        area.draw(&Text::new(head.to_string(), (sample_x0, y), note_style.clone()))?;
+        area.draw(&Text::new(
+            head.to_string(),
+            (sample_x0, y),
+            note_style.clone(),
+        ))?;
         for n in names {
             y += row - 4;
             area.draw(&Text::new(
@@ -1053,9 +1148,18 @@ fn draw_legend<DB: DrawingBackend>(
 }
 
 /// Shortens `text` with an ellipsis until it fits `max_px`.
-fn fit_text<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, text: &str, font: &FontDesc<'_>, max_px: i32) -> String {
+fn fit_text<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    text: &str,
+    font: &FontDesc<'_>,
+    max_px: i32,
+) -> String {
     let style = TextStyle::from(font.clone());
-    let width = |s: &str| area.estimate_text_size(s, &style).map(|(w, _)| w as i32).unwrap_or(0);
+    let width = |s: &str| {
+        area.estimate_text_size(s, &style)
+            .map(|(w, _)| w as i32)
+            .unwrap_or(0)
+    };
     if width(text) <= max_px {
         return text.to_string();
     }
@@ -1114,7 +1218,8 @@ mod tests {
         assert_eq!(alpha.dash, None);
         for colour in ["#000000", alpha.hex().as_str()] {
             // (Axes and ticks are 2-point lines.)
-            let l: Vec<&(String, usize)> = lines.iter().filter(|l| l.0 == colour && l.1 > 2).collect();
+            let l: Vec<&(String, usize)> =
+                lines.iter().filter(|l| l.0 == colour && l.1 > 2).collect();
             assert_eq!(l.len(), 1, "{colour}: {l:?}");
             assert!(l[0].1 >= 90, "{colour}: {} points", l[0].1);
         }
@@ -1126,7 +1231,12 @@ mod tests {
         let mut colours: Vec<&str> = lines
             .iter()
             .map(|l| l.0.as_str())
-            .filter(|c| *c == "#000000" || PALETTE.iter().any(|p| LineStyle { rgb: *p, ..alpha }.hex() == *c))
+            .filter(|c| {
+                *c == "#000000"
+                    || PALETTE
+                        .iter()
+                        .any(|p| LineStyle { rgb: *p, ..alpha }.hex() == *c)
+            })
             .collect();
         colours.sort_unstable();
         colours.dedup();
@@ -1147,7 +1257,9 @@ mod tests {
             assert_eq!(fig.omitted.len(), 1);
             assert_eq!(fig.omitted[0].source, "Dead");
             assert!(
-                fig.omitted[0].reason.contains("20 of 20 left out (diverged)"),
+                fig.omitted[0]
+                    .reason
+                    .contains("20 of 20 left out (diverged)"),
                 "{}",
                 fig.omitted[0].reason
             );
@@ -1173,9 +1285,12 @@ mod tests {
     #[test]
     fn a_diverged_series_does_not_wreck_the_axis() {
         let mut report = testdata::scene();
-        report
-            .sources
-            .push(testdata::source("Wild", 20, |t| if t < 1.0 { 0.6 } else { 1e17 }, 1e17));
+        report.sources.push(testdata::source(
+            "Wild",
+            20,
+            |t| if t < 1.0 { 0.6 } else { 1e17 },
+            1e17,
+        ));
         let styles = SourceStyles::for_reports(std::slice::from_ref(&report));
         let fig = build_figure(&report, FigureKind::GoalDistance, &styles);
         let (lo, hi) = fig.y_range;
@@ -1231,7 +1346,10 @@ mod tests {
             .flat_map(|y| (0..WIDTH_PX).map(move |x| (x, y)))
             .filter(|&(x, y)| px(x, y) == alpha)
             .count();
-        assert!(alpha_pixels > 300, "{alpha_pixels} pixels of Alpha's colour");
+        assert!(
+            alpha_pixels > 300,
+            "{alpha_pixels} pixels of Alpha's colour"
+        );
         // The title is rendered text: dark pixels in the top rows.
         let dark_title = (0..24)
             .flat_map(|y| (0..WIDTH_PX).map(move |x| (x, y)))
@@ -1258,7 +1376,11 @@ mod tests {
         assert_eq!(pieces[1], [(1.5, 1.0), (2.0, 0.0)]);
         assert_eq!(pieces[2], [(6.0, 0.2), (7.0, 0.3)]);
         // A segment from far below to far above keeps its middle.
-        let pieces = clip_polyline(&[(0.0, Some(-1e17)), (1.0, Some(1e17))], (0.0, 1.0), (0.0, 1.0));
+        let pieces = clip_polyline(
+            &[(0.0, Some(-1e17)), (1.0, Some(1e17))],
+            (0.0, 1.0),
+            (0.0, 1.0),
+        );
         assert_eq!(pieces.len(), 1);
         assert!((pieces[0][0].0 - 0.5).abs() < 1e-9 && (pieces[0][1].0 - 0.5).abs() < 1e-9);
     }
@@ -1290,7 +1412,11 @@ mod tests {
             FigureKind::CubePitch,
             &SourceStyles::for_reports(std::slice::from_ref(&report)),
         );
-        assert!(fig.y_range.0 < -89.0 && fig.y_range.1 >= 0.0, "{:?}", fig.y_range);
+        assert!(
+            fig.y_range.0 < -89.0 && fig.y_range.1 >= 0.0,
+            "{:?}",
+            fig.y_range
+        );
         assert!(fig.to_svg().unwrap().contains("pitch change (deg)"));
     }
 
@@ -1299,7 +1425,9 @@ mod tests {
         let a: Vec<LineStyle> = (0..7).map(LineStyle::for_source).collect();
         for i in 0..7 {
             for j in 0..i {
-                assert!(a[i].rgb != a[j].rgb && a[i].marker != a[j].marker || a[i].dash != a[j].dash);
+                assert!(
+                    a[i].rgb != a[j].rgb && a[i].marker != a[j].marker || a[i].dash != a[j].dash
+                );
             }
         }
         assert_eq!(file_stem("scene 1/ä"), "scene_1__");

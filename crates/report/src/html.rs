@@ -134,7 +134,10 @@ pub fn render_index(
 
     summary(&mut h, reports, downloads);
     for r in reports {
-        let figs: Vec<&FigureEntry<'_>> = figures.iter().filter(|f| f.figure.scene == r.scene).collect();
+        let figs: Vec<&FigureEntry<'_>> = figures
+            .iter()
+            .filter(|f| f.figure.scene == r.scene)
+            .collect();
         scene_section(&mut h, r, &figs);
     }
     provenance_section(&mut h, provenance);
@@ -226,7 +229,8 @@ fn summary(h: &mut String, reports: &[SceneReport], downloads: &[(String, String
             format!(
                 "{}: {}",
                 escape(&r.scene),
-                r.closest().map_or("none".to_string(), |s| escape(&s.source))
+                r.closest()
+                    .map_or("none".to_string(), |s| escape(&s.source))
             )
         })
         .collect();
@@ -251,7 +255,12 @@ fn phase_label(r: &SceneReport, i: usize) -> String {
         .get(i + 1)
         .copied()
         .unwrap_or(r.steps as f64 * r.control_period_s);
-    format!("phase {} ({}\u{2013}{} s)", i + 1, trim_num(start), trim_num(end))
+    format!(
+        "phase {} ({}\u{2013}{} s)",
+        i + 1,
+        trim_num(start),
+        trim_num(end)
+    )
 }
 
 fn trim_num(v: f64) -> String {
@@ -282,7 +291,8 @@ fn scene_section(h: &mut String, r: &SceneReport, figures: &[&FigureEntry<'_>]) 
     let _ = writeln!(
         h,
         ". Closest source overall: <strong>{}</strong>.</p>",
-        r.closest().map_or("none".to_string(), |s| escape(&s.source))
+        r.closest()
+            .map_or("none".to_string(), |s| escape(&s.source))
     );
 
     // Closest per phase.
@@ -340,7 +350,10 @@ fn scene_section(h: &mut String, r: &SceneReport, figures: &[&FigureEntry<'_>]) 
     }
 
     measures_table(h, r);
-    if std::iter::once(reference).chain(&r.sources).any(|s| s.cube.is_some()) {
+    if std::iter::once(reference)
+        .chain(&r.sources)
+        .any(|s| s.cube.is_some())
+    {
         cube_table(h, r);
     }
     health_section(h, r);
@@ -368,7 +381,12 @@ fn opt_num(v: Option<f64>, decimals: usize) -> String {
 fn measures_table(h: &mut String, r: &SceneReport) {
     h.push_str("<h3>Measures</h3>\n<table class=\"measures\">\n<thead><tr><th>Source</th><th>Kind</th><th>Runs used</th><th>Accumulated error (m)</th><th>Mean error (m)</th><th>Max error (m)</th><th>Final error (m)</th><th>Orientation error (deg)</th><th>Final distance to goal (m)</th><th>Converged (s)</th><th>Overshoot (m)</th><th>Goal crossings</th></tr></thead>\n<tbody>\n");
     let rows: Vec<&SourceSummary> = std::iter::once(&r.reference).chain(&r.sources).collect();
-    let best = best_index(&rows.iter().map(|s| s.accumulated_error_m).collect::<Vec<_>>());
+    let best = best_index(
+        &rows
+            .iter()
+            .map(|s| s.accumulated_error_m)
+            .collect::<Vec<_>>(),
+    );
     for (i, s) in rows.iter().enumerate() {
         // Without usable runs the goal measures of an empty mean say nothing.
         let g = s.goal.as_ref().filter(|_| s.runs_used > 0);
@@ -389,12 +407,17 @@ fn measures_table(h: &mut String, r: &SceneReport) {
         num_cell(
             h,
             &g.map_or("n/a".into(), |g| {
-                g.convergence_time_s.map_or("never".into(), |t| format!("{t:.2}"))
+                g.convergence_time_s
+                    .map_or("never".into(), |t| format!("{t:.2}"))
             }),
             false,
         );
         num_cell(h, &fmt_m(g.and_then(|g| g.overshoot_m)), false);
-        num_cell(h, &g.map_or("n/a".into(), |g| g.goal_crossings.to_string()), false);
+        num_cell(
+            h,
+            &g.map_or("n/a".into(), |g| g.goal_crossings.to_string()),
+            false,
+        );
         h.push_str("</tr>\n");
     }
     h.push_str("</tbody>\n</table>\n");
@@ -441,7 +464,8 @@ fn cube_table(h: &mut String, r: &SceneReport) {
                 num_cell(h, &opt_num(Some(c.max_tilt_deg), 1), false);
                 num_cell(
                     h,
-                    &c.contact_onset_s.map_or("none".into(), |t| format!("{t:.2}")),
+                    &c.contact_onset_s
+                        .map_or("none".into(), |t| format!("{t:.2}")),
                     false,
                 );
             }
@@ -493,7 +517,10 @@ fn health_section(h: &mut String, r: &SceneReport) {
         );
     }
     h.push_str("</ul>\n");
-    let _ = writeln!(h, "<details><summary>Every flagged run ({flagged})</summary>");
+    let _ = writeln!(
+        h,
+        "<details><summary>Every flagged run ({flagged})</summary>"
+    );
     h.push_str("<table class=\"health\">\n<thead><tr><th>Source</th><th>Run</th><th>Status</th><th>Why</th></tr></thead>\n<tbody>\n");
     for s in &sources {
         for f in &s.runs_flagged {
@@ -523,7 +550,11 @@ fn alignment_section(h: &mut String, a: Option<&AlignmentReport>) {
     let leads: Vec<i64> = a
         .runs
         .iter()
-        .filter_map(|r| r.start.onset_frame.map(|o| o as i64 - r.start.start_frame as i64))
+        .filter_map(|r| {
+            r.start
+                .onset_frame
+                .map(|o| o as i64 - r.start.start_frame as i64)
+        })
         .collect();
     if let (Some(lo), Some(hi)) = (starts.iter().min(), starts.iter().max()) {
         let _ = write!(h, " Start frames {lo}\u{2013}{hi}");
@@ -543,18 +574,26 @@ fn alignment_section(h: &mut String, a: Option<&AlignmentReport>) {
     if a.runs.is_empty() {
         return;
     }
-    let _ = writeln!(h, "<details><summary>Start of every run ({})</summary>", a.runs.len());
+    let _ = writeln!(
+        h,
+        "<details><summary>Start of every run ({})</summary>",
+        a.runs.len()
+    );
     h.push_str("<table class=\"alignment\">\n<thead><tr><th>Run</th><th>Start frame</th><th>Start (s)</th><th>Motion onset frame</th><th>Onset minus start (frames)</th><th>Steps available</th></tr></thead>\n<tbody>\n");
     for r in &a.runs {
         let _ = write!(h, "<tr><td>{}</td>", escape(&r.run));
         num_cell(h, &r.start.start_frame.to_string(), false);
         num_cell(h, &format!("{:.2}", r.start.start_s), false);
-        num_cell(h, &r.start.onset_frame.map_or("none".into(), |o| o.to_string()), false);
         num_cell(
             h,
-            &r.start
-                .onset_frame
-                .map_or("n/a".into(), |o| (o as i64 - r.start.start_frame as i64).to_string()),
+            &r.start.onset_frame.map_or("none".into(), |o| o.to_string()),
+            false,
+        );
+        num_cell(
+            h,
+            &r.start.onset_frame.map_or("n/a".into(), |o| {
+                (o as i64 - r.start.start_frame as i64).to_string()
+            }),
             false,
         );
         num_cell(h, &r.steps_available.to_string(), false);
@@ -582,7 +621,12 @@ fn provenance_section(h: &mut String, p: &Provenance) {
     }
     kv.extend(p.details.iter().cloned());
     for (k, v) in &kv {
-        let _ = writeln!(h, "<dt>{}</dt><dd><code>{}</code></dd>", escape(k), escape(v));
+        let _ = writeln!(
+            h,
+            "<dt>{}</dt><dd><code>{}</code></dd>",
+            escape(k),
+            escape(v)
+        );
     }
     h.push_str("</dl>\n");
     if !p.sources.is_empty() {
@@ -622,7 +666,12 @@ mod tests {
         let svgs: Vec<String> = figs.iter().map(|f| f.to_svg().unwrap()).collect();
         let names: Vec<(String, String)> = figs
             .iter()
-            .map(|f| (format!("figures/{}.svg", f.stem), format!("figures/{}.png", f.stem)))
+            .map(|f| {
+                (
+                    format!("figures/{}.svg", f.stem),
+                    format!("figures/{}.png", f.stem),
+                )
+            })
             .collect();
         let entries: Vec<FigureEntry<'_>> = figs
             .iter()
@@ -640,7 +689,12 @@ mod tests {
         prov.sources
             .push(crate::SourceProvenance::new("Alpha <&>").with("engine", "alpha \"1.0\""));
         (
-            render_index(&reports, &entries, &prov, &[("table.md".into(), "table".into())]),
+            render_index(
+                &reports,
+                &entries,
+                &prov,
+                &[("table.md".into(), "table".into())],
+            ),
             figs.len(),
         )
     }
@@ -679,9 +733,16 @@ mod tests {
         assert_eq!(body.matches("<tr>").count(), 3);
         // Alpha (1.0 m) is best in the scene and in total; Dead has no value.
         let alpha_row = body.lines().find(|l| l.contains("Alpha")).unwrap();
-        assert_eq!(alpha_row.matches("class=\"num best\"").count(), 2, "{alpha_row}");
+        assert_eq!(
+            alpha_row.matches("class=\"num best\"").count(),
+            2,
+            "{alpha_row}"
+        );
         let dead_row = body.lines().find(|l| l.contains("Dead")).unwrap();
-        assert!(dead_row.contains("n/a (20 of 20 runs left out)"), "{dead_row}");
+        assert!(
+            dead_row.contains("n/a (20 of 20 runs left out)"),
+            "{dead_row}"
+        );
         // Per phase, Alpha is closest in both.
         assert!(html.contains("phase 1 (0\u{2013}2.5 s): <strong>Alpha &lt;&amp;&gt;</strong>"));
         assert_eq!(tbody(&html, "scene-scene-test").matches("<tr>").count(), 3);

@@ -113,7 +113,10 @@ pub fn write_report(
         files
             .figures_png
             .push(write(&fig_dir.join(format!("{}.png", f.stem)), &png)?);
-        rel.push((format!("figures/{}.svg", f.stem), format!("figures/{}.png", f.stem)));
+        rel.push((
+            format!("figures/{}.svg", f.stem),
+            format!("figures/{}.png", f.stem),
+        ));
         svgs.push(svg);
     }
 
@@ -129,9 +132,13 @@ pub fn write_report(
             .push(write(&out_dir.join(name), table::render(reports, format))?);
     }
     let series = serde_json::to_string(&table::to_json(reports, true)).unwrap_or_default();
-    files.data.push(write(&out_dir.join("series.json"), series + "\n")?);
+    files
+        .data
+        .push(write(&out_dir.join("series.json"), series + "\n")?);
     let prov = serde_json::to_string_pretty(provenance).unwrap_or_default();
-    files.data.push(write(&out_dir.join("provenance.json"), prov + "\n")?);
+    files
+        .data
+        .push(write(&out_dir.join("provenance.json"), prov + "\n")?);
 
     let entries: Vec<html::FigureEntry<'_>> = figures
         .iter()

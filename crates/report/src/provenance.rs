@@ -82,7 +82,9 @@ pub fn shell_join<I: IntoIterator<Item = S>, S: AsRef<str>>(args: I) -> String {
     args.into_iter()
         .map(|a| {
             let a = a.as_ref();
-            let plain = !a.is_empty() && a.chars().all(|c| c.is_ascii_alphanumeric() || "-_./=:,+@%".contains(c));
+            let plain = !a.is_empty()
+                && a.chars()
+                    .all(|c| c.is_ascii_alphanumeric() || "-_./=:,+@%".contains(c));
             if plain {
                 a.to_string()
             } else {
@@ -96,7 +98,10 @@ pub fn shell_join<I: IntoIterator<Item = S>, S: AsRef<str>>(args: I) -> String {
 /// Formats a time as UTC ISO 8601 with seconds (`1970-01-01T00:00:00Z`);
 /// times before 1970 print as the epoch.
 pub fn utc_timestamp(t: SystemTime) -> String {
-    let secs = t.duration_since(UNIX_EPOCH).map(|d| d.as_secs()).unwrap_or(0);
+    let secs = t
+        .duration_since(UNIX_EPOCH)
+        .map(|d| d.as_secs())
+        .unwrap_or(0);
     let (days, rem) = (secs / 86_400, secs % 86_400);
     let (y, m, d) = civil_from_days(days as i64);
     format!(
@@ -155,13 +160,17 @@ mod tests {
     #[test]
     fn new_fills_the_tool_version_and_time() {
         let mut p = Provenance::new("t");
-        p.sources.push(SourceProvenance::new("s").with("engine", "x 1"));
+        p.sources
+            .push(SourceProvenance::new("s").with("engine", "x 1"));
         assert_eq!(p.tool_version, realitygap_core::TOOL_VERSION);
         assert!(
             p.generated_utc.ends_with('Z') && p.generated_utc.len() == 20,
             "{}",
             p.generated_utc
         );
-        assert_eq!(p.sources[0].details, [("engine".to_string(), "x 1".to_string())]);
+        assert_eq!(
+            p.sources[0].details,
+            [("engine".to_string(), "x 1".to_string())]
+        );
     }
 }

@@ -1,7 +1,9 @@
 //! Synthetic scene reports for the unit tests.
 
 use realitygap_analysis::align::RunStart;
-use realitygap_analysis::compare::{AlignedRun, AlignmentReport, FlaggedRun, SceneReport, Series, SourceSummary};
+use realitygap_analysis::compare::{
+    AlignedRun, AlignmentReport, FlaggedRun, SceneReport, Series, SourceSummary,
+};
 use realitygap_analysis::metrics::GoalMeasures;
 use realitygap_analysis::{AnalysisMode, HealthFlag};
 
@@ -14,7 +16,10 @@ pub fn source(name: &str, runs: usize, f: impl Fn(f64) -> f64, scale: f64) -> So
     let usable = runs > 0;
     let some = |v: Vec<Option<f64>>| if usable { v } else { vec![None; v.len()] };
     let series = Series {
-        wrist_mean_m: t_s.iter().map(|t| usable.then(|| [f(*t), 0.0, 0.5])).collect(),
+        wrist_mean_m: t_s
+            .iter()
+            .map(|t| usable.then(|| [f(*t), 0.0, 0.5]))
+            .collect(),
         wrist_spread_m: some(vec![Some(0.005); 100]),
         wrist_distance_to_goal_m: some(goal),
         wrist_distance_to_reference_m: some(vec![Some(0.01 * scale); 100]),

@@ -5,16 +5,31 @@ fn sample_trajectory() -> Trajectory {
     let mut t = Trajectory::with_bodies(&["wrist", "cube"]);
     t.time_s = vec![0.0, 0.05, 0.1, 0.15000000000000002];
     t.bodies[0].poses = vec![
-        Some(Pose::new(Vec3::new(0.0670618953, 0.8718789057, -0.0), Quat::IDENTITY)),
+        Some(Pose::new(
+            Vec3::new(0.0670618953, 0.8718789057, -0.0),
+            Quat::IDENTITY,
+        )),
         None,
-        Some(Pose::new(Vec3::new(1e17, -1.5e-19, f64::INFINITY), Quat::new(0.5, -0.5, 0.5, 0.5))),
-        Some(Pose::new(Vec3::new(1.0 / 3.0, 2e-5, 9_999_999_999_999_998.0), Quat::new(0.0, 1.0, 0.0, 0.0))),
+        Some(Pose::new(
+            Vec3::new(1e17, -1.5e-19, f64::INFINITY),
+            Quat::new(0.5, -0.5, 0.5, 0.5),
+        )),
+        Some(Pose::new(
+            Vec3::new(1.0 / 3.0, 2e-5, 9_999_999_999_999_998.0),
+            Quat::new(0.0, 1.0, 0.0, 0.0),
+        )),
     ];
     t.bodies[1].poses = vec![
         Some(Pose::new(Vec3::new(0.5, 0.0, 0.0375), Quat::IDENTITY)),
-        Some(Pose::new(Vec3::new(0.5, 2.07310114618026e-19, 0.0417051962), Quat::new(1.0, 2.39e-18, 0.0, 0.0))),
+        Some(Pose::new(
+            Vec3::new(0.5, 2.07310114618026e-19, 0.0417051962),
+            Quat::new(1.0, 2.39e-18, 0.0, 0.0),
+        )),
         None,
-        Some(Pose::new(Vec3::new(f64::NEG_INFINITY, 5e-324, f64::MAX), Quat::IDENTITY)),
+        Some(Pose::new(
+            Vec3::new(f64::NEG_INFINITY, 5e-324, f64::MAX),
+            Quat::IDENTITY,
+        )),
     ];
     t.joint_angles_rad = Some(vec![vec![0.0, -1.5, 3.0]; 4]);
     t.joint_velocity_commands_rad_s = Some(vec![vec![0.1, -0.5235987755982988, 0.0]; 4]);
@@ -36,7 +51,13 @@ fn csv_round_trip_is_exact() {
          cube_x_m,cube_y_m,cube_z_m,cube_qw,cube_qx,cube_qy,cube_qz,q1_rad,q2_rad,q3_rad,\
          qd_cmd1_rad_s,qd_cmd2_rad_s,qd_cmd3_rad_s"
     );
-    assert!(text.lines().nth(2).unwrap().starts_with("0.05,,,,,,,,0.5,2.07310114618026e-19,"), "{text}");
+    assert!(
+        text.lines()
+            .nth(2)
+            .unwrap()
+            .starts_with("0.05,,,,,,,,0.5,2.07310114618026e-19,"),
+        "{text}"
+    );
     assert!(text.contains("1e17") && text.contains("inf") && text.contains("-inf"));
     let back = parse_text(&text).unwrap();
     assert_eq!(back, t);
@@ -53,7 +74,10 @@ fn csv_round_trip_is_exact() {
 fn nan_round_trips() {
     let mut t = Trajectory::with_bodies(&["wrist"]);
     t.time_s = vec![0.0];
-    t.bodies[0].poses = vec![Some(Pose::new(Vec3::new(f64::NAN, 1.0, 2.0), Quat::IDENTITY))];
+    t.bodies[0].poses = vec![Some(Pose::new(
+        Vec3::new(f64::NAN, 1.0, 2.0),
+        Quat::IDENTITY,
+    ))];
     let text = format_run_csv(&t).unwrap();
     assert!(text.contains("NaN"));
     let back = parse_text(&text).unwrap();
@@ -80,7 +104,8 @@ fn csv_errors_name_line_and_column() {
     assert!(parse_text("").unwrap_err().message.contains("empty"));
     let e = parse_text("time,wrist_x_m\n").unwrap_err();
     assert_eq!((e.line, e.column), (Some(1), Some(1)));
-    let e = parse_text("t_s,wrist_x_m,wrist_y_m,wrist_z_m,wrist_qw,wrist_qx,wrist_qz,wrist_qy\n").unwrap_err();
+    let e = parse_text("t_s,wrist_x_m,wrist_y_m,wrist_z_m,wrist_qw,wrist_qx,wrist_qz,wrist_qy\n")
+        .unwrap_err();
     assert_eq!(e.column, Some(7), "{e}");
     let e = parse_text("t_s,wrist_x_m,wrist_y_m\n").unwrap_err();
     assert!(e.message.contains("ends before"), "{e}");
@@ -89,7 +114,11 @@ fn csv_errors_name_line_and_column() {
     // A garbage cell.
     let bad = good.replacen("0.0375", "0.03x75", 1);
     let e = parse_text(&bad).unwrap_err();
-    assert_eq!((e.line, e.column, e.field.as_deref()), (Some(2), Some(11), Some("cube_z_m")), "{e}");
+    assert_eq!(
+        (e.line, e.column, e.field.as_deref()),
+        (Some(2), Some(11), Some("cube_z_m")),
+        "{e}"
+    );
     // A partial pose.
     let bad = good.replacen(",0.5,0,0.0375,", ",0.5,,0.0375,", 1);
     let e = parse_text(&bad).unwrap_err();
@@ -107,7 +136,12 @@ fn csv_errors_name_line_and_column() {
     // A header only: an empty trajectory.
     assert_eq!(parse_text("t_s,q1_rad\n").unwrap().len(), 0);
     // Quoted header names (as some tools write them).
-    assert_eq!(parse_text("\"t_s\",\"q1_rad\"\n0,1\n").unwrap().joint_angles_rad, Some(vec![vec![1.0]]));
+    assert_eq!(
+        parse_text("\"t_s\",\"q1_rad\"\n0,1\n")
+            .unwrap()
+            .joint_angles_rad,
+        Some(vec![vec![1.0]])
+    );
 }
 
 proptest! {
@@ -149,9 +183,17 @@ proptest! {
 fn store_writes_reopens_and_reads_runs() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("results/mujoco-scene1");
-    let mut store = RunStore::create_or_open(&dir, "mujoco", SourceKind::Simulated, Some("scene1")).unwrap();
-    store.set_engine(EngineInfo { name: "mujoco".into(), version: "3.1.6".into() }).unwrap();
-    store.set_settings(serde_json::json!({"timestep_s": 1e-4})).unwrap();
+    let mut store =
+        RunStore::create_or_open(&dir, "mujoco", SourceKind::Simulated, Some("scene1")).unwrap();
+    store
+        .set_engine(EngineInfo {
+            name: "mujoco".into(),
+            version: "3.1.6".into(),
+        })
+        .unwrap();
+    store
+        .set_settings(serde_json::json!({"timestep_s": 1e-4}))
+        .unwrap();
     assert!(!store.has_finished_run("r0"));
     let t = sample_trajectory();
     let mut entry = RunEntry::new("r0");
@@ -171,10 +213,19 @@ fn store_writes_reopens_and_reads_runs() {
     assert_eq!(reopened.runs()[0].file, "runs/r0.csv");
     assert_eq!(reopened.runs()[1].status, RunStatus::Failed);
     assert_eq!(reopened.read_run("r0").unwrap(), t);
-    assert!(matches!(reopened.read_run("r1"), Err(StoreError::NoTrajectory { .. })));
-    assert!(matches!(reopened.read_run("nope"), Err(StoreError::UnknownRun { .. })));
+    assert!(matches!(
+        reopened.read_run("r1"),
+        Err(StoreError::NoTrajectory { .. })
+    ));
+    assert!(matches!(
+        reopened.read_run("nope"),
+        Err(StoreError::UnknownRun { .. })
+    ));
     assert!(reopened.has_finished_run("r0"));
-    assert_eq!(reopened.manifest().engine.as_ref().unwrap().version, "3.1.6");
+    assert_eq!(
+        reopened.manifest().engine.as_ref().unwrap().version,
+        "3.1.6"
+    );
 
     // The JSON is what a person expects.
     let json: serde_json::Value =
@@ -196,7 +247,8 @@ fn store_writes_reopens_and_reads_runs() {
 
     // Rewriting a run replaces its entry; a failure after success removes
     // the stale CSV.
-    let mut store = RunStore::create_or_open(&dir, "mujoco", SourceKind::Simulated, Some("scene1")).unwrap();
+    let mut store =
+        RunStore::create_or_open(&dir, "mujoco", SourceKind::Simulated, Some("scene1")).unwrap();
     let mut entry = RunEntry::new("r1");
     entry.status = RunStatus::Diverged;
     store.write_run(entry, &t).unwrap();
@@ -211,16 +263,27 @@ fn store_writes_reopens_and_reads_runs() {
 fn store_refuses_another_source_or_scene() {
     let tmp = tempfile::tempdir().unwrap();
     RunStore::create_or_open(tmp.path(), "real", SourceKind::Real, Some("scene3")).unwrap();
-    let e = RunStore::create_or_open(tmp.path(), "real", SourceKind::Real, Some("scene1")).unwrap_err();
-    assert!(e.to_string().contains("scene 'scene3'") && e.to_string().contains("scene 'scene1'"), "{e}");
-    assert!(RunStore::create_or_open(tmp.path(), "mujoco", SourceKind::Simulated, Some("scene3")).is_err());
+    let e =
+        RunStore::create_or_open(tmp.path(), "real", SourceKind::Real, Some("scene1")).unwrap_err();
+    assert!(
+        e.to_string().contains("scene 'scene3'") && e.to_string().contains("scene 'scene1'"),
+        "{e}"
+    );
+    assert!(
+        RunStore::create_or_open(tmp.path(), "mujoco", SourceKind::Simulated, Some("scene3"))
+            .is_err()
+    );
     assert!(RunStore::create_or_open(tmp.path(), "real", SourceKind::Real, Some("scene3")).is_ok());
 }
 
 #[test]
 fn bad_manifest_names_file_line_column() {
     let tmp = tempfile::tempdir().unwrap();
-    std::fs::write(tmp.path().join(MANIFEST_FILE), "{\n  \"tool_version\": \"0.1.0\",\n  \"source\": 3\n}\n").unwrap();
+    std::fs::write(
+        tmp.path().join(MANIFEST_FILE),
+        "{\n  \"tool_version\": \"0.1.0\",\n  \"source\": 3\n}\n",
+    )
+    .unwrap();
     let e = RunStore::open(tmp.path()).unwrap_err();
     match &e {
         StoreError::Manifest { path, line, .. } => {
@@ -231,7 +294,10 @@ fn bad_manifest_names_file_line_column() {
     }
     assert!(e.to_string().contains("manifest.json:3:"), "{e}");
     std::fs::write(tmp.path().join(MANIFEST_FILE), "not json").unwrap();
-    assert!(RunStore::open(tmp.path()).unwrap_err().to_string().contains(":1:"));
+    assert!(RunStore::open(tmp.path())
+        .unwrap_err()
+        .to_string()
+        .contains(":1:"));
     let e = RunStore::open(&tmp.path().join("missing")).unwrap_err();
     assert!(e.to_string().starts_with("cannot read"), "{e}");
 }
@@ -240,12 +306,19 @@ fn bad_manifest_names_file_line_column() {
 fn manifest_paths_cannot_escape_the_directory() {
     let tmp = tempfile::tempdir().unwrap();
     let mut store = RunStore::create_or_open(tmp.path(), "x", SourceKind::Recorded, None).unwrap();
-    store.write_run(RunEntry::new("a"), &sample_trajectory()).unwrap();
+    store
+        .write_run(RunEntry::new("a"), &sample_trajectory())
+        .unwrap();
     let path = tmp.path().join(MANIFEST_FILE);
-    let text = std::fs::read_to_string(&path).unwrap().replace("runs/a.csv", "../../etc/passwd");
+    let text = std::fs::read_to_string(&path)
+        .unwrap()
+        .replace("runs/a.csv", "../../etc/passwd");
     std::fs::write(&path, text).unwrap();
     let store = RunStore::open(tmp.path()).unwrap();
-    assert!(matches!(store.read_run("a"), Err(StoreError::NoTrajectory { .. })));
+    assert!(matches!(
+        store.read_run("a"),
+        Err(StoreError::NoTrajectory { .. })
+    ));
 }
 
 #[test]
@@ -261,7 +334,10 @@ fn run_ids_are_checked_and_sanitised() {
     assert!(validate_run_id(&sanitize_run_id(&"x".repeat(500))).is_ok());
     let tmp = tempfile::tempdir().unwrap();
     let mut store = RunStore::create_or_open(tmp.path(), "x", SourceKind::Recorded, None).unwrap();
-    assert!(matches!(store.write_run(RunEntry::new("../x"), &sample_trajectory()), Err(StoreError::InvalidRunId { .. })));
+    assert!(matches!(
+        store.write_run(RunEntry::new("../x"), &sample_trajectory()),
+        Err(StoreError::InvalidRunId { .. })
+    ));
 }
 
 #[test]
@@ -274,9 +350,18 @@ fn discover_finds_results_directories() {
     std::fs::create_dir_all(root.join("empty/dir")).unwrap();
     let found: Vec<String> = discover(root)
         .iter()
-        .map(|p| p.strip_prefix(root).unwrap().to_string_lossy().replace('\\', "/"))
+        .map(|p| {
+            p.strip_prefix(root)
+                .unwrap()
+                .to_string_lossy()
+                .replace('\\', "/")
+        })
         .collect();
-    assert_eq!(found, vec!["a", "b/c", "b/d/e"], "depth 4 and hidden are not searched");
+    assert_eq!(
+        found,
+        vec!["a", "b/c", "b/d/e"],
+        "depth 4 and hidden are not searched"
+    );
     assert_eq!(discover(&root.join("a")), vec![root.join("a")]);
     assert!(discover(&root.join("missing")).is_empty());
 }

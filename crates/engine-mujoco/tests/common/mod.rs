@@ -19,34 +19,60 @@ pub fn paper_data() -> Option<PathBuf> {
     if dir.join("Simulation").is_dir() {
         Some(dir)
     } else if std::env::var_os("REALITYGAP_REQUIRE_PAPER_DATA").is_some() {
-        panic!("paper data not found at {} and REALITYGAP_REQUIRE_PAPER_DATA is set", dir.display());
+        panic!(
+            "paper data not found at {} and REALITYGAP_REQUIRE_PAPER_DATA is set",
+            dir.display()
+        );
     } else {
-        eprintln!("paper data not found at {}: skipping this test", dir.display());
+        eprintln!(
+            "paper data not found at {}: skipping this test",
+            dir.display()
+        );
         None
     }
 }
 
 /// One of the project's scenes.
 pub fn scene(name: &str) -> Scene {
-    Scene::from_file(&workspace().join("assets/scenes").join(format!("{name}.toml"))).unwrap()
+    Scene::from_file(
+        &workspace()
+            .join("assets/scenes")
+            .join(format!("{name}.toml")),
+    )
+    .unwrap()
 }
 
 /// The official Kinova URDF, with its meshes resolved in the paper data.
 pub fn official_robot(paper: &Path) -> RobotModel {
     let mut resolver = PackageResolver::new();
     resolver.insert("kinova_description", paper.join("kinova_description"));
-    RobotModel::from_urdf_file(&paper.join("kinova_description/urdf/m1n6s300.urdf"), &resolver).unwrap()
+    RobotModel::from_urdf_file(
+        &paper.join("kinova_description/urdf/m1n6s300.urdf"),
+        &resolver,
+    )
+    .unwrap()
 }
 
 /// The project's Mico2.
 pub fn mico2() -> RobotModel {
-    RobotModel::from_urdf_file(&workspace().join("assets/robots/mico2/mico2.urdf"), &PackageResolver::new()).unwrap()
+    RobotModel::from_urdf_file(
+        &workspace().join("assets/robots/mico2/mico2.urdf"),
+        &PackageResolver::new(),
+    )
+    .unwrap()
 }
 
 /// Runs a scene through MuJoCo with the scene's own settings.
 pub fn run(scene: &Scene, robot: &RobotModel) -> RunOutcome {
     scene.validate(robot).unwrap();
-    let out = simulate(&MujocoEngine, scene, robot, &scene.settings_for("mujoco"), &RunOptions::default()).unwrap();
+    let out = simulate(
+        &MujocoEngine,
+        scene,
+        robot,
+        &scene.settings_for("mujoco"),
+        &RunOptions::default(),
+    )
+    .unwrap();
     assert_eq!(out.status, RunStatus::Completed, "{}", scene.name);
     out
 }
@@ -65,10 +91,18 @@ pub fn read_study_csv(path: &Path) -> Vec<[f64; 14]> {
 
 /// Wrist positions of a run.
 pub fn wrist(out: &RunOutcome) -> Vec<Vec3> {
-    out.trajectory.positions("wrist").into_iter().map(|p| p.unwrap()).collect()
+    out.trajectory
+        .positions("wrist")
+        .into_iter()
+        .map(|p| p.unwrap())
+        .collect()
 }
 
 /// Cube positions of a run.
 pub fn cube(out: &RunOutcome) -> Vec<Vec3> {
-    out.trajectory.positions("cube").into_iter().map(|p| p.unwrap()).collect()
+    out.trajectory
+        .positions("cube")
+        .into_iter()
+        .map(|p| p.unwrap())
+        .collect()
 }

@@ -21,23 +21,38 @@ pub fn paper_data() -> Option<PathBuf> {
     if dir.join("kinova_description/urdf/m1n6s300.urdf").is_file() {
         Some(dir)
     } else if std::env::var_os("REALITYGAP_REQUIRE_PAPER_DATA").is_some() {
-        panic!("paper data not found at {} and REALITYGAP_REQUIRE_PAPER_DATA is set", dir.display());
+        panic!(
+            "paper data not found at {} and REALITYGAP_REQUIRE_PAPER_DATA is set",
+            dir.display()
+        );
     } else {
-        eprintln!("paper data not found at {}: skipping this test", dir.display());
+        eprintln!(
+            "paper data not found at {}: skipping this test",
+            dir.display()
+        );
         None
     }
 }
 
 /// One of the project's scenes.
 pub fn scene(name: &str) -> Scene {
-    Scene::from_file(&workspace().join("assets/scenes").join(format!("{name}.toml"))).unwrap()
+    Scene::from_file(
+        &workspace()
+            .join("assets/scenes")
+            .join(format!("{name}.toml")),
+    )
+    .unwrap()
 }
 
 /// The official Kinova URDF, with its meshes resolved in the paper data.
 pub fn official_robot(paper: &Path) -> RobotModel {
     let mut resolver = PackageResolver::new();
     resolver.insert("kinova_description", paper.join("kinova_description"));
-    RobotModel::from_urdf_file(&paper.join("kinova_description/urdf/m1n6s300.urdf"), &resolver).unwrap()
+    RobotModel::from_urdf_file(
+        &paper.join("kinova_description/urdf/m1n6s300.urdf"),
+        &resolver,
+    )
+    .unwrap()
 }
 
 /// A scene with the official robot instead of its own.
@@ -51,7 +66,11 @@ pub fn with_official_robot(scene: &Scene, paper: &Path) -> (Scene, RobotModel) {
 
 /// The project's Mico2.
 pub fn mico2() -> RobotModel {
-    RobotModel::from_urdf_file(&workspace().join("assets/robots/mico2/mico2.urdf"), &PackageResolver::new()).unwrap()
+    RobotModel::from_urdf_file(
+        &workspace().join("assets/robots/mico2/mico2.urdf"),
+        &PackageResolver::new(),
+    )
+    .unwrap()
 }
 
 /// Settings from `key=value` pairs.
@@ -68,20 +87,43 @@ pub fn settings(pairs: &[&str]) -> EngineSettings {
 /// Runs a scene through ODE with `pairs` as settings.
 pub fn run_ode(scene: &Scene, robot: &RobotModel, pairs: &[&str]) -> RunOutcome {
     scene.validate(robot).unwrap();
-    simulate(&OdeEngine, scene, robot, &settings(pairs), &RunOptions::default()).unwrap()
+    simulate(
+        &OdeEngine,
+        scene,
+        robot,
+        &settings(pairs),
+        &RunOptions::default(),
+    )
+    .unwrap()
 }
 
 /// Wrist positions of a run.
 pub fn wrist(out: &RunOutcome) -> Vec<Vec3> {
-    out.trajectory.positions("wrist").into_iter().map(|p| p.unwrap()).collect()
+    out.trajectory
+        .positions("wrist")
+        .into_iter()
+        .map(|p| p.unwrap())
+        .collect()
 }
 
 /// Cube positions of a run.
 pub fn cube(out: &RunOutcome) -> Vec<Vec3> {
-    out.trajectory.positions("cube").into_iter().map(|p| p.unwrap()).collect()
+    out.trajectory
+        .positions("cube")
+        .into_iter()
+        .map(|p| p.unwrap())
+        .collect()
 }
 
 /// Final joint angles of a run, degrees.
 pub fn final_angles_deg(out: &RunOutcome) -> Vec<f64> {
-    out.trajectory.joint_angles_rad.as_ref().unwrap().last().unwrap().iter().map(|a| a.to_degrees()).collect()
+    out.trajectory
+        .joint_angles_rad
+        .as_ref()
+        .unwrap()
+        .last()
+        .unwrap()
+        .iter()
+        .map(|a| a.to_degrees())
+        .collect()
 }

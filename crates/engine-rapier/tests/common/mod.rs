@@ -20,23 +20,38 @@ pub fn paper_data() -> Option<PathBuf> {
     if dir.join("kinova_description").is_dir() {
         Some(dir)
     } else if std::env::var_os("REALITYGAP_REQUIRE_PAPER_DATA").is_some() {
-        panic!("paper data not found at {} and REALITYGAP_REQUIRE_PAPER_DATA is set", dir.display());
+        panic!(
+            "paper data not found at {} and REALITYGAP_REQUIRE_PAPER_DATA is set",
+            dir.display()
+        );
     } else {
-        eprintln!("paper data not found at {}: skipping this test", dir.display());
+        eprintln!(
+            "paper data not found at {}: skipping this test",
+            dir.display()
+        );
         None
     }
 }
 
 /// One of the project's scenes.
 pub fn scene(name: &str) -> Scene {
-    Scene::from_file(&workspace().join("assets/scenes").join(format!("{name}.toml"))).unwrap()
+    Scene::from_file(
+        &workspace()
+            .join("assets/scenes")
+            .join(format!("{name}.toml")),
+    )
+    .unwrap()
 }
 
 /// The official Kinova URDF, with its meshes resolved in the paper data.
 pub fn official_robot(paper: &Path) -> RobotModel {
     let mut resolver = PackageResolver::new();
     resolver.insert("kinova_description", paper.join("kinova_description"));
-    RobotModel::from_urdf_file(&paper.join("kinova_description/urdf/m1n6s300.urdf"), &resolver).unwrap()
+    RobotModel::from_urdf_file(
+        &paper.join("kinova_description/urdf/m1n6s300.urdf"),
+        &resolver,
+    )
+    .unwrap()
 }
 
 /// A scene switched to the official URDF.
@@ -48,7 +63,11 @@ pub fn official_scene(name: &str, paper: &Path) -> Scene {
 
 /// The project's Mico2.
 pub fn mico2() -> RobotModel {
-    RobotModel::from_urdf_file(&workspace().join("assets/robots/mico2/mico2.urdf"), &PackageResolver::new()).unwrap()
+    RobotModel::from_urdf_file(
+        &workspace().join("assets/robots/mico2/mico2.urdf"),
+        &PackageResolver::new(),
+    )
+    .unwrap()
 }
 
 /// Runs a scene through `engine` with the scene's own settings for it;
@@ -59,26 +78,53 @@ pub fn run_with(engine: &dyn Engine, scene: &Scene, robot: &RobotModel) -> RunOu
 
 /// Runs a scene through `engine` with the given settings; the run must
 /// complete.
-pub fn run_with_settings(engine: &dyn Engine, scene: &Scene, robot: &RobotModel, settings: &EngineSettings) -> RunOutcome {
+pub fn run_with_settings(
+    engine: &dyn Engine,
+    scene: &Scene,
+    robot: &RobotModel,
+    settings: &EngineSettings,
+) -> RunOutcome {
     scene.validate(robot).unwrap();
     let out = simulate(engine, scene, robot, settings, &RunOptions::default()).unwrap();
-    assert_eq!(out.status, RunStatus::Completed, "{} in {}", scene.name, engine.name());
+    assert_eq!(
+        out.status,
+        RunStatus::Completed,
+        "{} in {}",
+        scene.name,
+        engine.name()
+    );
     out
 }
 
 /// Wrist positions of a run.
 pub fn wrist(out: &RunOutcome) -> Vec<Vec3> {
-    out.trajectory.positions("wrist").into_iter().map(|p| p.unwrap()).collect()
+    out.trajectory
+        .positions("wrist")
+        .into_iter()
+        .map(|p| p.unwrap())
+        .collect()
 }
 
 /// Cube positions of a run.
 pub fn cube(out: &RunOutcome) -> Vec<Vec3> {
-    out.trajectory.positions("cube").into_iter().map(|p| p.unwrap()).collect()
+    out.trajectory
+        .positions("cube")
+        .into_iter()
+        .map(|p| p.unwrap())
+        .collect()
 }
 
 /// Final joint angles of a run, degrees.
 pub fn final_angles_deg(out: &RunOutcome) -> Vec<f64> {
-    out.trajectory.joint_angles_rad.as_ref().unwrap().last().unwrap().iter().map(|a| a.to_degrees()).collect()
+    out.trajectory
+        .joint_angles_rad
+        .as_ref()
+        .unwrap()
+        .last()
+        .unwrap()
+        .iter()
+        .map(|a| a.to_degrees())
+        .collect()
 }
 
 /// The angles (degrees, actuator order) at which the scene's servos hold
@@ -87,7 +133,11 @@ pub fn final_angles_deg(out: &RunOutcome) -> Vec<f64> {
 /// the gravity torque of [`RobotModel::gravity_torques`]. Solved by fixed
 /// point from the targets (the droop is a degree or two).
 pub fn static_equilibrium_deg(scene: &Scene, robot: &RobotModel, targets_deg: &[f64]) -> Vec<f64> {
-    let joints: Vec<usize> = scene.actuators.iter().map(|a| robot.joint_by_name(&a.joint).unwrap()).collect();
+    let joints: Vec<usize> = scene
+        .actuators
+        .iter()
+        .map(|a| robot.joint_by_name(&a.joint).unwrap())
+        .collect();
     let mut angles = targets_deg.to_vec();
     for _ in 0..50 {
         let mut positions = vec![0.0; robot.joints.len()];
@@ -97,7 +147,8 @@ pub fn static_equilibrium_deg(scene: &Scene, robot: &RobotModel, targets_deg: &[
         for (name, &v) in &scene.robot.held_joints_rad {
             positions[robot.joint_by_name(name).unwrap()] = v;
         }
-        let torques = robot.gravity_torques(&scene.robot.base, &positions, Vec3::new(0.0, 0.0, -9.81));
+        let torques =
+            robot.gravity_torques(&scene.robot.base, &positions, Vec3::new(0.0, 0.0, -9.81));
         angles = scene
             .actuators
             .iter()
