@@ -22,6 +22,7 @@ pub mod engine;
 pub mod pose;
 pub mod robot;
 pub mod scene;
+pub mod testing;
 pub mod trajectory;
 
 pub use engine::{Engine, EngineError, EngineSettings, Simulation};
