@@ -231,7 +231,7 @@ pub fn check(traj: &Trajectory, opts: &HealthOptions) -> RunHealth {
         for i in 1..=n {
             let same = i < n
                 && traj.bodies.iter().all(|b| b.poses[i] == b.poses[i - 1])
-                && !zero_rows.contains(&i);
+                && zero_rows.binary_search(&i).is_err();
             if !same {
                 let len = i - start;
                 if len > best.1 {

@@ -465,10 +465,8 @@ pub fn load_store(
             };
             let trajectory = match store.read_run(&e.id) {
                 Ok(t) => t,
-                Err(err) if failed.is_some() => {
-                    let _ = err;
-                    realitygap_core::Trajectory::default()
-                }
+                // A failed run may have no trajectory file: keep it, empty.
+                Err(_) if failed.is_some() => realitygap_core::Trajectory::default(),
                 Err(err) => return Err(anyhow!("run '{}' of {}: {err}", e.id, dir.display())),
             };
             Ok(RunInput {
