@@ -25,6 +25,7 @@
 //! [`RunStatus::Diverged`] with the samples recorded so far.
 
 use crate::engine::{Engine, EngineError, EngineSettings, ModelVariation, Simulation};
+use crate::params::PhysicalParams;
 use crate::pose::Pose;
 use crate::robot::RobotModel;
 use crate::scene::{Scene, SceneError};
@@ -334,130 +335,346 @@ fn divergence(angles: &[f64], poses: &[Pose], roles: &[String], bound_m: f64) ->
     None
 }
 
+/// The controller's own state during a run, which outlives any one
+/// [`Simulation`]: the tick reached, the commands waiting out the actuation
+/// delay, the reading-noise generator, the targets in force and the samples
+/// recorded so far. A run is one loop driving one or several simulations in
+/// turn ([`ControllerLoop::advance`]); handing a run from one engine to
+/// another at a tick is `advance(a, tick)`, `b.set_state(&a.state()?)`,
+/// `advance(b, end)`.
+#[derive(Debug, Clone)]
+pub struct ControllerLoop {
+    roles: Vec<String>,
+    samples: usize,
+    period_s: f64,
+    gain_per_s: f64,
+    max_speed_deg_s: f64,
+    schedule_times_s: Vec<f64>,
+    scene_targets: Vec<Vec<f64>>,
+    joints: usize,
+    divergence_bound_m: f64,
+    noise_std_rad: f64,
+    noise: SplitMix64,
+    offsets_rad: Vec<f64>,
+    initial_offsets_rad: Vec<f64>,
+    delay_s: f64,
+    /// Commands waiting to reach the servos: (due time s, rad/s).
+    pending: VecDeque<(f64, Vec<f64>)>,
+    /// The servo targets in force, rad/s.
+    in_force: Vec<f64>,
+    tick: usize,
+    trajectory: Trajectory,
+    angle_rows: Vec<Vec<f64>>,
+    command_rows: Vec<Vec<f64>>,
+    status: Option<RunStatus>,
+    engine_steps: u64,
+    wall_time_s: f64,
+}
+
+/// How the physical parameters change the controller: encoder offsets and
+/// actuation latency (see [`crate::params`]).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct ControlParams {
+    /// Encoder zero offsets per controlled joint, rad (true = measured +
+    /// offset); empty means none.
+    pub offsets_rad: Vec<f64>,
+    /// Actuation latency, s, added to the perturbation's whole periods.
+    pub delay_s: f64,
+}
+
+impl ControlParams {
+    /// The controller's share of `params` for `scene`.
+    pub fn from_params(params: &PhysicalParams, scene: &Scene) -> ControlParams {
+        ControlParams {
+            offsets_rad: params.offsets_rad(scene),
+            delay_s: params.delay_s(),
+        }
+    }
+}
+
+impl ControllerLoop {
+    /// A loop for `scene` at tick 0 with nothing recorded.
+    pub fn new(scene: &Scene, options: &RunOptions, control: &ControlParams) -> ControllerLoop {
+        let joints = scene.actuators.len();
+        let roles: Vec<String> = scene.tracked.iter().map(|t| t.role.clone()).collect();
+        let period_s = scene.controller.period_s;
+        let (noise_std_rad, periods, noise, initial) = match &options.perturbation {
+            Some(p) => (
+                p.sensor_noise_std_rad,
+                p.control_delay_periods,
+                SplitMix64::new(p.noise_seed),
+                (0..joints)
+                    .map(|j| p.initial_offsets_rad.get(j).copied().unwrap_or(0.0))
+                    .collect(),
+            ),
+            None => (0.0, 0, SplitMix64::new(0), vec![0.0; joints]),
+        };
+        let samples = scene.sample_count();
+        ControllerLoop {
+            samples,
+            period_s,
+            gain_per_s: scene.controller.gain_per_s,
+            max_speed_deg_s: scene.controller.max_speed_deg_s,
+            schedule_times_s: scene.schedule.iter().map(|e| e.t_s).collect(),
+            scene_targets: Vec::new(),
+            joints,
+            divergence_bound_m: options.divergence_bound_m,
+            noise_std_rad,
+            noise,
+            offsets_rad: if control.offsets_rad.len() == joints {
+                control.offsets_rad.clone()
+            } else {
+                vec![0.0; joints]
+            },
+            initial_offsets_rad: initial,
+            delay_s: periods as f64 * period_s + control.delay_s,
+            pending: VecDeque::new(),
+            in_force: vec![0.0; joints],
+            tick: 0,
+            trajectory: Trajectory::with_bodies(&roles),
+            roles,
+            angle_rows: Vec::with_capacity(samples),
+            command_rows: Vec::with_capacity(samples),
+            status: None,
+            engine_steps: 0,
+            wall_time_s: 0.0,
+        }
+        .with_targets(scene)
+    }
+
+    fn with_targets(mut self, scene: &Scene) -> ControllerLoop {
+        // The targets of each schedule entry, in actuator order (degrees).
+        self.scene_targets = (0..scene.schedule.len())
+            .map(|i| {
+                let t = scene.schedule[i].t_s;
+                let tick = (t / self.period_s).round() as usize;
+                scene.targets_deg_at_tick(tick)
+            })
+            .collect();
+        self
+    }
+
+    /// The next tick to run (= samples recorded so far).
+    pub fn tick(&self) -> usize {
+        self.tick
+    }
+
+    /// The number of ticks of the whole run.
+    pub fn samples(&self) -> usize {
+        self.samples
+    }
+
+    /// True once the run has ended (all ticks, or diverged).
+    pub fn is_done(&self) -> bool {
+        self.status.is_some()
+    }
+
+    /// Places a fresh simulation at the perturbation's initial joint
+    /// angles (nothing to do without one). Call once, before the first
+    /// [`ControllerLoop::advance`] of a run that starts at tick 0.
+    pub fn start(&mut self, sim: &mut dyn Simulation) -> Result<(), RunError> {
+        self.check_shape(sim)?;
+        if self.initial_offsets_rad.iter().any(|&o| o != 0.0) {
+            sim.set_joint_angles_rad(&self.initial_offsets_rad)?;
+        }
+        Ok(())
+    }
+
+    fn check_shape(&self, sim: &dyn Simulation) -> Result<(), RunError> {
+        if sim.joint_count() != self.joints || sim.tracked_count() != self.roles.len() {
+            return Err(EngineError::Usage {
+                engine: "simulation".to_string(),
+                message: format!(
+                    "the simulation has {} joints and {} tracked bodies, the scene {} and {}",
+                    sim.joint_count(),
+                    sim.tracked_count(),
+                    self.joints,
+                    self.roles.len()
+                ),
+            }
+            .into());
+        }
+        Ok(())
+    }
+
+    /// The targets of the schedule entry in force at time `t_s`, degrees.
+    fn targets_deg(&self, t_s: f64) -> &[f64] {
+        let entry = self.schedule_times_s.iter().rposition(|&e| e <= t_s + 1e-9);
+        match entry {
+            Some(i) => &self.scene_targets[i],
+            None => &self.scene_targets[0],
+        }
+    }
+
+    /// The controller's command at one tick from the joint angles read, rad/s.
+    fn command(&mut self, t_s: f64, angles: &[f64]) -> Vec<f64> {
+        let mut command = Vec::with_capacity(self.joints);
+        for (j, &angle) in angles.iter().enumerate() {
+            let mut reading = angle - self.offsets_rad[j];
+            if self.noise_std_rad > 0.0 {
+                reading += self.noise_std_rad * self.noise.normal();
+            }
+            let error_deg = self.targets_deg(t_s)[j] - reading.to_degrees();
+            command.push(
+                (self.gain_per_s * error_deg)
+                    .clamp(-self.max_speed_deg_s, self.max_speed_deg_s)
+                    .to_radians(),
+            );
+        }
+        command
+    }
+
+    /// Sends every pending command due at or before `t_s` (the last one
+    /// wins); true when the targets changed.
+    fn release_due(&mut self, t_s: f64) -> bool {
+        let mut changed = false;
+        while let Some((due, _)) = self.pending.front() {
+            if *due > t_s + 1e-9 {
+                break;
+            }
+            if let Some((_, c)) = self.pending.pop_front() {
+                self.in_force = c;
+                changed = true;
+            }
+        }
+        changed
+    }
+
+    /// Runs ticks on `sim` until tick `end_tick` (exclusive, at most the
+    /// run's length) or until the run diverges. `sim` must be at the
+    /// loop's time: fresh for tick 0, or given the state of the simulation
+    /// that ran the ticks before. Returns true while ticks remain.
+    pub fn advance(&mut self, sim: &mut dyn Simulation, end_tick: usize) -> Result<bool, RunError> {
+        self.check_shape(sim)?;
+        let steps_per_period = steps_per_period(sim.timestep_s(), self.period_s)?;
+        let end = end_tick.min(self.samples);
+        let started = Instant::now();
+        let mut angles = vec![0.0; self.joints];
+        let mut poses = vec![Pose::IDENTITY; self.roles.len()];
+        while self.status.is_none() && self.tick < end {
+            let tick = self.tick;
+            let t_s = tick as f64 * self.period_s;
+            sim.joint_angles_rad(&mut angles);
+            sim.tracked_poses(&mut poses);
+            if let Some(reason) = divergence(&angles, &poses, &self.roles, self.divergence_bound_m) {
+                self.status = Some(RunStatus::Diverged { t_s, reason });
+                break;
+            }
+            let command = self.command(t_s, &angles);
+            self.pending.push_back((t_s + self.delay_s, command));
+            self.release_due(t_s);
+            sim.set_joint_velocity_targets(&self.in_force);
+            self.trajectory.time_s.push(t_s);
+            for (track, pose) in self.trajectory.bodies.iter_mut().zip(&poses) {
+                track.poses.push(Some(*pose));
+            }
+            self.angle_rows.push(angles.clone());
+            self.command_rows.push(self.in_force.clone());
+            self.tick += 1;
+            if let Some(status) = self.step_period(sim, t_s, steps_per_period)? {
+                self.status = Some(status);
+                break;
+            }
+            if self.tick == self.samples {
+                self.status = Some(RunStatus::Completed);
+            }
+        }
+        self.wall_time_s += started.elapsed().as_secs_f64();
+        Ok(self.status.is_none())
+    }
+
+    /// Steps one control period, releasing delayed commands at the engine
+    /// step where they fall due. `Some` diverged status when the engine
+    /// reports itself unstable; an error when it fails otherwise.
+    fn step_period(
+        &mut self,
+        sim: &mut dyn Simulation,
+        t_s: f64,
+        steps: u64,
+    ) -> Result<Option<RunStatus>, RunError> {
+        let dt = sim.timestep_s();
+        let mut done = 0u64;
+        while done < steps {
+            if done > 0 && self.release_due(t_s + done as f64 * dt) {
+                sim.set_joint_velocity_targets(&self.in_force);
+            }
+            // Step up to the engine step where the next command falls due.
+            let next = match self.pending.front() {
+                Some((due, _)) => ((due - t_s) / dt - 1e-9).ceil().max(0.0) as u64,
+                None => steps,
+            }
+            .clamp(done + 1, steps);
+            match sim.step_n(next - done) {
+                Ok(()) => self.engine_steps += next - done,
+                Err(EngineError::Unstable {
+                    t_s: at, message, ..
+                }) => {
+                    // Steps taken, up to and including the bad one.
+                    let into = ((at - t_s) / dt).round().max(0.0) as u64;
+                    self.engine_steps += (into + 1).clamp(done, next) - done;
+                    return Ok(Some(RunStatus::Diverged {
+                        t_s: at,
+                        reason: message,
+                    }));
+                }
+                Err(e) => return Err(e.into()),
+            }
+            done = next;
+        }
+        Ok(None)
+    }
+
+    /// Ends the run: the samples recorded, how it ended, the steps taken
+    /// and the wall time of the loop.
+    pub fn finish(self) -> RunOutcome {
+        let mut trajectory = self.trajectory;
+        trajectory.joint_angles_rad = Some(self.angle_rows);
+        trajectory.joint_velocity_commands_rad_s = Some(self.command_rows);
+        RunOutcome {
+            trajectory,
+            status: self.status.unwrap_or(RunStatus::Completed),
+            engine_steps: self.engine_steps,
+            wall_time_s: self.wall_time_s,
+        }
+    }
+}
+
+fn steps_per_period(timestep_s: f64, period_s: f64) -> Result<u64, SceneError> {
+    let ratio = period_s / timestep_s;
+    if !(timestep_s > 0.0) || ratio < 1.0 - 1e-9 || (ratio - ratio.round()).abs() > 1e-6 * ratio {
+        return Err(SceneError::Parse {
+            path: std::path::PathBuf::new(),
+            line: None,
+            column: None,
+            message: format!(
+                "the control period {period_s} s is not a whole number of engine timesteps of {timestep_s} s"
+            ),
+        });
+    }
+    Ok(ratio.round() as u64)
+}
+
 /// Runs `scene` on a freshly loaded `sim` (see the module documentation).
 pub fn run_scene(
     sim: &mut dyn Simulation,
     scene: &Scene,
     options: &RunOptions,
 ) -> Result<RunOutcome, RunError> {
-    let engine_name = "simulation";
-    let steps_per_period = scene.steps_per_period(sim.timestep_s())?;
-    let joints = scene.actuators.len();
-    if sim.joint_count() != joints || sim.tracked_count() != scene.tracked.len() {
-        return Err(EngineError::Usage {
-            engine: engine_name.to_string(),
-            message: format!(
-                "the simulation has {} joints and {} tracked bodies, the scene {} and {}",
-                sim.joint_count(),
-                sim.tracked_count(),
-                joints,
-                scene.tracked.len()
-            ),
-        }
-        .into());
-    }
-    let roles: Vec<String> = scene.tracked.iter().map(|t| t.role.clone()).collect();
-    let samples = scene.sample_count();
-    let period = scene.controller.period_s;
-    let gain = scene.controller.gain_per_s;
-    let max_speed = scene.controller.max_speed_deg_s;
+    run_scene_with(sim, scene, options, &ControlParams::default())
+}
 
-    let (noise_std, delay, mut noise) = match &options.perturbation {
-        Some(p) => {
-            if p.initial_offsets_rad.iter().any(|&o| o != 0.0) {
-                let start: Vec<f64> = (0..joints)
-                    .map(|j| p.initial_offsets_rad.get(j).copied().unwrap_or(0.0))
-                    .collect();
-                sim.set_joint_angles_rad(&start)?;
-            }
-            (
-                p.sensor_noise_std_rad,
-                p.control_delay_periods as usize,
-                SplitMix64::new(p.noise_seed),
-            )
-        }
-        None => (0.0, 0, SplitMix64::new(0)),
-    };
-
-    let mut trajectory = Trajectory::with_bodies(&roles);
-    let mut angle_rows = Vec::with_capacity(samples);
-    let mut command_rows = Vec::with_capacity(samples);
-    let mut angles = vec![0.0; joints];
-    let mut poses = vec![Pose::IDENTITY; roles.len()];
-    let mut pending: VecDeque<Vec<f64>> = (0..delay).map(|_| vec![0.0; joints]).collect();
-    let mut status = RunStatus::Completed;
-    let mut engine_steps = 0u64;
-    let mut targets_deg = scene.targets_deg_at_tick(0);
-    let mut entry_in_force = usize::MAX;
-
-    let start = Instant::now();
-    for tick in 0..samples {
-        let t_s = tick as f64 * period;
-        sim.joint_angles_rad(&mut angles);
-        sim.tracked_poses(&mut poses);
-        if let Some(reason) = divergence(&angles, &poses, &roles, options.divergence_bound_m) {
-            status = RunStatus::Diverged { t_s, reason };
-            break;
-        }
-        let entry = scene
-            .schedule
-            .iter()
-            .rposition(|e| e.t_s <= t_s + 1e-9)
-            .unwrap_or(usize::MAX);
-        if entry != entry_in_force {
-            targets_deg = scene.targets_deg_at_tick(tick);
-            entry_in_force = entry;
-        }
-        let command: Vec<f64> = (0..joints)
-            .map(|j| {
-                let reading = if noise_std > 0.0 {
-                    angles[j] + noise_std * noise.normal()
-                } else {
-                    angles[j]
-                };
-                let error_deg = targets_deg[j] - reading.to_degrees();
-                (gain * error_deg).clamp(-max_speed, max_speed).to_radians()
-            })
-            .collect();
-        let sent = if delay == 0 {
-            command
-        } else {
-            pending.push_back(command);
-            pending.pop_front().unwrap_or_else(|| vec![0.0; joints])
-        };
-        sim.set_joint_velocity_targets(&sent);
-        trajectory.time_s.push(t_s);
-        for (track, pose) in trajectory.bodies.iter_mut().zip(&poses) {
-            track.poses.push(Some(*pose));
-        }
-        angle_rows.push(angles.clone());
-        command_rows.push(sent);
-        match sim.step_n(steps_per_period) {
-            Ok(()) => engine_steps += steps_per_period,
-            Err(EngineError::Unstable { t_s, message, .. }) => {
-                // Steps taken in this period, up to and including the bad one.
-                let into_period = ((t_s - tick as f64 * period) / sim.timestep_s())
-                    .round()
-                    .max(0.0) as u64;
-                engine_steps += (into_period + 1).min(steps_per_period);
-                status = RunStatus::Diverged {
-                    t_s,
-                    reason: message,
-                };
-                break;
-            }
-            Err(e) => return Err(e.into()),
-        }
-    }
-    let wall_time_s = start.elapsed().as_secs_f64();
-    trajectory.joint_angles_rad = Some(angle_rows);
-    trajectory.joint_velocity_commands_rad_s = Some(command_rows);
-    Ok(RunOutcome {
-        trajectory,
-        status,
-        engine_steps,
-        wall_time_s,
-    })
+/// [`run_scene`] with the controller's share of the physical parameters.
+pub fn run_scene_with(
+    sim: &mut dyn Simulation,
+    scene: &Scene,
+    options: &RunOptions,
+    control: &ControlParams,
+) -> Result<RunOutcome, RunError> {
+    scene.steps_per_period(sim.timestep_s())?;
+    let mut run = ControllerLoop::new(scene, options, control);
+    run.start(sim)?;
+    run.advance(sim, usize::MAX)?;
+    Ok(run.finish())
 }
 
 /// Loads `scene` into `engine` (with the perturbation's mass and friction
@@ -469,18 +686,66 @@ pub fn simulate(
     settings: &EngineSettings,
     options: &RunOptions,
 ) -> Result<RunOutcome, RunError> {
+    simulate_with(engine, scene, robot, settings, &PhysicalParams::none(), options)
+}
+
+/// Loads `scene` into `engine` with physical parameters and runs it:
+/// [`prepare`], [`Engine::load_with`], then the controller loop with the
+/// parameters' encoder offsets and latency.
+pub fn simulate_with(
+    engine: &dyn Engine,
+    scene: &Scene,
+    robot: &RobotModel,
+    settings: &EngineSettings,
+    params: &PhysicalParams,
+    options: &RunOptions,
+) -> Result<RunOutcome, RunError> {
+    let (scene, robot) = prepare(engine, scene, robot, params)?;
+    let mut sim = load_prepared(engine, &scene, &robot, settings, params, options)?;
+    run_scene_with(sim.as_mut(), &scene, options, &ControlParams::from_params(params, &scene))
+}
+
+/// Checks that `engine` honours every key of `params` and writes the
+/// scene and robot keys into copies of `scene` and `robot`
+/// ([`PhysicalParams::apply`]).
+pub fn prepare(
+    engine: &dyn Engine,
+    scene: &Scene,
+    robot: &RobotModel,
+    params: &PhysicalParams,
+) -> Result<(Scene, RobotModel), RunError> {
+    params.check_support(engine.name(), &engine.param_support())?;
+    params.apply(scene, robot).map_err(|e| {
+        RunError::Engine(EngineError::Param {
+            engine: engine.name().to_string(),
+            key: "(names)".to_string(),
+            message: e.to_string(),
+        })
+    })
+}
+
+/// Loads a scene prepared by [`prepare`] with the perturbation's mass and
+/// friction factors.
+pub fn load_prepared(
+    engine: &dyn Engine,
+    scene: &Scene,
+    robot: &RobotModel,
+    settings: &EngineSettings,
+    params: &PhysicalParams,
+    options: &RunOptions,
+) -> Result<Box<dyn Simulation>, RunError> {
     let variation = options
         .perturbation
         .as_ref()
         .map(|p| p.variation)
         .unwrap_or_default();
-    let mut sim = engine.load(scene, robot, settings, &variation)?;
-    run_scene(sim.as_mut(), scene, options)
+    Ok(engine.load_with(scene, robot, settings, &variation, params)?)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::engine::SimState;
     use crate::pose::{Quat, Vec3};
     use std::path::Path;
 
@@ -559,6 +824,22 @@ link = "l2"
         fn tracked_poses(&self, out: &mut [Pose]) {
             out[0] = Pose::new(Vec3::new(self.q[0], self.q[1], 0.0), Quat::IDENTITY);
         }
+        fn state(&self) -> Result<SimState, EngineError> {
+            Ok(SimState {
+                time_s: self.t,
+                joint_angles_rad: self.q.clone(),
+                joint_velocities_rad_s: self.v.clone(),
+                joint_velocity_targets_rad_s: self.v.clone(),
+                objects: Vec::new(),
+                native: None,
+            })
+        }
+        fn set_state(&mut self, state: &SimState) -> Result<(), EngineError> {
+            self.t = state.time_s;
+            self.q.copy_from_slice(&state.joint_angles_rad);
+            self.v.copy_from_slice(&state.joint_velocity_targets_rad_s);
+            Ok(())
+        }
     }
 
     fn ideal(dt: f64) -> Ideal {
@@ -609,6 +890,76 @@ link = "l2"
             q_last[1].to_degrees()
         );
         assert_eq!(t.positions("tip")[1].unwrap().x, q1[0]);
+    }
+
+    #[test]
+    fn a_run_handed_over_at_a_tick_equals_one_run() {
+        let scene = scene();
+        let whole = run_scene(&mut ideal(0.01), &scene, &RunOptions::default()).unwrap();
+        let mut a = ideal(0.01);
+        let mut run = ControllerLoop::new(&scene, &RunOptions::default(), &ControlParams::default());
+        run.start(&mut a).unwrap();
+        assert!(run.advance(&mut a, 7).unwrap());
+        assert_eq!(run.tick(), 7);
+        let mut b = ideal(0.01);
+        b.set_state(&a.state().unwrap()).unwrap();
+        assert!(!run.advance(&mut b, usize::MAX).unwrap());
+        assert!(run.is_done());
+        let split = run.finish();
+        assert_eq!(split.trajectory, whole.trajectory);
+        assert_eq!(split.engine_steps, whole.engine_steps);
+    }
+
+    #[test]
+    fn a_delay_in_seconds_takes_effect_at_the_next_engine_step() {
+        let scene = scene();
+        let control = ControlParams {
+            offsets_rad: Vec::new(),
+            delay_s: 0.025,
+        };
+        let out = run_scene_with(&mut ideal(0.01), &scene, &RunOptions::default(), &control)
+            .unwrap();
+        let q = out.trajectory.joint_angles_rad.as_ref().unwrap();
+        // The first command (-30 deg/s) reaches the servo at 0.03 s: two of
+        // the period's five steps at it.
+        assert!((q[1][0].to_degrees() + 0.6).abs() < 1e-9, "{}", q[1][0].to_degrees());
+        // Whole periods as seconds equal the perturbation's whole periods.
+        let by_periods = RunOptions {
+            perturbation: Some(
+                Perturbation {
+                    control_delay_periods: 2,
+                    ..Default::default()
+                }
+                .sample(1, 2),
+            ),
+            ..Default::default()
+        };
+        let a = run_scene(&mut ideal(0.01), &scene, &by_periods).unwrap();
+        let b = run_scene_with(
+            &mut ideal(0.01),
+            &scene,
+            &RunOptions::default(),
+            &ControlParams {
+                offsets_rad: Vec::new(),
+                delay_s: 0.1,
+            },
+        )
+        .unwrap();
+        assert_eq!(a.trajectory.joint_angles_rad, b.trajectory.joint_angles_rad);
+    }
+
+    #[test]
+    fn an_encoder_offset_shifts_where_the_joint_settles() {
+        let scene = scene();
+        let control = ControlParams {
+            offsets_rad: vec![0.0, 1f64.to_radians()],
+            delay_s: 0.0,
+        };
+        let out = run_scene_with(&mut ideal(0.01), &scene, &RunOptions::default(), &control)
+            .unwrap();
+        let last = out.trajectory.joint_angles_rad.unwrap()[19].clone();
+        // Target 2 deg measured, so 3 deg true.
+        assert!((last[1].to_degrees() - 3.0).abs() < 0.05, "{}", last[1].to_degrees());
     }
 
     #[test]

@@ -21,7 +21,8 @@
 //!   otherwise paper over, such as MuJoCo's automatic reset) returns
 //!   [`EngineError::Unstable`].
 
-use crate::pose::Pose;
+use crate::params::{ParamSupport, PhysicalParams};
+use crate::pose::{Pose, Vec3};
 use crate::robot::RobotModel;
 use crate::scene::Scene;
 use std::collections::BTreeMap;
@@ -143,6 +144,120 @@ pub struct SettingInfo {
     pub help: &'static str,
 }
 
+/// The one parse path for engine settings: every engine reads its
+/// `[engine.NAME]` table and `--set` values through this, so unknown keys,
+/// wrong types and out-of-range values give the same error everywhere:
+/// `engine NAME: setting `KEY`: must be ..., found ...`.
+pub struct SettingsReader<'a> {
+    engine: &'a str,
+    settings: &'a EngineSettings,
+}
+
+impl<'a> SettingsReader<'a> {
+    /// A reader of `settings` for `engine`, whose accepted keys are
+    /// `known`; a key not among them is an error listing the known ones.
+    pub fn new(
+        engine: &'a str,
+        settings: &'a EngineSettings,
+        known: &[SettingInfo],
+    ) -> Result<SettingsReader<'a>, EngineError> {
+        let reader = SettingsReader { engine, settings };
+        if let Some(key) = settings.keys().find(|k| !known.iter().any(|i| i.key == k.as_str())) {
+            let names: Vec<&str> = known.iter().map(|i| i.key).collect();
+            return Err(reader.error(
+                key,
+                format!("unknown setting (accepted: {})", names.join(", ")),
+            ));
+        }
+        Ok(reader)
+    }
+
+    /// An error about `key` in this engine's style.
+    pub fn error(&self, key: &str, message: impl Into<String>) -> EngineError {
+        EngineError::Setting {
+            engine: self.engine.to_string(),
+            key: key.to_string(),
+            message: message.into(),
+        }
+    }
+
+    /// A number (integers convert; the text `inf` is infinity), when set;
+    /// `ok` says which values are accepted and `what` describes them
+    /// (`"greater than 0 s"`). NaN is never accepted, infinity only when
+    /// `ok` accepts it.
+    pub fn number(
+        &self,
+        key: &str,
+        ok: impl Fn(f64) -> bool,
+        what: &str,
+    ) -> Result<Option<f64>, EngineError> {
+        let Some(value) = self.settings.get(key) else {
+            return Ok(None);
+        };
+        let v = match value {
+            SettingValue::Text(t)
+                if matches!(t.trim().to_ascii_lowercase().as_str(), "inf" | "infinity") =>
+            {
+                f64::INFINITY
+            }
+            other => other
+                .as_f64()
+                .ok_or_else(|| self.error(key, format!("expected a number, found \"{other}\"")))?,
+        };
+        if v.is_nan() || !ok(v) {
+            return Err(self.error(key, format!("must be {what}, found {v}")));
+        }
+        Ok(Some(v))
+    }
+
+    /// A whole number in `min..=max`, when set.
+    pub fn integer(&self, key: &str, min: i64, max: i64) -> Result<Option<i64>, EngineError> {
+        let Some(value) = self.settings.get(key) else {
+            return Ok(None);
+        };
+        let v = value.as_i64().ok_or_else(|| {
+            self.error(key, format!("expected a whole number, found \"{value}\""))
+        })?;
+        if !(min..=max).contains(&v) {
+            return Err(self.error(
+                key,
+                format!("must be a whole number from {min} to {max}, found {v}"),
+            ));
+        }
+        Ok(Some(v))
+    }
+
+    /// `true` or `false`, when set.
+    pub fn boolean(&self, key: &str) -> Result<Option<bool>, EngineError> {
+        match self.settings.get(key) {
+            None => Ok(None),
+            Some(v) => v
+                .as_bool()
+                .map(Some)
+                .ok_or_else(|| self.error(key, format!("expected true or false, found \"{v}\""))),
+        }
+    }
+
+    /// One of `choices` by name (case-insensitive), when set.
+    pub fn choice<T: Copy>(&self, key: &str, choices: &[(&str, T)]) -> Result<Option<T>, EngineError> {
+        let Some(value) = self.settings.get(key) else {
+            return Ok(None);
+        };
+        let text = value.as_str().map(|t| t.trim().to_ascii_lowercase());
+        choices
+            .iter()
+            .find(|(name, _)| Some(*name) == text.as_deref())
+            .map(|(_, v)| Some(*v))
+            .ok_or_else(|| {
+                let names: Vec<&str> = choices.iter().map(|(n, _)| *n).collect();
+                self.error(
+                    key,
+                    format!("\"{value}\" is not one of {}", names.join(", ")),
+                )
+            })
+    }
+}
+
 /// What went wrong in an engine.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum EngineError {
@@ -176,6 +291,26 @@ pub enum EngineError {
         /// What the engine reported.
         message: String,
     },
+    /// A physical parameter the engine cannot honour, or cannot honour
+    /// with this value.
+    #[error("engine {engine}: parameter `{key}`: {message}")]
+    Param {
+        /// The engine's name.
+        engine: String,
+        /// The parameter, e.g. `joints.m1n6s300_joint_2.armature`.
+        key: String,
+        /// Why, and what the engine honours instead.
+        message: String,
+    },
+    /// A state that cannot be loaded (wrong joint or object count,
+    /// non-finite values).
+    #[error("engine {engine}: cannot set the state: {message}")]
+    State {
+        /// The engine's name.
+        engine: String,
+        /// What does not fit.
+        message: String,
+    },
     /// A call that does not fit the simulation (e.g. a vector of the wrong
     /// length).
     #[error("engine {engine}: {message}")]
@@ -202,15 +337,131 @@ pub trait Engine: Send + Sync {
     /// Checks settings without loading anything and returns the timestep
     /// they select, s.
     fn check_settings(&self, settings: &EngineSettings) -> Result<f64, EngineError>;
+    /// The physical parameters this engine maps itself, and how (the keys
+    /// [`crate::params::ParamKey::is_core`] need not be listed: the controller loop
+    /// applies them). A key set in a parameters file and absent here is an
+    /// error ([`PhysicalParams::check_support`]).
+    fn param_support(&self) -> Vec<ParamSupport>;
     /// Builds a simulation of `scene` with `robot` (already validated against
-    /// the scene), configured by `settings` and changed by `variation`.
+    /// the scene), configured by `settings`, changed by `variation`, with the
+    /// engine-mapped physical parameters of `params` applied (armature,
+    /// restitution, contact softness, and anything a model loaded as is,
+    /// such as an MJCF file, must take from `params` itself).
+    ///
+    /// `scene` and `robot` already carry the parameters that
+    /// [`PhysicalParams::apply`] writes into them; [`crate::controller::simulate_with`]
+    /// calls `apply` and [`PhysicalParams::check_support`] before this.
+    fn load_with(
+        &self,
+        scene: &Scene,
+        robot: &RobotModel,
+        settings: &EngineSettings,
+        variation: &ModelVariation,
+        params: &PhysicalParams,
+    ) -> Result<Box<dyn Simulation>, EngineError>;
+    /// [`Engine::load_with`] without physical parameters.
     fn load(
         &self,
         scene: &Scene,
         robot: &RobotModel,
         settings: &EngineSettings,
         variation: &ModelVariation,
-    ) -> Result<Box<dyn Simulation>, EngineError>;
+    ) -> Result<Box<dyn Simulation>, EngineError> {
+        self.load_with(scene, robot, settings, variation, &PhysicalParams::none())
+    }
+}
+
+/// The dynamic state of one scene object: pose and twist, world frame.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ObjectState {
+    /// The object's name in the scene.
+    pub name: String,
+    /// Its centre and orientation (body to world).
+    pub pose: Pose,
+    /// Velocity of its centre, world frame, m/s.
+    pub linear_velocity_m_s: Vec3,
+    /// Angular velocity, world frame, rad/s.
+    pub angular_velocity_rad_s: Vec3,
+}
+
+/// An engine's own complete state, for restoring into the same engine
+/// exactly (solver warm starts, held joints, actuator activations). Other
+/// engines ignore it and load the portable fields of [`SimState`].
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct NativeState {
+    /// The engine's name ([`Engine::name`]).
+    pub engine: String,
+    /// The engine's numbers, in its own layout.
+    pub data: Vec<f64>,
+}
+
+/// The state of a running simulation: everything needed to continue it in
+/// this engine or hand it over to another one running the same scene.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SimState {
+    /// Simulated time, s.
+    pub time_s: f64,
+    /// Controlled joints' angles, rad, in the scene's actuator order.
+    pub joint_angles_rad: Vec<f64>,
+    /// Controlled joints' velocities, rad/s, same order.
+    pub joint_velocities_rad_s: Vec<f64>,
+    /// The servo velocity targets in force, rad/s, same order.
+    pub joint_velocity_targets_rad_s: Vec<f64>,
+    /// Every scene object, in the scene's order.
+    pub objects: Vec<ObjectState>,
+    /// The engine's own complete state, when it has one.
+    pub native: Option<NativeState>,
+}
+
+impl SimState {
+    /// The portable part only (no [`NativeState`]): what another engine
+    /// loads, and what a same-engine restore without warm starts uses.
+    pub fn portable(&self) -> SimState {
+        SimState {
+            native: None,
+            ..self.clone()
+        }
+    }
+
+    /// Checks the state against a simulation's joint and object counts and
+    /// for non-finite numbers; the message says what does not fit.
+    pub fn check(&self, joints: usize, objects: &[&str]) -> Result<(), String> {
+        let vectors = [
+            ("joint_angles_rad", &self.joint_angles_rad),
+            ("joint_velocities_rad_s", &self.joint_velocities_rad_s),
+            ("joint_velocity_targets_rad_s", &self.joint_velocity_targets_rad_s),
+        ];
+        for (name, v) in vectors {
+            if v.len() != joints {
+                return Err(format!(
+                    "{name} has {} values, the simulation {joints} joints",
+                    v.len()
+                ));
+            }
+            if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+                return Err(format!("{name}[{i}] is not finite"));
+            }
+        }
+        if !self.time_s.is_finite() || self.time_s < 0.0 {
+            return Err(format!("time {} s is not a finite time >= 0", self.time_s));
+        }
+        let names: Vec<&str> = self.objects.iter().map(|o| o.name.as_str()).collect();
+        if names != objects {
+            return Err(format!(
+                "the state has objects {names:?}, the scene {objects:?}"
+            ));
+        }
+        for o in &self.objects {
+            let finite = o.pose.is_finite()
+                && [o.linear_velocity_m_s, o.angular_velocity_rad_s]
+                    .iter()
+                    .all(|v| v.x.is_finite() && v.y.is_finite() && v.z.is_finite());
+            if !finite {
+                return Err(format!("object '{}' has a non-finite pose or twist", o.name));
+            }
+        }
+        Ok(())
+    }
 }
 
 /// One running simulation of a scene (see the module documentation for the
@@ -246,11 +497,54 @@ pub trait Simulation: Send {
     /// Writes the tracked bodies' world poses into `out`
     /// (`out.len() == tracked_count()`).
     fn tracked_poses(&self, out: &mut [Pose]);
+    /// The current state (see [`SimState`]); valid at any time, also
+    /// before the first step.
+    fn state(&self) -> Result<SimState, EngineError>;
+    /// Sets the state, at any time of the run. A state with a
+    /// [`NativeState`] of this engine is restored exactly; otherwise the
+    /// portable fields are loaded: joint angles and velocities, servo
+    /// targets, object poses and twists and the time, with held joints at
+    /// their scene positions and at rest, and whatever else the engine
+    /// keeps (warm starts, contact caches) reset. The reported angles and
+    /// poses are valid at once.
+    fn set_state(&mut self, state: &SimState) -> Result<(), EngineError>;
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn settings_reader_gives_one_error_style() {
+        let known = [
+            SettingInfo { key: "timestep_s", help: "" },
+            SettingInfo { key: "iterations", help: "" },
+            SettingInfo { key: "solver", help: "" },
+            SettingInfo { key: "warm", help: "" },
+        ];
+        let mut s = EngineSettings::new();
+        s.insert("timestep_s".into(), SettingValue::Integer(1));
+        s.insert("iterations".into(), SettingValue::Integer(20));
+        s.insert("solver".into(), SettingValue::Text("PGS".into()));
+        s.insert("warm".into(), SettingValue::Bool(true));
+        let r = SettingsReader::new("toy", &s, &known).unwrap();
+        assert_eq!(r.number("timestep_s", |v| v > 0.0, "> 0").unwrap(), Some(1.0));
+        assert_eq!(r.number("absent", |v| v > 0.0, "> 0").unwrap(), None);
+        assert_eq!(r.integer("iterations", 1, 100).unwrap(), Some(20));
+        assert_eq!(r.choice("solver", &[("pgs", 1), ("tgs", 2)]).unwrap(), Some(1));
+        assert_eq!(r.boolean("warm").unwrap(), Some(true));
+        let e = r.number("timestep_s", |v| v < 0.5, "below 0.5 s").unwrap_err().to_string();
+        assert_eq!(e, "engine toy: setting `timestep_s`: must be below 0.5 s, found 1");
+        let e = r.integer("iterations", 1, 10).unwrap_err().to_string();
+        assert!(e.contains("from 1 to 10, found 20"), "{e}");
+        let e = r.choice("solver", &[("tgs", 2)]).unwrap_err().to_string();
+        assert!(e.contains("is not one of tgs"), "{e}");
+        let e = r.boolean("solver").unwrap_err().to_string();
+        assert!(e.contains("expected true or false"), "{e}");
+        s.insert("bogus".into(), SettingValue::Integer(1));
+        let e = SettingsReader::new("toy", &s, &known).err().unwrap().to_string();
+        assert!(e.contains("setting `bogus`: unknown setting (accepted: timestep_s"), "{e}");
+    }
 
     #[test]
     fn parses_setting_values() {

@@ -11,6 +11,10 @@
 //! - [`scene`]: [`Scene`], one scripted experiment read from TOML.
 //! - [`engine`]: the [`Engine`] / [`Simulation`] interface every physics
 //!   engine implements.
+//! - [`params`]: [`PhysicalParams`], the typed physical parameters of a run
+//!   (`--params FILE`), and which engine honours which.
+//! - [`conformance`]: the checks every engine's tests run (state round
+//!   trip, handover, parameter effects, gravity, divergence).
 //! - [`controller`]: the controller loop shared by every engine
 //!   ([`controller::run_scene`]) and the seeded per-run perturbations.
 //!
@@ -18,14 +22,17 @@
 //! otherwise (`_deg`, `_mm`).
 
 pub mod controller;
+pub mod conformance;
 pub mod engine;
+pub mod params;
 pub mod pose;
 pub mod robot;
 pub mod scene;
 pub mod testing;
 pub mod trajectory;
 
-pub use engine::{Engine, EngineError, EngineSettings, Simulation};
+pub use engine::{Engine, EngineError, EngineSettings, ObjectState, SimState, Simulation};
+pub use params::{ParamKey, ParamSupport, PhysicalParams};
 pub use pose::{Pose, Quat, Vec3};
 pub use robot::{RobotError, RobotModel};
 pub use scene::{Scene, SceneError};

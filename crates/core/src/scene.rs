@@ -23,6 +23,7 @@
 //! name = "scene1_single_joint"
 //! description = "Joint 2 to -100 degrees"
 //! duration_s = 6.0
+//! gravity_m_s2 = [0.0, 0.0, -9.81]          # optional, world frame (the default)
 //!
 //! [robot]
 //! urdf = "../robots/mico2/mico2.urdf"     # relative to this file, or absolute
@@ -83,6 +84,9 @@ use std::fmt;
 use std::path::{Path, PathBuf};
 use toml::Spanned;
 
+/// Standard gravity, m/s^2: a scene's default is `(0, 0, -9.81)`.
+pub const STANDARD_GRAVITY_M_S2: f64 = 9.81;
+
 /// A scripted experiment: robot, objects, controller, schedule, tracked
 /// bodies and per-engine settings. See the [module documentation](self) for
 /// the file format.
@@ -96,6 +100,9 @@ pub struct Scene {
     pub source: PathBuf,
     /// Length of a run, s; the run records `duration_s / period_s` samples.
     pub duration_s: f64,
+    /// Gravity in the world frame, m/s^2 (`gravity_m_s2`, default
+    /// `[0, 0, -9.81]`). Every engine uses it.
+    pub gravity_m_s2: Vec3,
     /// The robot and where it stands.
     pub robot: RobotSpec,
     /// The ground plane, when there is one.
@@ -300,6 +307,7 @@ struct FileScene {
     #[serde(default)]
     description: String,
     duration_s: Spanned<f64>,
+    gravity_m_s2: Option<Spanned<[f64; 3]>>,
     robot: FileRobot,
     ground: Option<FileGround>,
     #[serde(default, rename = "object")]
@@ -858,11 +866,16 @@ impl Scene {
             engine_settings.insert(engine.clone(), settings);
         }
 
+        let gravity_m_s2 = match &file.gravity_m_s2 {
+            Some(g) => b.vec3("gravity_m_s2", g)?,
+            None => Vec3::new(0.0, 0.0, -STANDARD_GRAVITY_M_S2),
+        };
         Ok(Scene {
             name,
             description: file.description.clone(),
             source: path.to_path_buf(),
             duration_s,
+            gravity_m_s2,
             robot: RobotSpec {
                 urdf,
                 base,

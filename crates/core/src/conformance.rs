@@ -1,0 +1,312 @@
+//! The conformance suite every engine crate runs in its tests: what the
+//! [`Engine`] / [`Simulation`] contract promises, measured the same way for
+//! every engine. Each check returns the number it measured, so an engine's
+//! test states its own tolerance (and the README its reason) instead of
+//! the suite hiding it. Like [`crate::testing`], these panic on error, as
+//! tests want; they are not for production code.
+//!
+//! | check | function |
+//! |---|---|
+//! | state round trip (save at tick k, continue to 2k; restore into a fresh simulation and continue) | [`state_round_trip`] |
+//! | a state loaded into another simulation gives the same tracked positions | [`handover_gap`] |
+//! | more joint damping slows a joint falling with its servo off | [`falling_angle_rad`] |
+//! | a lower force limit makes joint 2 lag its target | [`force_limit_effect_m`] |
+//! | cube friction changes how far the push moves the cube | [`cube_push_m`] |
+//! | an unsupported parameter is an error naming engine and key | [`unsupported_key_error`] |
+//! | gravity comes from the scene | [`gravity_effect_rad`] |
+//! | a diverging setting ends the run as diverged | [`diverges`] |
+
+use crate::controller::{
+    load_prepared, prepare, ControlParams, ControllerLoop, RunOptions, RunOutcome, RunStatus,
+};
+use crate::engine::{Engine, EngineError, EngineSettings, Simulation};
+use crate::params::{JointParams, ObjectParams, ParamKey, PhysicalParams};
+use crate::pose::{Pose, Vec3};
+use crate::robot::RobotModel;
+use crate::scene::Scene;
+use crate::testing;
+
+/// An engine under test with the settings to run it at.
+#[derive(Clone, Copy)]
+pub struct Subject<'a> {
+    /// The engine.
+    pub engine: &'a dyn Engine,
+    /// Its settings (e.g. a coarser timestep to keep tests fast).
+    pub settings: &'a EngineSettings,
+}
+
+fn load(
+    subject: Subject<'_>,
+    scene: &Scene,
+    robot: &RobotModel,
+    params: &PhysicalParams,
+) -> (Scene, Box<dyn Simulation>) {
+    let (scene, robot) = prepare(subject.engine, scene, robot, params).unwrap();
+    let settings = params.settings_over(subject.engine.name(), subject.settings);
+    let sim = load_prepared(
+        subject.engine,
+        &scene,
+        &robot,
+        &settings,
+        params,
+        &RunOptions::default(),
+    )
+    .unwrap();
+    (scene, sim)
+}
+
+fn positions(outcome: &RunOutcome, from_tick: usize) -> Vec<Vec<Vec3>> {
+    let t = &outcome.trajectory;
+    (from_tick..t.len())
+        .map(|i| {
+            t.bodies
+                .iter()
+                .map(|b| b.poses[i].expect("recorded pose").position_m)
+                .collect()
+        })
+        .collect()
+}
+
+fn max_gap(a: &[Vec<Vec3>], b: &[Vec<Vec3>]) -> f64 {
+    assert_eq!(a.len(), b.len(), "row counts differ");
+    a.iter()
+        .zip(b)
+        .flat_map(|(ra, rb)| ra.iter().zip(rb).map(|(p, q)| p.distance(*q)))
+        .fold(0.0, f64::max)
+}
+
+/// Runs `scene` to tick `k`, takes the state, and continues to tick `2k`;
+/// loads the state into a fresh simulation (the whole state, or only its
+/// portable part when `portable`) and continues that one to `2k` with the
+/// same controller. Returns the largest distance between the two runs'
+/// tracked positions over ticks `k..2k`, m.
+pub fn state_round_trip(
+    subject: Subject<'_>,
+    scene: &Scene,
+    robot: &RobotModel,
+    k: usize,
+    portable: bool,
+) -> f64 {
+    let params = PhysicalParams::none();
+    let (scene, mut first) = load(subject, scene, robot, &params);
+    let control = ControlParams::default();
+    let mut run = ControllerLoop::new(&scene, &RunOptions::default(), &control);
+    run.start(first.as_mut()).unwrap();
+    run.advance(first.as_mut(), k).unwrap();
+    let mut state = first.state().unwrap();
+    if portable {
+        state = state.portable();
+    }
+    let mut resumed_run = run.clone();
+    run.advance(first.as_mut(), 2 * k).unwrap();
+    let (_, mut second) = load(subject, &scene, robot, &params);
+    second.set_state(&state).unwrap();
+    assert!(
+        (second.time_s() - state.time_s).abs() < 1e-9,
+        "set_state must set the time: {} vs {}",
+        second.time_s(),
+        state.time_s
+    );
+    resumed_run.advance(second.as_mut(), 2 * k).unwrap();
+    let a = run.finish();
+    let b = resumed_run.finish();
+    assert_eq!(a.status, RunStatus::Completed, "{:?}", a.status);
+    assert_eq!(b.status, RunStatus::Completed, "{:?}", b.status);
+    max_gap(&positions(&a, k), &positions(&b, k))
+}
+
+/// Runs `scene` in `from` to tick `k`, loads the portable state into a
+/// fresh simulation of `to`, and returns the largest distance between the
+/// tracked positions the two report right after, m. Also checks that the
+/// joint angles arrive (1e-9 rad, or f32 precision for f32 engines:
+/// returned in the second value, rad).
+pub fn handover_gap(
+    from: Subject<'_>,
+    to: Subject<'_>,
+    scene: &Scene,
+    robot: &RobotModel,
+    k: usize,
+) -> (f64, f64) {
+    let params = PhysicalParams::none();
+    let (scene, mut a) = load(from, scene, robot, &params);
+    let mut run = ControllerLoop::new(&scene, &RunOptions::default(), &ControlParams::default());
+    run.start(a.as_mut()).unwrap();
+    run.advance(a.as_mut(), k).unwrap();
+    let state = a.state().unwrap().portable();
+    let (_, mut b) = load(to, &scene, robot, &params);
+    b.set_state(&state).unwrap();
+    let mut pa = vec![Pose::IDENTITY; scene.tracked.len()];
+    let mut pb = pa.clone();
+    a.tracked_poses(&mut pa);
+    b.tracked_poses(&mut pb);
+    let gap = pa
+        .iter()
+        .zip(&pb)
+        .map(|(p, q)| p.position_m.distance(q.position_m))
+        .fold(0.0, f64::max);
+    let mut qa = vec![0.0; scene.actuators.len()];
+    let mut qb = qa.clone();
+    a.joint_angles_rad(&mut qa);
+    b.joint_angles_rad(&mut qb);
+    let angle_gap = qa
+        .iter()
+        .zip(&qb)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max);
+    (gap, angle_gap)
+}
+
+/// Every servo off (force limit 0), joint 2 started at -0.5 rad and left
+/// to fall under gravity for 0.3 s with `damping` N m s/rad on it: how far
+/// joint 2 moved, rad.
+pub fn falling_angle_rad(subject: Subject<'_>, damping: f64) -> f64 {
+    let scene = testing::scene("scene1_single_joint");
+    let robot = testing::mico2();
+    let mut params = motors_off(&scene);
+    params
+        .joints
+        .entry("m1n6s300_joint_2".into())
+        .or_default()
+        .damping = Some(damping);
+    free_fall(subject, &scene, &robot, &params)
+}
+
+fn motors_off(scene: &Scene) -> PhysicalParams {
+    let mut params = PhysicalParams::none();
+    for a in &scene.actuators {
+        params.joints.insert(
+            a.joint.clone(),
+            JointParams {
+                force_limit: Some(0.0),
+                ..JointParams::default()
+            },
+        );
+    }
+    params
+}
+
+fn free_fall(
+    subject: Subject<'_>,
+    scene: &Scene,
+    robot: &RobotModel,
+    params: &PhysicalParams,
+) -> f64 {
+    let (_, mut sim) = load(subject, scene, robot, params);
+    let mut start = vec![0.0; scene.actuators.len()];
+    start[1] = -0.5;
+    sim.set_joint_angles_rad(&start).unwrap();
+    sim.set_joint_velocity_targets(&vec![0.0; start.len()]);
+    let steps = (0.3 / sim.timestep_s()).round() as u64;
+    sim.step_n(steps).unwrap();
+    let mut q = vec![0.0; start.len()];
+    sim.joint_angles_rad(&mut q);
+    (q[1] - start[1]).abs()
+}
+
+/// Scene 1 to 1.5 s with joint 2's force limit at `limit` N m and without
+/// it: the distance between the two wrists at 1.5 s, m.
+pub fn force_limit_effect_m(subject: Subject<'_>, limit: f64) -> f64 {
+    let scene = testing::scene("scene1_single_joint");
+    let robot = testing::mico2();
+    let mut limited = PhysicalParams::none();
+    limited.joints.insert(
+        "m1n6s300_joint_2".into(),
+        JointParams {
+            force_limit: Some(limit),
+            ..JointParams::default()
+        },
+    );
+    let wrist = |params: &PhysicalParams| {
+        let (scene, mut sim) = load(subject, &scene, &robot, params);
+        let mut run = ControllerLoop::new(&scene, &RunOptions::default(), &ControlParams::default());
+        run.start(sim.as_mut()).unwrap();
+        run.advance(sim.as_mut(), 31).unwrap();
+        let out = run.finish();
+        out.trajectory.positions("wrist")[30].expect("wrist at 1.5 s")
+    };
+    wrist(&limited).distance(wrist(&PhysicalParams::none()))
+}
+
+/// Scene 3 with the cube's friction coefficient at `friction`: the cube's
+/// final displacement along x, m.
+pub fn cube_push_m(subject: Subject<'_>, friction: f64) -> f64 {
+    let scene = testing::scene("scene3_cube_push");
+    let robot = testing::mico2();
+    let mut params = PhysicalParams::none();
+    params.objects.insert(
+        "cube".into(),
+        ObjectParams {
+            friction: Some(friction),
+            ..ObjectParams::default()
+        },
+    );
+    let (scene, mut sim) = load(subject, &scene, &robot, &params);
+    let mut run = ControllerLoop::new(&scene, &RunOptions::default(), &ControlParams::default());
+    run.start(sim.as_mut()).unwrap();
+    run.advance(sim.as_mut(), usize::MAX).unwrap();
+    let out = run.finish();
+    assert_eq!(out.status, RunStatus::Completed, "{:?}", out.status);
+    let cube = out.trajectory.positions("cube");
+    let first = cube[0].expect("cube at start");
+    let last = cube[cube.len() - 1].expect("cube at end");
+    last.x - first.x
+}
+
+/// A parameter key that neither core nor the engine honours, set in a
+/// file, and the error loading it gives; `None` when the engine honours
+/// every key.
+pub fn unsupported_key_error(engine: &dyn Engine) -> Option<(ParamKey, EngineError)> {
+    let support = engine.param_support();
+    let key = ParamKey::ALL
+        .into_iter()
+        .find(|k| !k.is_core() && !support.iter().any(|s| s.key == *k))?;
+    let text = match key {
+        ParamKey::JointDamping => "[joints.m1n6s300_joint_2]\ndamping = 1.0\n",
+        ParamKey::JointArmature => "[joints.m1n6s300_joint_2]\narmature = 0.01\n",
+        ParamKey::JointFrictionloss => "[joints.m1n6s300_joint_2]\nfrictionloss = 0.1\n",
+        ParamKey::JointKv => "[joints.m1n6s300_joint_2]\nkv = 40.0\n",
+        ParamKey::JointForceLimit => "[joints.m1n6s300_joint_2]\nforce_limit = 30.0\n",
+        ParamKey::LinkMassScale => "[links.m1n6s300_link_3]\nmass_scale = 1.1\n",
+        ParamKey::ObjectMass => "[objects.cube]\nmass_kg = 0.1\n",
+        ParamKey::ObjectFriction => "[objects.cube]\nfriction = 0.5\n",
+        ParamKey::ObjectRestitution => "[objects.cube]\nrestitution = 0.1\n",
+        ParamKey::ContactTimeConstant => "[contact]\ntime_constant_s = 0.02\n",
+        ParamKey::ContactDampingRatio => "[contact]\ndamping_ratio = 1.0\n",
+        _ => unreachable!("core keys are honoured by every engine"),
+    };
+    let params =
+        PhysicalParams::from_toml_str(text, std::path::Path::new("/conformance/params.toml"))
+            .unwrap();
+    let scene = testing::scene("scene1_single_joint");
+    let robot = testing::mico2();
+    match prepare(engine, &scene, &robot, &params) {
+        Err(crate::controller::RunError::Engine(e)) => Some((key, e)),
+        Err(e) => panic!("unexpected error for {key}: {e}"),
+        Ok(_) => panic!(
+            "engine {} loaded {key}, which its param_support does not list",
+            engine.name()
+        ),
+    }
+}
+
+/// Every servo off, joint 2 started at -0.5 rad: how far it moves in 0.3 s
+/// with the scene's gravity set to zero (first value) and at the default
+/// (second), rad.
+pub fn gravity_effect_rad(subject: Subject<'_>) -> (f64, f64) {
+    let mut scene = testing::scene("scene1_single_joint");
+    let robot = testing::mico2();
+    let params = motors_off(&scene);
+    let with = free_fall(subject, &scene, &robot, &params);
+    scene.gravity_m_s2 = Vec3::new(0.0, 0.0, 0.0);
+    let without = free_fall(subject, &scene, &robot, &params);
+    (without, with)
+}
+
+/// Runs scene 1 at `settings` (meant to be unstable) and returns the run:
+/// the caller asserts it ended as [`RunStatus::Diverged`].
+pub fn diverges(engine: &dyn Engine, settings: &EngineSettings) -> RunOutcome {
+    let scene = testing::scene("scene1_single_joint");
+    let robot = testing::mico2();
+    crate::controller::simulate(engine, &scene, &robot, settings, &RunOptions::default())
+        .unwrap()
+}
