@@ -3,6 +3,7 @@
 
 use anyhow::{bail, Result};
 use realitygap_core::engine::Engine;
+use realitygap_core::params::ParamKey;
 
 /// Arguments of `realitygap engines`.
 #[derive(clap::Args)]
@@ -11,6 +12,10 @@ pub struct Args {
     /// scene file, or `--set` on `realitygap run`).
     #[arg(long)]
     pub settings: bool,
+    /// Also list, per engine, the physical parameters (`--params FILE`) it
+    /// honours and what each becomes in the engine.
+    #[arg(long)]
+    pub params: bool,
 }
 
 /// Every engine compiled in (cargo features of this crate), by name.
@@ -74,6 +79,29 @@ pub fn run(args: Args) -> Result<()> {
                 println!("{:<width$}    {:<18} {}", "", s.key, s.help);
             }
         }
+        if args.params {
+            for (key, mapping) in param_table(e.as_ref()) {
+                println!("{:<width$}    {:<30} {}", "", key.pattern(), mapping);
+            }
+        }
     }
     Ok(())
+}
+
+/// Every parameter key with what it becomes in `engine`: the engine's own
+/// mapping, the controller's for the keys core applies, or "not supported
+/// (an error)".
+pub fn param_table(engine: &dyn Engine) -> Vec<(ParamKey, String)> {
+    let support = engine.param_support();
+    ParamKey::ALL
+        .iter()
+        .map(|&key| {
+            let mapping = match (key.core_mapping(), support.iter().find(|s| s.key == key)) {
+                (Some(core), _) => format!("controller: {core}"),
+                (None, Some(s)) => s.mapping.to_string(),
+                (None, None) => "not supported (a file setting it is an error)".to_string(),
+            };
+            (key, mapping)
+        })
+        .collect()
 }

@@ -61,6 +61,9 @@ pub struct Args {
     /// Give up on a simulation after this many seconds.
     #[arg(long, value_name = "SECONDS")]
     pub timeout_s: Option<f64>,
+    /// Physical parameters for every engine's runs (see `run --params`).
+    #[arg(long, value_name = "FILE")]
+    pub params: Option<PathBuf>,
 }
 
 /// The project's assets folder: `REALITYGAP_ASSETS`, else the one this
@@ -141,6 +144,7 @@ pub fn run(args: Args) -> Result<()> {
         perturb: vec![],
         set: vec![],
         timeout_s: args.timeout_s,
+        params: args.params.clone(),
     };
     if let Err(e) = cmd_run::run(run_args) {
         // Failed runs are listed in the report; the comparison goes on with

@@ -17,8 +17,11 @@
 use crate::cmd_engines;
 use anyhow::{anyhow, bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
-use realitygap_core::controller::{repeat_seed, run_scene, Perturbation, RunOptions, RunStatus};
+use realitygap_core::controller::{
+    load_prepared, repeat_seed, run_scene_with, ControlParams, Perturbation, RunOptions, RunStatus,
+};
 use realitygap_core::engine::{Engine, EngineSettings, SettingValue};
+use realitygap_core::params::PhysicalParams;
 use realitygap_core::pose::{Pose, Quat, Vec3};
 use realitygap_core::robot::{PackageResolver, RobotModel};
 use realitygap_core::scene::Scene;
@@ -82,6 +85,11 @@ pub struct Args {
     /// Give up on a run after this many seconds (recorded as failed).
     #[arg(long, value_name = "SECONDS")]
     pub timeout_s: Option<f64>,
+    /// Physical parameters (TOML: [joints.NAME], [links.NAME],
+    /// [objects.NAME], [contact], [controller], [engine.NAME]; see the
+    /// README). `--set` still overrides its engine settings.
+    #[arg(long, value_name = "FILE")]
+    pub params: Option<PathBuf>,
 }
 
 /// One run as the child process receives it.
@@ -94,6 +102,9 @@ struct Job {
     set: Vec<String>,
     perturb: Vec<String>,
     seed: u64,
+    /// The parameters file, absolute.
+    #[serde(default)]
+    params: Option<PathBuf>,
     /// Only load the model and report success.
     check_only: bool,
 }
@@ -200,6 +211,7 @@ struct Prepared {
     robot: RobotModel,
     engine: Box<dyn Engine>,
     settings: EngineSettings,
+    params: PhysicalParams,
     timestep_s: f64,
     steps_per_period: u64,
 }
@@ -304,12 +316,21 @@ fn parse_perturbation(specs: &[String]) -> Result<Perturbation> {
     Ok(p)
 }
 
+/// Reads a parameters file, or none.
+pub(crate) fn read_params(path: Option<&Path>) -> Result<PhysicalParams> {
+    match path {
+        Some(p) => Ok(PhysicalParams::from_file(p)?),
+        None => Ok(PhysicalParams::none()),
+    }
+}
+
 fn prepare(
     scene_file: &Path,
     engine: &str,
     robot: Option<&str>,
     packages: &[String],
     set: &[String],
+    params_file: Option<&Path>,
 ) -> Result<Prepared> {
     let engine = cmd_engines::find(engine)?;
     let mut scene = Scene::from_file(scene_file)?;
@@ -323,11 +344,16 @@ fn prepare(
             .with_context(|| format!("the robot of scene {}", scene_file.display()))?,
     };
     scene.validate(&robot)?;
-    let mut settings = scene.settings_for(engine.name());
+    let params = read_params(params_file)?;
+    let (scene, robot) =
+        realitygap_core::controller::prepare(engine.as_ref(), &scene, &robot, &params)
+            .map_err(|e| anyhow!("{e}"))
+            .with_context(|| format!("scene {} with --params", scene_file.display()))?;
+    let mut settings = params.settings_over(engine.name(), &scene.settings_for(engine.name()));
     settings.extend(overrides_for(set, engine.name())?);
     let timestep_s = engine.check_settings(&settings).with_context(|| {
         format!(
-            "scene {} ([engine.{}] and --set)",
+            "scene {} ([engine.{}], --params and --set)",
             scene_file.display(),
             engine.name()
         )
@@ -338,6 +364,7 @@ fn prepare(
         robot,
         engine,
         settings,
+        params,
         timestep_s,
         steps_per_period,
     })
@@ -361,20 +388,28 @@ pub fn run_one() -> Result<()> {
         job.robot.as_deref(),
         &job.packages,
         &job.set,
+        job.params.as_deref(),
     )?;
     let perturbation = parse_perturbation(&job.perturb)?;
     let sample =
         (!perturbation.is_none()).then(|| perturbation.sample(job.seed, p.scene.actuators.len()));
-    let variation = sample.as_ref().map(|s| s.variation).unwrap_or_default();
-    let mut sim = p.engine.load(&p.scene, &p.robot, &p.settings, &variation)?;
-    if job.check_only {
-        return Ok(());
-    }
     let options = RunOptions {
         perturbation: sample,
         ..RunOptions::default()
     };
-    let outcome = run_scene(sim.as_mut(), &p.scene, &options)?;
+    let mut sim = load_prepared(
+        p.engine.as_ref(),
+        &p.scene,
+        &p.robot,
+        &p.settings,
+        &p.params,
+        &options,
+    )?;
+    if job.check_only {
+        return Ok(());
+    }
+    let control = ControlParams::from_params(&p.params, &p.scene);
+    let outcome = run_scene_with(sim.as_mut(), &p.scene, &options, &control)?;
     let text = serde_json::to_string(&ChildResult::from_outcome(&outcome))?;
     let mut out = std::io::stdout().lock();
     out.write_all(text.as_bytes())
@@ -562,6 +597,12 @@ pub fn run(args: Args) -> Result<()> {
         v
     };
     let perturbation = parse_perturbation(&args.perturb)?;
+    let params_file = match &args.params {
+        Some(p) => {
+            Some(std::path::absolute(p).with_context(|| format!("--params {}", p.display()))?)
+        }
+        None => None,
+    };
     let resolver = resolver(&args.packages)?;
     // Resolve the robot once, for its label and early errors.
     let robot_label = robot_override(args.robot.as_deref(), &resolver)?.map(|(_, _, label)| label);
@@ -580,6 +621,7 @@ pub fn run(args: Args) -> Result<()> {
                 args.robot.as_deref(),
                 &args.packages,
                 &args.set,
+                params_file.as_deref(),
             )?;
             let source = match &robot_label {
                 Some(label) => format!("{engine}-{label}"),
@@ -620,6 +662,8 @@ pub fn run(args: Args) -> Result<()> {
                 "duration_s": p.scene.duration_s,
                 "samples_per_run": p.scene.sample_count(),
                 "seed": args.seed,
+                "params_file": params_file.as_ref().map(|p| p.display().to_string()),
+                "params": serde_json::to_value(&p.params)?,
                 "perturbation": perturbation.describe(),
                 "deterministic": perturbation.is_none(),
             });
@@ -669,6 +713,7 @@ pub fn run(args: Args) -> Result<()> {
         set: args.set.clone(),
         perturb: args.perturb.clone(),
         seed: repeat_seed(args.seed, repeat as u64),
+        params: params_file.clone(),
         check_only,
     };
 

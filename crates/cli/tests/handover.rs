@@ -1,0 +1,71 @@
+//! A state handed from every compiled-in engine to every other one: after
+//! loading it, the receiving engine reports the same wrist and cube
+//! positions (1e-6 m) and joint angles. The engines meet only here, in the
+//! command's crate, since no engine crate knows another.
+
+use realitygap_core::conformance::{handover_gap, Subject};
+use realitygap_core::engine::Engine;
+use realitygap_core::testing;
+
+fn engines() -> Vec<Box<dyn Engine>> {
+    #[allow(unused_mut)]
+    let mut v: Vec<Box<dyn Engine>> = Vec::new();
+    #[cfg(feature = "mujoco")]
+    v.push(Box::new(realitygap_engine_mujoco::MujocoEngine));
+    #[cfg(feature = "bullet")]
+    v.push(Box::new(realitygap_engine_bullet::BulletEngine));
+    #[cfg(feature = "ode")]
+    v.push(Box::new(realitygap_engine_ode::OdeEngine));
+    #[cfg(feature = "rapier")]
+    v.push(Box::new(realitygap_engine_rapier::RapierEngine));
+    v
+}
+
+#[test]
+fn every_engine_hands_its_state_to_every_other() {
+    let scene = testing::scene("scene3_cube_push");
+    let robot = testing::mico2();
+    let engines = engines();
+    let settings: Vec<_> = engines
+        .iter()
+        .map(|e| scene.settings_for(e.name()))
+        .collect();
+    let mut worst: f64 = 0.0;
+    for (i, from) in engines.iter().enumerate() {
+        for (j, to) in engines.iter().enumerate() {
+            // Tick 170 = 8.5 s: the arm moving into its second phase.
+            let (gap_m, angle_rad) = handover_gap(
+                Subject {
+                    engine: from.as_ref(),
+                    settings: &settings[i],
+                },
+                Subject {
+                    engine: to.as_ref(),
+                    settings: &settings[j],
+                },
+                &scene,
+                &robot,
+                170,
+            );
+            eprintln!(
+                "HANDOVER {} -> {}: positions {:.3e} m, joint angles {:.3e} rad",
+                from.name(),
+                to.name(),
+                gap_m,
+                angle_rad
+            );
+            assert!(gap_m <= 1e-6, "{} -> {}: {gap_m} m", from.name(), to.name());
+            assert!(
+                angle_rad <= 1e-6,
+                "{} -> {}: {angle_rad} rad",
+                from.name(),
+                to.name()
+            );
+            worst = worst.max(gap_m);
+        }
+    }
+    eprintln!(
+        "HANDOVER worst {worst:.3e} m over {} pairs",
+        engines.len().pow(2)
+    );
+}
