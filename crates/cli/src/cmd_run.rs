@@ -729,39 +729,11 @@ pub fn run(args: Args) -> Result<()> {
         .iter()
         .map(|g| args.repeats as usize - g.pending.len())
         .sum();
-    let queue: VecDeque<(usize, u32)> = groups
+    let total: usize = groups
         .iter()
-        .enumerate()
-        .filter(|(_, g)| g.load_error.is_none())
-        .flat_map(|(i, g)| g.pending.iter().map(move |&r| (i, r)))
-        .collect();
-    let total = queue.len();
-    let jobs_list: Vec<Job> = queue
-        .iter()
-        .map(|&(g, r)| job_for(&groups[g], r, false))
-        .collect();
-    let queue = Arc::new(Mutex::new(
-        queue.into_iter().zip(jobs_list).collect::<VecDeque<_>>(),
-    ));
-    let (tx, rx) = mpsc::channel::<((usize, u32), ChildEnd, f64)>();
-    let workers: Vec<_> = (0..jobs.min(total.max(1)))
-        .map(|_| {
-            let queue = Arc::clone(&queue);
-            let tx = tx.clone();
-            let timeout_s = args.timeout_s;
-            std::thread::spawn(move || loop {
-                let next = queue.lock().map(|mut q| q.pop_front()).unwrap_or(None);
-                let Some((key, job)) = next else { break };
-                let start = Instant::now();
-                let end = run_child(&job, timeout_s);
-                if tx.send((key, end, start.elapsed().as_secs_f64())).is_err() {
-                    break;
-                }
-            })
-        })
-        .collect();
-    drop(tx);
-
+        .filter(|g| g.load_error.is_none())
+        .map(|g| g.pending.len())
+        .sum();
     let bar = ProgressBar::new(total as u64);
     bar.set_style(
         ProgressStyle::with_template(
@@ -774,83 +746,27 @@ pub fn run(args: Args) -> Result<()> {
             "{skipped} finished runs kept from an earlier batch"
         ));
     }
-    let mut failures = 0usize;
-    let mut steps_total = 0u64;
-    let mut loop_time_total = 0.0f64;
-    for ((gi, repeat), end, elapsed_s) in rx {
-        let g = &mut groups[gi];
-        let id = run_id(repeat);
-        let mut entry = RunEntry::new(&id);
-        if !perturbation.is_none() {
-            entry.seed = Some(repeat_seed(args.seed, repeat as u64));
-        }
-        entry
-            .extra
-            .insert("repeat".into(), serde_json::json!(repeat));
-        let stored = match end {
-            ChildEnd::Done(result) => match result.trajectory() {
-                Ok(trajectory) => {
-                    entry.wall_time_s = Some(result.wall_time_s);
-                    entry.extra.insert(
-                        "engine_steps".into(),
-                        serde_json::json!(result.engine_steps),
-                    );
-                    let sps = if result.wall_time_s > 0.0 {
-                        result.engine_steps as f64 / result.wall_time_s
-                    } else {
-                        0.0
-                    };
-                    entry
-                        .extra
-                        .insert("steps_per_second".into(), serde_json::json!(sps.round()));
-                    entry
-                        .extra
-                        .insert("process_wall_time_s".into(), serde_json::json!(elapsed_s));
-                    entry
-                        .extra
-                        .insert("samples".into(), serde_json::json!(trajectory.len()));
-                    steps_total += result.engine_steps;
-                    loop_time_total += result.wall_time_s;
-                    if let Some((t_s, reason)) = &result.diverged {
-                        entry.status = StoreStatus::Diverged;
-                        entry.message = Some(format!("diverged at t = {t_s:.4} s: {reason}"));
-                        entry
-                            .extra
-                            .insert("diverged_at_s".into(), serde_json::json!(t_s));
-                        g.done[1] += 1;
-                    } else {
-                        g.done[0] += 1;
-                    }
-                    g.store.write_run(entry, &trajectory)
-                }
-                Err(e) => {
-                    entry.message = Some(e.to_string());
-                    failures += 1;
-                    g.done[2] += 1;
-                    g.store.record_failed_run(entry)
-                }
-            },
-            ChildEnd::Failed(message) => {
-                bar.println(format!(
-                    "{}/{} {id}: failed: {message}",
-                    g.scene_name, g.source
-                ));
-                entry.message = Some(message);
-                entry.wall_time_s = Some(elapsed_s);
-                failures += 1;
-                g.done[2] += 1;
-                g.store.record_failed_run(entry)
-            }
-        };
-        stored.with_context(|| format!("storing {id} in {}", g.store.dir().display()))?;
-        bar.inc(1);
-        if failures > 0 {
-            bar.set_message(format!("{failures} failed"));
-        }
-    }
-    for w in workers {
-        let _ = w.join();
-    }
+    let mut batch = Batch {
+        groups: &mut groups,
+        job_for: &job_for,
+        workers: jobs,
+        timeout_s: args.timeout_s,
+        seed: (!perturbation.is_none()).then_some(args.seed),
+        bar: &bar,
+        stats: BatchStats::default(),
+    };
+    // Deterministic repeats are simulated twice; when the two are
+    // identical, the others are recorded as copies of the first.
+    let (first, deferred) = split_for_copies(batch.groups, perturbation.is_none());
+    batch.execute(first)?;
+    let rest = batch.copy_or_simulate(deferred)?;
+    batch.execute(rest)?;
+    let BatchStats {
+        failures,
+        steps_total,
+        loop_time_total,
+        simulated,
+    } = batch.stats;
     bar.finish_and_clear();
 
     let batch_wall_s = batch_start.elapsed().as_secs_f64();
@@ -886,7 +802,8 @@ pub fn run(args: Args) -> Result<()> {
     }
     if steps_total > 0 {
         say(format!(
-            "{total} runs in {batch_wall_s:.1} s with {jobs} jobs ({:.0} engine steps/s per run)",
+            "{total} runs ({simulated} simulated, {} copies of identical deterministic runs) in {batch_wall_s:.1} s with {jobs} jobs ({:.0} engine steps/s per run)",
+            total - simulated,
             if loop_time_total > 0.0 {
                 steps_total as f64 / loop_time_total
             } else {
@@ -901,6 +818,224 @@ pub fn run(args: Args) -> Result<()> {
         bail!("{failures} of {total} runs failed (their messages are in the manifests); rerun the same command to retry them");
     }
     Ok(())
+}
+
+/// Counts of one batch.
+#[derive(Default)]
+struct BatchStats {
+    failures: usize,
+    steps_total: u64,
+    loop_time_total: f64,
+    simulated: usize,
+}
+
+/// The runs of one `realitygap run` being executed: the results
+/// directories, how to make a child's job, and the progress shown.
+struct Batch<'a> {
+    groups: &'a mut [Group],
+    job_for: &'a dyn Fn(&Group, u32, bool) -> Job,
+    workers: usize,
+    timeout_s: Option<f64>,
+    /// The batch seed, recorded per run when repeats are perturbed.
+    seed: Option<u64>,
+    bar: &'a ProgressBar,
+    stats: BatchStats,
+}
+
+/// For a deterministic batch, the first two pending repeats of each group
+/// (simulated now) and the rest (decided by [`Batch::copy_or_simulate`]);
+/// otherwise every pending repeat now.
+fn split_for_copies(
+    groups: &[Group],
+    deterministic: bool,
+) -> (Vec<(usize, u32)>, Vec<(usize, Vec<u32>)>) {
+    let mut first = Vec::new();
+    let mut deferred = Vec::new();
+    for (i, g) in groups
+        .iter()
+        .enumerate()
+        .filter(|(_, g)| g.load_error.is_none())
+    {
+        let now = if deterministic {
+            g.pending.len().min(2)
+        } else {
+            g.pending.len()
+        };
+        first.extend(g.pending[..now].iter().map(|&r| (i, r)));
+        if now < g.pending.len() {
+            deferred.push((i, g.pending[now..].to_vec()));
+        }
+    }
+    (first, deferred)
+}
+
+impl Batch<'_> {
+    /// Runs `runs` in child processes, `workers` at a time, storing each
+    /// as it finishes.
+    fn execute(&mut self, runs: Vec<(usize, u32)>) -> Result<()> {
+        if runs.is_empty() {
+            return Ok(());
+        }
+        let jobs: VecDeque<((usize, u32), Job)> = runs
+            .iter()
+            .map(|&(g, r)| ((g, r), (self.job_for)(&self.groups[g], r, false)))
+            .collect();
+        let count = jobs.len();
+        let queue = Arc::new(Mutex::new(jobs));
+        let (tx, rx) = mpsc::channel::<((usize, u32), ChildEnd, f64)>();
+        let workers: Vec<_> = (0..self.workers.min(count))
+            .map(|_| {
+                let queue = Arc::clone(&queue);
+                let tx = tx.clone();
+                let timeout_s = self.timeout_s;
+                std::thread::spawn(move || loop {
+                    let next = queue.lock().map(|mut q| q.pop_front()).unwrap_or(None);
+                    let Some((key, job)) = next else { break };
+                    let start = Instant::now();
+                    let end = run_child(&job, timeout_s);
+                    if tx.send((key, end, start.elapsed().as_secs_f64())).is_err() {
+                        break;
+                    }
+                })
+            })
+            .collect();
+        drop(tx);
+        for ((gi, repeat), end, elapsed_s) in rx {
+            self.store(gi, repeat, end, elapsed_s)?;
+        }
+        for w in workers {
+            let _ = w.join();
+        }
+        Ok(())
+    }
+
+    /// Stores one child's result in its group's results directory.
+    fn store(&mut self, gi: usize, repeat: u32, end: ChildEnd, elapsed_s: f64) -> Result<()> {
+        let g = &mut self.groups[gi];
+        let id = run_id(repeat);
+        let mut entry = RunEntry::new(&id);
+        if let Some(seed) = self.seed {
+            entry.seed = Some(repeat_seed(seed, repeat as u64));
+        }
+        entry
+            .extra
+            .insert("repeat".into(), serde_json::json!(repeat));
+        self.stats.simulated += 1;
+        let stored = match end {
+            ChildEnd::Done(result) => match result.trajectory() {
+                Ok(trajectory) => {
+                    entry.wall_time_s = Some(result.wall_time_s);
+                    let sps = if result.wall_time_s > 0.0 {
+                        result.engine_steps as f64 / result.wall_time_s
+                    } else {
+                        0.0
+                    };
+                    for (k, v) in [
+                        ("engine_steps", serde_json::json!(result.engine_steps)),
+                        ("steps_per_second", serde_json::json!(sps.round())),
+                        ("process_wall_time_s", serde_json::json!(elapsed_s)),
+                        ("samples", serde_json::json!(trajectory.len())),
+                    ] {
+                        entry.extra.insert(k.into(), v);
+                    }
+                    self.stats.steps_total += result.engine_steps;
+                    self.stats.loop_time_total += result.wall_time_s;
+                    if let Some((t_s, reason)) = &result.diverged {
+                        entry.status = StoreStatus::Diverged;
+                        entry.message = Some(format!("diverged at t = {t_s:.4} s: {reason}"));
+                        entry
+                            .extra
+                            .insert("diverged_at_s".into(), serde_json::json!(t_s));
+                        g.done[1] += 1;
+                    } else {
+                        g.done[0] += 1;
+                    }
+                    g.store.write_run(entry, &trajectory)
+                }
+                Err(e) => {
+                    entry.message = Some(e.to_string());
+                    self.stats.failures += 1;
+                    g.done[2] += 1;
+                    g.store.record_failed_run(entry)
+                }
+            },
+            ChildEnd::Failed(message) => {
+                self.bar.println(format!(
+                    "{}/{} {id}: failed: {message}",
+                    g.scene_name, g.source
+                ));
+                entry.message = Some(message);
+                entry.wall_time_s = Some(elapsed_s);
+                self.stats.failures += 1;
+                g.done[2] += 1;
+                g.store.record_failed_run(entry)
+            }
+        };
+        stored.with_context(|| format!("storing {id} in {}", g.store.dir().display()))?;
+        self.bar.inc(1);
+        if self.stats.failures > 0 {
+            self.bar
+                .set_message(format!("{} failed", self.stats.failures));
+        }
+        Ok(())
+    }
+
+    /// For each group's deferred repeats: when its two simulated repeats
+    /// both completed with byte-identical runs, records the deferred ones as
+    /// copies of the first (`copy_of` in the manifest); otherwise returns
+    /// them to be simulated.
+    fn copy_or_simulate(&mut self, deferred: Vec<(usize, Vec<u32>)>) -> Result<Vec<(usize, u32)>> {
+        let mut simulate = Vec::new();
+        for (gi, repeats) in deferred {
+            let g = &mut self.groups[gi];
+            let proven = g
+                .pending
+                .get(..2)
+                .and_then(|pair| identical_runs(&g.store, pair[0], pair[1]));
+            let Some((original, trajectory)) = proven else {
+                simulate.extend(repeats.into_iter().map(|r| (gi, r)));
+                continue;
+            };
+            for repeat in repeats {
+                let mut entry = RunEntry::new(run_id(repeat));
+                entry
+                    .extra
+                    .insert("repeat".into(), serde_json::json!(repeat));
+                entry
+                    .extra
+                    .insert("copy_of".into(), serde_json::json!(run_id(original)));
+                entry
+                    .extra
+                    .insert("samples".into(), serde_json::json!(trajectory.len()));
+                g.store
+                    .write_run(entry, &trajectory)
+                    .with_context(|| format!("storing a copy in {}", g.store.dir().display()))?;
+                g.done[0] += 1;
+                self.bar.inc(1);
+            }
+        }
+        Ok(simulate)
+    }
+}
+
+/// The first repeat's trajectory when repeats `a` and `b` of a store both
+/// completed and their run files are byte-identical.
+fn identical_runs(store: &RunStore, a: u32, b: u32) -> Option<(u32, Trajectory)> {
+    let ok = |r: u32| {
+        store
+            .run(&run_id(r))
+            .is_some_and(|e| e.status == StoreStatus::Ok)
+    };
+    if !(ok(a) && ok(b)) {
+        return None;
+    }
+    let file =
+        |r: u32| std::fs::read(store.dir().join("runs").join(format!("{}.csv", run_id(r)))).ok();
+    let (fa, fb) = (file(a)?, file(b)?);
+    if fa != fb {
+        return None;
+    }
+    store.read_run(&run_id(a)).ok().map(|t| (a, t))
 }
 
 /// Prints a line on standard output; a closed pipe (`| head`) is not an
