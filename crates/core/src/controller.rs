@@ -641,7 +641,7 @@ impl ControllerLoop {
 
 fn steps_per_period(timestep_s: f64, period_s: f64) -> Result<u64, SceneError> {
     let ratio = period_s / timestep_s;
-    if !(timestep_s > 0.0) || ratio < 1.0 - 1e-9 || (ratio - ratio.round()).abs() > 1e-6 * ratio {
+    if timestep_s.is_nan() || timestep_s <= 0.0 || ratio < 1.0 - 1e-9 || (ratio - ratio.round()).abs() > 1e-6 * ratio {
         return Err(SceneError::Parse {
             path: std::path::PathBuf::new(),
             line: None,
