@@ -9,11 +9,14 @@ use std::ffi::{c_char, c_int};
 use std::sync::{Mutex, MutexGuard};
 
 pub(crate) use rubullet_sys::{
+    b3ChangeDynamicsInfoSetContactStiffnessAndDamping, b3ChangeDynamicsInfoSetJointDamping,
     b3ChangeDynamicsInfoSetLateralFriction, b3ChangeDynamicsInfoSetLocalInertiaDiagonal,
-    b3ChangeDynamicsInfoSetMass, b3ConnectPhysicsDirect, b3ContactInformation,
-    b3CreateCollisionShapeAddBox, b3CreateCollisionShapeAddPlane,
+    b3ChangeDynamicsInfoSetMass, b3ChangeDynamicsInfoSetRestitution, b3ConnectPhysicsDirect,
+    b3ContactInformation, b3CreateCollisionShapeAddBox, b3CreateCollisionShapeAddPlane,
     b3CreateCollisionShapeCommandInit, b3CreateMultiBodyBase, b3CreateMultiBodyCommandInit,
-    b3CreatePoseCommandInit, b3CreatePoseCommandSetJointPosition,
+    b3CreatePoseCommandInit, b3CreatePoseCommandSetBaseAngularVelocity,
+    b3CreatePoseCommandSetBaseLinearVelocity, b3CreatePoseCommandSetBaseOrientation,
+    b3CreatePoseCommandSetBasePosition, b3CreatePoseCommandSetJointPosition,
     b3CreatePoseCommandSetJointVelocity, b3DisconnectSharedMemory, b3DynamicsInfo,
     b3GetContactPointInformation, b3GetDynamicsInfo, b3GetDynamicsInfoCommandInit, b3GetJointInfo,
     b3GetLinkState, b3GetNumJoints, b3GetStatusAABB, b3GetStatusActualState, b3GetStatusBodyIndex,
@@ -22,7 +25,8 @@ pub(crate) use rubullet_sys::{
     b3InitRequestPhysicsParamCommand, b3InitStepSimulationCommand, b3JointControlCommandInit2,
     b3JointControlSetDesiredPosition, b3JointControlSetDesiredVelocity, b3JointControlSetKd,
     b3JointControlSetKp, b3JointControlSetMaximumForce, b3JointInfo, b3LinkState,
-    b3LoadUrdfCommandInit, b3LoadUrdfCommandSetFlags, b3LoadUrdfCommandSetStartOrientation,
+    b3LoadStateCommandInit, b3LoadStateSetFileName, b3LoadUrdfCommandInit,
+    b3LoadUrdfCommandSetFlags, b3LoadUrdfCommandSetStartOrientation,
     b3LoadUrdfCommandSetStartPosition, b3LoadUrdfCommandSetUseFixedBase, b3PhysicsClientHandle,
     b3PhysicsParamSetContactBreakingThreshold, b3PhysicsParamSetDefaultContactERP,
     b3PhysicsParamSetDefaultFrictionERP, b3PhysicsParamSetDefaultGlobalCFM,
@@ -31,8 +35,9 @@ pub(crate) use rubullet_sys::{
     b3PhysicsParamSetSolverResidualThreshold, b3PhysicsParamSetSplitImpulsePenetrationThreshold,
     b3PhysicsParamSetTimeStep, b3PhysicsParamSetUseSplitImpulse, b3PhysicsSimulationParameters,
     b3RequestActualStateCommandComputeForwardKinematics, b3RequestActualStateCommandInit,
-    b3RequestCollisionInfoCommandInit, b3SharedMemoryCommandHandle, b3SharedMemoryStatusHandle,
-    b3SubmitClientCommandAndWaitStatus, eURDF_Flags, EnumSharedMemoryServerStatus as Status,
+    b3RequestCollisionInfoCommandInit, b3SaveBulletCommandInit, b3SharedMemoryCommandHandle,
+    b3SharedMemoryStatusHandle, b3SubmitClientCommandAndWaitStatus, eURDF_Flags,
+    EnumSharedMemoryServerStatus as Status,
 };
 
 // Server status codes (SharedMemoryPublic.h, enum EnumSharedMemoryServerStatus;
@@ -58,6 +63,8 @@ pub(crate) const CMD_CREATE_MULTI_BODY_COMPLETED: c_int =
     Status::CMD_CREATE_MULTI_BODY_COMPLETED as c_int;
 pub(crate) const CMD_REQUEST_PHYSICS_SIMULATION_PARAMETERS_COMPLETED: c_int =
     Status::CMD_REQUEST_PHYSICS_SIMULATION_PARAMETERS_COMPLETED as c_int;
+pub(crate) const CMD_BULLET_SAVING_COMPLETED: c_int = Status::CMD_BULLET_SAVING_COMPLETED as c_int;
+pub(crate) const CMD_RESTORE_STATE_COMPLETED: c_int = Status::CMD_RESTORE_STATE_COMPLETED as c_int;
 
 // Joint control modes (SharedMemoryPublic.h, the anonymous enum after
 // `struct b3LinkState`; not exported by rubullet-sys).
@@ -223,6 +230,14 @@ pub(crate) fn status_name(kind: c_int) -> String {
             "CMD_UNKNOWN_COMMAND_FLUSHED",
         ),
         (Status::CMD_INVALID_STATUS as c_int, "CMD_INVALID_STATUS"),
+        (
+            Status::CMD_BULLET_SAVING_FAILED as c_int,
+            "CMD_BULLET_SAVING_FAILED",
+        ),
+        (
+            Status::CMD_RESTORE_STATE_FAILED as c_int,
+            "CMD_RESTORE_STATE_FAILED",
+        ),
     ];
     match names.iter().find(|(k, _)| *k == kind) {
         Some((_, name)) => name.to_string(),

@@ -18,7 +18,8 @@
 //! The copy is deleted as soon as Bullet has loaded it. A URDF file without
 //! meshes and visuals is loaded as it is.
 
-use realitygap_core::robot::{Geometry, RobotModel};
+use realitygap_core::pose::{Pose, Vec3};
+use realitygap_core::robot::{Geometry, JointKind, RobotModel};
 use std::collections::BTreeMap;
 use std::ffi::CString;
 use std::path::{Path, PathBuf};
@@ -225,11 +226,116 @@ fn rewrite(text: &str, meshes: &BTreeMap<String, PathBuf>) -> (String, Vec<Strin
     (out, replaced)
 }
 
+fn xyz(v: Vec3) -> String {
+    format!("{:?} {:?} {:?}", v.x, v.y, v.z)
+}
+
+fn origin(pose: &Pose) -> String {
+    let (r, p, y) = pose.orientation.to_euler_rpy();
+    format!(
+        "<origin xyz=\"{}\" rpy=\"{r:?} {p:?} {y:?}\"/>",
+        xyz(pose.position_m)
+    )
+}
+
+fn geometry(g: &Geometry) -> String {
+    match g {
+        Geometry::Box { size_m } => format!("<box size=\"{}\"/>", xyz(*size_m)),
+        Geometry::Cylinder { radius_m, length_m } => {
+            format!("<cylinder radius=\"{radius_m:?}\" length=\"{length_m:?}\"/>")
+        }
+        Geometry::Capsule { radius_m, length_m } => {
+            format!("<capsule radius=\"{radius_m:?}\" length=\"{length_m:?}\"/>")
+        }
+        Geometry::Sphere { radius_m } => format!("<sphere radius=\"{radius_m:?}\"/>"),
+        Geometry::Mesh { path, scale, .. } => format!(
+            "<mesh filename=\"{}\" scale=\"{}\"/>",
+            xml_escape(&path.to_string_lossy()),
+            xyz(*scale)
+        ),
+    }
+}
+
+/// A URDF text of `robot` for Bullet: links with their inertials and
+/// collision shapes (absolute mesh paths), joints with their origin, axis,
+/// limits and dynamics; no visuals. Numbers are written in Rust's
+/// shortest round-trip form, orientations as roll-pitch-yaw.
+pub(crate) fn from_model(robot: &RobotModel) -> String {
+    let mut out = format!(
+        "<?xml version=\"1.0\"?>\n<robot name=\"{}\">\n",
+        xml_escape(&robot.name)
+    );
+    for link in &robot.links {
+        out.push_str(&format!("  <link name=\"{}\">\n", xml_escape(&link.name)));
+        if let Some(i) = &link.inertial {
+            let [ixx, ixy, ixz, iyy, iyz, izz] = i.inertia;
+            out.push_str(&format!(
+                "    <inertial>{}<mass value=\"{:?}\"/><inertia ixx=\"{ixx:?}\" ixy=\"{ixy:?}\" ixz=\"{ixz:?}\" iyy=\"{iyy:?}\" iyz=\"{iyz:?}\" izz=\"{izz:?}\"/></inertial>\n",
+                origin(&i.origin),
+                i.mass_kg
+            ));
+        }
+        for c in &link.collisions {
+            out.push_str(&format!(
+                "    <collision>{}<geometry>{}</geometry></collision>\n",
+                origin(&c.origin),
+                geometry(&c.geometry)
+            ));
+        }
+        out.push_str("  </link>\n");
+    }
+    for j in &robot.joints {
+        out.push_str(&format!(
+            "  <joint name=\"{}\" type=\"{}\"><parent link=\"{}\"/><child link=\"{}\"/>{}<axis xyz=\"{}\"/>",
+            xml_escape(&j.name),
+            j.kind.urdf_name(),
+            xml_escape(&robot.links[j.parent].name),
+            xml_escape(&robot.links[j.child].name),
+            origin(&j.origin),
+            xyz(j.axis)
+        ));
+        if let Some(l) = &j.limits {
+            let number = |v: f64| {
+                if v.is_finite() {
+                    format!("{v:?}")
+                } else {
+                    "0".into()
+                }
+            };
+            let bounds = if j.kind == JointKind::Continuous {
+                String::new()
+            } else {
+                format!(
+                    "lower=\"{}\" upper=\"{}\" ",
+                    number(l.lower),
+                    number(l.upper)
+                )
+            };
+            out.push_str(&format!(
+                "<limit {bounds}effort=\"{}\" velocity=\"{}\"/>",
+                number(l.effort),
+                number(l.velocity)
+            ));
+        }
+        out.push_str(&format!(
+            "<dynamics damping=\"{:?}\" friction=\"{:?}\"/></joint>\n",
+            j.damping, j.friction
+        ));
+    }
+    out.push_str("</robot>\n");
+    out
+}
+
 static COPIES: AtomicU64 = AtomicU64::new(0);
 
 /// The URDF file Bullet should load for `robot` (see the module
 /// documentation).
 pub(crate) fn prepare(robot: &RobotModel) -> Result<UrdfForBullet, String> {
+    if !robot.source.is_file() {
+        // A model read from a string (e.g. the built-in Mico2, whose
+        // `source` only names it): written from the model itself.
+        return write_temporary(&from_model(robot));
+    }
     let meshes = mesh_paths(robot);
     if meshes.is_empty() && robot.links.iter().all(|l| l.visuals.is_empty()) {
         return Ok(UrdfForBullet {
@@ -252,6 +358,11 @@ pub(crate) fn prepare(robot: &RobotModel) -> Result<UrdfForBullet, String> {
             robot.source.display()
         ));
     }
+    write_temporary(&copy)
+}
+
+/// Writes `text` to a new temporary URDF file.
+fn write_temporary(copy: &str) -> Result<UrdfForBullet, String> {
     let dir = std::env::temp_dir();
     loop {
         let n = COPIES.fetch_add(1, Ordering::Relaxed);
