@@ -145,6 +145,74 @@ pub struct HingePlan {
     pub kv: f64,
     /// Servo torque limit, N m (may be infinite).
     pub force_limit_nm: f64,
+    /// Reflected rotor inertia on the joint axis, kg m^2 (the `armature`
+    /// parameter; 0 when none).
+    pub armature_kg_m2: f64,
+}
+
+impl HingePlan {
+    /// The joint's passive row (viscous damping and armature) as one
+    /// implicit ODE motor row, at timestep `h_s`: `(gain, inertial)` where
+    /// the row's torque is `-gain * v_next + inertial * v_start` (N m, with
+    /// the joint rates at the end and the start of the step). Damping `d`
+    /// gives `-d v_next`; armature `a` gives `-a (v_next - v_start) / h`,
+    /// minus the armature times the joint's angular acceleration. So `gain
+    /// = d + a / h` and `inertial = a / h`. ODE realises the row as an
+    /// angular motor with `dParamCFM = 1 / gain` and target velocity
+    /// `inertial / gain * v_start` (its torque is `(v_target - v_next) /
+    /// CFM`). `None` when the joint has neither.
+    pub fn passive_row(&self, h_s: f64) -> Option<(f64, f64)> {
+        let inertial = self.armature_kg_m2 / h_s;
+        let gain = self.damping + inertial;
+        (gain > 0.0 && gain.is_finite()).then_some((gain, inertial))
+    }
+}
+
+/// Contact softness from the `[contact]` parameters: every contact between
+/// two bodies behaves as a spring-damper with time constant `tc` and
+/// damping ratio `zeta`, in MuJoCo's convention (its `solref`): for the
+/// pair's effective mass `m`, stiffness `k = m / (zeta tc)^2` and damping
+/// `c = 2 m / tc` (natural frequency `1 / (zeta tc)`, decay rate `1 / tc`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ContactSoftness {
+    /// Time constant, s.
+    pub time_constant_s: f64,
+    /// Damping ratio (1 = critically damped).
+    pub damping_ratio: f64,
+}
+
+impl ContactSoftness {
+    /// MuJoCo's default time constant (`solref` 0.02 s), used when only the
+    /// damping ratio is given, s.
+    pub const DEFAULT_TIME_CONSTANT_S: f64 = 0.02;
+    /// MuJoCo's default damping ratio, used when only the time constant is
+    /// given.
+    pub const DEFAULT_DAMPING_RATIO: f64 = 1.0;
+
+    /// ODE's soft ERP and the CFM of ONE contact point (kg^-1 s) for a pair
+    /// of bodies with inverse masses summing to `inverse_mass` (1/kg; 0 for
+    /// two immovable bodies: `None`) at timestep `h_s`.
+    ///
+    /// ODE integrates a constraint with error reduction ERP and force
+    /// mixing CFM like an implicit spring-damper with `ERP = h k / (h k +
+    /// c)` and `CFM = 1 / (h k + c)` (ODE manual, "how to use ERP and CFM").
+    /// With `k` and `c` from the effective (reduced) mass `m = 1 /
+    /// inverse_mass`: `ERP = h / (h + 2 zeta^2 tc)` and `CFM = 1 / (m (h /
+    /// (zeta tc)^2 + 2 / tc))`. A pair touching at `n` points splits the
+    /// spring and the damper between them (`k / n`, `c / n` each: the same
+    /// ERP, `n` times the CFM), so the pair as a whole has the stiffness
+    /// and damping above whatever the number of points.
+    pub fn erp_cfm(&self, h_s: f64, inverse_mass: f64) -> Option<(f64, f64)> {
+        if !(inverse_mass > 0.0 && inverse_mass.is_finite()) {
+            return None;
+        }
+        let (tc, zeta) = (self.time_constant_s, self.damping_ratio);
+        let k_per_mass = 1.0 / (zeta * tc).powi(2);
+        let c_per_mass = 2.0 / tc;
+        let erp = h_s * k_per_mass / (h_s * k_per_mass + c_per_mass);
+        let cfm = inverse_mass / (h_s * k_per_mass + c_per_mass);
+        Some((erp, cfm))
+    }
 }
 
 /// A free object of the scene.
@@ -160,6 +228,8 @@ pub struct ObjectPlan {
     pub pose: Pose,
     /// Friction coefficient (scene's or default, scaled).
     pub mu: f64,
+    /// Coefficient of restitution (the `restitution` parameter), when set.
+    pub restitution: Option<f64>,
 }
 
 /// What a tracked body follows on the model.
@@ -201,6 +271,11 @@ pub struct ModelPlan {
     /// Joint positions (indexed like `robot.joints`) of the initial
     /// configuration: controlled joints 0, held joints at their positions.
     pub initial_positions: Vec<f64>,
+    /// Gravity in the world frame, m/s^2 (the scene's).
+    pub gravity_m_s2: Vec3,
+    /// Contact softness (the `[contact]` parameters), when set; else the
+    /// world ERP and CFM apply to contacts.
+    pub contact_softness: Option<ContactSoftness>,
 }
 
 /// Scales a 3x3 matrix.
@@ -573,6 +648,7 @@ pub fn plan(
             friction_nm: joint.friction,
             kv: a.kv,
             force_limit_nm: a.force_limit,
+            armature_kg_m2: 0.0,
         });
     }
 
@@ -593,6 +669,7 @@ pub fn plan(
                 },
                 pose: o.pose,
                 mu: friction(o.friction),
+                restitution: None,
             }
         })
         .collect();
@@ -637,6 +714,8 @@ pub fn plan(
         robot_mu: friction(None),
         tracked,
         initial_positions,
+        gravity_m_s2: scene.gravity_m_s2,
+        contact_softness: None,
     })
 }
 
@@ -653,6 +732,51 @@ impl ModelPlan {
         self.bodies
             .iter()
             .map(|b| b.body_pose_from_root(&world[b.root_link]))
+            .collect()
+    }
+
+    /// World velocities of the robot bodies (linear velocity of each body's
+    /// centre of mass, m/s, and angular velocity, rad/s) with the
+    /// controlled joints at `angles_rad` turning at `rates_rad_s` (actuator
+    /// order), the base at rest at `base` and held joints still.
+    ///
+    /// Propagated down the tree: a child link turns with its parent plus
+    /// the joint rate about the joint's world axis, `w_c = w_p + axis q'`;
+    /// its frame origin lies on the joint axis, so it moves with the
+    /// parent's rigid motion, `v_c = v_p + w_p x (p_c - p_p)`; a body's
+    /// centre of mass moves as `v_root + w x (com - p_root)`.
+    pub fn body_twists(
+        &self,
+        robot: &RobotModel,
+        base: &Pose,
+        angles_rad: &[f64],
+        rates_rad_s: &[f64],
+    ) -> Vec<(Vec3, Vec3)> {
+        let mut positions = self.initial_positions.clone();
+        let mut rates = vec![0.0; robot.joints.len()];
+        for ((h, &a), &r) in self.hinges.iter().zip(angles_rad).zip(rates_rad_s) {
+            positions[h.joint] = a;
+            rates[h.joint] = r;
+        }
+        let world = robot.forward_kinematics(base, &positions);
+        let mut lin = vec![Vec3::ZERO; robot.links.len()];
+        let mut ang = vec![Vec3::ZERO; robot.links.len()];
+        for &j in robot.joints_in_tree_order() {
+            let joint = &robot.joints[j];
+            let (p, c) = (joint.parent, joint.child);
+            let r = world[c].position_m - world[p].position_m;
+            let axis = world[c].orientation.rotate(joint.axis);
+            ang[c] = ang[p] + axis.scale(rates[j]);
+            lin[c] = lin[p] + ang[p].cross(r);
+        }
+        self.bodies
+            .iter()
+            .map(|b| {
+                let root = &world[b.root_link];
+                let com = b.body_pose_from_root(root).position_m;
+                let w = ang[b.root_link];
+                (lin[b.root_link] + w.cross(com - root.position_m), w)
+            })
             .collect()
     }
 }

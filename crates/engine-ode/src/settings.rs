@@ -7,7 +7,7 @@
 //! surface layer); the timestep is the 0.01 s (the PyBullet rate
 //! of the study), the stepper the exact `dWorldStep`.
 
-use realitygap_core::engine::{EngineError, EngineSettings, SettingInfo, SettingValue};
+use realitygap_core::engine::{EngineError, EngineSettings, SettingInfo, SettingsReader};
 
 /// The engine's name on the command line and in result directories.
 pub const ENGINE_NAME: &str = "ode";
@@ -36,6 +36,10 @@ pub const SETTINGS: &[SettingInfo] = &[
         help: "largest velocity with which contacts push shapes apart, m/s (> 0, `inf` = no cap); default inf (ODE's)",
     },
     SettingInfo { key: "contact_surface_layer_m", help: "penetration allowed before contacts push back, m (>= 0); default 0 (ODE's)" },
+    SettingInfo {
+        key: "contact_bounce_velocity_m_s",
+        help: "approach speed below which a contact with restitution does not bounce (dContactBounce's bounce_vel), m/s (>= 0); default 0.01",
+    },
     SettingInfo {
         key: "self_collision",
         help: "true: links of the arm collide with each other (except a link and its parent); default false (see the README)",
@@ -120,6 +124,9 @@ pub struct OdeSettings {
     pub contact_max_correcting_vel_m_s: f64,
     /// Contact surface layer, m.
     pub contact_surface_layer_m: f64,
+    /// Approach speed below which restitution is not applied, m/s
+    /// (`bounce_vel` of `dContactBounce`).
+    pub contact_bounce_velocity_m_s: f64,
     /// Whether links of the arm collide with each other.
     pub self_collision: bool,
     /// Servo mapping.
@@ -143,6 +150,7 @@ impl Default for OdeSettings {
             max_contacts: 10,
             contact_max_correcting_vel_m_s: f64::INFINITY,
             contact_surface_layer_m: 0.0,
+            contact_bounce_velocity_m_s: 0.01,
             self_collision: false,
             servo: Servo::Motor,
             weld: Weld::Merge,
@@ -151,186 +159,94 @@ impl Default for OdeSettings {
     }
 }
 
-fn setting_error(key: &str, message: impl Into<String>) -> EngineError {
-    EngineError::Setting {
-        engine: ENGINE_NAME.to_string(),
-        key: key.to_string(),
-        message: message.into(),
-    }
-}
-
-/// A number from a setting: integers convert, and the text `inf` is
-/// infinity when `allow_inf`.
-fn number(key: &str, value: &SettingValue, allow_inf: bool) -> Result<f64, EngineError> {
-    if allow_inf {
-        if let Some(text) = value.as_str() {
-            if matches!(
-                text.trim().to_ascii_lowercase().as_str(),
-                "inf" | "infinity"
-            ) {
-                return Ok(f64::INFINITY);
-            }
-        }
-    }
-    let v = value
-        .as_f64()
-        .ok_or_else(|| setting_error(key, format!("expected a number, found \"{value}\"")))?;
-    if v.is_nan() || (v.is_infinite() && !allow_inf) {
-        return Err(setting_error(
-            key,
-            format!("must be a finite number, found {v}"),
-        ));
-    }
-    Ok(v)
-}
-
-fn choice<T: Copy>(
-    key: &str,
-    value: &SettingValue,
-    choices: &[(&str, T)],
-) -> Result<T, EngineError> {
-    let text = value.as_str().map(|t| t.trim().to_ascii_lowercase());
-    choices
-        .iter()
-        .find(|(name, _)| Some(*name) == text.as_deref())
-        .map(|(_, v)| *v)
-        .ok_or_else(|| {
-            setting_error(
-                key,
-                format!(
-                    "\"{value}\" is not one of {}",
-                    choices
-                        .iter()
-                        .map(|(n, _)| *n)
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ),
-            )
-        })
-}
-
 impl OdeSettings {
-    /// Checks `settings` and fills in the defaults; an error names the key,
-    /// the value and what is accepted.
+    /// Checks `settings` through the workspace's one settings reader
+    /// ([`SettingsReader`]) and fills in the defaults; an error names the
+    /// engine, the key, the value and what is accepted.
     pub fn parse(settings: &EngineSettings) -> Result<OdeSettings, EngineError> {
-        let mut o = OdeSettings::default();
-        for (key, value) in settings {
-            let k = key.as_str();
-            let range = |v: f64, ok: bool, what: &str| -> Result<f64, EngineError> {
-                if ok {
-                    Ok(v)
-                } else {
-                    Err(setting_error(k, format!("must be {what}, found {v}")))
-                }
-            };
-            match k {
-                "timestep_s" => {
-                    let v = number(k, value, false)?;
-                    o.timestep_s = range(v, v > 0.0, "greater than 0 s")?;
-                }
-                "stepper" => {
-                    o.stepper = choice(
-                        k,
-                        value,
-                        &[
-                            ("world_step", Stepper::WorldStep),
-                            ("quick_step", Stepper::QuickStep),
-                        ],
-                    )?
-                }
-                "quick_step_iterations" => {
-                    let v = value.as_i64().ok_or_else(|| {
-                        setting_error(k, format!("expected a whole number, found \"{value}\""))
-                    })?;
-                    if !(1..=1_000_000).contains(&v) {
-                        return Err(setting_error(
-                            k,
-                            format!("must be a whole number from 1 to 1000000, found {v}"),
-                        ));
-                    }
-                    o.quick_step_iterations = v as u32;
-                }
-                "quick_step_sor" => {
-                    let v = number(k, value, false)?;
-                    o.quick_step_sor = range(v, v > 0.0 && v <= 2.0, "in (0, 2]")?;
-                }
-                "erp" => {
-                    let v = number(k, value, false)?;
-                    o.erp = range(v, (0.0..=1.0).contains(&v), "in [0, 1]")?;
-                }
-                "cfm" => {
-                    let v = number(k, value, false)?;
-                    o.cfm = range(v, v >= 0.0, ">= 0")?;
-                }
-                "contact_mu" => {
-                    let v = number(k, value, true)?;
-                    o.contact_mu = range(v, v >= 0.0, ">= 0")?;
-                }
-                "max_contacts" => {
-                    let v = value.as_i64().ok_or_else(|| {
-                        setting_error(k, format!("expected a whole number, found \"{value}\""))
-                    })?;
-                    if !(1..=256).contains(&v) {
-                        return Err(setting_error(
-                            k,
-                            format!("must be a whole number from 1 to 256, found {v}"),
-                        ));
-                    }
-                    o.max_contacts = v as usize;
-                }
-                "contact_max_correcting_vel_m_s" => {
-                    let v = number(k, value, true)?;
-                    o.contact_max_correcting_vel_m_s =
-                        range(v, v > 0.0, "greater than 0 (or inf)")?;
-                }
-                "contact_surface_layer_m" => {
-                    let v = number(k, value, false)?;
-                    o.contact_surface_layer_m = range(v, v >= 0.0, ">= 0 m")?;
-                }
-                "self_collision" => {
-                    o.self_collision = value.as_bool().ok_or_else(|| {
-                        setting_error(k, format!("expected true or false, found \"{value}\""))
-                    })?
-                }
-                "servo" => {
-                    o.servo = choice(k, value, &[("motor", Servo::Motor), ("kv", Servo::Kv)])?
-                }
-                "weld" => {
-                    o.weld = choice(
-                        k,
-                        value,
-                        &[("merge", Weld::Merge), ("fixed_joint", Weld::FixedJoint)],
-                    )?
-                }
-                "base" => {
-                    o.base = choice(
-                        k,
-                        value,
-                        &[("fixed_joint", Base::FixedJoint), ("static", Base::Static)],
-                    )?
-                }
-                other => {
-                    return Err(setting_error(
-                        other,
-                        format!(
-                            "unknown setting (ODE accepts: {})",
-                            SETTINGS
-                                .iter()
-                                .map(|s| s.key)
-                                .collect::<Vec<_>>()
-                                .join(", ")
-                        ),
-                    ))
-                }
-            }
-        }
-        Ok(o)
+        let r = SettingsReader::new(ENGINE_NAME, settings, SETTINGS)?;
+        let d = OdeSettings::default();
+        let finite = |v: f64| v.is_finite();
+        Ok(OdeSettings {
+            timestep_s: r
+                .number(
+                    "timestep_s",
+                    |v| finite(v) && v > 0.0,
+                    "greater than 0 s and finite",
+                )?
+                .unwrap_or(d.timestep_s),
+            stepper: r
+                .choice(
+                    "stepper",
+                    &[
+                        ("world_step", Stepper::WorldStep),
+                        ("quick_step", Stepper::QuickStep),
+                    ],
+                )?
+                .unwrap_or(d.stepper),
+            quick_step_iterations: r
+                .integer("quick_step_iterations", 1, 1_000_000)?
+                .map_or(d.quick_step_iterations, |v| v as u32),
+            quick_step_sor: r
+                .number("quick_step_sor", |v| v > 0.0 && v <= 2.0, "in (0, 2]")?
+                .unwrap_or(d.quick_step_sor),
+            erp: r
+                .number("erp", |v| (0.0..=1.0).contains(&v), "in [0, 1]")?
+                .unwrap_or(d.erp),
+            cfm: r
+                .number("cfm", |v| finite(v) && v >= 0.0, ">= 0 and finite")?
+                .unwrap_or(d.cfm),
+            contact_mu: r
+                .number("contact_mu", |v| v >= 0.0, ">= 0 (or inf)")?
+                .unwrap_or(d.contact_mu),
+            max_contacts: r
+                .integer("max_contacts", 1, 256)?
+                .map_or(d.max_contacts, |v| v as usize),
+            contact_max_correcting_vel_m_s: r
+                .number(
+                    "contact_max_correcting_vel_m_s",
+                    |v| v > 0.0,
+                    "greater than 0 (or inf)",
+                )?
+                .unwrap_or(d.contact_max_correcting_vel_m_s),
+            contact_surface_layer_m: r
+                .number(
+                    "contact_surface_layer_m",
+                    |v| finite(v) && v >= 0.0,
+                    ">= 0 m and finite",
+                )?
+                .unwrap_or(d.contact_surface_layer_m),
+            contact_bounce_velocity_m_s: r
+                .number(
+                    "contact_bounce_velocity_m_s",
+                    |v| finite(v) && v >= 0.0,
+                    ">= 0 m/s and finite",
+                )?
+                .unwrap_or(d.contact_bounce_velocity_m_s),
+            self_collision: r.boolean("self_collision")?.unwrap_or(d.self_collision),
+            servo: r
+                .choice("servo", &[("motor", Servo::Motor), ("kv", Servo::Kv)])?
+                .unwrap_or(d.servo),
+            weld: r
+                .choice(
+                    "weld",
+                    &[("merge", Weld::Merge), ("fixed_joint", Weld::FixedJoint)],
+                )?
+                .unwrap_or(d.weld),
+            base: r
+                .choice(
+                    "base",
+                    &[("fixed_joint", Base::FixedJoint), ("static", Base::Static)],
+                )?
+                .unwrap_or(d.base),
+        })
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use realitygap_core::engine::SettingValue;
 
     fn parse(pairs: &[(&str, &str)]) -> Result<OdeSettings, EngineError> {
         let settings: EngineSettings = pairs
@@ -362,6 +278,7 @@ mod tests {
             ("max_contacts", "4"),
             ("contact_max_correcting_vel_m_s", "0.1"),
             ("contact_surface_layer_m", "0.001"),
+            ("contact_bounce_velocity_m_s", "0.1"),
             ("self_collision", "true"),
             ("servo", "kv"),
             ("weld", "fixed_joint"),
@@ -390,7 +307,11 @@ mod tests {
         let cases: &[(&str, &str, &str)] = &[
             ("timestep_s", "0", "must be greater than 0 s"),
             ("timestep_s", "fast", "expected a number"),
-            ("timestep_s", "inf", "must be a finite number"),
+            (
+                "timestep_s",
+                "inf",
+                "greater than 0 s and finite, found inf",
+            ),
             ("stepper", "euler", "is not one of world_step, quick_step"),
             ("quick_step_iterations", "2.5", "expected a whole number"),
             ("quick_step_iterations", "0", "from 1 to"),
@@ -400,6 +321,7 @@ mod tests {
             ("contact_mu", "-0.1", ">= 0"),
             ("max_contacts", "0", "from 1 to 256"),
             ("contact_max_correcting_vel_m_s", "0", "greater than 0"),
+            ("contact_bounce_velocity_m_s", "-1", ">= 0 m/s"),
             ("self_collision", "1", "expected true or false"),
             ("servo", "pd", "is not one of motor, kv"),
             ("base", "floating", "is not one of fixed_joint, static"),
@@ -407,7 +329,7 @@ mod tests {
             (
                 "timestep",
                 "0.01",
-                "unknown setting (ODE accepts: timestep_s, stepper",
+                "unknown setting (accepted: timestep_s, stepper",
             ),
         ];
         for (key, value, expected) in cases {

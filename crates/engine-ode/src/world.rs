@@ -36,6 +36,10 @@ const _: () = assert!(
     "ODE triangle indices must be 32-bit"
 );
 
+/// Numbers per moving body in the native state (position 3, quaternion 4,
+/// linear velocity 3, angular velocity 3).
+pub const BODY_STATE_LEN: usize = 13;
+
 /// The messages ODE reported since the last [`take_messages`] (at most 64).
 static MESSAGES: Mutex<Vec<String>> = Mutex::new(Vec::new());
 /// Serialises the calls that are not thread safe (see the module docs).
@@ -181,16 +185,31 @@ pub enum Owner {
     Object(usize),
 }
 
+/// The surface of one geom, as contacts see it.
+#[derive(Debug, Clone, Copy)]
+struct GeomSurface {
+    /// Owner slot: 0 ground, 1.. robot bodies, then objects.
+    slot: usize,
+    /// Coulomb friction coefficient.
+    mu: f64,
+    /// Coefficient of restitution; negative when none is set.
+    restitution: f64,
+}
+
 /// What the collision callback needs; lives in a Box so its address is
 /// stable while ODE calls back.
 struct CollideContext {
     world: dWorldID,
     group: dJointGroupID,
-    /// Owner slot (0 ground, 1.. robot bodies, then objects) and friction
-    /// of every geom, indexed by the geom's user data minus 1.
-    geoms: Vec<(usize, f64)>,
+    /// Every geom's surface, indexed by the geom's user data minus 1.
+    geoms: Vec<GeomSurface>,
     /// Whether two owner slots may touch, `slots x slots`.
     may_touch: Vec<bool>,
+    /// Soft ERP and the CFM of one contact point per pair of owner slots,
+    /// `slots x slots` (the `[contact]` parameters); empty when not set.
+    soft: Vec<(f64, f64)>,
+    /// Approach speed below which restitution is not applied, m/s.
+    bounce_velocity_m_s: f64,
     slots: usize,
     buffer: Vec<dContact>,
     contacts: usize,
@@ -198,15 +217,44 @@ struct CollideContext {
     pairs: Vec<(usize, usize)>,
 }
 
+impl CollideContext {
+    /// The surface parameters of the `n` contact points between two geoms.
+    fn surface(&self, a: &GeomSurface, b: &GeomSurface, n: usize) -> dSurfaceParameters {
+        let mut surface = dSurfaceParameters {
+            mode: dContactApprox1 as c_int,
+            mu: a.mu.min(b.mu),
+            ..Default::default()
+        };
+        let restitution = a.restitution.max(b.restitution);
+        if restitution >= 0.0 {
+            surface.mode |= dContactBounce as c_int;
+            surface.bounce = restitution;
+            surface.bounce_vel = self.bounce_velocity_m_s;
+        }
+        if let Some(&(erp, cfm)) = self.soft.get(a.slot * self.slots + b.slot) {
+            surface.mode |= (dContactSoftERP | dContactSoftCFM) as c_int;
+            surface.soft_erp = erp;
+            surface.soft_cfm = cfm * n as f64;
+        }
+        surface
+    }
+}
+
+/// A collision callback that does nothing: `dSpaceCollide` with it only
+/// brings the space's bounding boxes up to date (see
+/// [`OdeWorld::restore_move_order`]).
+unsafe extern "C" fn no_contacts(_data: *mut c_void, _o1: dGeomID, _o2: dGeomID) {}
+
 unsafe extern "C" fn near_callback(data: *mut c_void, o1: dGeomID, o2: dGeomID) {
     // SAFETY: `data` is the CollideContext passed to dSpaceCollide by
     // OdeWorld::step, alive and exclusively ours for the call.
     let ctx = &mut *(data as *mut CollideContext);
     let index = |g: dGeomID| (dGeomGetData(g) as usize).wrapping_sub(1);
     let (i1, i2) = (index(o1), index(o2));
-    let (Some(&(s1, mu1)), Some(&(s2, mu2))) = (ctx.geoms.get(i1), ctx.geoms.get(i2)) else {
+    let (Some(&g1), Some(&g2)) = (ctx.geoms.get(i1), ctx.geoms.get(i2)) else {
         return;
     };
+    let (s1, s2) = (g1.slot, g2.slot);
     if !ctx.may_touch[s1 * ctx.slots + s2] {
         return;
     }
@@ -220,13 +268,9 @@ unsafe extern "C" fn near_callback(data: *mut c_void, o1: dGeomID, o2: dGeomID) 
         return;
     };
     let n = dCollide(o1, o2, max, &mut first.geom, stride);
-    let mu = mu1.min(mu2);
+    let surface = ctx.surface(&g1, &g2, n.max(0) as usize);
     for c in ctx.buffer.iter_mut().take(n.max(0) as usize) {
-        c.surface = dSurfaceParameters {
-            mode: dContactApprox1 as c_int,
-            mu,
-            ..Default::default()
-        };
+        c.surface = surface;
         let joint = dJointCreateContact(ctx.world, ctx.group, c);
         dJointAttach(joint, b1, b2);
     }
@@ -256,8 +300,17 @@ pub struct OdeWorld {
     names: Vec<String>,
     /// One hinge per controlled joint, actuator order.
     hinges: Vec<dJointID>,
-    /// Viscous damping per hinge, N m s/rad.
-    damping: Vec<f64>,
+    /// The passive rows of hinges with armature: (angular motor, hinge
+    /// index, factor): each step the motor's target velocity is the factor
+    /// times the hinge rate at the step start (see
+    /// [`crate::plan::HingePlan::passive_row`]).
+    inertial_motors: Vec<(dJointID, usize, f64)>,
+    /// Every moving body: the robot's (plan order, static ones left out),
+    /// then the objects'. The native state lists bodies in this order.
+    moving: Vec<dBodyID>,
+    /// The index in `moving` of each owner slot's body (none for the
+    /// ground and a static base).
+    moving_of_slot: Vec<Option<usize>>,
     trimeshes: Vec<TriMeshStore>,
     ctx: Box<CollideContext>,
     stepper: Stepper,
@@ -308,6 +361,8 @@ impl OdeWorld {
                 geoms: Vec::new(),
                 may_touch: Vec::new(),
                 slots: 0,
+                soft: Vec::new(),
+                bounce_velocity_m_s: settings.contact_bounce_velocity_m_s,
                 buffer: vec![dContact::default(); settings.max_contacts],
                 contacts: 0,
                 pairs: Vec::new(),
@@ -325,14 +380,17 @@ impl OdeWorld {
                     .chain(plan.objects.iter().map(|o| format!("object {}", o.name)))
                     .collect(),
                 hinges: Vec::new(),
-                damping: Vec::new(),
+                inertial_motors: Vec::new(),
+                moving: Vec::new(),
+                moving_of_slot: Vec::new(),
                 trimeshes: Vec::new(),
                 ctx,
                 stepper: settings.stepper,
                 timestep_s: settings.timestep_s,
                 rng_seed: 0,
             };
-            dWorldSetGravity(world, 0.0, 0.0, -9.81);
+            let g = plan.gravity_m_s2;
+            dWorldSetGravity(world, g.x, g.y, g.z);
             dWorldSetERP(world, settings.erp);
             dWorldSetCFM(world, settings.cfm);
             dWorldSetQuickStepNumIterations(world, settings.quick_step_iterations as c_int);
@@ -353,8 +411,11 @@ impl OdeWorld {
                 let g = dCreatePlane(space, 0.0, 0.0, 1.0, height);
                 w.register_geom(
                     g,
-                    slot_of(Owner::Ground),
-                    mu,
+                    GeomSurface {
+                        slot: 0,
+                        mu,
+                        restitution: -1.0,
+                    },
                     Owner::Ground,
                     settings.self_collision,
                 );
@@ -395,13 +456,12 @@ impl OdeWorld {
                         );
                         dGeomSetOffsetQuaternion(geom, quat(g.offset.orientation).as_ptr());
                     }
-                    w.register_geom(
-                        geom,
-                        slot_of(Owner::Robot(b)),
-                        plan.robot_mu,
-                        Owner::Robot(b),
-                        settings.self_collision,
-                    );
+                    let surface = GeomSurface {
+                        slot: slot_of(Owner::Robot(b)),
+                        mu: plan.robot_mu,
+                        restitution: -1.0,
+                    };
+                    w.register_geom(geom, surface, Owner::Robot(b), settings.self_collision);
                 }
             }
             let base_is_body = !w.robot_bodies[0].is_null();
@@ -458,20 +518,23 @@ impl OdeWorld {
                 if h.friction_nm > 0.0 {
                     // Coulomb joint friction: a second motor holding zero
                     // velocity with at most the friction torque.
-                    let motor = dJointCreateAMotor(world, std::ptr::null_mut());
-                    dJointAttach(
-                        motor,
-                        w.robot_bodies[h.child_body],
-                        w.robot_bodies[h.parent_body],
-                    );
-                    dJointSetAMotorMode(motor, dAMotorUser as c_int);
-                    dJointSetAMotorNumAxes(motor, 1);
-                    dJointSetAMotorAxis(motor, 0, 0, a.x, a.y, a.z);
+                    let motor = w.axis_motor(h, a);
                     dJointSetAMotorParam(motor, dParamVel as c_int, 0.0);
                     dJointSetAMotorParam(motor, dParamFMax as c_int, h.friction_nm);
                 }
+                if let Some((gain, inertial)) = h.passive_row(settings.timestep_s) {
+                    // Damping and armature: one unbounded, softened motor
+                    // row (see HingePlan::passive_row).
+                    let motor = w.axis_motor(h, a);
+                    dJointSetAMotorParam(motor, dParamVel as c_int, 0.0);
+                    dJointSetAMotorParam(motor, dParamFMax as c_int, f64::INFINITY);
+                    dJointSetAMotorParam(motor, dParamCFM as c_int, 1.0 / gain);
+                    if inertial > 0.0 {
+                        w.inertial_motors
+                            .push((motor, w.hinges.len(), inertial / gain));
+                    }
+                }
                 w.hinges.push(joint);
-                w.damping.push(h.damping);
             }
 
             for (i, o) in plan.objects.iter().enumerate() {
@@ -487,13 +550,12 @@ impl OdeWorld {
                 dBodySetQuaternion(id, quat(o.pose.orientation).as_ptr());
                 let geom = dCreateBox(space, o.size_m.x, o.size_m.y, o.size_m.z);
                 dGeomSetBody(geom, id);
-                w.register_geom(
-                    geom,
-                    slot_of(Owner::Object(i)),
-                    o.mu,
-                    Owner::Object(i),
-                    settings.self_collision,
-                );
+                let surface = GeomSurface {
+                    slot: slot_of(Owner::Object(i)),
+                    mu: o.mu,
+                    restitution: o.restitution.unwrap_or(-1.0),
+                };
+                w.register_geom(geom, surface, Owner::Object(i), settings.self_collision);
                 w.object_bodies.push(id);
             }
 
@@ -529,8 +591,81 @@ impl OdeWorld {
             }
             w.ctx.may_touch = may_touch;
             w.ctx.slots = slots;
+            w.index_moving_bodies(plan);
+            if let Some(softness) = plan.contact_softness {
+                w.ctx.soft = w.soft_contact_table(plan, &softness, settings.timestep_s);
+            }
             Ok(w)
         }
+    }
+
+    /// A one-axis angular motor (`dAMotorUser`) on hinge `h`'s bodies about
+    /// its world axis `axis`, the axis fixed in the child body (so it turns
+    /// with the joint).
+    fn axis_motor(&self, h: &crate::plan::HingePlan, axis: Vec3) -> dJointID {
+        let (child, parent) = (
+            self.robot_bodies[h.child_body],
+            self.robot_bodies[h.parent_body],
+        );
+        // SAFETY: the world and both bodies (or null for the world) are
+        // this world's, alive; the motor joins them like the hinge does.
+        unsafe {
+            let motor = dJointCreateAMotor(self.world, std::ptr::null_mut());
+            dJointAttach(motor, child, parent);
+            dJointSetAMotorMode(motor, dAMotorUser as c_int);
+            dJointSetAMotorNumAxes(motor, 1);
+            // rel = 1: the axis is anchored to the first (child) body.
+            dJointSetAMotorAxis(motor, 0, 1, axis.x, axis.y, axis.z);
+            motor
+        }
+    }
+
+    /// Fills `moving` (the robot's moving bodies, then the objects') and
+    /// which owner slot each belongs to.
+    fn index_moving_bodies(&mut self, plan: &ModelPlan) {
+        let slots = 1 + self.robot_bodies.len() + plan.objects.len();
+        self.moving_of_slot = vec![None; slots];
+        for (b, &id) in self.robot_bodies.iter().enumerate() {
+            if !id.is_null() {
+                self.moving_of_slot[1 + b] = Some(self.moving.len());
+                self.moving.push(id);
+            }
+        }
+        for (i, &id) in self.object_bodies.iter().enumerate() {
+            self.moving_of_slot[1 + self.robot_bodies.len() + i] = Some(self.moving.len());
+            self.moving.push(id);
+        }
+    }
+
+    /// Soft ERP and one contact point's CFM for every pair of owner slots
+    /// (see [`crate::plan::ContactSoftness::erp_cfm`]), from the pair's
+    /// reduced mass: `1 / (1 / m1 + 1 / m2)`, the ground and a static
+    /// base counting as immovable. Pairs of two immovable owners get the
+    /// world's values (they never touch).
+    fn soft_contact_table(
+        &self,
+        plan: &ModelPlan,
+        softness: &crate::plan::ContactSoftness,
+        h_s: f64,
+    ) -> Vec<(f64, f64)> {
+        let mut inverse_mass = vec![0.0; self.moving_of_slot.len()];
+        for (b, body) in plan.bodies.iter().enumerate() {
+            if let (false, Some(m)) = (self.robot_bodies[b].is_null(), body.mass) {
+                inverse_mass[1 + b] = 1.0 / m.mass_kg;
+            }
+        }
+        for (i, o) in plan.objects.iter().enumerate() {
+            inverse_mass[1 + plan.bodies.len() + i] = 1.0 / o.mass.mass_kg;
+        }
+        let n = inverse_mass.len();
+        let mut table = Vec::with_capacity(n * n);
+        for a in 0..n {
+            for b in 0..n {
+                let pair = softness.erp_cfm(h_s, inverse_mass[a] + inverse_mass[b]);
+                table.push(pair.unwrap_or((0.2, 1e-5)));
+            }
+        }
+        table
     }
 
     /// # Safety
@@ -587,12 +722,11 @@ impl OdeWorld {
     unsafe fn register_geom(
         &mut self,
         geom: dGeomID,
-        slot: usize,
-        mu: f64,
+        surface: GeomSurface,
         owner: Owner,
         self_collision: bool,
     ) {
-        self.ctx.geoms.push((slot, mu));
+        self.ctx.geoms.push(surface);
         dGeomSetData(geom, self.ctx.geoms.len() as *mut c_void);
         // Category bits let the space skip pairs that never touch before it
         // compares bounding boxes; the callback decides the rest.
@@ -635,19 +769,20 @@ impl OdeWorld {
         self.hinges.len()
     }
 
-    /// One step: joint damping torques, collision, the solver (with this
-    /// world's random-generator state), contacts removed. `false` when
-    /// ODE's stepper reports a failure (out of memory). Must be called with
-    /// [`ode_lock`] held.
+    /// One step: the armature rows' reference velocities, collision, the
+    /// solver (with this world's random-generator state), contacts removed.
+    /// `false` when ODE's stepper reports a failure (out of memory). Must
+    /// be called with [`ode_lock`] held.
     pub fn step(&mut self) -> bool {
+        for &(motor, hinge, factor) in &self.inertial_motors {
+            let rate = self.hinge_rate(hinge);
+            // SAFETY: the motor is a joint of this world; setting its
+            // parameter touches only that joint.
+            unsafe { dJointSetAMotorParam(motor, dParamVel as c_int, factor * rate) };
+        }
         // SAFETY: lock held (caller); the context is boxed, alive and not
         // otherwise borrowed during dSpaceCollide.
         unsafe {
-            for (&j, &d) in self.hinges.iter().zip(&self.damping) {
-                if d > 0.0 {
-                    dJointAddHingeTorque(j, -d * dJointGetHingeAngleRate(j));
-                }
-            }
             self.ctx.contacts = 0;
             self.ctx.pairs.clear();
             let ctx: *mut CollideContext = &mut *self.ctx;
@@ -710,16 +845,187 @@ impl OdeWorld {
 
     /// Puts robot body `b` at `pose`, at rest (static bodies stay).
     pub fn place_robot_body(&mut self, b: usize, pose: &Pose) {
+        self.set_robot_body_state(b, pose, Vec3::ZERO, Vec3::ZERO);
+    }
+
+    /// Puts robot body `b` at `pose` (its centre of mass) moving with `v`
+    /// (m/s, of the centre of mass) and `w` (rad/s), world frame (static
+    /// bodies stay).
+    pub fn set_robot_body_state(&mut self, b: usize, pose: &Pose, v: Vec3, w: Vec3) {
         let id = self.robot_bodies[b];
-        if id.is_null() {
-            return;
+        if !id.is_null() {
+            Self::set_body_state(id, pose, v, w);
         }
-        // SAFETY: `id` is a live body of this world.
+    }
+
+    /// Puts object `i` at `pose` (its centre) moving with `v` (m/s) and `w`
+    /// (rad/s), world frame.
+    pub fn set_object_state(&mut self, i: usize, pose: &Pose, v: Vec3, w: Vec3) {
+        Self::set_body_state(self.object_bodies[i], pose, v, w);
+    }
+
+    fn set_body_state(id: dBodyID, pose: &Pose, v: Vec3, w: Vec3) {
+        let p = pose.position_m;
+        // SAFETY: `id` is a live body of this world; the quaternion array
+        // outlives the call, which copies it.
         unsafe {
-            dBodySetPosition(id, pose.position_m.x, pose.position_m.y, pose.position_m.z);
+            dBodySetPosition(id, p.x, p.y, p.z);
             dBodySetQuaternion(id, quat(pose.orientation).as_ptr());
-            dBodySetLinearVel(id, 0.0, 0.0, 0.0);
-            dBodySetAngularVel(id, 0.0, 0.0, 0.0);
+            dBodySetLinearVel(id, v.x, v.y, v.z);
+            dBodySetAngularVel(id, w.x, w.y, w.z);
+        }
+    }
+
+    fn body_velocity_of(id: dBodyID) -> (Vec3, Vec3) {
+        // SAFETY: `id` is a live body of this world.
+        unsafe { (vec3(dBodyGetLinearVel(id)), vec3(dBodyGetAngularVel(id))) }
+    }
+
+    /// Object `i`'s velocity (of its centre, m/s) and angular velocity
+    /// (rad/s), world frame.
+    pub fn object_velocity(&self, i: usize) -> (Vec3, Vec3) {
+        Self::body_velocity_of(self.object_bodies[i])
+    }
+
+    /// Hinge `i`'s rate (child relative to parent about the axis), rad/s.
+    pub fn hinge_rate(&self, i: usize) -> f64 {
+        // SAFETY: reads the joint's bodies of this world.
+        unsafe { dJointGetHingeAngleRate(self.hinges[i]) }
+    }
+
+    /// Hinge `i`'s motor target velocity, rad/s.
+    pub fn hinge_velocity_target(&self, i: usize) -> f64 {
+        // SAFETY: reads a parameter of a joint of this world.
+        unsafe { dJointGetHingeParam(self.hinges[i], dParamVel as c_int) }
+    }
+
+    /// Number of moving bodies (robot bodies that are not static, then
+    /// objects): the bodies of the native state.
+    pub fn moving_count(&self) -> usize {
+        self.moving.len()
+    }
+
+    /// Appends every moving body's state, [`BODY_STATE_LEN`] numbers each:
+    /// position (m), quaternion (w x y z), linear velocity (m/s), angular
+    /// velocity (rad/s), world frame, exactly as ODE holds them.
+    pub fn write_moving_states(&self, out: &mut Vec<f64>) {
+        for &id in &self.moving {
+            let pose = Self::body_pose_of(id);
+            let (v, w) = Self::body_velocity_of(id);
+            let q = pose.orientation;
+            out.extend_from_slice(&pose.position_m.to_array());
+            out.extend_from_slice(&[q.w, q.x, q.y, q.z]);
+            out.extend_from_slice(&v.to_array());
+            out.extend_from_slice(&w.to_array());
+        }
+    }
+
+    /// Sets every moving body from numbers written by
+    /// [`OdeWorld::write_moving_states`] (`data.len()` must be
+    /// `BODY_STATE_LEN * moving_count()`).
+    pub fn read_moving_states(&mut self, data: &[f64]) {
+        for (&id, b) in self.moving.iter().zip(data.chunks_exact(BODY_STATE_LEN)) {
+            let v3 = |k: usize| Vec3::new(b[k], b[k + 1], b[k + 2]);
+            let pose = Pose::new(v3(0), Quat::new(b[3], b[4], b[5], b[6]));
+            Self::set_body_state(id, &pose, v3(7), v3(10));
+            Self::set_quaternion_exactly(id, [b[3], b[4], b[5], b[6]]);
+        }
+    }
+
+    /// Gives body `id` exactly the quaternion `q` (w x y z), which ODE
+    /// held before: `dBodySetQuaternion` normalises what it is given, and
+    /// normalising a unit quaternion again may change its last bits. So
+    /// the input is corrected by what ODE changed (a few tries), then
+    /// scaled copies of `q` are tried (normalised, they differ from `q`
+    /// only in rounding) until ODE keeps `q`; if none does (not seen in the
+    /// tests), `q` as ODE normalises it.
+    fn set_quaternion_exactly(id: dBodyID, q: [f64; 4]) {
+        let try_input = |input: &[f64; 4]| {
+            // SAFETY: `id` is a live body of this world; ODE copies the 4
+            // numbers in and returns a pointer to its own 4.
+            unsafe {
+                dBodySetQuaternion(id, input.as_ptr());
+                let p = dBodyGetQuaternion(id);
+                [*p, *p.add(1), *p.add(2), *p.add(3)]
+            }
+        };
+        let mut input = q;
+        for _ in 0..4 {
+            let got = try_input(&input);
+            if got == q {
+                return;
+            }
+            for k in 0..4 {
+                input[k] += q[k] - got[k];
+            }
+        }
+        // Scaled copies of q normalise to q up to rounding, which differs
+        // from one scale to the next: try scales until one rounds to q.
+        for j in 1..=1000 {
+            let scale = 1.0 + f64::from(j) * if j % 2 == 0 { 1e-12 } else { -1e-12 };
+            if try_input(&q.map(|x| x * scale)) == q {
+                return;
+            }
+        }
+        try_input(&q);
+    }
+
+    /// This world's state of ODE's random generator (what
+    /// `dWorldQuickStep` draws from next).
+    pub fn rng_seed(&self) -> u64 {
+        self.rng_seed as u64
+    }
+
+    /// Sets this world's random-generator state.
+    pub fn set_rng_seed(&mut self, seed: u64) {
+        self.rng_seed = seed as std::ffi::c_ulong;
+    }
+
+    /// The moving bodies (indices as in [`OdeWorld::write_moving_states`])
+    /// in the order ODE last moved them, first moved first. ODE keeps the
+    /// shapes of a space in a list and puts a moved shape at its front;
+    /// the list's order is the order in which collision detection visits
+    /// pairs, which orders the contacts and so the solver's rows. A step
+    /// moves the bodies in its own order, which a restore must repeat to
+    /// continue identically ([`OdeWorld::restore_move_order`]).
+    pub fn move_order(&self) -> Vec<usize> {
+        let mut seen = vec![false; self.moving.len()];
+        let mut order = Vec::with_capacity(self.moving.len());
+        // SAFETY: reads this world's space and its geoms (dSpaceGetGeom
+        // walks the space's list; nothing is changed but its cursor).
+        let count = unsafe { dSpaceGetNumGeoms(self.space) };
+        for i in 0..count {
+            // SAFETY: as above; `i` is below the number of geoms.
+            let data = unsafe { dGeomGetData(dSpaceGetGeom(self.space, i)) } as usize;
+            let slot = self.ctx.geoms.get(data.wrapping_sub(1)).map(|g| g.slot);
+            if let Some(m) = slot.and_then(|s| self.moving_of_slot[s]) {
+                if !seen[m] {
+                    seen[m] = true;
+                    order.push(m);
+                }
+            }
+        }
+        order.reverse();
+        order
+    }
+
+    /// Moves the bodies in `order` (from [`OdeWorld::move_order`]) where
+    /// they are, so that the space's list is as it was when the order was
+    /// read: first brings every bounding box up to date (a collision pass
+    /// without contacts), then touches each body's position, which moves
+    /// its shapes to the list's front as a step does. Must be called with
+    /// [`ode_lock`] held.
+    pub fn restore_move_order(&mut self, order: &[usize]) {
+        // SAFETY: lock held (caller); the callback ignores its arguments.
+        unsafe { dSpaceCollide(self.space, std::ptr::null_mut(), Some(no_contacts)) };
+        for &m in order {
+            let Some(&id) = self.moving.get(m) else {
+                continue;
+            };
+            let p = Self::body_pose_of(id).position_m;
+            // SAFETY: `id` is a live body of this world; the position is
+            // its own (only its shapes are marked as moved).
+            unsafe { dBodySetPosition(id, p.x, p.y, p.z) };
         }
     }
 

@@ -132,89 +132,6 @@ fn continuous_joint_angles_are_unwrapped() {
     assert!((sim.time_s() - 7.0).abs() < 1e-9);
 }
 
-/// A scene with one pendulum: a 1 kg point-like mass 0.1 m out along x
-/// on a hinge about y, at rest horizontal, so gravity pulls it with
-/// 0.981 N m about +y.
-struct Pendulum {
-    dir: PathBuf,
-    scene: Scene,
-    robot: RobotModel,
-}
-
-const PENDULUM_TORQUE_NM: f64 = 0.981;
-const PENDULUM_INERTIA: f64 = 0.01 + 1e-4;
-
-fn pendulum(tag: &str, force_limit: f64, upper_limit_rad: f64) -> Pendulum {
-    let dir = std::env::temp_dir().join(format!(
-        "realitygap-ode-pendulum-{tag}-{}",
-        std::process::id()
-    ));
-    std::fs::create_dir_all(&dir).unwrap();
-    let urdf = format!(
-        r#"<robot name="pendulum">
-  <link name="stand">
-    <inertial><mass value="1"/><inertia ixx="1e-3" ixy="0" ixz="0" iyy="1e-3" iyz="0" izz="1e-3"/></inertial>
-  </link>
-  <joint name="hinge" type="revolute">
-    <parent link="stand"/><child link="arm"/>
-    <origin xyz="0 0 1"/><axis xyz="0 1 0"/>
-    <limit lower="-1" upper="{upper_limit_rad}" effort="100" velocity="10"/>
-  </joint>
-  <link name="arm">
-    <inertial><origin xyz="0.1 0 0"/><mass value="1"/><inertia ixx="1e-4" ixy="0" ixz="0" iyy="1e-4" iyz="0" izz="1e-4"/></inertial>
-    <collision><origin xyz="0.1 0 0"/><geometry><sphere radius="0.01"/></geometry></collision>
-  </link>
-</robot>"#
-    );
-    let urdf_path = dir.join("pendulum.urdf");
-    std::fs::write(&urdf_path, urdf).unwrap();
-    let toml = format!(
-        r#"name = "pendulum"
-duration_s = 1.0
-[robot]
-urdf = {:?}
-base_position_m = [0, 0, 0]
-[controller]
-gain_per_s = 10.0
-max_speed_deg_s = 30.0
-period_s = 0.05
-[[actuator]]
-joint = "hinge"
-kv = 10.0
-force_limit = {force_limit:?}
-[[schedule]]
-t_s = 0.0
-[[track]]
-role = "tip"
-link = "arm"
-"#,
-        urdf_path.display().to_string()
-    );
-    let scene = Scene::from_toml_str(&toml, &dir.join("pendulum.toml")).unwrap();
-    let robot = RobotModel::from_urdf_file(&urdf_path, &PackageResolver::new()).unwrap();
-    scene.validate(&robot).unwrap();
-    Pendulum { dir, scene, robot }
-}
-
-impl Drop for Pendulum {
-    fn drop(&mut self) {
-        std::fs::remove_dir_all(&self.dir).ok();
-    }
-}
-
-fn angle(sim: &OdeSimulation) -> f64 {
-    let mut q = [0.0];
-    sim.joint_angles_rad(&mut q);
-    q[0]
-}
-
-/// Mean joint velocity over `n` steps, rad/s.
-fn velocity_over(sim: &mut OdeSimulation, n: u64) -> f64 {
-    let before = angle(sim);
-    sim.step_n(n).unwrap();
-    (angle(sim) - before) / (n as f64 * sim.timestep_s())
-}
-
 /// `servo = "kv"`: the motor yields like a damper, so a load torque makes
 /// the joint creep at torque / kv; `servo = "motor"` (ODE's own motor)
 /// holds the target velocity up to the world CFM.
@@ -377,7 +294,7 @@ fn bad_settings_are_clear_errors() {
     let cases: &[(&[&str], &str)] = &[
         (
             &["integrator=rk4"],
-            "engine ode: setting `integrator`: unknown setting (ODE accepts: timestep_s",
+            "engine ode: setting `integrator`: unknown setting (accepted: timestep_s",
         ),
         (
             &["stepper=pgs"],
