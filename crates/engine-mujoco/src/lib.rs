@@ -32,12 +32,19 @@
 //! [`EngineError::Unstable`], never silently stepped over.
 
 pub mod mjcf;
+pub mod model_params;
+pub mod settings;
+mod state;
 
+pub use settings::{MujocoSettings, MUJOCO_DEFAULT_TIMESTEP_S, SETTINGS};
+
+use model_params::ModelSource;
 use mujoco_rs::mujoco_c;
 use mujoco_rs::prelude::*;
 use realitygap_core::engine::{
-    Engine, EngineError, EngineSettings, ModelVariation, SettingInfo, Simulation,
+    Engine, EngineError, EngineSettings, ModelVariation, SettingInfo, SimState, Simulation,
 };
+use realitygap_core::params::{ParamSupport, PhysicalParams};
 use realitygap_core::pose::{Pose, Quat, Vec3};
 use realitygap_core::robot::RobotModel;
 use realitygap_core::scene::{Scene, TrackTarget};
@@ -46,46 +53,6 @@ use std::sync::Mutex;
 
 /// The engine's name on the command line and in result directories.
 pub const ENGINE_NAME: &str = "mujoco";
-
-/// MuJoCo's own default timestep, s (used when the settings give none and
-/// the model is built from URDF).
-pub const MUJOCO_DEFAULT_TIMESTEP_S: f64 = 0.002;
-
-/// The settings accepted in `[engine.mujoco]` and by `--set`.
-pub const SETTINGS: &[SettingInfo] = &[
-    SettingInfo {
-        key: "timestep_s",
-        help: "integration timestep, s (> 0); default 0.002, or the MJCF file's own",
-    },
-    SettingInfo {
-        key: "integrator",
-        help: "euler | rk4 | implicit | implicitfast; default euler",
-    },
-    SettingInfo {
-        key: "solver",
-        help: "constraint solver: pgs | cg | newton; default newton",
-    },
-    SettingInfo {
-        key: "iterations",
-        help: "maximum solver iterations (>= 1); default 100",
-    },
-    SettingInfo {
-        key: "tolerance",
-        help: "solver tolerance (>= 0); default 1e-8",
-    },
-    SettingInfo {
-        key: "cone",
-        help: "friction cone: pyramidal | elliptic; default pyramidal",
-    },
-    SettingInfo {
-        key: "impratio",
-        help: "frictional-to-normal impedance ratio (> 0); default 1",
-    },
-    SettingInfo {
-        key: "noslip_iterations",
-        help: "no-slip solver iterations (>= 0); default 0",
-    },
-];
 
 /// The messages MuJoCo reported through its log since the last
 /// [`take_messages`] (warnings and errors; at most 64 kept).
@@ -148,133 +115,11 @@ pub fn mujoco_version() -> String {
 #[derive(Debug, Default, Clone, Copy)]
 pub struct MujocoEngine;
 
-/// Engine settings, checked.
-#[derive(Debug, Clone, Default, PartialEq)]
-struct Options {
-    timestep_s: Option<f64>,
-    integrator: Option<i32>,
-    solver: Option<i32>,
-    iterations: Option<i32>,
-    tolerance: Option<f64>,
-    cone: Option<i32>,
-    impratio: Option<f64>,
-    noslip_iterations: Option<i32>,
-}
-
-fn setting_error(key: &str, message: impl Into<String>) -> EngineError {
-    EngineError::Setting {
-        engine: ENGINE_NAME.to_string(),
-        key: key.to_string(),
-        message: message.into(),
-    }
-}
-
 fn load_error(message: impl Into<String>) -> EngineError {
     EngineError::Load {
         engine: ENGINE_NAME.to_string(),
         message: message.into(),
     }
-}
-
-fn parse_options(settings: &EngineSettings) -> Result<Options, EngineError> {
-    let mut o = Options::default();
-    for (key, value) in settings {
-        let number = |min: f64, inclusive: bool| -> Result<f64, EngineError> {
-            let v = value.as_f64().ok_or_else(|| {
-                setting_error(key, format!("expected a number, found \"{value}\""))
-            })?;
-            let ok = v.is_finite() && if inclusive { v >= min } else { v > min };
-            if ok {
-                Ok(v)
-            } else {
-                Err(setting_error(
-                    key,
-                    format!(
-                        "must be {} {min}, found {v}",
-                        if inclusive { ">=" } else { ">" }
-                    ),
-                ))
-            }
-        };
-        let whole = |min: i64| -> Result<i32, EngineError> {
-            let v = value.as_i64().ok_or_else(|| {
-                setting_error(key, format!("expected a whole number, found \"{value}\""))
-            })?;
-            if v >= min && v <= i32::MAX as i64 {
-                Ok(v as i32)
-            } else {
-                Err(setting_error(
-                    key,
-                    format!("must be a whole number >= {min}, found {v}"),
-                ))
-            }
-        };
-        let choice = |choices: &[(&str, i32)]| -> Result<i32, EngineError> {
-            let text = value.as_str().map(str::to_ascii_lowercase);
-            choices
-                .iter()
-                .find(|(n, _)| Some(*n) == text.as_deref())
-                .map(|(_, v)| *v)
-                .ok_or_else(|| {
-                    setting_error(
-                        key,
-                        format!(
-                            "\"{value}\" is not one of {}",
-                            choices
-                                .iter()
-                                .map(|(n, _)| *n)
-                                .collect::<Vec<_>>()
-                                .join(", ")
-                        ),
-                    )
-                })
-        };
-        match key.as_str() {
-            "timestep_s" => o.timestep_s = Some(number(0.0, false)?),
-            "integrator" => {
-                o.integrator = Some(choice(&[
-                    ("euler", mujoco_c::mjtIntegrator::mjINT_EULER as i32),
-                    ("rk4", mujoco_c::mjtIntegrator::mjINT_RK4 as i32),
-                    ("implicit", mujoco_c::mjtIntegrator::mjINT_IMPLICIT as i32),
-                    (
-                        "implicitfast",
-                        mujoco_c::mjtIntegrator::mjINT_IMPLICITFAST as i32,
-                    ),
-                ])?)
-            }
-            "solver" => {
-                o.solver = Some(choice(&[
-                    ("pgs", mujoco_c::mjtSolver::mjSOL_PGS as i32),
-                    ("cg", mujoco_c::mjtSolver::mjSOL_CG as i32),
-                    ("newton", mujoco_c::mjtSolver::mjSOL_NEWTON as i32),
-                ])?)
-            }
-            "iterations" => o.iterations = Some(whole(1)?),
-            "tolerance" => o.tolerance = Some(number(0.0, true)?),
-            "cone" => {
-                o.cone = Some(choice(&[
-                    ("pyramidal", mujoco_c::mjtCone::mjCONE_PYRAMIDAL as i32),
-                    ("elliptic", mujoco_c::mjtCone::mjCONE_ELLIPTIC as i32),
-                ])?)
-            }
-            "impratio" => o.impratio = Some(number(0.0, false)?),
-            "noslip_iterations" => o.noslip_iterations = Some(whole(0)?),
-            other => {
-                return Err(setting_error(
-                    other,
-                    format!(
-                        "unknown setting (MuJoCo accepts: {})",
-                        SETTINGS
-                            .iter()
-                            .map(|s| s.key)
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    ),
-                ))
-            }
-        }
-    }
-    Ok(o)
 }
 
 impl Engine for MujocoEngine {
@@ -295,22 +140,45 @@ impl Engine for MujocoEngine {
     }
 
     fn check_settings(&self, settings: &EngineSettings) -> Result<f64, EngineError> {
-        Ok(parse_options(settings)?
+        Ok(MujocoSettings::parse(settings)?
             .timestep_s
             .unwrap_or(MUJOCO_DEFAULT_TIMESTEP_S))
     }
 
-    fn load(
+    fn param_support(&self) -> Vec<ParamSupport> {
+        model_params::param_support()
+    }
+
+    fn load_with(
         &self,
         scene: &Scene,
         robot: &RobotModel,
         settings: &EngineSettings,
         variation: &ModelVariation,
+        params: &PhysicalParams,
     ) -> Result<Box<dyn Simulation>, EngineError> {
-        Ok(Box::new(MujocoSimulation::load(
-            scene, robot, settings, variation,
+        Ok(Box::new(MujocoSimulation::load_with(
+            scene, robot, settings, variation, params,
         )?))
     }
+}
+
+/// A scene object's body in the model and its free joint's addresses.
+#[derive(Debug, Clone)]
+struct ObjectSlot {
+    name: String,
+    /// `qpos` and `qvel` addresses of the object body's free joint; `None`
+    /// when the model (an MJCF file) lacks the body or it is not free.
+    free: Option<(usize, usize)>,
+}
+
+/// A held joint that is a joint of the model (MJCF files; the model built
+/// from URDF welds held joints): its addresses and scene angle.
+#[derive(Debug, Clone, Copy)]
+struct HeldJoint {
+    qpos_adr: usize,
+    dof_adr: usize,
+    angle_rad: f64,
 }
 
 /// A MuJoCo model and its state, driven through [`Simulation`].
@@ -324,6 +192,10 @@ pub struct MujocoSimulation {
     ctrl_index: Vec<usize>,
     /// Body index of each tracked body.
     tracked_body: Vec<usize>,
+    /// The scene's objects, in scene order.
+    objects: Vec<ObjectSlot>,
+    /// Held joints that are joints of the model.
+    held: Vec<HeldJoint>,
     /// Warning counters already seen (BADQPOS, BADQVEL, BADQACC).
     warnings_seen: [i32; 3],
 }
@@ -343,148 +215,211 @@ const INSTABILITY_WARNINGS: [(mujoco_c::mjtWarning, &str); 3] = [
     ),
 ];
 
-impl MujocoSimulation {
-    /// Builds the model of `scene` (from its MJCF file when it names one,
-    /// else from `robot`), applies `settings` and `variation`, and puts it
-    /// in its initial state.
-    pub fn load(
-        scene: &Scene,
-        robot: &RobotModel,
-        settings: &EngineSettings,
-        variation: &ModelVariation,
-    ) -> Result<MujocoSimulation, EngineError> {
-        let options = parse_options(settings)?;
-        let model = match &scene.robot.mjcf {
-            Some(path) => {
-                if !path.is_file() {
-                    return Err(load_error(format!(
-                        "MJCF file {} not found",
-                        path.display()
-                    )));
-                }
-                MjModel::from_xml(path)
-                    .map_err(|e| load_error(format!("MJCF file {}: {e}", path.display())))?
+/// Compiles the model: the scene's MJCF file as is, or MJCF written from
+/// the scene and `robot`.
+fn compile(scene: &Scene, robot: &RobotModel) -> Result<MjModel, EngineError> {
+    match &scene.robot.mjcf {
+        Some(path) => {
+            if !path.is_file() {
+                return Err(load_error(format!(
+                    "MJCF file {} not found",
+                    path.display()
+                )));
             }
-            None => {
-                let xml = mjcf::scene_to_mjcf(scene, robot).map_err(|e| load_error(e.0))?;
-                MjModel::from_xml_string(&xml).map_err(|e| {
-                    load_error(format!(
-                        "MuJoCo rejected the model built from {}: {e}",
-                        robot.source.display()
-                    ))
-                })?
-            }
-        };
-        let mut model = Box::new(model);
-        {
-            let opt = model.opt_mut();
-            if let Some(v) = options.timestep_s {
-                opt.timestep = v;
-            } else if scene.robot.mjcf.is_none() {
-                opt.timestep = MUJOCO_DEFAULT_TIMESTEP_S;
-            }
-            if let Some(v) = options.integrator {
-                opt.integrator = v;
-            }
-            if let Some(v) = options.solver {
-                opt.solver = v;
-            }
-            if let Some(v) = options.iterations {
-                opt.iterations = v;
-            }
-            if let Some(v) = options.tolerance {
-                opt.tolerance = v;
-            }
-            if let Some(v) = options.cone {
-                opt.cone = v;
-            }
-            if let Some(v) = options.impratio {
-                opt.impratio = v;
-            }
-            if let Some(v) = options.noslip_iterations {
-                opt.noslip_iterations = v;
-            }
+            MjModel::from_xml(path)
+                .map_err(|e| load_error(format!("MJCF file {}: {e}", path.display())))
         }
-        let scaled = !variation.is_identity();
-        if scaled {
-            for m in model.body_mass_mut() {
-                *m *= variation.mass_scale;
-            }
-            for i in model.body_inertia_mut() {
-                for c in i.iter_mut() {
-                    *c *= variation.mass_scale;
-                }
-            }
-            for f in model.geom_friction_mut() {
-                f[0] *= variation.friction_scale;
-            }
+        None => {
+            let xml = mjcf::scene_to_mjcf(scene, robot).map_err(|e| load_error(e.0))?;
+            MjModel::from_xml_string(&xml).map_err(|e| {
+                load_error(format!(
+                    "MuJoCo rejected the model built from {}: {e}",
+                    robot.source.display()
+                ))
+            })
         }
+    }
+}
 
-        // Names -> indices.
-        let by_name = |kind: MjtObjBase, name: &str| model.name_to_id(kind, name);
-        let mut qpos_adr = Vec::new();
-        let mut dof_adr = Vec::new();
-        let mut ctrl_index = Vec::new();
-        for a in &scene.actuators {
-            let j = by_name(MjtObjBase::mjOBJ_JOINT, &a.joint).ok_or_else(|| {
+/// Multiplies every body's mass and inertia and every geom's sliding
+/// friction by the variation's factors.
+fn apply_variation(model: &mut MjModel, variation: &ModelVariation) {
+    for m in model.body_mass_mut() {
+        *m *= variation.mass_scale;
+    }
+    for i in model.body_inertia_mut() {
+        for c in i.iter_mut() {
+            *c *= variation.mass_scale;
+        }
+    }
+    for f in model.geom_friction_mut() {
+        f[0] *= variation.friction_scale;
+    }
+}
+
+/// Addresses of the controlled joints: (qpos, qvel, actuator) per joint.
+fn resolve_actuators(
+    model: &MjModel,
+    scene: &Scene,
+) -> Result<(Vec<usize>, Vec<usize>, Vec<usize>), EngineError> {
+    let mut qpos_adr = Vec::new();
+    let mut dof_adr = Vec::new();
+    let mut ctrl_index = Vec::new();
+    for a in &scene.actuators {
+        let j = model
+            .name_to_id(MjtObjBase::mjOBJ_JOINT, &a.joint)
+            .ok_or_else(|| {
                 load_error(format!(
                     "the model has no joint named \"{}\"{}",
                     a.joint,
                     mjcf_note(scene)
                 ))
             })?;
-            let jtype = model.jnt_type()[j];
-            if jtype != mujoco_c::mjtJoint::mjJNT_HINGE && jtype != mujoco_c::mjtJoint::mjJNT_SLIDE
-            {
-                return Err(load_error(format!(
-                    "joint \"{}\" is not a hinge or slide joint in the model",
-                    a.joint
-                )));
-            }
-            qpos_adr.push(model.jnt_qposadr()[j] as usize);
-            dof_adr.push(model.jnt_dofadr()[j] as usize);
-            let actuator = (0..model.ffi().nu as usize)
-                .find(|&u| {
-                    model.actuator_trntype()[u] == mujoco_c::mjtTrn::mjTRN_JOINT
-                        && model.actuator_trnid()[u][0] as usize == j
-                })
+        let jtype = model.jnt_type()[j];
+        if jtype != mujoco_c::mjtJoint::mjJNT_HINGE && jtype != mujoco_c::mjtJoint::mjJNT_SLIDE {
+            return Err(load_error(format!(
+                "joint \"{}\" is not a hinge or slide joint in the model",
+                a.joint
+            )));
+        }
+        qpos_adr.push(model.jnt_qposadr()[j] as usize);
+        dof_adr.push(model.jnt_dofadr()[j] as usize);
+        let actuator = model_params::actuator_of(model, &a.joint).ok_or_else(|| {
+            load_error(format!(
+                "no actuator drives joint \"{}\"{}",
+                a.joint,
+                mjcf_note(scene)
+            ))
+        })?;
+        ctrl_index.push(actuator);
+    }
+    Ok((qpos_adr, dof_adr, ctrl_index))
+}
+
+fn resolve_tracked(model: &MjModel, scene: &Scene) -> Result<Vec<usize>, EngineError> {
+    let mut tracked_body = Vec::new();
+    for t in &scene.tracked {
+        let body = match &t.target {
+            TrackTarget::Link(link) => model
+                .name_to_id(MjtObjBase::mjOBJ_BODY, &mjcf::body_name(link))
                 .ok_or_else(|| {
                     load_error(format!(
-                        "no actuator drives joint \"{}\"{}",
-                        a.joint,
+                        "tracked link \"{link}\" is not a body of the model{}",
                         mjcf_note(scene)
                     ))
-                })?;
-            ctrl_index.push(actuator);
+                })?,
+            TrackTarget::Object(object) => {
+                model_params::object_body(model, object).ok_or_else(|| {
+                    load_error(format!(
+                        "tracked object \"{object}\" is not a body of the model{}",
+                        mjcf_note(scene)
+                    ))
+                })?
+            }
+        };
+        tracked_body.push(body);
+    }
+    Ok(tracked_body)
+}
+
+/// The scene's objects in the model, and the held joints that are joints
+/// of it.
+fn resolve_state_slots(model: &MjModel, scene: &Scene) -> (Vec<ObjectSlot>, Vec<HeldJoint>) {
+    let objects = scene
+        .objects
+        .iter()
+        .map(|o| {
+            let body = model_params::object_body(model, &o.name);
+            let free = body.and_then(|b| {
+                let j = model.body_jntadr()[b];
+                (model.body_jntnum()[b] == 1
+                    && j >= 0
+                    && model.jnt_type()[j as usize] == mujoco_c::mjtJoint::mjJNT_FREE)
+                    .then(|| {
+                        (
+                            model.jnt_qposadr()[j as usize] as usize,
+                            model.jnt_dofadr()[j as usize] as usize,
+                        )
+                    })
+            });
+            ObjectSlot {
+                name: o.name.clone(),
+                free,
+            }
+        })
+        .collect();
+    let held = scene
+        .robot
+        .held_joints_rad
+        .iter()
+        .filter_map(|(name, &angle_rad)| {
+            let j = model.name_to_id(MjtObjBase::mjOBJ_JOINT, name)?;
+            let t = model.jnt_type()[j];
+            (t == mujoco_c::mjtJoint::mjJNT_HINGE || t == mujoco_c::mjtJoint::mjJNT_SLIDE).then(
+                || HeldJoint {
+                    qpos_adr: model.jnt_qposadr()[j] as usize,
+                    dof_adr: model.jnt_dofadr()[j] as usize,
+                    angle_rad,
+                },
+            )
+        })
+        .collect();
+    (objects, held)
+}
+
+impl MujocoSimulation {
+    /// [`MujocoSimulation::load_with`] without physical parameters.
+    pub fn load(
+        scene: &Scene,
+        robot: &RobotModel,
+        settings: &EngineSettings,
+        variation: &ModelVariation,
+    ) -> Result<MujocoSimulation, EngineError> {
+        Self::load_with(scene, robot, settings, variation, &PhysicalParams::none())
+    }
+
+    /// Builds the model of `scene` (from its MJCF file when it names one,
+    /// else from `robot`), applies `settings`, the scene's gravity,
+    /// `params` ([`model_params::apply`]) and `variation`, and puts it in
+    /// its initial state: held joints at their scene angles, all at rest.
+    pub fn load_with(
+        scene: &Scene,
+        robot: &RobotModel,
+        settings: &EngineSettings,
+        variation: &ModelVariation,
+        params: &PhysicalParams,
+    ) -> Result<MujocoSimulation, EngineError> {
+        let options = MujocoSettings::parse(settings)?;
+        let mut model = Box::new(compile(scene, robot)?);
+        {
+            let opt = model.opt_mut();
+            if scene.robot.mjcf.is_none() {
+                opt.timestep = MUJOCO_DEFAULT_TIMESTEP_S;
+            }
+            options.apply(opt);
+            opt.gravity = scene.gravity_m_s2.to_array();
         }
-        let mut tracked_body = Vec::new();
-        for t in &scene.tracked {
-            let body = match &t.target {
-                TrackTarget::Link(link) => by_name(MjtObjBase::mjOBJ_BODY, &mjcf::body_name(link))
-                    .ok_or_else(|| {
-                        load_error(format!(
-                            "tracked link \"{link}\" is not a body of the model{}",
-                            mjcf_note(scene)
-                        ))
-                    })?,
-                TrackTarget::Object(object) => {
-                    let generated = format!("{}{object}", mjcf::OBJECT_BODY_PREFIX);
-                    by_name(MjtObjBase::mjOBJ_BODY, &generated)
-                        .or_else(|| by_name(MjtObjBase::mjOBJ_BODY, object))
-                        .ok_or_else(|| {
-                            load_error(format!(
-                                "tracked object \"{object}\" is not a body of the model{}",
-                                mjcf_note(scene)
-                            ))
-                        })?
-                }
-            };
-            tracked_body.push(body);
+        let source = match &scene.robot.mjcf {
+            Some(p) => ModelSource::AsIs(p),
+            None => ModelSource::Generated,
+        };
+        let mut set_const = model_params::apply(&mut model, scene, params, source)?;
+        if !variation.is_identity() {
+            apply_variation(&mut model, variation);
+            set_const = true;
         }
+        let (qpos_adr, dof_adr, ctrl_index) = resolve_actuators(&model, scene)?;
+        if source == ModelSource::Generated {
+            for a in scene.actuators.iter().filter(|a| a.force_limit == 0.0) {
+                model_params::set_servo(&mut model, &a.joint, None, Some(0.0), source)?;
+            }
+        }
+        let tracked_body = resolve_tracked(&model, scene)?;
+        let (objects, held) = resolve_state_slots(&model, scene);
 
         let mut data = MjData::try_new(model)
             .map_err(|e| load_error(format!("cannot allocate the simulation data: {e}")))?;
-        if scaled {
+        if set_const {
             // SAFETY: model and data belong together and are not in use elsewhere.
             unsafe {
                 let d = data.ffi_mut() as *mut mujoco_c::mjData;
@@ -492,17 +427,29 @@ impl MujocoSimulation {
                 mujoco_c::mj_setConst(m, d);
             }
         }
-        data.forward();
         let mut sim = MujocoSimulation {
             data,
             qpos_adr,
             dof_adr,
             ctrl_index,
             tracked_body,
+            objects,
+            held,
             warnings_seen: [0; 3],
         };
+        sim.place_held_joints();
+        sim.data.forward();
         sim.warnings_seen = sim.warning_counts();
         Ok(sim)
+    }
+
+    /// Puts the held joints that are joints of the model at their scene
+    /// angles, at rest.
+    fn place_held_joints(&mut self) {
+        for h in &self.held {
+            self.data.qpos_mut()[h.qpos_adr] = h.angle_rad;
+            self.data.qvel_mut()[h.dof_adr] = 0.0;
+        }
     }
 
     fn warning_counts(&self) -> [i32; 3] {
@@ -677,6 +624,14 @@ impl Simulation for MujocoSimulation {
             *o = self.body_pose_by_index(b);
         }
     }
+
+    fn state(&self) -> Result<SimState, EngineError> {
+        self.read_state()
+    }
+
+    fn set_state(&mut self, state: &SimState) -> Result<(), EngineError> {
+        self.write_state(state)
+    }
 }
 
 #[cfg(test)]
@@ -744,8 +699,16 @@ mod tests {
                 SettingValue::Float(2.5),
                 "expected a whole number",
             ),
-            ("iterations", SettingValue::Integer(0), ">= 1"),
-            ("gravity", SettingValue::Float(1.0), "unknown setting"),
+            (
+                "iterations",
+                SettingValue::Integer(0),
+                "whole number from 1 to",
+            ),
+            (
+                "gravity",
+                SettingValue::Float(1.0),
+                "unknown setting (accepted: timestep_s",
+            ),
         ] {
             let err = e
                 .check_settings(&settings(&[(key, value)]))

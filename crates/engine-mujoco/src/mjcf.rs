@@ -146,9 +146,11 @@ pub fn scene_to_mjcf(scene: &Scene, robot: &RobotModel) -> Result<String, MjcfEr
 
     for o in &scene.objects {
         let inertia = o.principal_inertia();
+        // With priority 1 the object's coefficient is the contact's
+        // (MuJoCo otherwise takes the larger of the two geoms').
         let friction = o
             .friction
-            .map(|f| format!(" friction=\"{} 0.005 0.0001\"", num(f)))
+            .map(|f| format!(" friction=\"{} 0.005 0.0001\" priority=\"1\"", num(f)))
             .unwrap_or_default();
         let geom = match o.shape {
             ObjectShape::Box { size_m } => {
@@ -183,7 +185,9 @@ pub fn scene_to_mjcf(scene: &Scene, robot: &RobotModel) -> Result<String, MjcfEr
 
     let mut actuators = String::new();
     for a in &scene.actuators {
-        let limit = if a.force_limit.is_finite() {
+        // A zero limit (servo off) is set on the compiled model: MuJoCo
+        // rejects an empty forcerange in MJCF.
+        let limit = if a.force_limit.is_finite() && a.force_limit > 0.0 {
             format!(
                 " forcelimited=\"true\" forcerange=\"{} {}\"",
                 num(-a.force_limit),
