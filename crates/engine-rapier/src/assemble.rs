@@ -29,24 +29,27 @@
 //!    are disabled; other robot bodies may touch.
 //! 5. **World.** A fixed half-space `z >= height_m` for the ground, one
 //!    dynamic box per scene object (mass from the scene, uniform density),
-//!    gravity (0, 0, -9.81) m/s^2, and the solver settings.
+//!    the scene's gravity, and the solver settings.
+//!
+//! The physical parameters that [`PhysicalParams::apply`] cannot write into
+//! the scene and robot are applied here, at load: joint `armature` (the
+//! multibody's per-DoF armature), object `restitution` (the collider's,
+//! combine rule `Max`) and `[contact]` softness (see [`crate::params`]).
 
 use crate::settings::RapierSettings;
 use crate::shapes::ShapeBuilder;
 use rapier3d::dynamics::{GenericJointBuilder, JointAxesMask, JointAxis, MotorModel};
 use rapier3d::math::{Pose as RPose, Rotation, Vector};
 use rapier3d::prelude::{
-    ColliderBuilder, MassProperties, MultibodyJointHandle, PhysicsWorld, RigidBodyBuilder,
-    RigidBodyHandle,
+    CoefficientCombineRule, ColliderBuilder, MassProperties, MultibodyJointHandle, PhysicsWorld,
+    RigidBodyBuilder, RigidBodyHandle,
 };
 use realitygap_core::engine::ModelVariation;
+use realitygap_core::params::PhysicalParams;
 use realitygap_core::pose::{Pose, Quat, Vec3};
 use realitygap_core::robot::{JointKind, RobotModel};
 use realitygap_core::scene::{ObjectShape, Scene, TrackTarget};
 use std::collections::HashMap;
-
-/// Standard gravity along -z, m/s^2.
-pub const GRAVITY_M_S2: f64 = 9.81;
 
 /// A controlled joint in the assembled world.
 #[derive(Debug, Clone)]
@@ -62,6 +65,9 @@ pub struct ControlledJoint {
     pub coordinate: usize,
     /// The servo's velocity gain, N m s/rad (the motor's damping).
     pub kv: f32,
+    /// Index of the joint's degree of freedom in the multibody's
+    /// generalized velocity vector.
+    pub dof: usize,
 }
 
 /// Where a frame sits: a body and the frame's pose in the body frame.
@@ -86,6 +92,8 @@ pub struct Assembly {
     /// A name for every body: the top link's name for a robot body,
     /// `object:NAME` for a scene object, `ground` for the ground.
     pub body_names: HashMap<RigidBodyHandle, String>,
+    /// The scene objects' bodies, in the scene's order.
+    pub objects: Vec<RigidBodyHandle>,
 }
 
 /// A rigid group of links (one Rapier body).
@@ -196,13 +204,16 @@ fn group_mass(
     (mass, com, inertia)
 }
 
-/// Builds the world of `scene` with `robot` (see the module documentation).
-/// Errors are messages for [`realitygap_core::EngineError::Load`].
+/// Builds the world of `scene` with `robot` (see the module documentation),
+/// with the engine-mapped keys of `params` (already checked by
+/// [`crate::params::check`]). Errors are messages for
+/// [`realitygap_core::EngineError::Load`].
 pub fn assemble(
     scene: &Scene,
     robot: &RobotModel,
     settings: &RapierSettings,
     variation: &ModelVariation,
+    params: &PhysicalParams,
 ) -> Result<Assembly, String> {
     if !(variation.mass_scale.is_finite() && variation.mass_scale > 0.0) {
         return Err(format!(
@@ -242,9 +253,9 @@ pub fn assemble(
                 a.joint, a.kv
             ));
         }
-        if a.force_limit.is_nan() || a.force_limit <= 0.0 {
+        if a.force_limit.is_nan() || a.force_limit < 0.0 {
             return Err(format!(
-                "actuator of joint \"{}\": force limit must be positive, found {}",
+                "actuator of joint \"{}\": force limit must be >= 0 (0 = servo off), found {}",
                 a.joint, a.force_limit
             ));
         }
@@ -319,7 +330,9 @@ pub fn assemble(
     }
 
     let mut world = PhysicsWorld::new();
-    world.gravity = Vector::new(0.0, 0.0, -GRAVITY_M_S2 as f32);
+    let g = scene.gravity_m_s2;
+    world.gravity = Vector::new(g.x as f32, g.y as f32, g.z as f32);
+    crate::params::apply_contact(&mut world.integration_parameters, &params.contact);
     let p = &mut world.integration_parameters;
     p.dt = settings.timestep_s as f32;
     p.num_solver_iterations = settings.solver_iterations;
@@ -437,8 +450,8 @@ pub fn assemble(
     }
 
     // Fix the multibody's root, place every link, then set the per-DoF
-    // damping and friction (DoF indices are final only once the root is
-    // known to be fixed).
+    // damping, armature and friction (DoF indices are final only once the
+    // root is known to be fixed).
     if let Some(first) = handles.values().next() {
         let (mb, _) = world
             .multibody_joints
@@ -455,6 +468,7 @@ pub fn assemble(
             .expect("the handle was just inserted");
         let dof = mb.link(link_id).expect("the link exists").assembly_id();
         mb.damping_mut()[dof] = joint.damping as f32;
+        mb.armature_mut()[dof] = params.armature(&joint.name).unwrap_or(0.0) as f32;
         mb.frictions_mut()[dof] = joint.friction as f32;
     }
 
@@ -468,12 +482,19 @@ pub fn assemble(
             } else {
                 JointAxis::AngX
             };
+            let handle = handles[&j];
+            let dof = world
+                .multibody_joints
+                .get(handle)
+                .and_then(|(mb, link)| mb.link(link))
+                .map_or(0, |l| l.assembly_id());
             ControlledJoint {
                 name: a.joint.clone(),
-                handle: handles[&j],
+                handle,
                 axis,
                 coordinate: axis as usize,
                 kv: a.kv as f32,
+                dof,
             }
         })
         .collect();
@@ -515,6 +536,7 @@ pub fn assemble(
         body_names.insert(body, "ground".to_string());
     }
     let mut objects = HashMap::new();
+    let mut object_bodies = Vec::with_capacity(scene.objects.len());
     for o in &scene.objects {
         let shape = match o.shape {
             ObjectShape::Box { size_m }
@@ -542,11 +564,19 @@ pub fn assemble(
                 o.mass_kg * variation.mass_scale
             ));
         }
-        let collider = shape.mass(mass).friction(friction(o.friction));
+        let mut collider = shape.mass(mass).friction(friction(o.friction));
+        if let Some(r) = params.restitution(&o.name) {
+            // The other colliders' restitution is 0: with `Max` the
+            // object's coefficient is the contact's.
+            collider = collider
+                .restitution(r as f32)
+                .restitution_combine_rule(CoefficientCombineRule::Max);
+        }
         world
             .colliders
             .insert_with_parent(collider.build(), body, &mut world.bodies);
         objects.insert(o.name.clone(), body);
+        object_bodies.push(body);
         body_names.insert(body, format!("object:{}", o.name));
     }
 
@@ -576,6 +606,7 @@ pub fn assemble(
         tracked,
         links,
         body_names,
+        objects: object_bodies,
     })
 }
 

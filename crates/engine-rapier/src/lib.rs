@@ -23,14 +23,17 @@
 //! [`EngineError::Unstable`] rather than stepping on.
 
 pub mod assemble;
+pub mod params;
 pub mod settings;
 pub mod shapes;
+pub mod state;
 
 use assemble::{from_rapier_pose, Assembly, BodyFrame, ControlledJoint};
-use rapier3d::prelude::PhysicsWorld;
+use rapier3d::prelude::{PhysicsWorld, RigidBodyHandle};
 use realitygap_core::engine::{
-    Engine, EngineError, EngineSettings, ModelVariation, SettingInfo, Simulation,
+    Engine, EngineError, EngineSettings, ModelVariation, SettingInfo, SimState, Simulation,
 };
+use realitygap_core::params::{ParamSupport, PhysicalParams};
 use realitygap_core::pose::Pose;
 use realitygap_core::robot::RobotModel;
 use realitygap_core::scene::Scene;
@@ -69,15 +72,20 @@ impl Engine for RapierEngine {
         Ok(RapierSettings::parse(settings)?.timestep_s)
     }
 
-    fn load(
+    fn param_support(&self) -> Vec<ParamSupport> {
+        params::support()
+    }
+
+    fn load_with(
         &self,
         scene: &Scene,
         robot: &RobotModel,
         settings: &EngineSettings,
         variation: &ModelVariation,
+        params: &PhysicalParams,
     ) -> Result<Box<dyn Simulation>, EngineError> {
-        Ok(Box::new(RapierSimulation::load(
-            scene, robot, settings, variation,
+        Ok(Box::new(RapierSimulation::load_with(
+            scene, robot, settings, variation, params,
         )?))
     }
 }
@@ -85,12 +93,23 @@ impl Engine for RapierEngine {
 /// A Rapier world of a scene, driven through [`Simulation`].
 pub struct RapierSimulation {
     world: PhysicsWorld,
+    /// The world as loaded, before the first step: [`Simulation::set_state`]
+    /// starts from it, so a state set mid-run continues exactly as in a
+    /// freshly loaded simulation.
+    pristine: state::Pristine,
     joints: Vec<ControlledJoint>,
     tracked: Vec<BodyFrame>,
     links: HashMap<String, BodyFrame>,
-    body_names: HashMap<rapier3d::prelude::RigidBodyHandle, String>,
+    body_names: HashMap<RigidBodyHandle, String>,
+    /// The scene objects: name and body, in the scene's order.
+    objects: Vec<(String, RigidBodyHandle)>,
     settings: RapierSettings,
+    /// Simulated time at the last [`Simulation::set_state`] (0 at load), s.
+    time_origin_s: f64,
+    /// Steps taken since then.
     steps: u64,
+    /// The servo velocity targets in force, rad/s.
+    targets: Vec<f64>,
 }
 
 fn load_error(message: impl Into<String>) -> EngineError {
@@ -110,34 +129,61 @@ fn usage_error(message: impl Into<String>) -> EngineError {
 impl RapierSimulation {
     /// Builds the world of `scene` with `robot` (see [`assemble`]), configured
     /// by `settings` and changed by `variation`, at rest with every controlled
-    /// joint at 0.
+    /// joint at 0, without physical parameters.
     pub fn load(
         scene: &Scene,
         robot: &RobotModel,
         settings: &EngineSettings,
         variation: &ModelVariation,
     ) -> Result<RapierSimulation, EngineError> {
+        Self::load_with(scene, robot, settings, variation, &PhysicalParams::none())
+    }
+
+    /// [`RapierSimulation::load`] with the engine-mapped keys of `params`
+    /// (`armature`, `restitution`, `[contact]`) applied; `scene` and `robot`
+    /// already carry the keys [`PhysicalParams::apply`] writes. A key that
+    /// would have no effect on this model is an [`EngineError::Param`]
+    /// ([`params::check`]).
+    pub fn load_with(
+        scene: &Scene,
+        robot: &RobotModel,
+        settings: &EngineSettings,
+        variation: &ModelVariation,
+        physical: &PhysicalParams,
+    ) -> Result<RapierSimulation, EngineError> {
         let settings = RapierSettings::parse(settings)?;
+        params::check(scene, robot, physical)?;
         let Assembly {
             world,
             joints,
             tracked,
             links,
             body_names,
-        } = assemble::assemble(scene, robot, &settings, variation).map_err(|m| {
+            objects,
+        } = assemble::assemble(scene, robot, &settings, variation, physical).map_err(|m| {
             load_error(format!(
                 "{m} (robot {}, scene {})",
                 robot.source.display(),
                 scene.source.display()
             ))
         })?;
+        let objects = scene
+            .objects
+            .iter()
+            .map(|o| o.name.clone())
+            .zip(objects)
+            .collect();
         Ok(RapierSimulation {
+            pristine: state::Pristine::of(&world),
+            targets: vec![0.0; joints.len()],
             world,
             joints,
             tracked,
             links,
             body_names,
+            objects,
             settings,
+            time_origin_s: 0.0,
             steps: 0,
         })
     }
@@ -254,7 +300,7 @@ impl Simulation for RapierSimulation {
     }
 
     fn time_s(&self) -> f64 {
-        self.steps as f64 * self.settings.timestep_s
+        self.time_origin_s + self.steps as f64 * self.settings.timestep_s
     }
 
     fn joint_count(&self) -> usize {
@@ -302,6 +348,9 @@ impl Simulation for RapierSimulation {
     }
 
     fn set_joint_velocity_targets(&mut self, rad_s: &[f64]) {
+        for (t, &v) in self.targets.iter_mut().zip(rad_s) {
+            *t = v;
+        }
         let world = &mut self.world;
         for (joint, &v) in self.joints.iter().zip(rad_s) {
             if let Some((mb, link_id)) = world.multibody_joints.get_mut(joint.handle) {
@@ -337,6 +386,14 @@ impl Simulation for RapierSimulation {
         for (o, frame) in out.iter_mut().zip(&self.tracked) {
             *o = self.frame_pose(frame);
         }
+    }
+
+    fn state(&self) -> Result<SimState, EngineError> {
+        Ok(self.read_state())
+    }
+
+    fn set_state(&mut self, state: &SimState) -> Result<(), EngineError> {
+        self.write_state(state)
     }
 }
 

@@ -1,7 +1,7 @@
 //! The engine settings (`[engine.rapier]` in a scene file, `--set` on the
 //! command line): parsing, checking, defaults.
 
-use realitygap_core::engine::{EngineError, EngineSettings, SettingInfo, SettingValue};
+use realitygap_core::engine::{EngineError, EngineSettings, SettingInfo, SettingsReader};
 
 use crate::ENGINE_NAME;
 
@@ -96,84 +96,49 @@ impl Default for RapierSettings {
     }
 }
 
-fn setting_error(key: &str, message: impl Into<String>) -> EngineError {
-    EngineError::Setting {
-        engine: ENGINE_NAME.to_string(),
-        key: key.to_string(),
-        message: message.into(),
-    }
-}
-
-fn whole(key: &str, value: &SettingValue, min: i64) -> Result<usize, EngineError> {
-    let v = value
-        .as_i64()
-        .ok_or_else(|| setting_error(key, format!("expected a whole number, found \"{value}\"")))?;
-    if (min..=MAX_ITERATIONS).contains(&v) {
-        Ok(v as usize)
-    } else {
-        Err(setting_error(
-            key,
-            format!("must be a whole number from {min} to {MAX_ITERATIONS}, found {v}"),
-        ))
-    }
-}
-
 impl RapierSettings {
-    /// Reads `settings`, checking every key and value; unknown keys and bad
-    /// values are errors naming the key and what is accepted.
+    /// Reads `settings` through the core's [`SettingsReader`], checking
+    /// every key and value; unknown keys and bad values are errors naming
+    /// the key and what is accepted.
     pub fn parse(settings: &EngineSettings) -> Result<RapierSettings, EngineError> {
-        let mut s = RapierSettings::default();
-        for (key, value) in settings {
-            match key.as_str() {
-                "timestep_s" => {
-                    let v = value.as_f64().ok_or_else(|| {
-                        setting_error(key, format!("expected a number, found \"{value}\""))
-                    })?;
-                    if !(v.is_finite() && v > 0.0 && v <= 1.0) {
-                        return Err(setting_error(
-                            key,
-                            format!("must be > 0 and at most 1 s, found {v}"),
-                        ));
-                    }
-                    s.timestep_s = v;
-                }
-                "solver_iterations" => s.solver_iterations = whole(key, value, 1)?,
-                "internal_pgs_iterations" => s.internal_pgs_iterations = whole(key, value, 1)?,
-                "stabilization_iterations" => s.stabilization_iterations = whole(key, value, 0)?,
-                "mesh_shape" => {
-                    s.mesh_shape = match value.as_str().map(str::to_ascii_lowercase).as_deref() {
-                        Some("convex_hull") => MeshShape::ConvexHull,
-                        Some("trimesh") => MeshShape::TriMesh,
-                        _ => {
-                            return Err(setting_error(
-                                key,
-                                format!("\"{value}\" is not one of convex_hull, trimesh"),
-                            ))
-                        }
-                    }
-                }
-                other => {
-                    return Err(setting_error(
-                        other,
-                        format!(
-                            "unknown setting (Rapier accepts: {})",
-                            SETTINGS
-                                .iter()
-                                .map(|s| s.key)
-                                .collect::<Vec<_>>()
-                                .join(", ")
-                        ),
-                    ))
-                }
-            }
-        }
-        Ok(s)
+        let r = SettingsReader::new(ENGINE_NAME, settings, SETTINGS)?;
+        let d = RapierSettings::default();
+        let count = |key: &str, min: i64, default: usize| -> Result<usize, EngineError> {
+            Ok(r.integer(key, min, MAX_ITERATIONS)?
+                .map_or(default, |v| v as usize))
+        };
+        Ok(RapierSettings {
+            timestep_s: r
+                .number("timestep_s", |v| v > 0.0 && v <= 1.0, "> 0 and at most 1 s")?
+                .unwrap_or(d.timestep_s),
+            solver_iterations: count("solver_iterations", 1, d.solver_iterations)?,
+            internal_pgs_iterations: count(
+                "internal_pgs_iterations",
+                1,
+                d.internal_pgs_iterations,
+            )?,
+            stabilization_iterations: count(
+                "stabilization_iterations",
+                0,
+                d.stabilization_iterations,
+            )?,
+            mesh_shape: r
+                .choice(
+                    "mesh_shape",
+                    &[
+                        ("convex_hull", MeshShape::ConvexHull),
+                        ("trimesh", MeshShape::TriMesh),
+                    ],
+                )?
+                .unwrap_or(d.mesh_shape),
+        })
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use realitygap_core::engine::SettingValue;
 
     fn settings(pairs: &[(&str, SettingValue)]) -> EngineSettings {
         pairs
@@ -260,7 +225,7 @@ mod tests {
             (
                 "iterations",
                 SettingValue::Integer(3),
-                "unknown setting (Rapier accepts: timestep_s",
+                "unknown setting (accepted: timestep_s",
             ),
         ];
         for (key, value, expected) in cases {
