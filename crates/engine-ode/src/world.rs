@@ -21,7 +21,7 @@
 
 use crate::ffi::*;
 use crate::plan::{ModelPlan, ShapePlan};
-use crate::settings::{Base, OdeSettings, Stepper};
+use crate::settings::{OdeSettings, Stepper};
 use realitygap_core::pose::{Pose, Quat, Vec3};
 use std::cell::Cell;
 use std::ffi::{c_char, c_int, c_void, CStr};
@@ -287,6 +287,90 @@ struct TriMeshStore {
     _indices: Vec<u32>,
 }
 
+/// Gives body `id` (live) this mass (kg) and inertia (kg m^2, about its
+/// centre, body axes); ODE's own check (`dMassCheck`) decides whether it is
+/// usable.
+fn set_mass(id: dBodyID, mass_kg: f64, i: &[f64; 9]) -> Result<(), String> {
+    let mut m = dMass::default();
+    // SAFETY: `m` is a local dMass that ODE fills and checks.
+    let ok = unsafe {
+        dMassSetParameters(
+            &mut m, mass_kg, 0.0, 0.0, 0.0, i[0], i[4], i[8], i[1], i[2], i[5],
+        );
+        dMassCheck(&m) != 0
+    };
+    if !ok {
+        let said = take_messages().join("; ");
+        return Err(format!(
+            "ODE rejects the mass {mass_kg} kg with inertia {i:?} kg m^2: {said}"
+        ));
+    }
+    // SAFETY: `id` is a live body (caller); ODE copies the mass.
+    unsafe { dBodySetMass(id, &m) };
+    Ok(())
+}
+
+/// Puts static geom `geom` at `pose` in the world.
+fn place_geom(geom: dGeomID, pose: &Pose) {
+    let p = pose.position_m;
+    // SAFETY: `geom` is a live geom without a body; ODE copies the numbers.
+    unsafe {
+        dGeomSetPosition(geom, p.x, p.y, p.z);
+        dGeomSetQuaternion(geom, quat(pose.orientation).as_ptr());
+    }
+}
+
+/// Attaches `geom` to body `id` at `offset` from the body frame.
+fn attach_geom(geom: dGeomID, id: dBodyID, offset: &Pose) {
+    let p = offset.position_m;
+    // SAFETY: `geom` and `id` are live and of the same world; ODE copies
+    // the numbers.
+    unsafe {
+        dGeomSetBody(geom, id);
+        dGeomSetOffsetPosition(geom, p.x, p.y, p.z);
+        dGeomSetOffsetQuaternion(geom, quat(offset.orientation).as_ptr());
+    }
+}
+
+/// Which owner slots may touch (`slots x slots`, slot 0 the ground, then
+/// the robot bodies, then the objects): not the ground with itself, not a
+/// robot body with itself, nor with any other unless `self_collision`,
+/// never a body with the one it hinges or is welded on, never the ground
+/// with the base or what is welded to it (held at its pose: the floor
+/// cannot push it).
+fn contact_mask(plan: &ModelPlan, self_collision: bool) -> Vec<bool> {
+    let robot_slots = plan.bodies.len();
+    let slots = 1 + robot_slots + plan.objects.len();
+    let mut may_touch = vec![true; slots * slots];
+    let mut forbid = |a: usize, b: usize| {
+        may_touch[a * slots + b] = false;
+        may_touch[b * slots + a] = false;
+    };
+    forbid(0, 0);
+    for a in 0..robot_slots {
+        for b in 0..robot_slots {
+            if a == b || !self_collision {
+                forbid(1 + a, 1 + b);
+            }
+        }
+    }
+    for h in &plan.hinges {
+        forbid(1 + h.child_body, 1 + h.parent_body);
+    }
+    for &(child, parent) in &plan.welds {
+        forbid(1 + child, 1 + parent);
+    }
+    let mut anchored = vec![false; robot_slots];
+    anchored[0] = true;
+    for &(child, parent) in &plan.welds {
+        anchored[child] = anchored[child] || anchored[parent];
+    }
+    for (b, _) in anchored.iter().enumerate().filter(|(_, &a)| a) {
+        forbid(0, 1 + b);
+    }
+    may_touch
+}
+
 /// The ODE objects of one simulation. Dropping it destroys them.
 pub struct OdeWorld {
     world: dWorldID,
@@ -327,9 +411,13 @@ pub struct OdeWorld {
 // and the thread that steps gets its per-thread ODE data in ode_lock().
 unsafe impl Send for OdeWorld {}
 
-fn vec3(p: *const dReal) -> Vec3 {
-    // SAFETY: ODE returns pointers to at least 3 dReals for positions and
-    // velocities, valid while the body exists.
+/// The 3 numbers at `p`.
+///
+/// # Safety
+/// `p` points to at least 3 readable `dReal`s (ODE's pointers to a live
+/// body's position and velocities are).
+unsafe fn vec3(p: *const dReal) -> Vec3 {
+    // SAFETY: the caller's promise.
     unsafe { Vec3::new(*p, *p.add(1), *p.add(2)) }
 }
 
@@ -348,48 +436,83 @@ impl OdeWorld {
         body_poses: &[Pose],
         joint_frames: &[(Pose, Vec3)],
     ) -> Result<OdeWorld, String> {
-        // SAFETY: ODE is initialised and the lock is held (caller); every
-        // pointer handed to ODE is either one ODE returned or a buffer kept
-        // alive in the returned value (trimesh data, collision context).
+        let mut w = Self::empty(plan, settings);
+        w.configure(plan, settings);
+        if let Some((height, mu)) = plan.ground {
+            w.add_ground(height, mu, settings.self_collision);
+        }
+        for (b, pose) in body_poses.iter().enumerate().take(plan.bodies.len()) {
+            w.add_robot_body(plan, b, pose, settings.self_collision)?;
+        }
+        w.hold_base_and_welds(plan);
+        for (h, frame) in plan.hinges.iter().zip(joint_frames) {
+            w.add_hinge(h, frame, settings);
+        }
+        for (i, o) in plan.objects.iter().enumerate() {
+            w.add_object(plan, i, o, settings.self_collision)?;
+        }
+        w.ctx.slots = 1 + plan.bodies.len() + plan.objects.len();
+        w.ctx.may_touch = contact_mask(plan, settings.self_collision);
+        w.index_moving_bodies(plan);
+        if let Some(softness) = plan.contact_softness {
+            w.ctx.soft = w.soft_contact_table(plan, &softness, settings.timestep_s);
+        }
+        Ok(w)
+    }
+
+    /// A world, a space and a contact group with nothing in them.
+    fn empty(plan: &ModelPlan, settings: &OdeSettings) -> OdeWorld {
+        // SAFETY: ODE is initialised and the lock is held (build's caller);
+        // these create new objects and return their handles.
+        let (world, space, contact_group) = unsafe {
+            (
+                dWorldCreate(),
+                dHashSpaceCreate(std::ptr::null_mut()),
+                dJointGroupCreate(0),
+            )
+        };
+        let ctx = Box::new(CollideContext {
+            world,
+            group: contact_group,
+            geoms: Vec::new(),
+            may_touch: Vec::new(),
+            slots: 0,
+            soft: Vec::new(),
+            bounce_velocity_m_s: settings.contact_bounce_velocity_m_s,
+            buffer: vec![dContact::default(); settings.max_contacts],
+            contacts: 0,
+            pairs: Vec::new(),
+        });
+        OdeWorld {
+            world,
+            space,
+            contact_group,
+            robot_bodies: Vec::new(),
+            object_bodies: Vec::new(),
+            names: plan
+                .bodies
+                .iter()
+                .map(|b| format!("the body of link {}", b.name))
+                .chain(plan.objects.iter().map(|o| format!("object {}", o.name)))
+                .collect(),
+            hinges: Vec::new(),
+            inertial_motors: Vec::new(),
+            moving: Vec::new(),
+            moving_of_slot: Vec::new(),
+            trimeshes: Vec::new(),
+            ctx,
+            stepper: settings.stepper,
+            timestep_s: settings.timestep_s,
+            rng_seed: 0,
+        }
+    }
+
+    /// The world's gravity (the scene's), ERP, CFM, solver and contact
+    /// settings; bodies never fall asleep.
+    fn configure(&mut self, plan: &ModelPlan, settings: &OdeSettings) {
+        let (world, g) = (self.world, plan.gravity_m_s2);
+        // SAFETY: `world` is this world's; setters copy plain numbers.
         unsafe {
-            let world = dWorldCreate();
-            let space = dHashSpaceCreate(std::ptr::null_mut());
-            let contact_group = dJointGroupCreate(0);
-            let ctx = Box::new(CollideContext {
-                world,
-                group: contact_group,
-                geoms: Vec::new(),
-                may_touch: Vec::new(),
-                slots: 0,
-                soft: Vec::new(),
-                bounce_velocity_m_s: settings.contact_bounce_velocity_m_s,
-                buffer: vec![dContact::default(); settings.max_contacts],
-                contacts: 0,
-                pairs: Vec::new(),
-            });
-            let mut w = OdeWorld {
-                world,
-                space,
-                contact_group,
-                robot_bodies: Vec::new(),
-                object_bodies: Vec::new(),
-                names: plan
-                    .bodies
-                    .iter()
-                    .map(|b| format!("the body of link {}", b.name))
-                    .chain(plan.objects.iter().map(|o| format!("object {}", o.name)))
-                    .collect(),
-                hinges: Vec::new(),
-                inertial_motors: Vec::new(),
-                moving: Vec::new(),
-                moving_of_slot: Vec::new(),
-                trimeshes: Vec::new(),
-                ctx,
-                stepper: settings.stepper,
-                timestep_s: settings.timestep_s,
-                rng_seed: 0,
-            };
-            let g = plan.gravity_m_s2;
             dWorldSetGravity(world, g.x, g.y, g.z);
             dWorldSetERP(world, settings.erp);
             dWorldSetCFM(world, settings.cfm);
@@ -398,217 +521,209 @@ impl OdeWorld {
             dWorldSetContactMaxCorrectingVel(world, settings.contact_max_correcting_vel_m_s);
             dWorldSetContactSurfaceLayer(world, settings.contact_surface_layer_m);
             dWorldSetAutoDisableFlag(world, 0);
-
-            let robot_slots = plan.bodies.len();
-            let slots = 1 + robot_slots + plan.objects.len();
-            let slot_of = |o: Owner| match o {
-                Owner::Ground => 0,
-                Owner::Robot(b) => 1 + b,
-                Owner::Object(i) => 1 + robot_slots + i,
-            };
-
-            if let Some((height, mu)) = plan.ground {
-                let g = dCreatePlane(space, 0.0, 0.0, 1.0, height);
-                w.register_geom(
-                    g,
-                    GeomSurface {
-                        slot: 0,
-                        mu,
-                        restitution: -1.0,
-                    },
-                    Owner::Ground,
-                    settings.self_collision,
-                );
-            }
-
-            for (b, body) in plan.bodies.iter().enumerate() {
-                let pose = body_poses[b];
-                let id = if body.is_static {
-                    std::ptr::null_mut()
-                } else {
-                    let Some(m) = body.mass else {
-                        return Err(format!(
-                            "the body of link {} has no mass and cannot move",
-                            body.name
-                        ));
-                    };
-                    let id = dBodyCreate(world);
-                    w.set_mass(id, m.mass_kg, &m.inertia)
-                        .map_err(|e| format!("the body of link {}: {e}", body.name))?;
-                    dBodySetPosition(id, pose.position_m.x, pose.position_m.y, pose.position_m.z);
-                    dBodySetQuaternion(id, quat(pose.orientation).as_ptr());
-                    id
-                };
-                w.robot_bodies.push(id);
-                for g in &body.geoms {
-                    let geom = w.create_geom(&g.shape);
-                    if id.is_null() {
-                        let at = pose.compose(&g.offset);
-                        dGeomSetPosition(geom, at.position_m.x, at.position_m.y, at.position_m.z);
-                        dGeomSetQuaternion(geom, quat(at.orientation).as_ptr());
-                    } else {
-                        dGeomSetBody(geom, id);
-                        dGeomSetOffsetPosition(
-                            geom,
-                            g.offset.position_m.x,
-                            g.offset.position_m.y,
-                            g.offset.position_m.z,
-                        );
-                        dGeomSetOffsetQuaternion(geom, quat(g.offset.orientation).as_ptr());
-                    }
-                    let surface = GeomSurface {
-                        slot: slot_of(Owner::Robot(b)),
-                        mu: plan.robot_mu,
-                        restitution: -1.0,
-                    };
-                    w.register_geom(geom, surface, Owner::Robot(b), settings.self_collision);
-                }
-            }
-            let base_is_body = !w.robot_bodies[0].is_null();
-            if base_is_body {
-                debug_assert_eq!(settings.base, Base::FixedJoint);
-                let fixed = dJointCreateFixed(world, std::ptr::null_mut());
-                dJointAttach(fixed, w.robot_bodies[0], std::ptr::null_mut());
-                dJointSetFixed(fixed);
-            }
-
-            for &(child, parent) in &plan.welds {
-                let fixed = dJointCreateFixed(world, std::ptr::null_mut());
-                dJointAttach(fixed, w.robot_bodies[child], w.robot_bodies[parent]);
-                dJointSetFixed(fixed);
-            }
-
-            for (h, (frame, axis)) in plan.hinges.iter().zip(joint_frames) {
-                let joint = dJointCreateHinge(world, std::ptr::null_mut());
-                dJointAttach(
-                    joint,
-                    w.robot_bodies[h.child_body],
-                    w.robot_bodies[h.parent_body],
-                );
-                let a = frame.orientation.rotate(*axis);
-                dJointSetHingeAnchor(
-                    joint,
-                    frame.position_m.x,
-                    frame.position_m.y,
-                    frame.position_m.z,
-                );
-                dJointSetHingeAxis(joint, a.x, a.y, a.z);
-                if let Some(lo) = h.stops_rad.0 {
-                    dJointSetHingeParam(joint, dParamLoStop as c_int, lo);
-                }
-                if let Some(hi) = h.stops_rad.1 {
-                    dJointSetHingeParam(joint, dParamHiStop as c_int, hi);
-                }
-                dJointSetHingeParam(joint, dParamVel as c_int, 0.0);
-                dJointSetHingeParam(joint, dParamFMax as c_int, h.force_limit_nm);
-                if settings.servo == crate::settings::Servo::Kv {
-                    // torque = kv (v_target - v_next): the motor row's CFM is
-                    // the inverse of the damper gain (see the README).
-                    let cfm = if h.kv > 0.0 {
-                        1.0 / h.kv
-                    } else {
-                        f64::INFINITY
-                    };
-                    if cfm.is_finite() {
-                        dJointSetHingeParam(joint, dParamCFM as c_int, cfm);
-                    } else {
-                        dJointSetHingeParam(joint, dParamFMax as c_int, 0.0);
-                    }
-                }
-                if h.friction_nm > 0.0 {
-                    // Coulomb joint friction: a second motor holding zero
-                    // velocity with at most the friction torque.
-                    let motor = w.axis_motor(h, a);
-                    dJointSetAMotorParam(motor, dParamVel as c_int, 0.0);
-                    dJointSetAMotorParam(motor, dParamFMax as c_int, h.friction_nm);
-                }
-                if let Some((gain, inertial)) = h.passive_row(settings.timestep_s) {
-                    // Damping and armature: one unbounded, softened motor
-                    // row (see HingePlan::passive_row).
-                    let motor = w.axis_motor(h, a);
-                    dJointSetAMotorParam(motor, dParamVel as c_int, 0.0);
-                    dJointSetAMotorParam(motor, dParamFMax as c_int, f64::INFINITY);
-                    dJointSetAMotorParam(motor, dParamCFM as c_int, 1.0 / gain);
-                    if inertial > 0.0 {
-                        w.inertial_motors
-                            .push((motor, w.hinges.len(), inertial / gain));
-                    }
-                }
-                w.hinges.push(joint);
-            }
-
-            for (i, o) in plan.objects.iter().enumerate() {
-                let id = dBodyCreate(world);
-                w.set_mass(id, o.mass.mass_kg, &o.mass.inertia)
-                    .map_err(|e| format!("object \"{}\": {e}", o.name))?;
-                dBodySetPosition(
-                    id,
-                    o.pose.position_m.x,
-                    o.pose.position_m.y,
-                    o.pose.position_m.z,
-                );
-                dBodySetQuaternion(id, quat(o.pose.orientation).as_ptr());
-                let geom = dCreateBox(space, o.size_m.x, o.size_m.y, o.size_m.z);
-                dGeomSetBody(geom, id);
-                let surface = GeomSurface {
-                    slot: slot_of(Owner::Object(i)),
-                    mu: o.mu,
-                    restitution: o.restitution.unwrap_or(-1.0),
-                };
-                w.register_geom(geom, surface, Owner::Object(i), settings.self_collision);
-                w.object_bodies.push(id);
-            }
-
-            // Which owners may touch.
-            let mut may_touch = vec![true; slots * slots];
-            let mut forbid = |a: usize, b: usize| {
-                may_touch[a * slots + b] = false;
-                may_touch[b * slots + a] = false;
-            };
-            forbid(0, 0);
-            for a in 0..robot_slots {
-                for b in 0..robot_slots {
-                    if a == b || !settings.self_collision {
-                        forbid(1 + a, 1 + b);
-                    }
-                }
-            }
-            for h in &plan.hinges {
-                forbid(1 + h.child_body, 1 + h.parent_body);
-            }
-            for &(child, parent) in &plan.welds {
-                forbid(1 + child, 1 + parent);
-            }
-            // The base, and whatever is welded to it, is held at its pose:
-            // the floor cannot push it.
-            let mut anchored = vec![false; robot_slots];
-            anchored[0] = true;
-            for &(child, parent) in &plan.welds {
-                anchored[child] = anchored[child] || anchored[parent];
-            }
-            for (b, _) in anchored.iter().enumerate().filter(|(_, &a)| a) {
-                forbid(0, 1 + b);
-            }
-            w.ctx.may_touch = may_touch;
-            w.ctx.slots = slots;
-            w.index_moving_bodies(plan);
-            if let Some(softness) = plan.contact_softness {
-                w.ctx.soft = w.soft_contact_table(plan, &softness, settings.timestep_s);
-            }
-            Ok(w)
         }
+    }
+
+    /// The ground plane at `height` m with friction `mu`.
+    fn add_ground(&mut self, height: f64, mu: f64, self_collision: bool) {
+        // SAFETY: the space is this world's; the plane is placed in it.
+        let geom = unsafe { dCreatePlane(self.space, 0.0, 0.0, 1.0, height) };
+        let surface = GeomSurface {
+            slot: 0,
+            mu,
+            restitution: -1.0,
+        };
+        self.register_geom(geom, surface, Owner::Ground, self_collision);
+    }
+
+    /// Robot body `b` of the plan at `pose` (its centre of mass), with its
+    /// shapes; a static body only places its shapes.
+    fn add_robot_body(
+        &mut self,
+        plan: &ModelPlan,
+        b: usize,
+        pose: &Pose,
+        self_collision: bool,
+    ) -> Result<(), String> {
+        let body = &plan.bodies[b];
+        let id = if body.is_static {
+            std::ptr::null_mut()
+        } else {
+            let Some(m) = body.mass else {
+                return Err(format!(
+                    "the body of link {} has no mass and cannot move",
+                    body.name
+                ));
+            };
+            let id = self
+                .new_body(m.mass_kg, &m.inertia, pose)
+                .map_err(|e| format!("the body of link {}: {e}", body.name))?;
+            id
+        };
+        self.robot_bodies.push(id);
+        for g in &body.geoms {
+            let geom = self.create_geom(&g.shape);
+            if id.is_null() {
+                place_geom(geom, &pose.compose(&g.offset));
+            } else {
+                attach_geom(geom, id, &g.offset);
+            }
+            let surface = GeomSurface {
+                slot: 1 + b,
+                mu: plan.robot_mu,
+                restitution: -1.0,
+            };
+            self.register_geom(geom, surface, Owner::Robot(b), self_collision);
+        }
+        Ok(())
+    }
+
+    /// A body with this mass (kg) and inertia (kg m^2, about its centre,
+    /// body axes) at `pose`, at rest.
+    fn new_body(
+        &mut self,
+        mass_kg: f64,
+        inertia: &[f64; 9],
+        pose: &Pose,
+    ) -> Result<dBodyID, String> {
+        // SAFETY: the world is this world's; the new body belongs to it
+        // and is destroyed with it.
+        let id = unsafe { dBodyCreate(self.world) };
+        set_mass(id, mass_kg, inertia)?;
+        Self::set_body_state(id, pose, Vec3::ZERO, Vec3::ZERO);
+        Ok(id)
+    }
+
+    /// The base held to the world by a fixed joint (unless it is static),
+    /// and the bodies of `weld = "fixed_joint"` held to their parents.
+    fn hold_base_and_welds(&mut self, plan: &ModelPlan) {
+        let base = self.robot_bodies[0];
+        let mut pairs = plan
+            .welds
+            .iter()
+            .map(|&(child, parent)| (self.robot_bodies[child], self.robot_bodies[parent]))
+            .collect::<Vec<_>>();
+        if !base.is_null() {
+            pairs.insert(0, (base, std::ptr::null_mut()));
+        }
+        for (a, b) in pairs {
+            // SAFETY: the world and the bodies (or null: the world frame)
+            // are this world's; the joint fixes their current relative pose.
+            unsafe {
+                let fixed = dJointCreateFixed(self.world, std::ptr::null_mut());
+                dJointAttach(fixed, a, b);
+                dJointSetFixed(fixed);
+            }
+        }
+    }
+
+    /// The hinge of a controlled joint with its stops and motor, and its
+    /// friction and passive (damping, armature) rows; `frame` is the world
+    /// pose of the joint's child link frame and the unit axis in it.
+    fn add_hinge(
+        &mut self,
+        h: &crate::plan::HingePlan,
+        frame: &(Pose, Vec3),
+        settings: &OdeSettings,
+    ) {
+        let (child, parent) = (
+            self.robot_bodies[h.child_body],
+            self.robot_bodies[h.parent_body],
+        );
+        let (at, a) = (frame.0.position_m, frame.0.orientation.rotate(frame.1));
+        // SAFETY: the world and bodies are this world's; the hinge joins
+        // them; the setters copy plain numbers.
+        let joint = unsafe {
+            let joint = dJointCreateHinge(self.world, std::ptr::null_mut());
+            dJointAttach(joint, child, parent);
+            dJointSetHingeAnchor(joint, at.x, at.y, at.z);
+            dJointSetHingeAxis(joint, a.x, a.y, a.z);
+            joint
+        };
+        let set = |param: u32, value: f64| {
+            // SAFETY: `joint` is the hinge just made, of this world.
+            unsafe { dJointSetHingeParam(joint, param as c_int, value) }
+        };
+        if let Some(lo) = h.stops_rad.0 {
+            set(dParamLoStop, lo);
+        }
+        if let Some(hi) = h.stops_rad.1 {
+            set(dParamHiStop, hi);
+        }
+        set(dParamVel, 0.0);
+        set(dParamFMax, h.force_limit_nm);
+        if settings.servo == crate::settings::Servo::Kv {
+            // torque = kv (v_target - v_next): the motor row's CFM is the
+            // inverse of the damper gain (see the README).
+            if h.kv > 0.0 {
+                set(dParamCFM, 1.0 / h.kv);
+            } else {
+                set(dParamFMax, 0.0);
+            }
+        }
+        if h.friction_nm > 0.0 {
+            // Coulomb joint friction: a second motor holding zero velocity
+            // with at most the friction torque.
+            self.axis_motor(h, a, 0.0, h.friction_nm, None);
+        }
+        if let Some((gain, inertial)) = h.passive_row(settings.timestep_s) {
+            // Damping and armature: one unbounded, softened motor row (see
+            // HingePlan::passive_row).
+            let motor = self.axis_motor(h, a, 0.0, f64::INFINITY, Some(1.0 / gain));
+            if inertial > 0.0 {
+                self.inertial_motors
+                    .push((motor, self.hinges.len(), inertial / gain));
+            }
+        }
+        self.hinges.push(joint);
+    }
+
+    /// Scene object `i` (a box) at its pose, at rest.
+    fn add_object(
+        &mut self,
+        plan: &ModelPlan,
+        i: usize,
+        o: &crate::plan::ObjectPlan,
+        self_collision: bool,
+    ) -> Result<(), String> {
+        let id = self
+            .new_body(o.mass.mass_kg, &o.mass.inertia, &o.pose)
+            .map_err(|e| format!("object \"{}\": {e}", o.name))?;
+        // SAFETY: the space and the body are this world's.
+        let geom = unsafe {
+            let geom = dCreateBox(self.space, o.size_m.x, o.size_m.y, o.size_m.z);
+            dGeomSetBody(geom, id);
+            geom
+        };
+        let surface = GeomSurface {
+            slot: 1 + plan.bodies.len() + i,
+            mu: o.mu,
+            restitution: o.restitution.unwrap_or(-1.0),
+        };
+        self.register_geom(geom, surface, Owner::Object(i), self_collision);
+        self.object_bodies.push(id);
+        Ok(())
     }
 
     /// A one-axis angular motor (`dAMotorUser`) on hinge `h`'s bodies about
     /// its world axis `axis`, the axis fixed in the child body (so it turns
-    /// with the joint).
-    fn axis_motor(&self, h: &crate::plan::HingePlan, axis: Vec3) -> dJointID {
+    /// with the joint), with target velocity `vel` (rad/s), torque bound
+    /// `fmax` (N m) and, when given, its own CFM.
+    fn axis_motor(
+        &self,
+        h: &crate::plan::HingePlan,
+        axis: Vec3,
+        vel: f64,
+        fmax: f64,
+        cfm: Option<f64>,
+    ) -> dJointID {
         let (child, parent) = (
             self.robot_bodies[h.child_body],
             self.robot_bodies[h.parent_body],
         );
         // SAFETY: the world and both bodies (or null for the world) are
-        // this world's, alive; the motor joins them like the hinge does.
+        // this world's, alive; the motor joins them like the hinge does;
+        // the setters copy plain numbers.
         unsafe {
             let motor = dJointCreateAMotor(self.world, std::ptr::null_mut());
             dJointAttach(motor, child, parent);
@@ -616,6 +731,11 @@ impl OdeWorld {
             dJointSetAMotorNumAxes(motor, 1);
             // rel = 1: the axis is anchored to the first (child) body.
             dJointSetAMotorAxis(motor, 0, 1, axis.x, axis.y, axis.z);
+            dJointSetAMotorParam(motor, dParamVel as c_int, vel);
+            dJointSetAMotorParam(motor, dParamFMax as c_int, fmax);
+            if let Some(cfm) = cfm {
+                dJointSetAMotorParam(motor, dParamCFM as c_int, cfm);
+            }
             motor
         }
     }
@@ -668,45 +788,38 @@ impl OdeWorld {
         table
     }
 
-    /// # Safety
-    /// `id` is a body of this world.
-    unsafe fn set_mass(&self, id: dBodyID, mass_kg: f64, i: &[f64; 9]) -> Result<(), String> {
-        let mut m = dMass::default();
-        dMassSetParameters(
-            &mut m, mass_kg, 0.0, 0.0, 0.0, i[0], i[4], i[8], i[1], i[2], i[5],
-        );
-        if dMassCheck(&m) == 0 {
-            let said = take_messages().join("; ");
-            return Err(format!(
-                "ODE rejects the mass {mass_kg} kg with inertia {i:?} kg m^2: {said}"
-            ));
-        }
-        dBodySetMass(id, &m);
-        Ok(())
-    }
-
-    /// # Safety
-    /// Called during build, with the lock held.
-    unsafe fn create_geom(&mut self, shape: &ShapePlan) -> dGeomID {
+    /// A shape of the plan in this world's space (not yet on a body).
+    /// Called while building, with the lock held.
+    fn create_geom(&mut self, shape: &ShapePlan) -> dGeomID {
+        let space = self.space;
+        // SAFETY (every block below): `space` is this world's space; the
+        // new geom is placed in it and destroyed with it.
         match shape {
-            ShapePlan::Box(s) => dCreateBox(self.space, s.x, s.y, s.z),
-            ShapePlan::Sphere(r) => dCreateSphere(self.space, *r),
-            ShapePlan::Cylinder(r, l) => dCreateCylinder(self.space, *r, *l),
-            ShapePlan::Capsule(r, l) => dCreateCapsule(self.space, *r, *l),
+            ShapePlan::Box(s) => unsafe { dCreateBox(space, s.x, s.y, s.z) },
+            ShapePlan::Sphere(r) => unsafe { dCreateSphere(space, *r) },
+            ShapePlan::Cylinder(r, l) => unsafe { dCreateCylinder(space, *r, *l) },
+            ShapePlan::Capsule(r, l) => unsafe { dCreateCapsule(space, *r, *l) },
             ShapePlan::Mesh(m) => {
-                let data = dGeomTriMeshDataCreate();
                 let vertices = m.vertices.clone();
                 let indices = m.indices.clone();
-                dGeomTriMeshDataBuildDouble(
-                    data,
-                    vertices.as_ptr() as *const c_void,
-                    (3 * std::mem::size_of::<f64>()) as c_int,
-                    (vertices.len() / 3) as c_int,
-                    indices.as_ptr() as *const c_void,
-                    indices.len() as c_int,
-                    (3 * std::mem::size_of::<u32>()) as c_int,
-                );
-                let geom = dCreateTriMesh(self.space, data, None, None, None);
+                // SAFETY: ODE keeps pointers to `vertices` and `indices`,
+                // whose heap buffers live (unmoved) in `self.trimeshes`
+                // until the world is dropped, after the space; the counts
+                // and strides describe them (3 f64 per vertex, 3 u32 per
+                // triangle, sizes checked in plan::mesh_plan).
+                let (data, geom) = unsafe {
+                    let data = dGeomTriMeshDataCreate();
+                    dGeomTriMeshDataBuildDouble(
+                        data,
+                        vertices.as_ptr() as *const c_void,
+                        (3 * std::mem::size_of::<f64>()) as c_int,
+                        (vertices.len() / 3) as c_int,
+                        indices.as_ptr() as *const c_void,
+                        indices.len() as c_int,
+                        (3 * std::mem::size_of::<u32>()) as c_int,
+                    );
+                    (data, dCreateTriMesh(space, data, None, None, None))
+                };
                 self.trimeshes.push(TriMeshStore {
                     data,
                     _vertices: vertices,
@@ -717,9 +830,9 @@ impl OdeWorld {
         }
     }
 
-    /// # Safety
-    /// `geom` is a geom of this world's space.
-    unsafe fn register_geom(
+    /// Records `geom`'s surface for the collision callback (its user data
+    /// is its index + 1) and sets its collision categories.
+    fn register_geom(
         &mut self,
         geom: dGeomID,
         surface: GeomSurface,
@@ -727,7 +840,6 @@ impl OdeWorld {
         self_collision: bool,
     ) {
         self.ctx.geoms.push(surface);
-        dGeomSetData(geom, self.ctx.geoms.len() as *mut c_void);
         // Category bits let the space skip pairs that never touch before it
         // compares bounding boxes; the callback decides the rest.
         let (category, collide) = match owner {
@@ -742,8 +854,13 @@ impl OdeWorld {
                 CATEGORY_GROUND | CATEGORY_ROBOT | CATEGORY_OBJECT,
             ),
         };
-        dGeomSetCategoryBits(geom, category);
-        dGeomSetCollideBits(geom, collide);
+        // SAFETY: `geom` is a live geom of this world's space; the user
+        // data is a number, never dereferenced.
+        unsafe {
+            dGeomSetData(geom, self.ctx.geoms.len() as *mut c_void);
+            dGeomSetCategoryBits(geom, category);
+            dGeomSetCollideBits(geom, collide);
+        }
     }
 
     /// The timestep, s.
@@ -973,7 +1090,9 @@ impl OdeWorld {
     /// This world's state of ODE's random generator (what
     /// `dWorldQuickStep` draws from next).
     pub fn rng_seed(&self) -> u64 {
-        self.rng_seed as u64
+        // c_ulong is u64 here, u32 on some platforms.
+        #[allow(clippy::useless_conversion)]
+        u64::from(self.rng_seed)
     }
 
     /// Sets this world's random-generator state.
