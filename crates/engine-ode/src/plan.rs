@@ -473,6 +473,47 @@ pub fn plan(
     settings: &OdeSettings,
     variation: &ModelVariation,
 ) -> Result<ModelPlan, PlanError> {
+    let actuated = actuated_joints(scene, robot)?;
+    check_variation(variation)?;
+    let initial_positions = initial_positions(scene, robot, &actuated)?;
+    let (body_of_link, roots, welds) = partition(robot, &actuated, settings);
+    let world = robot.forward_kinematics(&Pose::IDENTITY, &initial_positions);
+    let link_in_root: Vec<Pose> = (0..robot.links.len())
+        .map(|l| pose_inverse(&world[roots[body_of_link[l]]]).compose(&world[l]))
+        .collect();
+    let parts = Parts {
+        robot,
+        body_of_link: &body_of_link,
+        link_in_root: &link_in_root,
+    };
+    let bodies = roots
+        .iter()
+        .enumerate()
+        .map(|(b, &root)| parts.body(b, root, settings, variation))
+        .collect::<Result<Vec<_>, _>>()?;
+    let hinges = hinge_plans(scene, robot, &actuated, &body_of_link);
+    let friction = |f: Option<f64>| f.unwrap_or(settings.contact_mu) * variation.friction_scale;
+    let objects = object_plans(scene, variation, &friction);
+    let tracked = tracked_plans(scene, &parts, &bodies)?;
+    Ok(ModelPlan {
+        bodies,
+        body_of_link,
+        link_in_root,
+        hinges,
+        welds,
+        objects,
+        ground: scene.ground.map(|g| (g.height_m, friction(g.friction))),
+        robot_mu: friction(None),
+        tracked,
+        initial_positions,
+        gravity_m_s2: scene.gravity_m_s2,
+        contact_softness: None,
+    })
+}
+
+/// The controlled joints (actuator order), which must be revolute or
+/// continuous.
+fn actuated_joints(scene: &Scene, robot: &RobotModel) -> Result<Vec<usize>, PlanError> {
     let actuated: Vec<usize> = scene
         .actuators
         .iter()
@@ -494,6 +535,10 @@ pub fn plan(
             )));
         }
     }
+    Ok(actuated)
+}
+
+fn check_variation(variation: &ModelVariation) -> Result<(), PlanError> {
     let usable = variation.mass_scale.is_finite()
         && variation.mass_scale > 0.0
         && variation.friction_scale.is_finite()
@@ -504,10 +549,17 @@ pub fn plan(
             variation.mass_scale, variation.friction_scale
         )));
     }
+    Ok(())
+}
 
-    // Joint positions of the initial configuration (held joints at their
-    // positions); mimic joints that follow a controlled joint cannot be
-    // welded.
+/// Joint positions of the initial configuration (held joints at their
+/// positions); mimic joints that follow a controlled joint cannot be
+/// welded.
+fn initial_positions(
+    scene: &Scene,
+    robot: &RobotModel,
+    actuated: &[usize],
+) -> Result<Vec<f64>, PlanError> {
     let mut initial_positions = vec![0.0; robot.joints.len()];
     for (j, joint) in robot.joints.iter().enumerate() {
         if actuated.contains(&j) || !joint.kind.is_movable() {
@@ -528,8 +580,18 @@ pub fn plan(
             .copied()
             .unwrap_or(0.0);
     }
+    Ok(initial_positions)
+}
 
-    // Bodies: a new one at the root and below every controlled joint.
+/// Which body each link belongs to: a new body at the root and below
+/// every controlled joint (and, with `weld = "fixed_joint"`, below every
+/// link with mass). Returns the body of each link, each body's root link,
+/// and the welded (child, parent) body pairs.
+fn partition(
+    robot: &RobotModel,
+    actuated: &[usize],
+    settings: &OdeSettings,
+) -> (Vec<usize>, Vec<usize>, Vec<(usize, usize)>) {
     let has_mass = |l: usize| robot.links[l].inertial.is_some_and(|i| i.mass_kg > 0.0);
     let mut body_of_link = vec![usize::MAX; robot.links.len()];
     let mut roots = vec![robot.root_link];
@@ -548,21 +610,72 @@ pub fn plan(
             body_of_link[joint.child] = body_of_link[joint.parent];
         }
     }
-    let world = robot.forward_kinematics(&Pose::IDENTITY, &initial_positions);
-    let link_in_root: Vec<Pose> = (0..robot.links.len())
-        .map(|l| pose_inverse(&world[roots[body_of_link[l]]]).compose(&world[l]))
-        .collect();
+    (body_of_link, roots, welds)
+}
 
-    let mut bodies = Vec::with_capacity(roots.len());
-    for (b, &root) in roots.iter().enumerate() {
+/// The robot and how its links are grouped into bodies.
+struct Parts<'a> {
+    robot: &'a RobotModel,
+    body_of_link: &'a [usize],
+    link_in_root: &'a [Pose],
+}
+
+impl Parts<'_> {
+    /// Body `b` (root link `root`): merged mass, centre and inertia, and
+    /// its shapes.
+    fn body(
+        &self,
+        b: usize,
+        root: usize,
+        settings: &OdeSettings,
+        variation: &ModelVariation,
+    ) -> Result<BodyPlan, PlanError> {
+        let robot = self.robot;
         let links: Vec<usize> = (0..robot.links.len())
-            .filter(|&l| body_of_link[l] == b)
+            .filter(|&l| self.body_of_link[l] == b)
             .collect();
-        let mut parts = Vec::new();
+        let (mass, com) = match combine_masses(&self.mass_parts(&links, variation)) {
+            Some((m, c)) => (Some(m), c),
+            None => (None, Vec3::ZERO),
+        };
+        let is_static = b == 0 && (settings.base == Base::Static || mass.is_none());
+        self.check_mass(&links, root, mass.as_ref(), is_static)?;
+        let body = BodyPlan {
+            name: robot.links[root].name.clone(),
+            root_link: root,
+            links: links.clone(),
+            mass,
+            com_in_root_m: com,
+            geoms: Vec::new(),
+            is_static,
+        };
+        let mut geoms = Vec::new();
         for &l in &links {
-            if let Some(inertial) = &robot.links[l].inertial {
+            for c in &robot.links[l].collisions {
+                let shape = shape_plan(&c.geometry, &robot.links[l].name)?;
+                let offset = body.link_in_body(&self.link_in_root[l]).compose(&c.origin);
+                geoms.push(GeomPlan {
+                    link: l,
+                    shape,
+                    offset,
+                });
+            }
+        }
+        Ok(BodyPlan { geoms, ..body })
+    }
+
+    /// The links' masses with their inertias in the body's root frame
+    /// (scaled by the variation).
+    fn mass_parts(
+        &self,
+        links: &[usize],
+        variation: &ModelVariation,
+    ) -> Vec<(Vec3, f64, [f64; 9])> {
+        let mut parts = Vec::new();
+        for &l in links {
+            if let Some(inertial) = &self.robot.links[l].inertial {
                 if inertial.mass_kg > 0.0 {
-                    let frame = link_in_root[l].compose(&inertial.origin);
+                    let frame = self.link_in_root[l].compose(&inertial.origin);
                     let r = frame.orientation.to_rotation_matrix();
                     let i = rotate_inertia(&r, &inertial.inertia_matrix());
                     parts.push((
@@ -573,6 +686,18 @@ pub fn plan(
                 }
             }
         }
+        parts
+    }
+
+    /// A moving body needs a mass and a positive definite inertia.
+    fn check_mass(
+        &self,
+        links: &[usize],
+        root: usize,
+        mass: Option<&MassPlan>,
+        is_static: bool,
+    ) -> Result<(), PlanError> {
+        let robot = self.robot;
         let link_names = || {
             links
                 .iter()
@@ -580,12 +705,7 @@ pub fn plan(
                 .collect::<Vec<_>>()
                 .join(", ")
         };
-        let (mass, com) = match combine_masses(&parts) {
-            Some((m, c)) => (Some(m), c),
-            None => (None, Vec3::ZERO),
-        };
-        let is_static = b == 0 && (settings.base == Base::Static || mass.is_none());
-        if let Some(m) = &mass {
+        if let Some(m) = mass {
             if !is_static && !is_positive_definite(&m.inertia) {
                 return Err(PlanError(format!(
                     "the links {} (one rigid body) have an inertia that is not positive definite ({:?} kg m^2); ODE cannot integrate it",
@@ -603,32 +723,20 @@ pub fn plan(
                 link_names()
             )));
         }
-        let body = BodyPlan {
-            name: robot.links[root].name.clone(),
-            root_link: root,
-            links: links.clone(),
-            mass,
-            com_in_root_m: com,
-            geoms: Vec::new(),
-            is_static,
-        };
-        let mut geoms = Vec::new();
-        for &l in &links {
-            for c in &robot.links[l].collisions {
-                let shape = shape_plan(&c.geometry, &robot.links[l].name)?;
-                let offset = body.link_in_body(&link_in_root[l]).compose(&c.origin);
-                geoms.push(GeomPlan {
-                    link: l,
-                    shape,
-                    offset,
-                });
-            }
-        }
-        bodies.push(BodyPlan { geoms, ..body });
+        Ok(())
     }
+}
 
+/// One hinge per controlled joint (actuator order), with the URDF limits
+/// ODE's hinge can express as stops.
+fn hinge_plans(
+    scene: &Scene,
+    robot: &RobotModel,
+    actuated: &[usize],
+    body_of_link: &[usize],
+) -> Vec<HingePlan> {
     let mut hinges = Vec::with_capacity(actuated.len());
-    for (a, &j) in scene.actuators.iter().zip(&actuated) {
+    for (a, &j) in scene.actuators.iter().zip(actuated) {
         let joint = &robot.joints[j];
         let mut stops = (None, None);
         if let Some(lim) = joint.limits {
@@ -651,9 +759,16 @@ pub fn plan(
             armature_kg_m2: 0.0,
         });
     }
+    hinges
+}
 
-    let friction = |f: Option<f64>| f.unwrap_or(settings.contact_mu) * variation.friction_scale;
-    let objects = scene
+/// The scene's objects (masses scaled, friction from `friction`).
+fn object_plans(
+    scene: &Scene,
+    variation: &ModelVariation,
+    friction: &dyn Fn(Option<f64>) -> f64,
+) -> Vec<ObjectPlan> {
+    scene
         .objects
         .iter()
         .map(|o| {
@@ -672,8 +787,16 @@ pub fn plan(
                 restitution: None,
             }
         })
-        .collect();
+        .collect()
+}
 
+/// What each of the scene's tracked bodies follows on the model.
+fn tracked_plans(
+    scene: &Scene,
+    parts: &Parts<'_>,
+    bodies: &[BodyPlan],
+) -> Result<Vec<TrackedPlan>, PlanError> {
+    let robot = parts.robot;
     let mut tracked = Vec::with_capacity(scene.tracked.len());
     for t in &scene.tracked {
         tracked.push(match &t.target {
@@ -684,10 +807,10 @@ pub fn plan(
                         robot.name
                     ))
                 })?;
-                let b = body_of_link[l];
+                let b = parts.body_of_link[l];
                 TrackedPlan::Link {
                     body: b,
-                    link_in_body: bodies[b].link_in_body(&link_in_root[l]),
+                    link_in_body: bodies[b].link_in_body(&parts.link_in_root[l]),
                 }
             }
             TrackTarget::Object(name) => {
@@ -702,21 +825,7 @@ pub fn plan(
             }
         });
     }
-
-    Ok(ModelPlan {
-        bodies,
-        body_of_link,
-        link_in_root,
-        hinges,
-        welds,
-        objects,
-        ground: scene.ground.map(|g| (g.height_m, friction(g.friction))),
-        robot_mu: friction(None),
-        tracked,
-        initial_positions,
-        gravity_m_s2: scene.gravity_m_s2,
-        contact_softness: None,
-    })
+    Ok(tracked)
 }
 
 impl ModelPlan {
