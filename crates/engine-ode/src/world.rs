@@ -455,7 +455,7 @@ impl OdeWorld {
         w.ctx.may_touch = contact_mask(plan, settings.self_collision);
         w.index_moving_bodies(plan);
         if let Some(softness) = plan.contact_softness {
-            w.ctx.soft = w.soft_contact_table(plan, &softness, settings.timestep_s);
+            w.ctx.soft = w.soft_contact_table(plan, &softness, settings);
         }
         Ok(w)
     }
@@ -761,13 +761,14 @@ impl OdeWorld {
     /// (see [`crate::plan::ContactSoftness::erp_cfm`]), from the pair's
     /// reduced mass: `1 / (1 / m1 + 1 / m2)`, the ground and a static
     /// base counting as immovable. Pairs of two immovable owners get the
-    /// world's values (they never touch).
+    /// world's ERP and CFM (they never touch).
     fn soft_contact_table(
         &self,
         plan: &ModelPlan,
         softness: &crate::plan::ContactSoftness,
-        h_s: f64,
+        settings: &OdeSettings,
     ) -> Vec<(f64, f64)> {
+        let h_s = settings.timestep_s;
         let mut inverse_mass = vec![0.0; self.moving_of_slot.len()];
         for (b, body) in plan.bodies.iter().enumerate() {
             if let (false, Some(m)) = (self.robot_bodies[b].is_null(), body.mass) {
@@ -782,7 +783,7 @@ impl OdeWorld {
         for a in 0..n {
             for b in 0..n {
                 let pair = softness.erp_cfm(h_s, inverse_mass[a] + inverse_mass[b]);
-                table.push(pair.unwrap_or((0.2, 1e-5)));
+                table.push(pair.unwrap_or((settings.erp, settings.cfm)));
             }
         }
         table
