@@ -21,6 +21,11 @@
 //! Rapier quarantines a body whose state turns non-finite (it freezes it at
 //! its last valid pose and disables it); [`RapierSimulation`] reports that as
 //! [`EngineError::Unstable`] rather than stepping on.
+//!
+//! Physical parameters: [`params`] lists the keys Rapier honours and how
+//! each maps; they are applied at load. Simulation state: [`state`] reads
+//! and sets it (portable, and native with the exact single-precision
+//! values).
 
 pub mod assemble;
 pub mod params;
