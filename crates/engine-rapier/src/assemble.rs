@@ -215,6 +215,48 @@ pub fn assemble(
     variation: &ModelVariation,
     params: &PhysicalParams,
 ) -> Result<Assembly, String> {
+    check_variation(variation)?;
+    let actuated = check_actuators(scene, robot)?;
+    let plan = plan_groups(scene, robot, &actuated)?;
+    let mut world = new_world(scene, settings, params);
+    let bodies = add_bodies(&mut world, robot, &plan, settings, variation)?;
+    let handles = add_joints(&mut world, scene, robot, &actuated, &plan, &bodies)?;
+    set_dof_parameters(&mut world, robot, &handles, params);
+    let joints = controlled_joints(&world, scene, robot, &handles);
+    let links: HashMap<String, BodyFrame> = robot
+        .links
+        .iter()
+        .enumerate()
+        .map(|(l, link)| {
+            (
+                link.name.clone(),
+                BodyFrame {
+                    body: bodies[plan.group_of[l]],
+                    offset: plan.offset[l],
+                },
+            )
+        })
+        .collect();
+    let mut body_names: HashMap<RigidBodyHandle, String> = plan
+        .groups
+        .iter()
+        .zip(&bodies)
+        .map(|(g, &b)| (b, robot.links[g.top_link].name.clone()))
+        .collect();
+    add_ground(&mut world, scene, variation, &mut body_names);
+    let objects = add_objects(&mut world, scene, variation, params, &mut body_names)?;
+    let tracked = tracked_frames(scene, robot, &links, &objects)?;
+    Ok(Assembly {
+        world,
+        joints,
+        tracked,
+        links,
+        body_names,
+        objects,
+    })
+}
+
+fn check_variation(variation: &ModelVariation) -> Result<(), String> {
     if !(variation.mass_scale.is_finite() && variation.mass_scale > 0.0) {
         return Err(format!(
             "the mass factor must be positive and finite, found {}",
@@ -227,8 +269,11 @@ pub fn assemble(
             variation.friction_scale
         ));
     }
+    Ok(())
+}
 
-    // Controlled joints, in scene order.
+/// The controlled joints, checked: robot joint index -> actuator index.
+fn check_actuators(scene: &Scene, robot: &RobotModel) -> Result<HashMap<usize, usize>, String> {
     let mut actuated: HashMap<usize, usize> = HashMap::new(); // joint index -> actuator index
     for (i, a) in scene.actuators.iter().enumerate() {
         let j = robot
@@ -264,7 +309,24 @@ pub fn assemble(
         }
     }
 
-    // 1. Groups.
+    Ok(actuated)
+}
+
+/// The rigid groups of the robot's links (stage 1).
+struct Plan {
+    groups: Vec<Group>,
+    /// Each link's group.
+    group_of: Vec<usize>,
+    /// Each link's pose in its group's frame.
+    offset: Vec<Pose>,
+}
+
+/// Stage 1: splits the links into rigid groups.
+fn plan_groups(
+    scene: &Scene,
+    robot: &RobotModel,
+    actuated: &HashMap<usize, usize>,
+) -> Result<Plan, String> {
     let mut group_of = vec![usize::MAX; robot.links.len()];
     let mut offset = vec![Pose::IDENTITY; robot.links.len()];
     let mut link_world = vec![scene.robot.base; robot.links.len()];
@@ -328,7 +390,16 @@ pub fn assemble(
             groups[group_of[child]].members.push((child, offset[child]));
         }
     }
+    Ok(Plan {
+        groups,
+        group_of,
+        offset,
+    })
+}
 
+/// An empty world with the scene's gravity, the solver settings and the
+/// contact softness of `params`.
+fn new_world(scene: &Scene, settings: &RapierSettings, params: &PhysicalParams) -> PhysicsWorld {
     let mut world = PhysicsWorld::new();
     let g = scene.gravity_m_s2;
     world.gravity = Vector::new(g.x as f32, g.y as f32, g.z as f32);
@@ -338,15 +409,26 @@ pub fn assemble(
     p.num_solver_iterations = settings.solver_iterations;
     p.num_internal_pgs_iterations = settings.internal_pgs_iterations;
     p.num_internal_stabilization_iterations = settings.stabilization_iterations;
+    world
+}
 
-    let friction = |f: Option<f64>| {
-        (f.unwrap_or(ColliderBuilder::default_friction() as f64) * variation.friction_scale) as f32
-    };
+/// A friction coefficient (Rapier's default when `None`) times the
+/// variation's factor.
+fn friction(f: Option<f64>, variation: &ModelVariation) -> f32 {
+    (f.unwrap_or(ColliderBuilder::default_friction() as f64) * variation.friction_scale) as f32
+}
 
-    // 2 and 3. Bodies and colliders.
+/// Stages 2 and 3: one body per group with its colliders.
+fn add_bodies(
+    world: &mut PhysicsWorld,
+    robot: &RobotModel,
+    plan: &Plan,
+    settings: &RapierSettings,
+    variation: &ModelVariation,
+) -> Result<Vec<RigidBodyHandle>, String> {
     let mut shapes = ShapeBuilder::new();
-    let mut bodies = Vec::with_capacity(groups.len());
-    for (g, group) in groups.iter().enumerate() {
+    let mut bodies = Vec::with_capacity(plan.groups.len());
+    for (g, group) in plan.groups.iter().enumerate() {
         let top = &robot.links[group.top_link].name;
         let builder = if g == 0 {
             RigidBodyBuilder::fixed().pose(to_rapier_pose(&group.world_pose))
@@ -396,7 +478,7 @@ pub fn assemble(
                 let collider = ColliderBuilder::new(shape)
                     .position(pose)
                     .density(0.0)
-                    .friction(friction(None));
+                    .friction(friction(None, variation));
                 world
                     .colliders
                     .insert_with_parent(collider.build(), body, &mut world.bodies);
@@ -404,15 +486,27 @@ pub fn assemble(
         }
         bodies.push(body);
     }
+    Ok(bodies)
+}
 
-    // 4. Multibody joints, parents first.
+/// Stage 4: the multibody joints, parents first.
+fn add_joints(
+    world: &mut PhysicsWorld,
+    scene: &Scene,
+    robot: &RobotModel,
+    actuated: &HashMap<usize, usize>,
+    plan: &Plan,
+    bodies: &[RigidBodyHandle],
+) -> Result<HashMap<usize, MultibodyJointHandle>, String> {
     let mut handles: HashMap<usize, MultibodyJointHandle> = HashMap::new();
     for &j in robot.joints_in_tree_order() {
         let Some(&a) = actuated.get(&j) else { continue };
         let joint = &robot.joints[j];
         let spec = &scene.actuators[a];
         let basis = Pose::new(Vec3::ZERO, x_onto(joint.axis));
-        let frame1 = offset[joint.parent].compose(&joint.origin).compose(&basis);
+        let frame1 = plan.offset[joint.parent]
+            .compose(&joint.origin)
+            .compose(&basis);
         let (locked, axis) = match joint.kind {
             JointKind::Revolute | JointKind::Continuous => {
                 (JointAxesMask::LOCKED_REVOLUTE_AXES, JointAxis::AngX)
@@ -440,18 +534,26 @@ pub fn assemble(
         let handle = world
             .multibody_joints
             .insert(
-                bodies[group_of[joint.parent]],
-                bodies[group_of[joint.child]],
+                bodies[plan.group_of[joint.parent]],
+                bodies[plan.group_of[joint.child]],
                 builder.build(),
                 true,
             )
             .ok_or_else(|| format!("Rapier refused the multibody joint \"{}\"", joint.name))?;
         handles.insert(j, handle);
     }
+    Ok(handles)
+}
 
-    // Fix the multibody's root, place every link, then set the per-DoF
-    // damping, armature and friction (DoF indices are final only once the
-    // root is known to be fixed).
+/// Fixes the multibody's root, places every link, then sets the per-DoF
+/// damping, armature and friction (DoF indices are final only once the
+/// root is known to be fixed).
+fn set_dof_parameters(
+    world: &mut PhysicsWorld,
+    robot: &RobotModel,
+    handles: &HashMap<usize, MultibodyJointHandle>,
+    params: &PhysicalParams,
+) {
     if let Some(first) = handles.values().next() {
         let (mb, _) = world
             .multibody_joints
@@ -460,7 +562,7 @@ pub fn assemble(
         mb.forward_kinematics(&world.bodies, true);
         mb.update_rigid_bodies(&mut world.bodies, true);
     }
-    for (&j, &handle) in &handles {
+    for (&j, &handle) in handles {
         let joint = &robot.joints[j];
         let (mb, link_id) = world
             .multibody_joints
@@ -471,8 +573,16 @@ pub fn assemble(
         mb.armature_mut()[dof] = params.armature(&joint.name).unwrap_or(0.0) as f32;
         mb.frictions_mut()[dof] = joint.friction as f32;
     }
+}
 
-    let joints = scene
+/// The controlled joints in the scene's actuator order.
+fn controlled_joints(
+    world: &PhysicsWorld,
+    scene: &Scene,
+    robot: &RobotModel,
+    handles: &HashMap<usize, MultibodyJointHandle>,
+) -> Vec<ControlledJoint> {
+    scene
         .actuators
         .iter()
         .map(|a| {
@@ -497,29 +607,16 @@ pub fn assemble(
                 dof,
             }
         })
-        .collect();
+        .collect()
+}
 
-    let links: HashMap<String, BodyFrame> = robot
-        .links
-        .iter()
-        .enumerate()
-        .map(|(l, link)| {
-            (
-                link.name.clone(),
-                BodyFrame {
-                    body: bodies[group_of[l]],
-                    offset: offset[l],
-                },
-            )
-        })
-        .collect();
-    let mut body_names: HashMap<RigidBodyHandle, String> = groups
-        .iter()
-        .zip(&bodies)
-        .map(|(g, &b)| (b, robot.links[g.top_link].name.clone()))
-        .collect();
-
-    // 5. Ground and objects.
+/// Stage 5: the ground's half-space.
+fn add_ground(
+    world: &mut PhysicsWorld,
+    scene: &Scene,
+    variation: &ModelVariation,
+    body_names: &mut HashMap<RigidBodyHandle, String>,
+) {
     if let Some(ground) = &scene.ground {
         let body = world
             .bodies
@@ -529,13 +626,22 @@ pub fn assemble(
                 ground.height_m as f32,
             )));
         let collider = ColliderBuilder::halfspace(rapier3d::na::Unit::new_unchecked(Vector::Z))
-            .friction(friction(ground.friction));
+            .friction(friction(ground.friction, variation));
         world
             .colliders
             .insert_with_parent(collider.build(), body, &mut world.bodies);
         body_names.insert(body, "ground".to_string());
     }
-    let mut objects = HashMap::new();
+}
+
+/// Stage 5: the scene's objects, their bodies in the scene's order.
+fn add_objects(
+    world: &mut PhysicsWorld,
+    scene: &Scene,
+    variation: &ModelVariation,
+    params: &PhysicalParams,
+    body_names: &mut HashMap<RigidBodyHandle, String>,
+) -> Result<Vec<RigidBodyHandle>, String> {
     let mut object_bodies = Vec::with_capacity(scene.objects.len());
     for o in &scene.objects {
         let shape = match o.shape {
@@ -564,7 +670,7 @@ pub fn assemble(
                 o.mass_kg * variation.mass_scale
             ));
         }
-        let mut collider = shape.mass(mass).friction(friction(o.friction));
+        let mut collider = shape.mass(mass).friction(friction(o.friction, variation));
         if let Some(r) = params.restitution(&o.name) {
             // The other colliders' restitution is 0: with `Max` the
             // object's coefficient is the contact's.
@@ -575,12 +681,20 @@ pub fn assemble(
         world
             .colliders
             .insert_with_parent(collider.build(), body, &mut world.bodies);
-        objects.insert(o.name.clone(), body);
         object_bodies.push(body);
         body_names.insert(body, format!("object:{}", o.name));
     }
+    Ok(object_bodies)
+}
 
-    let tracked = scene
+/// The tracked frames, in the scene's `[[track]]` order.
+fn tracked_frames(
+    scene: &Scene,
+    robot: &RobotModel,
+    links: &HashMap<String, BodyFrame>,
+    objects: &[RigidBodyHandle],
+) -> Result<Vec<BodyFrame>, String> {
+    scene
         .tracked
         .iter()
         .map(|t| match &t.target {
@@ -590,24 +704,19 @@ pub fn assemble(
                     robot.name
                 )
             }),
-            TrackTarget::Object(name) => objects
-                .get(name)
-                .map(|&body| BodyFrame {
+            TrackTarget::Object(name) => scene
+                .objects
+                .iter()
+                .zip(objects)
+                .find(|(o, _)| &o.name == name)
+                .map(|(_, &body)| body)
+                .map(|body| BodyFrame {
                     body,
                     offset: Pose::IDENTITY,
                 })
                 .ok_or_else(|| format!("tracked object \"{name}\" is not an object of the scene")),
         })
-        .collect::<Result<Vec<_>, _>>()?;
-
-    Ok(Assembly {
-        world,
-        joints,
-        tracked,
-        links,
-        body_names,
-        objects: object_bodies,
-    })
+        .collect::<Result<Vec<_>, _>>()
 }
 
 #[cfg(test)]
