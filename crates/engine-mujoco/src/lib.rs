@@ -13,9 +13,17 @@
 //!   have an actuator, and the file's own actuator gains, objects and ground
 //!   are used.
 //!
-//! In both cases the engine settings ([`SETTINGS`]: timestep, integrator,
-//! solver, ...) are applied to the compiled model, then the mass and
-//! friction factors of a [`ModelVariation`].
+//! In both cases the engine settings ([`SETTINGS`], parsed into
+//! [`MujocoSettings`]: timestep, integrator, solver, ...) and the scene's
+//! gravity are applied to the compiled model, then the physical parameters
+//! ([`model_params`]: armature, restitution and contact softness on both
+//! models, and every key on an MJCF file loaded as is), then the mass and
+//! friction factors of a [`ModelVariation`]. All of it happens once, at
+//! load; stepping is a bare `mj_step`.
+//!
+//! [`Simulation::state`] holds MuJoCo's complete state (`mj_getState`) for
+//! an exact restore, and the portable fields for other engines (see the
+//! `state` module).
 //!
 //! State is read as the study's own loop read it: after the period's last
 //! `mj_step`, joint angles (`qpos`) are those at time t, and body poses

@@ -19,7 +19,11 @@
 //!   so itself except for the links attached to the world-welded root).
 //! - One `<velocity>` actuator per controlled joint with the scene's `kv`
 //!   and force limit.
-//! - Each scene object: a body named `object:NAME` with a free joint.
+//! - Each scene object: a body named `object:NAME` with a free joint; when
+//!   the scene gives its friction, its geom has `priority="1"` so that its
+//!   coefficient is the contact's (MuJoCo otherwise takes the larger one).
+//! - A zero force limit (servo off) is set on the compiled model, since
+//!   MJCF rejects an empty `forcerange`.
 
 use realitygap_core::pose::{Pose, Quat, Vec3};
 use realitygap_core::robot::{Geometry, JointKind, RobotModel};
