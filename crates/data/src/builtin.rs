@@ -214,10 +214,7 @@ struct Manifest {
 /// The verified unpacked copy of `archive` under `cache_root`, unpacking it
 /// first when the cache has none or a damaged one. Safe to call from
 /// several processes at once.
-pub fn open_or_unpack(
-    archive: &StudyArchive,
-    cache_root: &Path,
-) -> Result<Unpacked, BuiltinError> {
+pub fn open_or_unpack(archive: &StudyArchive, cache_root: &Path) -> Result<Unpacked, BuiltinError> {
     let started = Instant::now();
     let parent = cache_root.join("study-data");
     fs::create_dir_all(&parent).map_err(|e| {
@@ -275,7 +272,11 @@ pub fn open_or_unpack(
         let _ = fs::remove_dir_all(&tmp);
         return match check_unpacked(&dir, &archive.sha256) {
             Ok(m) => Ok(done(&m, CacheAction::Reused)),
-            Err(_) => Err(BuiltinError::io(&dir, "move the unpacked copy into place", &e)),
+            Err(_) => Err(BuiltinError::io(
+                &dir,
+                "move the unpacked copy into place",
+                &e,
+            )),
         };
     }
     Ok(done(
@@ -396,7 +397,9 @@ fn unpack_into(bytes: &[u8], archive: &StudyArchive, tmp: &Path) -> Result<Manif
     fs::create_dir_all(tmp).map_err(|e| {
         BuiltinError::new(
             tmp,
-            format!("cannot create a folder in the cache ({e}); set {CACHE_ENV} to a writable folder"),
+            format!(
+                "cannot create a folder in the cache ({e}); set {CACHE_ENV} to a writable folder"
+            ),
         )
     })?;
     let decoder = ruzstd::decoding::StreamingDecoder::new(bytes)
@@ -449,7 +452,11 @@ fn unpack_into(bytes: &[u8], archive: &StudyArchive, tmp: &Path) -> Result<Manif
 }
 
 /// Writes one file of the archive, hashing it on the way.
-fn write_entry(entry: &mut impl Read, rel: &Path, target: &Path) -> Result<FileEntry, BuiltinError> {
+fn write_entry(
+    entry: &mut impl Read,
+    rel: &Path,
+    target: &Path,
+) -> Result<FileEntry, BuiltinError> {
     if let Some(parent) = target.parent() {
         fs::create_dir_all(parent)
             .map_err(|e| BuiltinError::io(parent, "create a folder in the cache", &e))?;
@@ -556,7 +563,10 @@ mod tests {
         for part in ["MotionCapture/Experiment3/CubeExp0020_6D.tsv", SAMPLE] {
             assert!(first.dir.join(part).is_file(), "{part}");
         }
-        assert!(first.dir.join("kinova_description/urdf/m1n6s300.urdf").is_file());
+        assert!(first
+            .dir
+            .join("kinova_description/urdf/m1n6s300.urdf")
+            .is_file());
         let second = unpack(tmp.path());
         assert_eq!(second.action, CacheAction::Reused);
         assert_eq!((second.files, second.bytes), (first.files, first.bytes));
@@ -589,23 +599,14 @@ mod tests {
         let mut edited = original.clone();
         edited[0] = if edited[0] == b'9' { b'8' } else { b'9' };
         fs::write(&sample, &edited).unwrap();
-        assert!(matches!(
-            unpack(tmp.path()).action,
-            CacheAction::Rebuilt(_)
-        ));
+        assert!(matches!(unpack(tmp.path()).action, CacheAction::Rebuilt(_)));
         assert_eq!(fs::read(&sample).unwrap(), original);
 
         // Removed file; then a half-unpacked copy (no manifest).
         fs::remove_file(&sample).unwrap();
-        assert!(matches!(
-            unpack(tmp.path()).action,
-            CacheAction::Rebuilt(_)
-        ));
+        assert!(matches!(unpack(tmp.path()).action, CacheAction::Rebuilt(_)));
         fs::remove_file(dir.join(MANIFEST_NAME)).unwrap();
-        assert!(matches!(
-            unpack(tmp.path()).action,
-            CacheAction::Rebuilt(_)
-        ));
+        assert!(matches!(unpack(tmp.path()).action, CacheAction::Rebuilt(_)));
         assert_eq!(unpack(tmp.path()).action, CacheAction::Reused);
     }
 
@@ -644,7 +645,11 @@ mod tests {
         let e = open_or_unpack(&a, &tmp.path().join("cache")).unwrap_err();
         assert_eq!(e.path, copy);
         assert!(e.message.contains("damaged"), "{e}");
-        assert!(!tmp.path().join("cache/study-data").join(a.cache_name()).exists());
+        assert!(!tmp
+            .path()
+            .join("cache/study-data")
+            .join(a.cache_name())
+            .exists());
 
         let e = StudyArchive::at(
             &tmp.path().join("none.tar.zst"),
@@ -740,14 +745,13 @@ mod tests {
                     .map(|(_, v)| std::ffi::OsString::from(v))
             }
         };
-        let all = env(&[
-            (CACHE_ENV, "/c"),
-            ("XDG_CACHE_HOME", "/x"),
-            ("HOME", "/h"),
-        ]);
+        let all = env(&[(CACHE_ENV, "/c"), ("XDG_CACHE_HOME", "/x"), ("HOME", "/h")]);
         assert_eq!(cache_root_from(all).unwrap(), PathBuf::from("/c"));
         let xdg = env(&[(CACHE_ENV, ""), ("XDG_CACHE_HOME", "/x"), ("HOME", "/h")]);
-        assert_eq!(cache_root_from(xdg).unwrap(), PathBuf::from("/x/realitygap"));
+        assert_eq!(
+            cache_root_from(xdg).unwrap(),
+            PathBuf::from("/x/realitygap")
+        );
         let home = env(&[("HOME", "/h")]);
         assert_eq!(
             cache_root_from(home).unwrap(),

@@ -14,6 +14,7 @@
 //! read gives an [`ImportError`] naming the file, line, column and field;
 //! no input makes a reader panic.
 
+pub mod builtin;
 pub mod error;
 pub mod qualisys;
 pub mod recorded;
