@@ -76,13 +76,13 @@ pub fn load_study(
     let study = Study::from_file(study_path)?;
     let base = study_path.parent().map(PathBuf::from).unwrap_or_default();
     let reads = reads_recordings(&study);
-    let data = match (reads, data) {
+    let data = match (&reads, data) {
         (Some(_), _) | (None, DataSource::Dir(_)) => match data.resolve()? {
             Some(dir) => dir,
             None => bail!(
                 "{}: the study reads recordings ({}), but --data none gives none; leave --data out for the study's recordings built in, or pass --data DIR",
                 study_path.display(),
-                reads.unwrap_or_default()
+                reads.as_deref().unwrap_or_default()
             ),
         },
         // Only results directories: no recordings to find.

@@ -110,9 +110,8 @@ pub fn builtin_data_dir() -> Result<PathBuf> {
 
 /// [`builtin_data_dir`] with the archive of the given assets folder.
 pub fn builtin_data_dir_in(assets: &Path) -> Result<PathBuf> {
-    let context = |e: builtin::BuiltinError| {
-        anyhow!("the study's recordings built in (--data builtin): {e}")
-    };
+    let context =
+        |e: builtin::BuiltinError| anyhow!("the study's recordings built in (--data builtin): {e}");
     let archive = StudyArchive::in_assets(assets).map_err(context)?;
     let root = builtin::default_cache_root().map_err(context)?;
     let unpacked = builtin::open_or_unpack(&archive, &root).map_err(context)?;
@@ -158,7 +157,10 @@ mod tests {
             .resolve()
             .unwrap_err()
             .to_string();
-        assert!(e.contains("/does/not/exist") && e.contains("no such folder"), "{e}");
+        assert!(
+            e.contains("/does/not/exist") && e.contains("no such folder"),
+            "{e}"
+        );
         assert_eq!(DataSource::None.resolve().unwrap(), None);
     }
 

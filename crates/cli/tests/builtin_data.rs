@@ -153,7 +153,10 @@ fn data_none_is_refused_for_a_study_that_reads_recordings() {
     );
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
-    assert!(err.contains("--data none") && err.contains("collins2019.toml"), "{err}");
+    assert!(
+        err.contains("--data none") && err.contains("collins2019.toml"),
+        "{err}"
+    );
 }
 
 #[cfg(all(feature = "rapier", feature = "ode"))]
@@ -191,7 +194,10 @@ fn reproduce_with_the_builtin_data_gives_the_table_of_paper_data() {
     assert_eq!(rows.len(), 1 + 7 + 2, "{builtin}");
     assert!(builtin.contains("| V-Rep Vortex |") && builtin.contains("(this tool)"));
     let html = std::fs::read_to_string(out_dir.join("report/index.html")).unwrap();
-    assert!(html.contains("paper-data.tar.zst"), "provenance names the built-in data");
+    assert!(
+        html.contains("paper-data.tar.zst"),
+        "provenance names the built-in data"
+    );
 
     let cross = with(&[os("--data"), os("none")]);
     assert!(!cross.contains("V-Rep"), "{cross}");
