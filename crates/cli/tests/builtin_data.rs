@@ -85,7 +85,8 @@ fn compare_with_the_builtin_data_gives_the_tables_of_paper_data() {
 #[test]
 fn a_damaged_cache_is_detected_and_rebuilt() {
     let cache = tempfile::tempdir().unwrap();
-    let args = [os("compare"), os(&study()), os("--mode"), os("study")];
+    let study = study();
+    let args = [os("compare"), os(&study), os("--mode"), os("study")];
     let (first, _) = ok(&realitygap(cache.path(), &args));
     let victim = unpacked_dir(cache.path()).join("MotionCapture/Experiment2/Double0007_6D.tsv");
     let size = std::fs::metadata(&victim).unwrap().len();
@@ -186,12 +187,22 @@ fn reproduce_with_the_builtin_data_gives_the_table_of_paper_data() {
         args.extend_from_slice(extra);
         ok(&realitygap(cache.path(), &args)).0
     };
-    let in_place = with(&[os("--data"), os(&paper)]);
-    let builtin = with(&[]);
-    assert_eq!(builtin, in_place);
-    let rows: Vec<&str> = builtin.lines().filter(|l| l.starts_with("| ")).collect();
+    // The tables and measures, after the simulation's summary lines
+    // (which say "1 ok" the first time and "1 kept" the second).
+    let tables = |stdout: String| {
+        let at = stdout.find("## Accumulated error").expect("the table");
+        stdout[at..].to_string()
+    };
+    let in_place = tables(with(&[os("--data"), os(&paper)]));
+    let builtin = tables(with(&[]));
+    assert!(
+        builtin == in_place,
+        "built in:\n{builtin}\nin place:\n{in_place}"
+    );
+    let summary = builtin.split("\n### ").next().unwrap();
+    let rows: Vec<&str> = summary.lines().filter(|l| l.starts_with("| ")).collect();
     // Header, 7 recorded simulators, 2 engines of this tool.
-    assert_eq!(rows.len(), 1 + 7 + 2, "{builtin}");
+    assert_eq!(rows.len(), 1 + 7 + 2, "{summary}");
     assert!(builtin.contains("| V-Rep Vortex |") && builtin.contains("(this tool)"));
     let html = std::fs::read_to_string(out_dir.join("report/index.html")).unwrap();
     assert!(
@@ -199,7 +210,7 @@ fn reproduce_with_the_builtin_data_gives_the_table_of_paper_data() {
         "provenance names the built-in data"
     );
 
-    let cross = with(&[os("--data"), os("none")]);
+    let cross = tables(with(&[os("--data"), os("none")]));
     assert!(!cross.contains("V-Rep"), "{cross}");
     assert!(cross.contains("(this tool)"), "{cross}");
 }
