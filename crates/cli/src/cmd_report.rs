@@ -15,9 +15,11 @@ pub struct Args {
     /// A study file (TOML).
     pub study: PathBuf,
     /// Folder that the study's file patterns are relative to: `builtin`
-    /// (the default: the study's recordings built into the project) or a
-    /// folder such as your own copy of the recordings.
-    #[arg(long, value_name = "builtin|DIR", default_value = "builtin")]
+    /// (the default: the study's recordings built into the project,
+    /// unpacked once into ~/.cache/realitygap or $REALITYGAP_CACHE_DIR), a
+    /// folder such as your own copy of the recordings, or `none` for a
+    /// study of results directories only.
+    #[arg(long, value_name = "builtin|none|DIR", default_value = "builtin")]
     pub data: DataSource,
     /// Folder that the study's results directories (`store` sources) are
     /// relative to. Default: the study file's folder.

@@ -39,8 +39,9 @@ const COLLINS2019: &str = include_str!(concat!(
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// The study's recordings: `builtin` (the default: shipped with the
-    /// project, unpacked once into the cache), a folder with MotionCapture/
-    /// and Simulation/, or `none` to compare the engines with each other.
+    /// project, unpacked once into ~/.cache/realitygap or
+    /// $REALITYGAP_CACHE_DIR), a folder with MotionCapture/ and
+    /// Simulation/, or `none` to compare the engines with each other.
     #[arg(long, value_name = "builtin|none|DIR", default_value = "builtin")]
     pub data: DataSource,
     /// Output folder: runs/, report/, tables and timings.json.

@@ -110,8 +110,9 @@ pub fn builtin_data_dir() -> Result<PathBuf> {
 
 /// [`builtin_data_dir`] with the archive of the given assets folder.
 pub fn builtin_data_dir_in(assets: &Path) -> Result<PathBuf> {
-    let context =
-        |e: builtin::BuiltinError| anyhow!("the study's recordings built in (--data builtin): {e}");
+    let context = |e: builtin::BuiltinError| {
+        anyhow!("the study's recordings built in (--data builtin): {e} (`reproduce --data none` runs without recordings)")
+    };
     let archive = StudyArchive::in_assets(assets).map_err(context)?;
     let root = builtin::default_cache_root().map_err(context)?;
     let unpacked = builtin::open_or_unpack(&archive, &root).map_err(context)?;
