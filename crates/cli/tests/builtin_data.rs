@@ -246,3 +246,36 @@ fn the_official_robot_comes_from_the_builtin_data() {
     assert_eq!(Path::new(urdf), expected, "{stderr}");
     assert_eq!(manifest["runs"][0]["status"], "ok", "{manifest}");
 }
+
+/// Two processes starting on an empty cache at once: one unpacks, the
+/// other waits for it and reuses its copy; both give the same table.
+#[test]
+fn two_processes_share_one_unpacking() {
+    let cache = tempfile::tempdir().unwrap();
+    let spawn = || {
+        Command::new(env!("CARGO_BIN_EXE_realitygap"))
+            .env("REALITYGAP_CACHE_DIR", cache.path())
+            .env_remove("REALITYGAP_ASSETS")
+            .args([os("compare"), os(&study()), os("--mode"), os("study")])
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap()
+    };
+    let (a, b) = (spawn(), spawn());
+    let (a, b) = (a.wait_with_output().unwrap(), b.wait_with_output().unwrap());
+    let ((out_a, err_a), (out_b, err_b)) = (ok(&a), ok(&b));
+    assert_eq!(out_a, out_b);
+    let unpacked = [&err_a, &err_b]
+        .iter()
+        .filter(|e| e.contains("unpacked"))
+        .count();
+    assert_eq!(unpacked, 1, "{err_a}\n{err_b}");
+    let leftovers: Vec<_> = std::fs::read_dir(cache.path().join("study-data"))
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with(".tmp") || n.starts_with(".trash"))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+}
