@@ -279,3 +279,44 @@ fn two_processes_share_one_unpacking() {
         .collect();
     assert!(leftovers.is_empty(), "{leftovers:?}");
 }
+
+/// A study of results directories only reads no recordings: without
+/// `--data` (or with `--data none`) nothing is unpacked.
+#[cfg(feature = "rapier")]
+#[test]
+fn a_study_of_results_directories_needs_no_recordings() {
+    let tmp = tempfile::tempdir().unwrap();
+    let runs = tmp.path().join("runs");
+    ok(&realitygap(
+        tmp.path(),
+        &[
+            os("run"),
+            os(&root().join("assets/scenes/scene1_single_joint.toml")),
+            os("--engine"),
+            os("rapier"),
+            os("--out"),
+            os(&runs),
+        ],
+    ));
+    let study = tmp.path().join("stores.toml");
+    std::fs::write(
+        &study,
+        "name = \"stores\"\n[[scenes]]\nname = \"scene1_single_joint\"\nsteps = 120\n\
+         [scenes.reference]\nname = \"rapier\"\nformat = \"store\"\ndir = \"scene1_single_joint/rapier\"\n\
+         [[scenes.sources]]\nname = \"rapier again\"\nformat = \"store\"\ndir = \"scene1_single_joint/rapier\"\n",
+    )
+    .unwrap();
+    let cache = tmp.path().join("cache");
+    let mut tables = Vec::new();
+    for data in [None, Some("none")] {
+        let mut args = vec![os("compare"), os(&study), os("--results"), os(&runs)];
+        if let Some(d) = data {
+            args.extend([os("--data"), os(d)]);
+        }
+        let (out, _) = ok(&realitygap(&cache, &args));
+        assert!(out.contains("| rapier again | 0.000 |"), "{out}");
+        tables.push(out);
+    }
+    assert_eq!(tables[0], tables[1]);
+    assert!(!cache.exists(), "nothing unpacked");
+}
