@@ -232,9 +232,8 @@ pub fn open_or_unpack(archive: &StudyArchive, cache_root: &Path) -> Result<Unpac
         elapsed_s: started.elapsed().as_secs_f64(),
     };
     // Fast path: a finished copy is only ever renamed into place whole.
-    let first_check = check_unpacked(&dir, &archive.sha256);
-    if let Ok(m) = &first_check {
-        return Ok(done(m, CacheAction::Reused));
+    if let Ok(m) = check_unpacked(&dir, &archive.sha256) {
+        return Ok(done(&m, CacheAction::Reused));
     }
     let _lock = lock(&parent, archive.cache_name())?;
     // Another process may have finished while this one waited.
@@ -244,23 +243,13 @@ pub fn open_or_unpack(archive: &StudyArchive, cache_root: &Path) -> Result<Unpac
     };
     remove_leftovers(&parent, archive.cache_name());
     if damage.is_some() {
-        let trash = parent.join(format!(
-            ".trash-{}-{}-{}",
-            archive.cache_name(),
-            std::process::id(),
-            UNIQUE.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
-        ));
+        let trash = scratch(&parent, "trash", archive.cache_name());
         fs::rename(&dir, &trash)
             .map_err(|e| BuiltinError::io(&dir, "move the damaged cached copy aside", &e))?;
         let _ = fs::remove_dir_all(&trash);
     }
     let bytes = read_checked(archive)?;
-    let tmp = parent.join(format!(
-        ".tmp-{}-{}-{}",
-        archive.cache_name(),
-        std::process::id(),
-        UNIQUE.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
-    ));
+    let tmp = scratch(&parent, "tmp", archive.cache_name());
     let manifest = match unpack_into(&bytes, archive, &tmp) {
         Ok(m) => m,
         Err(e) => {
@@ -286,6 +275,13 @@ pub fn open_or_unpack(archive: &StudyArchive, cache_root: &Path) -> Result<Unpac
             None => CacheAction::Unpacked,
         },
     ))
+}
+
+/// A new folder name `<parent>/.<kind>-<name>-<pid>-<n>`, unique among
+/// processes and threads; [`remove_leftovers`] removes those of dead ones.
+fn scratch(parent: &Path, kind: &str, name: &str) -> PathBuf {
+    let n = UNIQUE.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    parent.join(format!(".{kind}-{name}-{}-{n}", std::process::id()))
 }
 
 /// Holds an exclusive lock on `<parent>/<name>.lock` until dropped. A file
