@@ -1,21 +1,25 @@
 //! `realitygap compare`: the accumulated-error table and per-scene measures.
 
 use anyhow::{bail, Context, Result};
-use realitygap::study::{Roots, Study};
+use realitygap::data_source::DataSource;
+use realitygap::study::{Roots, SourceFormat, Study};
 use realitygap_analysis::align::Alignment;
 use realitygap_analysis::compare::{evaluate_scene, AnalysisMode, CompareOptions, SceneReport};
 use realitygap_analysis::table::{self, Format};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Arguments of `realitygap compare`.
 #[derive(clap::Args)]
 pub struct Args {
     /// A study file (TOML).
     pub study: PathBuf,
-    /// Folder that the study's file patterns are relative to (e.g. the
-    /// paper-data folder). Default: the study file's folder.
-    #[arg(long)]
-    pub data: Option<PathBuf>,
+    /// Folder that the study's file patterns are relative to: `builtin`
+    /// (the default: the study's recordings built into the project,
+    /// unpacked once into ~/.cache/realitygap or $REALITYGAP_CACHE_DIR), a
+    /// folder such as your own copy of the recordings, or `none` for a
+    /// study of results directories only.
+    #[arg(long, value_name = "builtin|none|DIR", default_value = "builtin")]
+    pub data: DataSource,
     /// Folder that the study's results directories (`store` sources) are
     /// relative to. Default: the study file's folder.
     #[arg(long)]
@@ -62,23 +66,53 @@ pub fn parse_alignment(s: &str) -> Result<Alignment> {
     })
 }
 
-/// Loads a study and evaluates every scene.
-pub fn evaluate(
-    study_path: &std::path::Path,
-    data: Option<PathBuf>,
+/// Reads a study file and finds the folders its sources are relative to:
+/// `--data` for file patterns (resolved only when the study reads
+/// recordings; the built-in ones are unpacked on first use), `--results`
+/// else the study file's folder for results directories.
+pub fn load_study(
+    study_path: &Path,
+    data: &DataSource,
     results: Option<PathBuf>,
-    opts: &CompareOptions,
-) -> Result<Vec<SceneReport>> {
+) -> Result<(Study, Roots)> {
     let study = Study::from_file(study_path)?;
     let base = study_path.parent().map(PathBuf::from).unwrap_or_default();
+    let reads = reads_recordings(&study);
+    let data = match (&reads, data) {
+        (Some(_), _) | (None, DataSource::Dir(_)) => match data.resolve()? {
+            Some(dir) => dir,
+            None => bail!(
+                "{}: the study reads recordings ({}), but --data none gives none; leave --data out for the study's recordings built in, or pass --data DIR",
+                study_path.display(),
+                reads.as_deref().unwrap_or_default()
+            ),
+        },
+        // Only results directories: no recordings to find.
+        (None, _) => base.clone(),
+    };
     let roots = Roots {
-        data: data.unwrap_or_else(|| base.clone()),
+        data,
         results: results.unwrap_or(base),
     };
-    if !roots.data.is_dir() {
-        bail!("data folder {} does not exist", roots.data.display());
-    }
-    let scenes = study.load(&roots)?;
+    Ok((study, roots))
+}
+
+/// The first source of the study that reads recording files (`qualisys`
+/// or `recorded`), as `name: pattern`; `None` when all are results
+/// directories.
+fn reads_recordings(study: &Study) -> Option<String> {
+    study
+        .scenes
+        .iter()
+        .flat_map(|s| std::iter::once(&s.reference).chain(&s.sources))
+        .chain(&study.sources)
+        .find(|s| s.format != SourceFormat::Store)
+        .map(|s| format!("{}: {}", s.name, s.files.as_deref().unwrap_or("")))
+}
+
+/// Evaluates every scene of a study.
+pub fn evaluate(study: &Study, roots: &Roots, opts: &CompareOptions) -> Result<Vec<SceneReport>> {
+    let scenes = study.load(roots)?;
     Ok(scenes
         .iter()
         .map(|s| evaluate_scene(&s.spec, &s.reference, &s.sources, opts))
@@ -97,7 +131,8 @@ pub fn run(args: Args) -> Result<()> {
         alignment: args.alignment.as_deref().map(parse_alignment).transpose()?,
         ..CompareOptions::default()
     };
-    let reports = evaluate(&args.study, args.data, args.results, &opts)?;
+    let (study, roots) = load_study(&args.study, &args.data, args.results)?;
+    let reports = evaluate(&study, &roots, &opts)?;
     let text = if format == Format::Json && args.series {
         serde_json::to_string_pretty(&table::to_json(&reports, true))? + "\n"
     } else {

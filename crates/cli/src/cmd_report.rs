@@ -1,7 +1,8 @@
 //! `realitygap report`: the figures, tables and `index.html` of a study.
 
-use crate::cmd_compare::{evaluate, parse_alignment};
+use crate::cmd_compare::{evaluate, load_study, parse_alignment};
 use anyhow::{Context, Result};
+use realitygap::data_source::DataSource;
 use realitygap::study::{expand, glob, Roots, SourceFormat, SourceSpec, Study};
 use realitygap_analysis::compare::{AnalysisMode, CompareOptions};
 use realitygap_data::RunStore;
@@ -13,10 +14,13 @@ use std::path::{Path, PathBuf};
 pub struct Args {
     /// A study file (TOML).
     pub study: PathBuf,
-    /// Folder that the study's file patterns are relative to (e.g. the
-    /// paper-data folder). Default: the study file's folder.
-    #[arg(long)]
-    pub data: Option<PathBuf>,
+    /// Folder that the study's file patterns are relative to: `builtin`
+    /// (the default: the study's recordings built into the project,
+    /// unpacked once into ~/.cache/realitygap or $REALITYGAP_CACHE_DIR), a
+    /// folder such as your own copy of the recordings, or `none` for a
+    /// study of results directories only.
+    #[arg(long, value_name = "builtin|none|DIR", default_value = "builtin")]
+    pub data: DataSource,
     /// Folder that the study's results directories (`store` sources) are
     /// relative to. Default: the study file's folder.
     #[arg(long)]
@@ -46,14 +50,10 @@ pub fn run(args: Args) -> Result<()> {
         alignment: args.alignment.as_deref().map(parse_alignment).transpose()?,
         ..CompareOptions::default()
     };
-    let reports = evaluate(&args.study, args.data.clone(), args.results.clone(), &opts)?;
-    let study = Study::from_file(&args.study)?;
-    let base = args.study.parent().map(PathBuf::from).unwrap_or_default();
-    let roots = Roots {
-        data: args.data.unwrap_or_else(|| base.clone()),
-        results: args.results.unwrap_or(base),
-    };
+    let (study, roots) = load_study(&args.study, &args.data, args.results.clone())?;
+    let reports = evaluate(&study, &roots, &opts)?;
     let mut provenance = provenance_for_study(&study, &args.study, &roots, mode);
+    provenance.details.extend(args.data.provenance());
     if let Some(a) = &args.alignment {
         provenance
             .details

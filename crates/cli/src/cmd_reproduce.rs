@@ -4,10 +4,11 @@
 //! 1. **simulate**: the three study scenes in every compiled engine,
 //!    `--repeats` times each (20 by default), into `OUT/runs/` exactly as
 //!    `realitygap run` does (parallel, resumable);
-//! 2. **compare**: with `--data`, against the real arm's recordings, next to
-//!    the study's recorded simulators (MuJoCo 1.5, PyBullet 2.1 and the V-Rep
-//!    engines); without, the engines against each other (the reference is
-//!    the first engine, MuJoCo when compiled in);
+//! 2. **compare**: against the real arm's recordings, next to the study's
+//!    recorded simulators (MuJoCo 1.5, PyBullet 2.1 and the V-Rep engines),
+//!    from the recordings built in or `--data DIR`; with `--data none`, the
+//!    engines against each other (the reference is the first engine, MuJoCo
+//!    when compiled in);
 //! 3. **report**: tables, figures and `OUT/report/index.html`.
 //!
 //! A rerun skips the finished simulations and redoes the (fast) rest.
@@ -16,6 +17,7 @@ use crate::cmd_engines;
 use crate::cmd_report::provenance_for_study;
 use crate::cmd_run;
 use anyhow::{bail, Context, Result};
+use realitygap::data_source::{assets_dir, DataSource};
 use realitygap::study::{Roots, SourceFormat, SourceSpec, Study, StudyScene};
 use realitygap_analysis::compare::{evaluate_scene, AnalysisMode, CompareOptions, CubeSpec};
 use realitygap_analysis::table::{self, Format};
@@ -36,10 +38,12 @@ const COLLINS2019: &str = include_str!(concat!(
 /// Arguments of `realitygap reproduce`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// The study's recordings (the folder with MotionCapture/ and
-    /// Simulation/). Without it the engines are compared with each other.
-    #[arg(long, value_name = "DIR")]
-    pub data: Option<PathBuf>,
+    /// The study's recordings: `builtin` (the default: shipped with the
+    /// project, unpacked once into ~/.cache/realitygap or
+    /// $REALITYGAP_CACHE_DIR), a folder with MotionCapture/ and
+    /// Simulation/, or `none` to compare the engines with each other.
+    #[arg(long, value_name = "builtin|none|DIR", default_value = "builtin")]
+    pub data: DataSource,
     /// Output folder: runs/, report/, tables and timings.json.
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
@@ -66,19 +70,6 @@ pub struct Args {
     pub params: Option<PathBuf>,
 }
 
-/// The project's assets folder: `REALITYGAP_ASSETS`, else the one this
-/// binary was built from, else `./assets`.
-pub fn assets_dir() -> PathBuf {
-    if let Some(dir) = std::env::var_os("REALITYGAP_ASSETS") {
-        return PathBuf::from(dir);
-    }
-    let built = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../assets"));
-    if built.join("scenes").is_dir() {
-        return built;
-    }
-    PathBuf::from("assets")
-}
-
 /// Runs the command.
 pub fn run(args: Args) -> Result<()> {
     let started = Instant::now();
@@ -87,7 +78,8 @@ pub fn run(args: Args) -> Result<()> {
     } else {
         AnalysisMode::Default
     };
-    if let Some(d) = &args.data {
+    let data = args.data.resolve()?;
+    if let Some(d) = &data {
         if !d.join("MotionCapture").is_dir() || !d.join("Simulation").is_dir() {
             bail!("--data {}: expected the study's recordings there (folders MotionCapture/ and Simulation/)", d.display());
         }
@@ -161,7 +153,7 @@ pub fn run(args: Args) -> Result<()> {
         .iter()
         .map(|p| Scene::from_file(p).map_err(anyhow::Error::from))
         .collect::<Result<_>>()?;
-    let (study, study_path, roots) = match &args.data {
+    let (study, study_path, roots) = match &data {
         Some(data) => {
             let path = assets_dir().join("studies/collins2019.toml");
             let mut study = Study::from_toml_str(COLLINS2019, &path)?;
@@ -219,6 +211,7 @@ pub fn run(args: Args) -> Result<()> {
     eprintln!("[3/3] writing the report");
     let t = Instant::now();
     let mut provenance = provenance_for_study(&study, &study_path, &roots, mode);
+    provenance.details.extend(args.data.provenance());
     provenance.details.push((
         "Command".into(),
         std::env::args().collect::<Vec<_>>().join(" "),

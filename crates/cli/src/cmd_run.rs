@@ -59,8 +59,9 @@ pub struct Args {
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
     /// Robot instead of the scene's: `mico2` (the project's, built in),
-    /// `official` (the Kinova URDF of the kinova_description package, see
-    /// --package), or a URDF file.
+    /// `official` (the Kinova URDF of the kinova_description package: from
+    /// --package or ROS_PACKAGE_PATH, else the one in the study data built
+    /// in), or a URDF file.
     #[arg(long, value_name = "mico2|official|PATH")]
     pub robot: Option<String>,
     /// Where a ROS package is, for `package://` URIs: NAME=DIR (repeatable).
@@ -235,7 +236,7 @@ fn robot_override(
         "official" => {
             let dir = resolver.find("kinova_description").map_err(|searched| {
                 anyhow!(
-                    "--robot official needs the kinova_description package (looked in: {}); pass --package kinova_description=DIR, e.g. ../shared/paper-data/kinova_description, or set ROS_PACKAGE_PATH",
+                    "--robot official needs the kinova_description package (looked in: {}); pass --package kinova_description=DIR, e.g. a copy of the study data's kinova_description, or set ROS_PACKAGE_PATH",
                     if searched.is_empty() { "nowhere".to_string() } else { searched.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ") }
                 )
             })?;
@@ -263,6 +264,26 @@ fn robot_override(
             Ok(Some((robot, path, label)))
         }
     }
+}
+
+/// `--robot official` with no kinova_description package given or on
+/// ROS_PACKAGE_PATH: adds the one of the study data built in. When that
+/// cannot be had either, says why and leaves the arguments as they are
+/// (loading the robot then fails naming where it looked).
+fn with_builtin_kinova(mut args: Args) -> Result<Args> {
+    if args.robot.as_deref() != Some("official")
+        || resolver(&args.packages)?.find("kinova_description").is_ok()
+    {
+        return Ok(args);
+    }
+    match realitygap::data_source::builtin_data_dir() {
+        Ok(dir) => args.packages.push(format!(
+            "kinova_description={}",
+            dir.join("kinova_description").display()
+        )),
+        Err(e) => eprintln!("warning: the built-in kinova_description cannot be used: {e:#}"),
+    }
+    Ok(args)
 }
 
 fn resolver(packages: &[String]) -> Result<PackageResolver> {
@@ -582,6 +603,7 @@ fn run_id(repeat: u32) -> String {
 /// `realitygap run`.
 pub fn run(args: Args) -> Result<()> {
     let batch_start = Instant::now();
+    let args = with_builtin_kinova(args)?;
     let engines: Vec<String> = if args.engines.is_empty() {
         let all: Vec<String> = cmd_engines::compiled()
             .iter()

@@ -3,6 +3,7 @@
 //! `reproduce` and the benchmarks. The binary (`main.rs`) is a thin layer
 //! of argument parsing and printing over it.
 
+pub mod data_source;
 pub mod study;
 
 /// The study's recordings beside the project (`../shared/paper-data`), for

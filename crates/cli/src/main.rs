@@ -39,8 +39,8 @@ enum Command {
     /// index.html of a study.
     Report(cmd_report::Args),
     /// The whole study in one command: every scene in every engine, the
-    /// comparison (against the real recordings with --data), the table,
-    /// the figures and the report.
+    /// comparison against the real arm (the study's recordings, built in),
+    /// the table, the figures and the report.
     Reproduce(cmd_reproduce::Args),
     /// Internal: run one simulation (a job as JSON on standard input) and
     /// print its trajectory; `run` starts one such process per run.

@@ -252,9 +252,12 @@ fn bad_urdfs_are_reported() {
         &["pkg.urdf", "no_such_pkg", "--package"],
     );
 
-    // The official robot without its package.
+    // The official robot without its package, and without the study data
+    // built in (an assets folder that has none).
+    let no_assets = tempfile::tempdir().unwrap();
     let out_official = Command::new(exe())
         .env_remove("ROS_PACKAGE_PATH")
+        .env("REALITYGAP_ASSETS", no_assets.path())
         .args([
             os("run"),
             os(&scene),
@@ -266,9 +269,9 @@ fn bad_urdfs_are_reported() {
         .output()
         .unwrap();
     assert!(!out_official.status.success());
-    assert!(
-        String::from_utf8_lossy(&out_official.stderr).contains("--package kinova_description=DIR")
-    );
+    let err = String::from_utf8_lossy(&out_official.stderr);
+    assert!(err.contains("--package kinova_description=DIR"), "{err}");
+    assert!(err.contains("paper-data.tar.zst"), "{err}");
 }
 
 /// A model whose engine dies in native code (MuJoCo's arena is too small

@@ -6,6 +6,8 @@
 //!   PyBullet and V-Rep CSV files: 14 numbers per control step).
 //! - [`runstore`]: the results directory, `manifest.json` plus one CSV per
 //!   run, written atomically so an interrupted batch loses no finished run.
+//! - [`builtin`]: the study's recordings shipped as one checksummed archive,
+//!   unpacked once into a verified cache folder.
 //!
 //! Every importer returns an [`ImportedRun`]: a
 //! [`Trajectory`](realitygap_core::Trajectory) in metres, radians and
@@ -14,6 +16,7 @@
 //! read gives an [`ImportError`] naming the file, line, column and field;
 //! no input makes a reader panic.
 
+pub mod builtin;
 pub mod error;
 pub mod qualisys;
 pub mod recorded;
