@@ -1,9 +1,9 @@
 //! `realitygap report`: the figures, tables and `index.html` of a study.
 
-use crate::cmd_compare::{evaluate, parse_alignment};
+use crate::cmd_compare::{evaluate, MeasureArgs};
 use anyhow::{Context, Result};
 use realitygap::study::{expand, glob, Roots, SourceFormat, SourceSpec, Study};
-use realitygap_analysis::compare::{AnalysisMode, CompareOptions};
+use realitygap_analysis::compare::AnalysisMode;
 use realitygap_data::RunStore;
 use realitygap_report::{write_report, Provenance, SourceProvenance};
 use std::path::{Path, PathBuf};
@@ -21,14 +21,9 @@ pub struct Args {
     /// relative to. Default: the study file's folder.
     #[arg(long)]
     pub results: Option<PathBuf>,
-    /// `default`: leave flagged runs out, estimate each real run's time
-    /// offset. `study`: the reference study's exact procedure.
-    #[arg(long, default_value = "default", value_parser = ["default", "study"])]
-    pub mode: String,
-    /// Override the alignment of recordings: `estimate`, `onset:LEAD` or
-    /// `fixed:FRAME`.
-    #[arg(long)]
-    pub alignment: Option<String>,
+    /// How the gap is measured.
+    #[command(flatten)]
+    pub measure: MeasureArgs,
     /// Folder to write the report into (created if missing).
     #[arg(long)]
     pub out: PathBuf,
@@ -36,17 +31,13 @@ pub struct Args {
 
 /// Runs the command.
 pub fn run(args: Args) -> Result<()> {
-    let mode = if args.mode == "study" {
-        AnalysisMode::Study
-    } else {
-        AnalysisMode::Default
-    };
-    let opts = CompareOptions {
-        mode,
-        alignment: args.alignment.as_deref().map(parse_alignment).transpose()?,
-        ..CompareOptions::default()
-    };
-    let reports = evaluate(&args.study, args.data.clone(), args.results.clone(), &opts)?;
+    let mode = args.measure.analysis_mode();
+    let reports = evaluate(
+        &args.study,
+        args.data.clone(),
+        args.results.clone(),
+        &args.measure,
+    )?;
     let study = Study::from_file(&args.study)?;
     let base = args.study.parent().map(PathBuf::from).unwrap_or_default();
     let roots = Roots {
@@ -54,10 +45,19 @@ pub fn run(args: Args) -> Result<()> {
         results: args.results.unwrap_or(base),
     };
     let mut provenance = provenance_for_study(&study, &args.study, &roots, mode);
-    if let Some(a) = &args.alignment {
+    if let Some(a) = &args.measure.alignment {
         provenance
             .details
             .push(("Alignment override".into(), a.clone()));
+    }
+    for (what, value) in [
+        ("Registration", &args.measure.registration),
+        ("Runs", &args.measure.runs),
+        ("Held-out runs", &args.measure.holdout),
+    ] {
+        if let Some(v) = value {
+            provenance.details.push((what.into(), v.clone()));
+        }
     }
     let files = write_report(&reports, &provenance, &args.out)
         .with_context(|| format!("writing the report into {}", args.out.display()))?;
