@@ -1073,7 +1073,7 @@ mod tests {
     }
 
     /// The real arm: 6 runs at 100 Hz starting at different frames, with
-    /// 1 mm run-to-run differences in reach.
+    /// 1 mm run-to-run offsets.
     fn real_runs() -> SourceRuns {
         SourceRuns {
             name: "real".into(),
@@ -1081,7 +1081,7 @@ mod tests {
             rate_hz: 100.0,
             alignment: Some(Alignment::estimate()),
             runs: (0..6)
-                .map(|i| run(&format!("r{i}"), 100, 5, 150 + 13 * i, 0.5 + 0.001 * i as f64, 0.0))
+                .map(|i| run(&format!("r{i}"), 100, 5, 150 + 13 * i, 0.5, 0.001 * i as f64))
                 .collect(),
         }
     }

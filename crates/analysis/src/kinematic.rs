@@ -109,6 +109,8 @@ name = "k"
 duration_s = 6.0
 [robot]
 urdf = "arm.urdf"
+base_position_m = [0.0, 0.0, 0.0]
+base_rpy_deg = [0.0, 0.0, 0.0]
 [controller]
 gain_per_s = 10.0
 max_speed_deg_s = 30.0
