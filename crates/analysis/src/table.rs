@@ -276,7 +276,11 @@ fn markdown(reports: &[SceneReport]) -> String {
                 starts.join(", ")
             );
         }
-        if let Some(runs) = r.runs.as_ref().filter(|_| r.closest_comparison.is_some()) {
+        if let Some(runs) = r
+            .runs
+            .as_ref()
+            .filter(|x| x.fit != x.scored || !x.selection.starts_with("all "))
+        {
             let _ = writeln!(
                 out,
                 "Runs: {} (fit: {}; scored: {}).",
@@ -303,22 +307,23 @@ fn markdown(reports: &[SceneReport]) -> String {
             let _ = writeln!(out, "Closest source: {}.", c.source);
         }
         let _ = writeln!(out);
-        let _ = writeln!(out, "| Source | Runs | Mean err (m) | Final err (m) | Goal dist (m) | Converged (s) | Overshoot (m) | Orient. err (deg) | Cube final dx (m) | Cube tilt (deg) | Contact (s) |");
+        let _ = writeln!(out, "| Source | Runs | Mean err (m) | Final err (m) | Lag (s) | Goal dist (m) | Converged (s) | Overshoot (m) | Orient. err (deg) | Cube final dx (m) | Cube tilt (deg) | Contact (s) |");
         let _ = writeln!(
             out,
-            "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+            "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
         );
         for s in std::iter::once(&r.reference).chain(&r.sources) {
             let g = s.goal.as_ref();
             let c = s.cube.as_ref();
             let _ = writeln!(
                 out,
-                "| {} | {}/{} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+                "| {} | {}/{} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
                 s.source,
                 s.runs_used,
                 s.runs_total,
                 fmt_m(s.mean_error_m),
                 fmt_m(s.final_error_m),
+                s.lag_s.map_or("n/a".into(), |v| format!("{v:.2}")),
                 fmt_m(g.and_then(|g| g.final_distance_m)),
                 g.and_then(|g| g.convergence_time_s)
                     .map_or("never".into(), |t| format!("{t:.2}")),
