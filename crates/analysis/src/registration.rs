@@ -238,45 +238,63 @@ pub fn fit_rigid_once(capture_m: &[Vec3], world_m: &[Vec3]) -> Option<Registrati
     })
 }
 
-/// [`fit_rigid_once`], then one trimming pass: pairs farther than
-/// `max(3 x median distance, trim_floor_m)` from their fitted position are
-/// left out and the transform is fitted again. Reports the residual of the
+/// Passes of [`fit_rigid`]'s trimming.
+const TRIM_PASSES: usize = 3;
+
+/// [`fit_rigid_once`], then up to three trimming passes: pairs farther
+/// than `max(3 x median distance, trim_floor_m)` from their position under
+/// the current fit are left out and the transform is fitted again on the
+/// rest, until the set kept stops changing. Reports the residual of the
 /// pairs kept.
 pub fn fit_rigid(capture_m: &[Vec3], world_m: &[Vec3], trim_floor_m: f64) -> Option<RigidFit> {
-    let first = fit_rigid_once(capture_m, world_m)?;
-    let distances = |r: &Registration| -> Vec<Option<f64>> {
-        capture_m
-            .iter()
-            .zip(world_m)
-            .map(|(a, b)| (a.is_finite() && b.is_finite()).then(|| r.apply(*a).distance(*b)))
-            .collect()
-    };
-    let d0 = distances(&first);
-    let mut sorted: Vec<f64> = d0.iter().flatten().copied().collect();
-    sorted.sort_by(f64::total_cmp);
-    let median = sorted[sorted.len() / 2];
-    let limit = (3.0 * median).max(trim_floor_m);
-    let keep: Vec<bool> = d0.iter().map(|d| d.is_some_and(|d| d <= limit)).collect();
-    let (ka, kb): (Vec<Vec3>, Vec<Vec3>) = capture_m
+    let usable: Vec<(Vec3, Vec3)> = capture_m
         .iter()
         .zip(world_m)
+        .filter(|(a, b)| a.is_finite() && b.is_finite())
+        .map(|(a, b)| (*a, *b))
+        .collect();
+    let (all_a, all_b): (Vec<Vec3>, Vec<Vec3>) = usable.iter().copied().unzip();
+    let mut registration = fit_rigid_once(&all_a, &all_b)?;
+    let mut keep = vec![true; usable.len()];
+    for _ in 0..TRIM_PASSES {
+        let d: Vec<f64> = usable
+            .iter()
+            .map(|(a, b)| registration.apply(*a).distance(*b))
+            .collect();
+        let mut sorted = d.clone();
+        sorted.sort_by(f64::total_cmp);
+        let limit = (3.0 * sorted[sorted.len() / 2]).max(trim_floor_m);
+        let next: Vec<bool> = d.iter().map(|d| *d <= limit).collect();
+        if next == keep {
+            break;
+        }
+        let (ka, kb): (Vec<Vec3>, Vec<Vec3>) = usable
+            .iter()
+            .zip(&next)
+            .filter(|(_, k)| **k)
+            .map(|(p, _)| *p)
+            .unzip();
+        match fit_rigid_once(&ka, &kb) {
+            Some(r) => {
+                registration = r;
+                keep = next;
+            }
+            None => break,
+        }
+    }
+    let kept: Vec<f64> = usable
+        .iter()
         .zip(&keep)
         .filter(|(_, k)| **k)
-        .map(|((a, b), _)| (*a, *b))
-        .unzip();
-    let registration = fit_rigid_once(&ka, &kb).unwrap_or(first);
-    let kept: Vec<f64> = ka
-        .iter()
-        .zip(&kb)
-        .map(|(a, b)| registration.apply(*a).distance(*b))
+        .map(|((a, b), _)| registration.apply(*a).distance(*b))
         .collect();
-    let used = kept.len().max(1);
     Some(RigidFit {
         registration,
-        residual_rms_m: (kept.iter().map(|d| d * d).sum::<f64>() / used as f64).sqrt(),
+        residual_rms_m: (kept.iter().map(|d| d * d).sum::<f64>() / kept.len().max(1) as f64)
+            .sqrt(),
         residual_max_m: kept.iter().copied().fold(0.0, f64::max),
         pairs_used: kept.len(),
-        pairs_trimmed: sorted.len() - kept.len(),
+        pairs_trimmed: usable.len() - kept.len(),
     })
 }
 

@@ -183,6 +183,13 @@ fn resolve_registration(
                 world.extend(w);
             }
             let fit = fit_rigid(&capture, &world, TRIM_FLOOR_M)?;
+            if std::env::var_os("RG_DEBUG_REG").is_some() {
+                for (c, w) in capture.iter().zip(&world) {
+                    let d = fit.registration.apply(*c) - *w;
+                    let raw = *c - *w;
+                    eprintln!("DBG {:.4} {:.4} {:.4} raw {:.1} {:.1} {:.1} fitted {:.1} {:.1} {:.1}", w.x, w.y, w.z, raw.x*1e3, raw.y*1e3, raw.z*1e3, d.x*1e3, d.y*1e3, d.z*1e3);
+                }
+            }
             let method = format!(
                 "estimated from the fit runs' mean wrist at the kinematic reference's settled steps ({} pairs over {} scenes, {} trimmed as outliers)",
                 fit.pairs_used + fit.pairs_trimmed,

@@ -657,5 +657,8 @@ mod tests {
         std::fs::write(&p, "name = \"x\"\n[[scenes]]\nname = \"s\"\nsteps = 3\n[scenes.reference]\nname = \"r\"\nformat = \"recorded\"\nfiles = \"a\"\n").unwrap();
         let e = format!("{:#}", Study::from_file(&p).unwrap_err());
         assert!(e.contains("quat_order"), "{e}");
+        std::fs::write(&p, "name = \"x\"\nholdout = \"16-\"\n[[scenes]]\nname = \"s\"\nsteps = 3\n[scenes.reference]\nname = \"r\"\nformat = \"store\"\ndir = \"d\"\n").unwrap();
+        let e = format!("{:#}", Study::from_file(&p).unwrap_err());
+        assert!(e.contains("bad.toml") && e.contains("`holdout` \"16-\""), "{e}");
     }
 }
