@@ -242,11 +242,18 @@ pub fn fit_rigid_once(capture_m: &[Vec3], world_m: &[Vec3]) -> Option<Registrati
 const TRIM_PASSES: usize = 3;
 
 /// [`fit_rigid_once`], then up to three trimming passes: pairs farther
-/// than `max(3 x median distance, trim_floor_m)` from their position under
-/// the current fit are left out and the transform is fitted again on the
-/// rest, until the set kept stops changing. Reports the residual of the
-/// pairs kept.
-pub fn fit_rigid(capture_m: &[Vec3], world_m: &[Vec3], trim_floor_m: f64) -> Option<RigidFit> {
+/// than `3 x median distance`, clamped to `[trim_floor_m, trim_ceiling_m]`,
+/// from their position under the current fit are left out and the
+/// transform is fitted again on the rest, until the set kept stops
+/// changing. Reports the residual of the pairs kept. (The ceiling keeps
+/// deviations no frame error explains, such as a hand resting on an
+/// object, out of the fit even when they pull the first fit towards them.)
+pub fn fit_rigid(
+    capture_m: &[Vec3],
+    world_m: &[Vec3],
+    trim_floor_m: f64,
+    trim_ceiling_m: f64,
+) -> Option<RigidFit> {
     let usable: Vec<(Vec3, Vec3)> = capture_m
         .iter()
         .zip(world_m)
@@ -263,7 +270,9 @@ pub fn fit_rigid(capture_m: &[Vec3], world_m: &[Vec3], trim_floor_m: f64) -> Opt
             .collect();
         let mut sorted = d.clone();
         sorted.sort_by(f64::total_cmp);
-        let limit = (3.0 * sorted[sorted.len() / 2]).max(trim_floor_m);
+        let limit = (3.0 * sorted[sorted.len() / 2])
+            .min(trim_ceiling_m)
+            .max(trim_floor_m);
         let next: Vec<bool> = d.iter().map(|d| *d <= limit).collect();
         if next == keep {
             break;
@@ -393,7 +402,7 @@ mod tests {
             .iter()
             .map(|p| inv.rotate(*p - truth.translation_m))
             .collect();
-        let fit = fit_rigid(&capture, &world, 0.005).unwrap();
+        let fit = fit_rigid(&capture, &world, 0.005, 0.02).unwrap();
         let (dt, da) = errors(&fit.registration, &truth);
         assert!(dt < 1e-4 && da < 0.05, "{dt} m, {da} deg");
         assert!(dt < 1e-9 && da < 1e-6, "exact data: {dt} m, {da} deg");
@@ -426,7 +435,7 @@ mod tests {
                 c
             })
             .collect();
-        let fit = fit_rigid(&capture, &world, 0.005).unwrap();
+        let fit = fit_rigid(&capture, &world, 0.005, 0.02).unwrap();
         let (dt, da) = errors(&fit.registration, &truth);
         assert!(dt < 5e-4 && da < 0.1, "{dt} m, {da} deg");
         // 8 outliers, one of them on a gap.
