@@ -323,7 +323,10 @@ pub fn align_group(
 /// or the track has fewer than 8 leading samples (only the samples before
 /// its first gap are used).
 pub fn lag_steps(track: &[Option<Vec3>], reference: &[Vec3], max_steps: usize) -> Option<f64> {
-    let track: Vec<Vec3> = track.iter().map_while(|p| p.filter(|p| p.is_finite())).collect();
+    let track: Vec<Vec3> = track
+        .iter()
+        .map_while(|p| p.filter(|p| p.is_finite()))
+        .collect();
     if track.len() < 8 {
         return None;
     }
@@ -605,7 +608,15 @@ mod tests {
             .iter()
             .map(|&r| ramp(r, 1200).positions("wrist"))
             .collect();
-        let g = align_group(&runs, &[true, true, true, false], &reference, 5, (20, 100), 0.01, 300);
+        let g = align_group(
+            &runs,
+            &[true, true, true, false],
+            &reference,
+            5,
+            (20, 100),
+            0.01,
+            300,
+        );
         for (s, r) in g.starts.iter().zip(rests) {
             assert_eq!(*s, Some(r - 50), "{g:?}");
         }
@@ -621,10 +632,14 @@ mod tests {
     #[test]
     fn lag_is_found_with_sub_step_precision() {
         // At rest for 20 steps, then a smooth swing.
-        let f = |x: f64| if x < 20.0 { 0.0 } else { 1.0 - ((x - 20.0) * 0.05).cos() };
-        let reference: Vec<Vec3> = (0..200)
-            .map(|i| Vec3::new(f(i as f64), 0.0, 0.0))
-            .collect();
+        let f = |x: f64| {
+            if x < 20.0 {
+                0.0
+            } else {
+                1.0 - ((x - 20.0) * 0.05).cos()
+            }
+        };
+        let reference: Vec<Vec3> = (0..200).map(|i| Vec3::new(f(i as f64), 0.0, 0.0)).collect();
         let behind: Vec<Option<Vec3>> = (0..200)
             .map(|i| Some(Vec3::new(f(i as f64 - 3.4) + 0.1, 0.0, 0.0)))
             .collect();

@@ -401,11 +401,18 @@ mod tests {
             .collect();
         let far = RunTracks::new(&[far_track], 20);
         let opts = BootstrapOptions::default();
-        let reps = replicates(&reference, &[("near", &near), ("far", &far), ("twin", &near)], &opts);
+        let reps = replicates(
+            &reference,
+            &[("near", &near), ("far", &far), ("twin", &near)],
+            &opts,
+        );
         let c = paired(("near", 1.0, &reps[0]), ("far", 2.0, &reps[1]), 0.95).unwrap();
         assert!(c.distinguishable && c.probability_closer > 0.99, "{c:?}");
         let tie = paired(("near", 1.0, &reps[0]), ("twin", 1.0, &reps[2]), 0.95).unwrap();
-        assert!(!tie.distinguishable && tie.probability_closer == 0.5, "{tie:?}");
+        assert!(
+            !tie.distinguishable && tie.probability_closer == 0.5,
+            "{tie:?}"
+        );
     }
 
     #[test]

@@ -374,7 +374,9 @@ pub struct SceneReport {
 
 /// An interval as `[low, high]` in metres with 3 decimals, or `n/a`.
 pub fn fmt_interval(i: Option<Interval>) -> String {
-    i.map_or("n/a".into(), |i| format!("[{:.3}, {:.3}]", i.low_m, i.high_m))
+    i.map_or("n/a".into(), |i| {
+        format!("[{:.3}, {:.3}]", i.low_m, i.high_m)
+    })
 }
 
 impl SceneReport {
@@ -499,7 +501,13 @@ pub(crate) fn align_runs(
                 .runs
                 .iter()
                 .zip(include)
-                .map(|(r, inc)| if *inc { r.trajectory.positions(WRIST) } else { vec![] })
+                .map(|(r, inc)| {
+                    if *inc {
+                        r.trajectory.positions(WRIST)
+                    } else {
+                        vec![]
+                    }
+                })
                 .collect();
             let fit: Vec<bool> = fit.iter().zip(include).map(|(f, i)| *f && *i).collect();
             let g = align::align_group(
@@ -911,7 +919,11 @@ fn compare_closest(sources: &[SourceSummary], level: f64) -> Option<PairedCompar
         .filter(|s| s.accumulated_error_m.is_some_and(f64::is_finite))
         .filter(|s| !s.bootstrap_replicates_m.is_empty())
         .collect();
-    ranked.sort_by(|a, b| a.accumulated_error_m.unwrap_or(f64::INFINITY).total_cmp(&b.accumulated_error_m.unwrap_or(f64::INFINITY)));
+    ranked.sort_by(|a, b| {
+        a.accumulated_error_m
+            .unwrap_or(f64::INFINITY)
+            .total_cmp(&b.accumulated_error_m.unwrap_or(f64::INFINITY))
+    });
     let (a, b) = (ranked.first()?, ranked.get(1)?);
     bootstrap::paired(
         (&a.source, a.accumulated_error_m?, &a.bootstrap_replicates_m),
@@ -961,8 +973,8 @@ pub fn evaluate_scene(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use realitygap_core::Pose;
     use crate::kinematic::KinematicTrack;
+    use realitygap_core::Pose;
 
     /// A run on the control grid: the wrist moves along x from 0 to `reach`
     /// over `move_steps`, then rests; z = 0.8.
@@ -1081,7 +1093,16 @@ mod tests {
             rate_hz: 100.0,
             alignment: Some(Alignment::estimate()),
             runs: (0..6)
-                .map(|i| run(&format!("r{i}"), 100, 5, 150 + 13 * i, 0.5, 0.001 * i as f64))
+                .map(|i| {
+                    run(
+                        &format!("r{i}"),
+                        100,
+                        5,
+                        150 + 13 * i,
+                        0.5,
+                        0.001 * i as f64,
+                    )
+                })
                 .collect(),
         }
     }
@@ -1117,14 +1138,22 @@ mod tests {
         assert_eq!(starts, [150, 163, 176, 189, 202, 215]);
         // The late source is 6 steps (0.3 s) behind; its error is not shrunk
         // by it: 6 steps x 12.5 mm over the ramp, about 2 m.
-        assert!((s_lag(&both, 0) - 0.3).abs() < 0.02, "{:?}", both.sources[0].lag_s);
+        assert!(
+            (s_lag(&both, 0) - 0.3).abs() < 0.02,
+            "{:?}",
+            both.sources[0].lag_s
+        );
         assert!(both.sources[0].accumulated_error_m.unwrap() > 1.5);
         // Intervals bracket the estimates, the same with or without the
         // other source.
         for s in &both.sources {
             let i = s.accumulated_error_interval_m.unwrap();
             let e = s.accumulated_error_m.unwrap();
-            assert!(i.low_m <= e && e <= i.high_m + 0.05, "{}: {e} {i:?}", s.source);
+            assert!(
+                i.low_m <= e && e <= i.high_m + 0.05,
+                "{}: {e} {i:?}",
+                s.source
+            );
         }
         assert_eq!(
             both.sources[1].accumulated_error_interval_m,
@@ -1135,9 +1164,24 @@ mod tests {
         assert!(c.distinguishable && c.probability_closer > 0.99, "{c:?}");
         assert_eq!(both.winner().unwrap().source, "near");
         // Twins cannot be told apart, and no winner is named.
-        let twins = evaluate_scene(&spec, &real, &[near.clone(), SourceRuns { name: "twin".into(), ..near }], &opts);
+        let twins = evaluate_scene(
+            &spec,
+            &real,
+            &[
+                near.clone(),
+                SourceRuns {
+                    name: "twin".into(),
+                    ..near
+                },
+            ],
+            &opts,
+        );
         assert!(twins.winner().is_none());
-        assert!(twins.verdict().contains("cannot be told apart"), "{}", twins.verdict());
+        assert!(
+            twins.verdict().contains("cannot be told apart"),
+            "{}",
+            twins.verdict()
+        );
     }
 
     #[test]
@@ -1169,7 +1213,10 @@ mod tests {
             .unwrap();
         let rep = evaluate_scene(&spec, &real, &[near], &given);
         let e_reg = rep.sources[0].accumulated_error_m.unwrap();
-        assert!(e_raw > 0.9 && e_reg < 0.3, "raw {e_raw}, registered {e_reg}");
+        assert!(
+            e_raw > 0.9 && e_reg < 0.3,
+            "raw {e_raw}, registered {e_reg}"
+        );
         let g = rep.registration.unwrap();
         assert!(g.residual_fit_rms_m.unwrap() < 0.003, "{g:?}");
         assert!(g.fit.is_none() && g.method.contains("test"));

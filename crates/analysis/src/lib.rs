@@ -35,5 +35,5 @@ pub mod study;
 pub mod table;
 
 pub use compare::{AnalysisMode, SceneReport, SourceRuns, SourceSummary};
-pub use study::{evaluate_study, SceneInput};
 pub use health::{HealthFlag, HealthOptions, RunHealth};
+pub use study::{evaluate_study, SceneInput};

@@ -299,8 +299,7 @@ pub fn fit_rigid(
         .collect();
     Some(RigidFit {
         registration,
-        residual_rms_m: (kept.iter().map(|d| d * d).sum::<f64>() / kept.len().max(1) as f64)
-            .sqrt(),
+        residual_rms_m: (kept.iter().map(|d| d * d).sum::<f64>() / kept.len().max(1) as f64).sqrt(),
         residual_max_m: kept.iter().copied().fold(0.0, f64::max),
         pairs_used: kept.len(),
         pairs_trimmed: usable.len() - kept.len(),
@@ -413,7 +412,7 @@ mod tests {
     /// Tolerance with gaps and noise: 1 mm Gaussian noise per axis on 400
     /// points, every 7th point missing (NaN), 2 % gross outliers of 5 cm:
     /// the outliers are trimmed and the transform is within 0.5 mm and 0.1
-/// degrees.
+    /// degrees.
     #[test]
     fn gaps_noise_and_outliers_stay_within_the_stated_tolerance() {
         let truth = known();
@@ -461,11 +460,17 @@ mod tests {
                 .to_string()
         };
         let e = bad(r#"{"rotation_wxyz": [1, 0.1, 0, 0], "translation_m": [0, 0, 0]}"#);
-        assert!(e.contains("reg.json") && e.contains("unit quaternion"), "{e}");
+        assert!(
+            e.contains("reg.json") && e.contains("unit quaternion"),
+            "{e}"
+        );
         let e = bad(r#"{"rotation_wxyz": [1, 0, 0, 0], "translation_m": [0, NaN, 0]}"#);
         assert!(e.contains("reg.json"), "{e}");
         let e = bad(r#"{"rotation_wxyz": [1, 0, 0, 0], "translation_m": [0, "NaN", 0]}"#);
-        assert!(e.contains("translation_m`[1]") && e.contains("finite"), "{e}");
+        assert!(
+            e.contains("translation_m`[1]") && e.contains("finite"),
+            "{e}"
+        );
         let e = bad(r#"{"rotation_wxyz": [1, 0, 0, 0]}"#);
         assert!(e.contains("reg.json") && e.contains("translation_m"), "{e}");
         let e = bad(r#"{"rotation_wxyz": [1, 0, 0], "translation_m": [0, 0, 0]}"#);

@@ -32,7 +32,9 @@ impl RunRange {
     /// errors.
     pub fn parse(text: &str, origin: &str) -> Result<RunRange, SelectionError> {
         let err = |why: String| SelectionError {
-            message: format!("{origin} \"{text}\": {why} (expected run numbers from 1 such as 1-15 or 1-5,8)"),
+            message: format!(
+                "{origin} \"{text}\": {why} (expected run numbers from 1 such as 1-15 or 1-5,8)"
+            ),
         };
         let mut ranges = Vec::new();
         for part in text.split(',').map(str::trim) {
@@ -191,12 +193,15 @@ mod tests {
     fn bad_selections_name_the_argument() {
         let e = sel(Some("25-30"), None).select("scene1", 20).unwrap_err();
         assert!(
-            e.message.contains("--runs \"25-30\" selects no run of scene 'scene1'"),
+            e.message
+                .contains("--runs \"25-30\" selects no run of scene 'scene1'"),
             "{e}"
         );
         let e = sel(None, Some("1-20")).select("s", 20).unwrap_err();
         assert!(e.message.contains("--holdout"), "{e}");
-        let e = sel(Some("1-16"), Some("16-20")).select("s", 20).unwrap_err();
+        let e = sel(Some("1-16"), Some("16-20"))
+            .select("s", 20)
+            .unwrap_err();
         assert!(e.message.contains("share runs 16"), "{e}");
         for bad in ["", "0-3", "5-2", "a", "1-", "1,,2"] {
             let e = RunRange::parse(bad, "--runs").unwrap_err();

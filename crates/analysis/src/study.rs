@@ -149,7 +149,8 @@ fn runs_report(reference: &SourceRuns, sel: &SelectedRuns, opts: &CompareOptions
         (Some(r), None) => format!("runs {} ({}), fitted and scored on", r.text, r.origin),
         (r, Some(h)) => format!(
             "fitted on runs {}, scored on held-out runs {} ({})",
-            r.as_ref().map_or("not held out".to_string(), |r| r.text.clone()),
+            r.as_ref()
+                .map_or("not held out".to_string(), |r| r.text.clone()),
             h.text,
             h.origin
         ),
@@ -171,8 +172,7 @@ fn resolve_registration(
     starts: &[&[Option<RunStart>]],
     opts: &CompareOptions,
 ) -> Option<(Registration, String, Option<RigidFit>)> {
-    if opts.mode == AnalysisMode::Study || !scenes.iter().any(|s| s.reference.alignment.is_some())
-    {
+    if opts.mode == AnalysisMode::Study || !scenes.iter().any(|s| s.reference.alignment.is_some()) {
         return None;
     }
     match &opts.registration {

@@ -413,7 +413,10 @@ fn markdown_notes(out: &mut String, reports: &[SceneReport]) {
         let _ = writeln!(out, "\nRegistration: {text}.");
     }
     if let Some(runs) = reports.iter().find_map(|r| r.runs.as_ref()) {
-        if reports.iter().any(|r| r.bootstrap.is_some() || r.registration.is_some()) {
+        if reports
+            .iter()
+            .any(|r| r.bootstrap.is_some() || r.registration.is_some())
+        {
             let _ = writeln!(out, "\nReal runs: {}.", runs.selection);
         }
     }

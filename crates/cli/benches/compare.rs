@@ -63,7 +63,10 @@ fn main() {
         holdout: Some(RunRange::parse("16-20", "--holdout").expect("range")),
     };
     let cases = [
-        ("default mode, registration + 1000 bootstrap resamples", CompareOptions::default()),
+        (
+            "default mode, registration + 1000 bootstrap resamples",
+            CompareOptions::default(),
+        ),
         (
             "default mode, no intervals",
             CompareOptions {

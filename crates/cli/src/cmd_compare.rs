@@ -83,12 +83,12 @@ impl MeasureArgs {
                 origin: file.to_string(),
             },
         };
-        let range = |cli: &Option<String>, file: &Option<String>, flag: &str, field: &str| {
-            match (cli, file) {
-                (Some(v), _) => RunRange::parse(v, flag).map(Some),
-                (None, Some(v)) => RunRange::parse(v, &format!("study file `{field}`")).map(Some),
-                (None, None) => Ok(None),
-            }
+        let range = |cli: &Option<String>, file: &Option<String>, flag: &str, field: &str| match (
+            cli, file,
+        ) {
+            (Some(v), _) => RunRange::parse(v, flag).map(Some),
+            (None, Some(v)) => RunRange::parse(v, &format!("study file `{field}`")).map(Some),
+            (None, None) => Ok(None),
         };
         let runs = RunSelection {
             runs: range(&self.runs, &study.runs, "--runs", "runs")?,

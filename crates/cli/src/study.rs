@@ -659,6 +659,9 @@ mod tests {
         assert!(e.contains("quat_order"), "{e}");
         std::fs::write(&p, "name = \"x\"\nholdout = \"16-\"\n[[scenes]]\nname = \"s\"\nsteps = 3\n[scenes.reference]\nname = \"r\"\nformat = \"store\"\ndir = \"d\"\n").unwrap();
         let e = format!("{:#}", Study::from_file(&p).unwrap_err());
-        assert!(e.contains("bad.toml") && e.contains("`holdout` \"16-\""), "{e}");
+        assert!(
+            e.contains("bad.toml") && e.contains("`holdout` \"16-\""),
+            "{e}"
+        );
     }
 }

@@ -281,13 +281,28 @@ fn real_start_frames_do_not_depend_on_the_simulated_sources() {
     }
     let dir = tempfile::tempdir().unwrap();
     let full = compare_study(&study_copy(dir.path(), &SOURCES), &["--format", "json"]);
-    assert!(full.status.success(), "{}", String::from_utf8_lossy(&full.stderr));
+    assert!(
+        full.status.success(),
+        "{}",
+        String::from_utf8_lossy(&full.stderr)
+    );
     let one_dir = tempfile::tempdir().unwrap();
-    let one = compare_study(&study_copy(one_dir.path(), &["PyBullet"]), &["--format", "json"]);
-    assert!(one.status.success(), "{}", String::from_utf8_lossy(&one.stderr));
+    let one = compare_study(
+        &study_copy(one_dir.path(), &["PyBullet"]),
+        &["--format", "json"],
+    );
+    assert!(
+        one.status.success(),
+        "{}",
+        String::from_utf8_lossy(&one.stderr)
+    );
     let full: Value = serde_json::from_slice(&full.stdout).unwrap();
     let one: Value = serde_json::from_slice(&one.stdout).unwrap();
-    assert_eq!(one["rows"].as_array().unwrap().len(), 3, "one source per scene");
+    assert_eq!(
+        one["rows"].as_array().unwrap().len(),
+        3,
+        "one source per scene"
+    );
     let (a, b) = (starts(&full), starts(&one));
     assert_eq!(a, b);
     for (scene, runs) in &a {
@@ -305,13 +320,30 @@ fn fit_on_runs_1_to_15_and_score_on_16_to_20() {
         return;
     };
     let v: Value = serde_json::from_str(&out).unwrap();
-    assert!(v["runs"].as_str().unwrap().contains("16-20"), "{}", v["runs"]);
+    assert!(
+        v["runs"].as_str().unwrap().contains("16-20"),
+        "{}",
+        v["runs"]
+    );
     for scene in SCENES {
         let s = &v["scenes"][scene];
-        let fit: Vec<&str> = s["runs"]["fit"].as_array().unwrap().iter().map(|r| r.as_str().unwrap()).collect();
-        let scored: Vec<&str> = s["runs"]["scored"].as_array().unwrap().iter().map(|r| r.as_str().unwrap()).collect();
+        let fit: Vec<&str> = s["runs"]["fit"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|r| r.as_str().unwrap())
+            .collect();
+        let scored: Vec<&str> = s["runs"]["scored"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|r| r.as_str().unwrap())
+            .collect();
         assert_eq!((fit.len(), scored.len()), (15, 5), "{scene}");
-        assert!(scored[0].contains("0016") && scored[4].contains("0020"), "{scored:?}");
+        assert!(
+            scored[0].contains("0016") && scored[4].contains("0020"),
+            "{scored:?}"
+        );
         assert_eq!(s["reference"]["runs_total"], 5);
         // The registration's residual on the held-out runs is reported.
         assert!(s["registration"]["residual_scored_rms_m"].as_f64().unwrap() < 0.05);
@@ -348,28 +380,62 @@ fn intervals_in_every_format_and_a_saved_registration_reapplies() {
     };
     let row = md.lines().find(|l| l.starts_with("| PyBullet |")).unwrap();
     assert_eq!(row.matches(" [").count(), 4, "{row}");
-    assert!(md.contains("Registration: capture frame registered into the world"), "{md}");
+    assert!(
+        md.contains("Registration: capture frame registered into the world"),
+        "{md}"
+    );
     let (csv, _) = compare(&["--format", "csv"]).unwrap();
     let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
     let lo = header.iter().position(|h| *h == "interval_low_m").unwrap();
-    let py = csv.lines().find(|l| l.starts_with("PyBullet,scene1")).unwrap();
-    assert!(py.split(',').nth(lo).unwrap().parse::<f64>().is_ok(), "{py}");
+    let py = csv
+        .lines()
+        .find(|l| l.starts_with("PyBullet,scene1"))
+        .unwrap();
+    assert!(
+        py.split(',').nth(lo).unwrap().parse::<f64>().is_ok(),
+        "{py}"
+    );
     let (tex, _) = compare(&["--format", "latex"]).unwrap();
     assert!(tex.contains("{\\scriptsize ["), "{tex}");
     let dir = tempfile::tempdir().unwrap();
     let saved = dir.path().join("registration.json");
-    let (json, _) = compare(&["--format", "json", "--save-registration", saved.to_str().unwrap()]).unwrap();
-    let given = compare(&["--format", "json", "--registration", saved.to_str().unwrap()])
+    let (json, _) = compare(&[
+        "--format",
+        "json",
+        "--save-registration",
+        saved.to_str().unwrap(),
+    ])
+    .unwrap();
+    let given = compare(&[
+        "--format",
+        "json",
+        "--registration",
+        saved.to_str().unwrap(),
+    ])
+    .unwrap()
+    .0;
+    let (a, b): (Value, Value) = (
+        serde_json::from_str(&json).unwrap(),
+        serde_json::from_str(&given).unwrap(),
+    );
+    for (x, y) in a["rows"]
+        .as_array()
         .unwrap()
-        .0;
-    let (a, b): (Value, Value) = (serde_json::from_str(&json).unwrap(), serde_json::from_str(&given).unwrap());
-    for (x, y) in a["rows"].as_array().unwrap().iter().zip(b["rows"].as_array().unwrap()) {
-        match (x["accumulated_error_m"].as_f64(), y["accumulated_error_m"].as_f64()) {
+        .iter()
+        .zip(b["rows"].as_array().unwrap())
+    {
+        match (
+            x["accumulated_error_m"].as_f64(),
+            y["accumulated_error_m"].as_f64(),
+        ) {
             (Some(p), Some(q)) => assert!((p - q).abs() < 1e-9, "{p} {q}"),
             (p, q) => assert_eq!(p, q),
         }
     }
-    assert!(b["registration"]["method"].as_str().unwrap().contains("registration.json"));
+    assert!(b["registration"]["method"]
+        .as_str()
+        .unwrap()
+        .contains("registration.json"));
     // Without registration the table is different (the offset is paid).
     let (raw, _) = compare(&["--format", "json", "--registration", "none"]).unwrap();
     let raw: Value = serde_json::from_str(&raw).unwrap();
@@ -411,14 +477,26 @@ fn bad_registration_files_and_run_ranges_name_the_culprit() {
         assert!(!err.contains("panicked"), "{err}");
     }
     for (args, expect) in [
-        (vec!["--runs", "25-30"], "--runs \"25-30\" selects no run of scene 'scene1_single_joint'"),
-        (vec!["--holdout", "1-20"], "--holdout \"1-20\" holds out every run"),
+        (
+            vec!["--runs", "25-30"],
+            "--runs \"25-30\" selects no run of scene 'scene1_single_joint'",
+        ),
+        (
+            vec!["--holdout", "1-20"],
+            "--holdout \"1-20\" holds out every run",
+        ),
         (vec!["--runs", "1-x"], "--runs \"1-x\""),
-        (vec!["--mode", "study", "--registration", "none"], "--registration does not apply to --mode study"),
+        (
+            vec!["--mode", "study", "--registration", "none"],
+            "--registration does not apply to --mode study",
+        ),
     ] {
         let out = compare_study(&study, &args);
         let err = String::from_utf8_lossy(&out.stderr);
-        assert!(!out.status.success() && err.contains(expect), "{args:?}: {err}");
+        assert!(
+            !out.status.success() && err.contains(expect),
+            "{args:?}: {err}"
+        );
     }
 }
 

@@ -88,8 +88,13 @@ fn report_on_the_paper_data() {
     let pybullet = table.lines().find(|l| l.contains("PyBullet")).unwrap();
     assert_eq!(pybullet.matches(" [").count(), 4, "{pybullet}");
     assert!(html.contains("bootstrap interval over the real runs"));
-    assert!(html.contains("scene1_single_joint: closest source: ") || html.contains("cannot be told apart"));
-    assert!(html.contains("<p id=\"registration\"><strong>Registration:</strong> capture frame registered"));
+    assert!(
+        html.contains("scene1_single_joint: closest source: ")
+            || html.contains("cannot be told apart")
+    );
+    assert!(html.contains(
+        "<p id=\"registration\"><strong>Registration:</strong> capture frame registered"
+    ));
     assert!(html.contains("<p id=\"runs\"><strong>Real runs:</strong> all 20 runs"));
     let reg: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("registration.json")).unwrap())

@@ -791,7 +791,9 @@ mod tests {
         assert!(html.contains("phase 1 (0\u{2013}2.5 s): <strong>Alpha &lt;&amp;&gt;</strong>"));
         // Intervals next to the values, the verdict and the registration.
         assert!(alpha_row.contains("1.000 [0.900, 1.100]"), "{alpha_row}");
-        assert!(html.contains("closest source: Alpha &lt;&amp;&gt; (closer than Beta with probability 1.000"));
+        assert!(html.contains(
+            "closest source: Alpha &lt;&amp;&gt; (closer than Beta with probability 1.000"
+        ));
         assert!(html.contains("translation (1.0, -2.0, 9.0) mm"));
         assert!(html.contains("estimated &lt;test&gt;"));
         assert_eq!(tbody(&html, "scene-scene-test").matches("<tr>").count(), 3);
