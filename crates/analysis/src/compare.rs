@@ -469,6 +469,57 @@ fn stride_of(src: &SourceRuns, spec: &SceneSpec) -> usize {
     (src.rate_hz * spec.control_period_s).round().max(1.0) as usize
 }
 
+/// Start frames of the included runs by [`align::align_group`] against
+/// the kinematic reference; `settings` are (stride, search frames, rest
+/// window, onset threshold in metres). Returns the starts and the group
+/// shift in frames.
+fn group_starts(
+    src: &SourceRuns,
+    kin: &KinematicTrack,
+    settings: (usize, usize, (usize, usize), f64),
+    include: &[bool],
+    fit: &[bool],
+) -> (Vec<Option<RunStart>>, i64) {
+    let (stride, search_frames, rest_frames, threshold_m) = settings;
+    let positions: Vec<Vec<Option<Vec3>>> = src
+        .runs
+        .iter()
+        .zip(include)
+        .map(|(r, inc)| {
+            if *inc {
+                r.trajectory.positions(WRIST)
+            } else {
+                vec![]
+            }
+        })
+        .collect();
+    let fit: Vec<bool> = fit.iter().zip(include).map(|(f, i)| *f && *i).collect();
+    let g = align::align_group(
+        &positions,
+        &fit,
+        &kin.wrist_m,
+        stride,
+        rest_frames,
+        threshold_m,
+        search_frames,
+    );
+    let starts = g
+        .starts
+        .iter()
+        .zip(&src.runs)
+        .zip(&positions)
+        .map(|((s, run), pos)| {
+            let start = (*s).filter(|s| *s < run.trajectory.len())?;
+            Some(RunStart {
+                start_frame: start,
+                start_s: run.trajectory.time_s[start] - run.trajectory.time_s[0],
+                onset_frame: align::motion_onset(pos, rest_frames, threshold_m),
+            })
+        })
+        .collect();
+    (starts, g.group_shift_frames)
+}
+
 /// Chooses the start frame of every run of a recording source marked in
 /// `include`, from the recordings and the scene's kinematic reference
 /// alone; templates are fitted on the runs marked in `fit`. Returns the
@@ -497,42 +548,15 @@ pub(crate) fn align_runs(
             },
             Some(kin),
         ) => {
-            let positions: Vec<Vec<Option<Vec3>>> = src
-                .runs
-                .iter()
-                .zip(include)
-                .map(|(r, inc)| {
-                    if *inc {
-                        r.trajectory.positions(WRIST)
-                    } else {
-                        vec![]
-                    }
-                })
-                .collect();
-            let fit: Vec<bool> = fit.iter().zip(include).map(|(f, i)| *f && *i).collect();
-            let g = align::align_group(
-                &positions,
-                &fit,
-                &kin.wrist_m,
-                stride,
-                *rest_frames,
-                *threshold_m,
-                *search_frames,
+            let (starts, shift) = group_starts(
+                src,
+                kin,
+                (stride, *search_frames, *rest_frames, *threshold_m),
+                include,
+                fit,
             );
-            group_shift = Some(g.group_shift_frames);
-            g.starts
-                .iter()
-                .zip(&src.runs)
-                .zip(&positions)
-                .map(|((s, run), pos)| {
-                    let start = (*s).filter(|s| *s < run.trajectory.len())?;
-                    Some(RunStart {
-                        start_frame: start,
-                        start_s: run.trajectory.time_s[start] - run.trajectory.time_s[0],
-                        onset_frame: align::motion_onset(pos, *rest_frames, *threshold_m),
-                    })
-                })
-                .collect()
+            group_shift = Some(shift);
+            starts
         }
         (a, kin) => {
             if matches!(a, Alignment::Estimate { .. }) && kin.is_none() {

@@ -276,36 +276,7 @@ fn markdown(reports: &[SceneReport]) -> String {
                 starts.join(", ")
             );
         }
-        if let Some(runs) = r
-            .runs
-            .as_ref()
-            .filter(|x| x.fit != x.scored || !x.selection.starts_with("all "))
-        {
-            let _ = writeln!(
-                out,
-                "Runs: {} (fit: {}; scored: {}).",
-                runs.selection,
-                runs.fit.join(", "),
-                runs.scored.join(", ")
-            );
-        }
-        if let Some(a) = r.alignment.as_ref().and_then(|a| a.group_shift_frames) {
-            let _ = writeln!(out, "Group shift to the kinematic reference: {a} frames.");
-        }
-        if let Some(g) = &r.registration {
-            let _ = writeln!(
-                out,
-                "Registration residual at this scene's {} settled steps: {} mm on the fit runs, {} mm on the scored runs.",
-                g.settled_steps,
-                g.residual_fit_rms_m.map_or("n/a".into(), |v| format!("{:.1}", v * 1000.0)),
-                g.residual_scored_rms_m.map_or("n/a".into(), |v| format!("{:.1}", v * 1000.0))
-            );
-        }
-        if r.closest_comparison.is_some() {
-            let _ = writeln!(out, "{}.", capitalise(&r.verdict()));
-        } else if let Some(c) = r.closest() {
-            let _ = writeln!(out, "Closest source: {}.", c.source);
-        }
+        scene_notes(&mut out, r);
         let _ = writeln!(out);
         let _ = writeln!(out, "| Source | Runs | Mean err (m) | Final err (m) | Lag (s) | Goal dist (m) | Converged (s) | Overshoot (m) | Orient. err (deg) | Cube final dx (m) | Cube tilt (deg) | Contact (s) |");
         let _ = writeln!(
@@ -356,6 +327,41 @@ fn markdown(reports: &[SceneReport]) -> String {
         }
     }
     out
+}
+
+/// The lines under a scene's heading: runs, group shift, registration
+/// residuals and the verdict on the closest source.
+fn scene_notes(out: &mut String, r: &SceneReport) {
+    if let Some(runs) = r
+        .runs
+        .as_ref()
+        .filter(|x| x.fit != x.scored || !x.selection.starts_with("all "))
+    {
+        let _ = writeln!(
+            out,
+            "Runs: {} (fit: {}; scored: {}).",
+            runs.selection,
+            runs.fit.join(", "),
+            runs.scored.join(", ")
+        );
+    }
+    if let Some(a) = r.alignment.as_ref().and_then(|a| a.group_shift_frames) {
+        let _ = writeln!(out, "Group shift to the kinematic reference: {a} frames.");
+    }
+    if let Some(g) = &r.registration {
+        let _ = writeln!(
+            out,
+            "Registration residual at this scene's {} settled steps: {} mm on the fit runs, {} mm on the scored runs.",
+            g.settled_steps,
+            g.residual_fit_rms_m.map_or("n/a".into(), |v| format!("{:.1}", v * 1000.0)),
+            g.residual_scored_rms_m.map_or("n/a".into(), |v| format!("{:.1}", v * 1000.0))
+        );
+    }
+    if r.closest_comparison.is_some() {
+        let _ = writeln!(out, "{}.", capitalise(&r.verdict()));
+    } else if let Some(c) = r.closest() {
+        let _ = writeln!(out, "Closest source: {}.", c.source);
+    }
 }
 
 fn capitalise(s: &str) -> String {

@@ -298,6 +298,28 @@ fn capitalise(s: &str) -> String {
     }
 }
 
+/// The scene's real runs (fitted on, scored on) and the registration's
+/// residuals there.
+fn runs_and_registration(h: &mut String, r: &SceneReport) {
+    if let Some(runs) = &r.runs {
+        let _ = writeln!(
+            h,
+            "<p>Real runs fitted on: {}. Scored on: {}.</p>",
+            escape(&runs.fit.join(", ")),
+            escape(&runs.scored.join(", "))
+        );
+    }
+    if let Some(g) = &r.registration {
+        let _ = writeln!(
+            h,
+            "<p>Registration residual at this scene's {} settled steps: {} mm on the fit runs, {} mm on the scored runs.</p>",
+            g.settled_steps,
+            g.residual_fit_rms_m.map_or("n/a".into(), |v| format!("{:.1}", v * 1000.0)),
+            g.residual_scored_rms_m.map_or("n/a".into(), |v| format!("{:.1}", v * 1000.0))
+        );
+    }
+}
+
 fn scene_section(h: &mut String, r: &SceneReport, figures: &[&FigureEntry<'_>]) {
     let _ = writeln!(
         h,
@@ -319,23 +341,7 @@ fn scene_section(h: &mut String, r: &SceneReport, figures: &[&FigureEntry<'_>]) 
         let _ = write!(h, "; goal ({:.4}, {:.4}, {:.4}) m", g[0], g[1], g[2]);
     }
     let _ = writeln!(h, ". {}.</p>", escape(&capitalise(&r.verdict())));
-    if let Some(runs) = &r.runs {
-        let _ = writeln!(
-            h,
-            "<p>Real runs fitted on: {}. Scored on: {}.</p>",
-            escape(&runs.fit.join(", ")),
-            escape(&runs.scored.join(", "))
-        );
-    }
-    if let Some(g) = &r.registration {
-        let _ = writeln!(
-            h,
-            "<p>Registration residual at this scene's {} settled steps: {} mm on the fit runs, {} mm on the scored runs.</p>",
-            g.settled_steps,
-            g.residual_fit_rms_m.map_or("n/a".into(), |v| format!("{:.1}", v * 1000.0)),
-            g.residual_scored_rms_m.map_or("n/a".into(), |v| format!("{:.1}", v * 1000.0))
-        );
-    }
+    runs_and_registration(h, r);
 
     // Closest per phase.
     if !r.phases_s.is_empty() {
