@@ -1083,7 +1083,7 @@ mod tests {
         let rep = evaluate_scene(
             &spec_with_kinematic(),
             &real,
-            &[sim.clone()],
+            std::slice::from_ref(&sim),
             &CompareOptions::default(),
         );
         assert_eq!(
@@ -1149,7 +1149,7 @@ mod tests {
         let near = sim("near", 0, 0.52);
         let opts = CompareOptions::default();
         let both = evaluate_scene(&spec, &real, &[late.clone(), near.clone()], &opts);
-        let one = evaluate_scene(&spec, &real, &[near.clone()], &opts);
+        let one = evaluate_scene(&spec, &real, std::slice::from_ref(&near), &opts);
         assert_eq!(both.alignment, one.alignment);
         let starts: Vec<usize> = one
             .alignment
@@ -1232,7 +1232,7 @@ mod tests {
             },
             ..Default::default()
         };
-        let e_raw = evaluate_scene(&spec, &real, &[near.clone()], &raw).sources[0]
+        let e_raw = evaluate_scene(&spec, &real, std::slice::from_ref(&near), &raw).sources[0]
             .accumulated_error_m
             .unwrap();
         let rep = evaluate_scene(&spec, &real, &[near], &given);

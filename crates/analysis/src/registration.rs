@@ -227,7 +227,7 @@ pub fn fit_rigid_once(capture_m: &[Vec3], world_m: &[Vec3]) -> Option<Registrati
     order.sort_by(|&i, &j| values[j].total_cmp(&values[i]));
     // Collinear (or coincident) points: the top eigenvalue is not unique.
     let scale = values.iter().map(|v| v.abs()).fold(0.0, f64::max);
-    if !(scale > 0.0) || values[order[0]] - values[order[1]] < 1e-12 * scale {
+    if scale.is_nan() || scale <= 0.0 || values[order[0]] - values[order[1]] < 1e-12 * scale {
         return None;
     }
     let v = vectors[order[0]];
@@ -331,13 +331,13 @@ fn jacobi_eigen4(mut a: [[f64; 4]; 4]) -> ([f64; 4], [[f64; 4]; 4]) {
                 let t = if theta == 0.0 { 1.0 } else { t };
                 let c = 1.0 / (t * t + 1.0).sqrt();
                 let s = t * c;
-                for k in 0..4 {
-                    let (akp, akq) = (a[k][p], a[k][q]);
-                    a[k][p] = c * akp - s * akq;
-                    a[k][q] = s * akp + c * akq;
+                for row in a.iter_mut() {
+                    let (akp, akq) = (row[p], row[q]);
+                    row[p] = c * akp - s * akq;
+                    row[q] = s * akp + c * akq;
                 }
-                for k in 0..4 {
-                    let (apk, aqk) = (a[p][k], a[q][k]);
+                let (rp, rq) = (a[p], a[q]);
+                for (k, (apk, aqk)) in rp.iter().zip(rq).enumerate() {
                     a[p][k] = c * apk - s * aqk;
                     a[q][k] = s * apk + c * aqk;
                 }
