@@ -317,8 +317,11 @@ pub fn align_group(
 /// Lag of a track behind a reference track (both per control step,
 /// metres), in control steps with sub-step precision: the shift `s`
 /// minimising the mean squared difference of the displacements from the
-/// first sample, `track(k + s)` against `reference(k)`, searched within
-/// `+-max_steps` and refined by a parabola through the best three shifts.
+/// first sample, `a * track(k + s)` against `reference(k)` with the best
+/// scale `a` for each shift (so that a track that stops short of the
+/// reference's amplitude, e.g. an arm sagging under gravity, is not read as
+/// early or late), searched within `+-max_steps` and refined by a parabola
+/// through the best three shifts.
 /// Positive: the track is behind. `None` when the tracks do not overlap
 /// or the track has fewer than 8 leading samples (only the samples before
 /// its first gap are used).
@@ -334,17 +337,22 @@ pub fn lag_steps(track: &[Option<Vec3>], reference: &[Vec3], max_steps: usize) -
     let n = track.len().min(reference.len()) as i64;
     let max = (max_steps as i64).min(n / 4);
     let cost = |s: i64| -> f64 {
-        let (mut sum, mut count) = (0.0, 0usize);
+        let (mut tt, mut tr, mut rr, mut count) = (0.0, 0.0, 0.0, 0usize);
         for k in 0..n {
             let j = k + s;
             if j < 0 || j >= n {
                 continue;
             }
-            let e = (track[j as usize] - t0) - (reference[k as usize] - r0);
-            sum += e.dot(e);
+            let t = track[j as usize] - t0;
+            let r = reference[k as usize] - r0;
+            tt += t.dot(t);
+            tr += t.dot(r);
+            rr += r.dot(r);
             count += 1;
         }
-        sum / count.max(1) as f64
+        // Residual of the best scale a = tr / tt: rr - tr^2 / tt.
+        let residual = if tt > 0.0 { rr - tr * tr / tt } else { rr };
+        residual.max(0.0) / count.max(1) as f64
     };
     let costs: Vec<(i64, f64)> = (-max..=max).map(|s| (s, cost(s))).collect();
     let (i, &(s, c)) = costs
@@ -646,7 +654,14 @@ mod tests {
         let lag = lag_steps(&behind, &reference, 40).unwrap();
         assert!((lag - 3.4).abs() < 0.1, "{lag}");
         let same: Vec<Option<Vec3>> = reference.iter().map(|p| Some(*p)).collect();
-        assert!(lag_steps(&same, &reference, 40).unwrap().abs() < 1e-9);
+        let zero = lag_steps(&same, &reference, 40).unwrap();
+        assert!(zero.abs() < 0.05, "{zero}");
+        // Stopping short (80 % of the swing) is not a lag.
+        let short: Vec<Option<Vec3>> = (0..200)
+            .map(|i| Some(Vec3::new(0.8 * f(i as f64 - 3.4), 0.0, 0.0)))
+            .collect();
+        let lag = lag_steps(&short, &reference, 40).unwrap();
+        assert!((lag - 3.4).abs() < 0.1, "{lag}");
         assert!(lag_steps(&[None], &reference, 40).is_none());
     }
 

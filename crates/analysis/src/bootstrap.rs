@@ -367,6 +367,7 @@ mod tests {
             }
         }
         let rate = covered as f64 / trials as f64;
+        eprintln!("bootstrap coverage: {covered} of {trials} ({rate:.3}) at nominal 0.95");
         assert!((0.90..=0.985).contains(&rate), "coverage {rate}");
     }
 

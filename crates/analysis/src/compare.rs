@@ -595,10 +595,10 @@ pub(crate) fn align_runs(
                     EndPolicy::Cut,
                 )
                 .1,
-                used_for: match (fit[i], opts.runs.holdout.is_some() && !fit[i]) {
-                    (true, _) if opts.runs.holdout.is_none() => "fit+score".into(),
-                    (true, _) => "fit".into(),
-                    _ => "score".into(),
+                used_for: match (opts.runs.holdout.is_some(), fit[i]) {
+                    (false, _) => "fit+score".into(),
+                    (true, true) => "fit".into(),
+                    (true, false) => "score".into(),
                 },
             }),
             None => report.failed.push((
