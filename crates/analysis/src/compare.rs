@@ -143,7 +143,8 @@ pub struct CompareOptions {
     /// Alignment to use for recordings instead of the mode's default
     /// (default mode: [`Alignment::estimate`]; study mode: the source's own).
     pub alignment: Option<Alignment>,
-    /// Capture-frame registration of the recordings.
+    /// Capture-frame registration of the recordings (never applied in
+    /// study mode, which keeps the raw capture frame as the study did).
     pub registration: RegistrationChoice,
     /// Which real runs to fit on and to score on (default: all, both).
     pub runs: RunSelection,
