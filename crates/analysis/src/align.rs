@@ -33,11 +33,13 @@ pub enum Alignment {
         #[serde(default = "default_threshold")]
         threshold_m: f64,
     },
-    /// Per run: the start frame that best matches a template motion (the
-    /// mean of the simulated sources), searched within `search_frames`
-    /// before and after the motion onset. Matching compares displacements
-    /// from each side's rest position, so a constant offset between the
-    /// capture frame and the simulation frame does not bias it.
+    /// The start frames that best match the scene's kinematic reference
+    /// (see [`align_group`]): each run is matched to the reference, then the
+    /// runs to their own mean, then the group as a whole to the reference,
+    /// searched within `search_frames` before and after the motion onset.
+    /// Matching compares displacements from each side's rest position, so
+    /// a constant offset between the capture frame and the simulation frame
+    /// does not bias it. No simulator is read.
     Estimate {
         /// Search half-width around the onset, frames.
         #[serde(default = "default_search")]
@@ -85,7 +87,7 @@ impl Alignment {
                 )
             }
             Alignment::Estimate { search_frames, .. } => {
-                format!("estimated per run against the simulated mean (search +-{search_frames} frames around onset)")
+                format!("estimated from the real runs and the scene alone: each run matched to the kinematic reference, the runs to each other, then the group to the kinematic reference (search +-{search_frames} frames around onset)")
             }
         }
     }
@@ -179,6 +181,196 @@ pub fn estimate_start(
         }
     }
     best.map(|(_, s)| s)
+}
+
+/// The displacement of a recording from `rest` at frames `start + k *
+/// stride` for `steps` steps, holding the last seen sample over gaps and
+/// past the end.
+fn displacement_track(
+    positions: &[Option<Vec3>],
+    rest: Vec3,
+    start: usize,
+    stride: usize,
+    steps: usize,
+) -> Vec<Vec3> {
+    let mut last = rest;
+    (0..steps)
+        .map(|k| {
+            if let Some(Some(p)) = positions.get(start + k * stride) {
+                last = *p;
+            }
+            last - rest
+        })
+        .collect()
+}
+
+/// The start frames of a group of recordings, from [`align_group`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct GroupAlignment {
+    /// Start frame per run (`None` when the run has no rest window or no
+    /// motion).
+    pub starts: Vec<Option<usize>>,
+    /// Frames the whole group was moved by in the last stage (positive:
+    /// later), after the runs were aligned to each other.
+    pub group_shift_frames: i64,
+}
+
+/// Aligns a group of recordings (wrist positions per frame) to a reference
+/// track on the control grid (e.g. the kinematic reference, metres per
+/// step), from the recordings and the reference alone:
+///
+/// 1. each run is matched to the reference ([`estimate_start`]);
+/// 2. twice: the mean displacement of the `fit` runs becomes a template and
+///    every run is matched to it (the runs aligned to each other);
+/// 3. the group is shifted as a whole by the number of frames (within
+///    `search_frames / 2`) that best matches the `fit` runs' mean
+///    displacement to the reference's.
+///
+/// `stride` is capture frames per control step. Runs outside `fit` are
+/// aligned to the template of the `fit` runs and shifted with them.
+pub fn align_group(
+    runs: &[Vec<Option<Vec3>>],
+    fit: &[bool],
+    reference_m: &[Vec3],
+    stride: usize,
+    rest_frames: (usize, usize),
+    threshold_m: f64,
+    search_frames: usize,
+) -> GroupAlignment {
+    let stride = stride.max(1);
+    let steps = reference_m.len();
+    let rests: Vec<Option<Vec3>> = runs
+        .iter()
+        .map(|r| median_position(r, rest_frames))
+        .collect();
+    let estimate = |template: &[Vec3]| -> Vec<Option<usize>> {
+        runs.iter()
+            .map(|r| estimate_start(r, template, stride, rest_frames, threshold_m, search_frames))
+            .collect()
+    };
+    let mut starts = estimate(reference_m);
+    let fit_mean = |starts: &[Option<usize>], shift: i64| -> Option<Vec<Vec3>> {
+        let mut sum = vec![Vec3::ZERO; steps];
+        let mut n = 0usize;
+        for (i, r) in runs.iter().enumerate() {
+            let (Some(s), Some(rest), true) = (starts[i], rests[i], fit.get(i) == Some(&true))
+            else {
+                continue;
+            };
+            let s = s as i64 + shift;
+            if s < 0 {
+                return None;
+            }
+            for (acc, d) in sum
+                .iter_mut()
+                .zip(displacement_track(r, rest, s as usize, stride, steps))
+            {
+                *acc = *acc + d;
+            }
+            n += 1;
+        }
+        (n > 0).then(|| sum.into_iter().map(|p| p.scale(1.0 / n as f64)).collect())
+    };
+    for _ in 0..2 {
+        let Some(template) = fit_mean(&starts, 0) else {
+            return GroupAlignment {
+                starts,
+                group_shift_frames: 0,
+            };
+        };
+        starts = estimate(&template);
+    }
+    let Some(k0) = reference_m.first().copied() else {
+        return GroupAlignment {
+            starts,
+            group_shift_frames: 0,
+        };
+    };
+    let half = (search_frames / 2) as i64;
+    let mut best: Option<(f64, i64)> = None;
+    for shift in -half..=half {
+        let Some(mean) = fit_mean(&starts, shift) else {
+            continue;
+        };
+        let cost: f64 = mean
+            .iter()
+            .zip(reference_m)
+            .map(|(d, k)| {
+                let e = *d - (*k - k0);
+                e.dot(e)
+            })
+            .sum();
+        if best.is_none_or(|(b, _)| cost < b) {
+            best = Some((cost, shift));
+        }
+    }
+    let shift = best.map_or(0, |(_, s)| s);
+    GroupAlignment {
+        starts: starts
+            .into_iter()
+            .map(|s| s.map(|s| (s as i64 + shift).max(0) as usize))
+            .collect(),
+        group_shift_frames: shift,
+    }
+}
+
+/// Lag of a track behind a reference track (both per control step,
+/// metres), in control steps with sub-step precision: the shift `s`
+/// minimising the mean squared difference of the displacements from the
+/// first sample, `a * track(k + s)` against `reference(k)` with the best
+/// scale `a` for each shift (so that a track that stops short of the
+/// reference's amplitude, e.g. an arm sagging under gravity, is not read as
+/// early or late), searched within `+-max_steps` and refined by a parabola
+/// through the best three shifts.
+/// Positive: the track is behind. `None` when the tracks do not overlap
+/// or the track has fewer than 8 leading samples (only the samples before
+/// its first gap are used).
+pub fn lag_steps(track: &[Option<Vec3>], reference: &[Vec3], max_steps: usize) -> Option<f64> {
+    let track: Vec<Vec3> = track
+        .iter()
+        .map_while(|p| p.filter(|p| p.is_finite()))
+        .collect();
+    if track.len() < 8 {
+        return None;
+    }
+    let (t0, r0) = (*track.first()?, *reference.first()?);
+    let n = track.len().min(reference.len()) as i64;
+    let max = (max_steps as i64).min(n / 4);
+    let cost = |s: i64| -> f64 {
+        let (mut tt, mut tr, mut rr, mut count) = (0.0, 0.0, 0.0, 0usize);
+        for k in 0..n {
+            let j = k + s;
+            if j < 0 || j >= n {
+                continue;
+            }
+            let t = track[j as usize] - t0;
+            let r = reference[k as usize] - r0;
+            tt += t.dot(t);
+            tr += t.dot(r);
+            rr += r.dot(r);
+            count += 1;
+        }
+        // Residual of the best scale a = tr / tt: rr - tr^2 / tt.
+        let residual = if tt > 0.0 { rr - tr * tr / tt } else { rr };
+        residual.max(0.0) / count.max(1) as f64
+    };
+    let costs: Vec<(i64, f64)> = (-max..=max).map(|s| (s, cost(s))).collect();
+    let (i, &(s, c)) = costs
+        .iter()
+        .enumerate()
+        .filter(|(_, (_, c))| c.is_finite())
+        .min_by(|a, b| a.1 .1.total_cmp(&b.1 .1))?;
+    if i == 0 || i + 1 == costs.len() {
+        return Some(s as f64);
+    }
+    let (cm, cp) = (costs[i - 1].1, costs[i + 1].1);
+    let denom = cm - 2.0 * c + cp;
+    let offset = if denom > 0.0 {
+        (0.5 * (cm - cp) / denom).clamp(-0.5, 0.5)
+    } else {
+        0.0
+    };
+    Some(s as f64 + offset)
 }
 
 /// The start frame chosen for one run, with what it was derived from.
@@ -411,6 +603,66 @@ mod tests {
             .collect();
         let s = estimate_start(&t.positions("wrist"), &template, 5, (20, 100), 0.01, 300).unwrap();
         assert_eq!(s, 237 - 20);
+    }
+
+    #[test]
+    fn group_alignment_recovers_each_runs_offset() {
+        // Reference: rest 10 steps then the ramp (5 mm per step).
+        let reference: Vec<Vec3> = (0..100)
+            .map(|i| Vec3::new(if i < 10 { 0.0 } else { (i - 10) as f64 * 0.005 }, 0.0, 0.5))
+            .collect();
+        let rests = [237, 180, 301, 150];
+        let runs: Vec<Vec<Option<Vec3>>> = rests
+            .iter()
+            .map(|&r| ramp(r, 1200).positions("wrist"))
+            .collect();
+        let g = align_group(
+            &runs,
+            &[true, true, true, false],
+            &reference,
+            5,
+            (20, 100),
+            0.01,
+            300,
+        );
+        for (s, r) in g.starts.iter().zip(rests) {
+            assert_eq!(*s, Some(r - 50), "{g:?}");
+        }
+        // A run whose capture is 20 mm off in z aligns the same.
+        let shifted: Vec<Option<Vec3>> = runs[0]
+            .iter()
+            .map(|p| p.map(|p| p + Vec3::new(0.0, 0.0, 0.02)))
+            .collect();
+        let g2 = align_group(&[shifted], &[true], &reference, 5, (20, 100), 0.01, 300);
+        assert_eq!(g2.starts[0], Some(237 - 50));
+    }
+
+    #[test]
+    fn lag_is_found_with_sub_step_precision() {
+        // At rest for 20 steps, then a smooth swing.
+        let f = |x: f64| {
+            if x < 20.0 {
+                0.0
+            } else {
+                1.0 - ((x - 20.0) * 0.05).cos()
+            }
+        };
+        let reference: Vec<Vec3> = (0..200).map(|i| Vec3::new(f(i as f64), 0.0, 0.0)).collect();
+        let behind: Vec<Option<Vec3>> = (0..200)
+            .map(|i| Some(Vec3::new(f(i as f64 - 3.4) + 0.1, 0.0, 0.0)))
+            .collect();
+        let lag = lag_steps(&behind, &reference, 40).unwrap();
+        assert!((lag - 3.4).abs() < 0.1, "{lag}");
+        let same: Vec<Option<Vec3>> = reference.iter().map(|p| Some(*p)).collect();
+        let zero = lag_steps(&same, &reference, 40).unwrap();
+        assert!(zero.abs() < 0.05, "{zero}");
+        // Stopping short (80 % of the swing) is not a lag.
+        let short: Vec<Option<Vec3>> = (0..200)
+            .map(|i| Some(Vec3::new(0.8 * f(i as f64 - 3.4), 0.0, 0.0)))
+            .collect();
+        let lag = lag_steps(&short, &reference, 40).unwrap();
+        assert!((lag - 3.4).abs() < 0.1, "{lag}");
+        assert!(lag_steps(&[None], &reference, 40).is_none());
     }
 
     #[test]

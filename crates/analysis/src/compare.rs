@@ -5,15 +5,27 @@
 //! 1. health-check every run ([`crate::health`]);
 //! 2. put every run on the control grid: simulated runs are cut (or padded)
 //!    to the scene's step count; recordings (the real arm) are aligned
-//!    ([`crate::align`]) and resampled;
+//!    ([`crate::align`]) from the recordings and the scene's kinematic
+//!    reference alone, registered into the world
+//!    ([`crate::registration`]) and resampled;
 //! 3. per source, the per-step mean of the tracked bodies over its runs,
 //!    leaving flagged runs out unless in [`AnalysisMode::Study`];
 //! 4. the measures ([`crate::metrics`]) of each source against the
-//!    reference's mean and against the goal.
+//!    reference's mean and against the goal, the lag of each source behind
+//!    the kinematic reference, and the bootstrap intervals
+//!    ([`crate::bootstrap`]).
+//!
+//! [`crate::study::evaluate_study`] runs this for every scene of a study
+//! with one registration and one run selection; [`evaluate_scene`] is the
+//! same for a single scene.
 
 use crate::align::{self, Alignment, EndPolicy, RunStart};
+use crate::bootstrap::{self, BootstrapOptions, Interval, PairedComparison, RunTracks};
 use crate::health::{self, HealthFlag, HealthOptions};
+use crate::kinematic::KinematicTrack;
 use crate::metrics::{self, GoalMeasures};
+use crate::registration::{Registration, RigidFit};
+use crate::selection::RunSelection;
 use crate::stats::{self, MeanTrack};
 use realitygap_core::trajectory::{CUBE, WRIST};
 use realitygap_core::{Quat, Trajectory, Vec3};
@@ -23,8 +35,10 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum AnalysisMode {
-    /// Flagged runs are left out and listed; real runs are aligned by an
-    /// estimated offset; runs that end early are cut.
+    /// Flagged runs are left out and listed; real runs are aligned to the
+    /// scene's kinematic reference and registered into the world frame;
+    /// runs that end early are cut; accumulated errors carry bootstrap
+    /// intervals.
     #[default]
     Default,
     /// Exactly the reference study's procedure: every run averaged in, the
@@ -90,9 +104,36 @@ pub struct SceneSpec {
     pub phases_s: Vec<f64>,
     /// Cube measures, for scenes with a cube.
     pub cube: Option<CubeSpec>,
+    /// The scene's kinematic reference (perfect velocity tracking through
+    /// forward kinematics, [`crate::kinematic`]), when the scene file is
+    /// known: what the real runs are aligned to, the registration is fitted
+    /// against and every source's lag is measured from.
+    #[serde(skip)]
+    pub kinematic: Option<KinematicTrack>,
 }
 
-/// Options of [`evaluate_scene`].
+/// Which capture-frame registration to apply to recordings.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub enum RegistrationChoice {
+    /// The mode's default: [`RegistrationChoice::Estimate`] in default mode,
+    /// [`RegistrationChoice::None`] in study mode.
+    #[default]
+    Auto,
+    /// Keep the raw capture frame.
+    None,
+    /// Estimate from the fit runs' settled poses against the kinematic
+    /// reference.
+    Estimate,
+    /// Apply this transform (e.g. read from `registration.json`).
+    Given {
+        /// The transform.
+        registration: Registration,
+        /// Where it came from (the file), for the report.
+        origin: String,
+    },
+}
+
+/// Options of [`evaluate_scene`] and [`crate::study::evaluate_study`].
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct CompareOptions {
     /// Screening and alignment mode.
@@ -102,6 +143,25 @@ pub struct CompareOptions {
     /// Alignment to use for recordings instead of the mode's default
     /// (default mode: [`Alignment::estimate`]; study mode: the source's own).
     pub alignment: Option<Alignment>,
+    /// Capture-frame registration of the recordings (never applied in
+    /// study mode, which keeps the raw capture frame as the study did).
+    pub registration: RegistrationChoice,
+    /// Which real runs to fit on and to score on (default: all, both).
+    pub runs: RunSelection,
+    /// Bootstrap settings; `None` is the mode's default (1000 resamples in
+    /// default mode, none in study mode).
+    pub bootstrap: Option<BootstrapOptions>,
+}
+
+impl CompareOptions {
+    /// The bootstrap settings in force (`None`: no intervals).
+    pub fn bootstrap_in_force(&self) -> Option<BootstrapOptions> {
+        match (self.bootstrap, self.mode) {
+            (Some(b), _) if b.resamples > 0 => Some(b),
+            (Some(_), _) | (None, AnalysisMode::Study) => None,
+            (None, AnalysisMode::Default) => Some(BootstrapOptions::default()),
+        }
+    }
 }
 
 /// A run with its health flags.
@@ -171,6 +231,20 @@ pub struct SourceSummary {
     /// the reference's, metres (`None` for the reference itself or when
     /// either has no usable run).
     pub accumulated_error_m: Option<f64>,
+    /// 95 % bootstrap interval of the accumulated error, metres (over the
+    /// real runs, and over this source's runs when they differ).
+    pub accumulated_error_interval_m: Option<Interval>,
+    /// Whether the bootstrap drew this source's own runs too (they are not
+    /// all identical).
+    pub bootstrap_over_source_runs: bool,
+    /// Bootstrap replicates of the accumulated error, metres (paired with
+    /// every other source's by index; not serialised).
+    #[serde(skip)]
+    pub bootstrap_replicates_m: Vec<f64>,
+    /// Time by which this source's mean wrist motion trails the scene's
+    /// kinematic reference, seconds (positive: behind). A measure only: it
+    /// is never used to shift the source.
+    pub lag_s: Option<f64>,
     /// Steps that entered the sum.
     pub steps_compared: usize,
     /// Mean distance to the reference over the steps, metres.
@@ -202,6 +276,8 @@ pub struct AlignedRun {
     pub start: RunStart,
     /// Steps with data after the start.
     pub steps_available: usize,
+    /// What the run is used for: `fit`, `score` or `fit+score`.
+    pub used_for: String,
 }
 
 /// How the reference was aligned.
@@ -213,6 +289,56 @@ pub struct AlignmentReport {
     pub runs: Vec<AlignedRun>,
     /// Runs that could not be aligned (no motion found), with the reason.
     pub failed: Vec<(String, String)>,
+    /// Frames the group of runs was moved by to match the kinematic
+    /// reference, after the runs were aligned to each other.
+    pub group_shift_frames: Option<i64>,
+}
+
+/// The capture-frame registration applied to the reference's recordings.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RegistrationReport {
+    /// How it was obtained, in words.
+    pub method: String,
+    /// `world = R * capture + t`: R as a unit quaternion w, x, y, z.
+    pub rotation_wxyz: [f64; 4],
+    /// t, metres.
+    pub translation_m: [f64; 3],
+    /// Rotation angle, degrees.
+    pub rotation_deg: f64,
+    /// Rotation axis (unit vector, capture frame).
+    pub rotation_axis: [f64; 3],
+    /// The fit over all scenes' fit runs (absent for a given file).
+    pub fit: Option<RigidFit>,
+    /// RMS distance, after registration, between the fit runs' mean wrist
+    /// and the kinematic reference at this scene's settled steps, metres.
+    pub residual_fit_rms_m: Option<f64>,
+    /// The same over the scored runs (the held-out runs when some are held
+    /// out), metres.
+    pub residual_scored_rms_m: Option<f64>,
+    /// Settled steps of this scene that entered the residuals.
+    pub settled_steps: usize,
+}
+
+impl RegistrationReport {
+    /// The transform reported.
+    pub fn registration(&self) -> Registration {
+        let q = self.rotation_wxyz;
+        Registration {
+            rotation: Quat::new(q[0], q[1], q[2], q[3]),
+            translation_m: Vec3::from_array(self.translation_m),
+        }
+    }
+}
+
+/// Which real runs the scene used.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RunsReport {
+    /// The selection, in words (e.g. `fit on runs 1-15, scored on 16-20`).
+    pub selection: String,
+    /// Runs fitted on (alignment template, registration), by identifier.
+    pub fit: Vec<String>,
+    /// Runs the sources were scored against, by identifier.
+    pub scored: Vec<String>,
 }
 
 /// Everything measured in one scene.
@@ -236,6 +362,22 @@ pub struct SceneReport {
     pub alignment: Option<AlignmentReport>,
     /// The sources' measures, in input order.
     pub sources: Vec<SourceSummary>,
+    /// The registration of the reference's recordings, when one was applied.
+    pub registration: Option<RegistrationReport>,
+    /// The real runs used.
+    pub runs: Option<RunsReport>,
+    /// The bootstrap settings, when intervals were computed.
+    pub bootstrap: Option<BootstrapOptions>,
+    /// The closest source against the runner-up, over the bootstrap
+    /// replicates.
+    pub closest_comparison: Option<PairedComparison>,
+}
+
+/// An interval as `[low, high]` in metres with 3 decimals, or `n/a`.
+pub fn fmt_interval(i: Option<Interval>) -> String {
+    i.map_or("n/a".into(), |i| {
+        format!("[{:.3}, {:.3}]", i.low_m, i.high_m)
+    })
 }
 
 impl SceneReport {
@@ -249,6 +391,43 @@ impl SceneReport {
                     .partial_cmp(&b.accumulated_error_m)
                     .unwrap()
             })
+    }
+    /// The closest source when it can be told apart from the runner-up (or
+    /// no interval was computed); `None` when the two cannot be told apart
+    /// or there is no source.
+    pub fn winner(&self) -> Option<&SourceSummary> {
+        match &self.closest_comparison {
+            Some(c) if !c.distinguishable => None,
+            _ => self.closest(),
+        }
+    }
+    /// One sentence on the closest source: its name and the probability
+    /// that it is closer than the runner-up, or that the two cannot be told
+    /// apart.
+    pub fn verdict(&self) -> String {
+        let Some(best) = self.closest() else {
+            return "no source could be compared".into();
+        };
+        match &self.closest_comparison {
+            None => format!("closest source: {}", best.source),
+            Some(c) if c.distinguishable => format!(
+                "closest source: {} (closer than {} with probability {:.3}; difference {:.3} m, 95 % interval {})",
+                c.closest,
+                c.runner_up,
+                c.probability_closer,
+                c.difference_m,
+                fmt_interval(c.difference_interval_m)
+            ),
+            Some(c) => format!(
+                "{} and {} cannot be told apart (probability {:.3} that {} is closer; difference {:.3} m, 95 % interval {})",
+                c.closest,
+                c.runner_up,
+                c.probability_closer,
+                c.closest,
+                c.difference_m,
+                fmt_interval(c.difference_interval_m)
+            ),
+        }
     }
     /// Per phase, the name of the source with the smallest error.
     pub fn closest_per_phase(&self) -> Vec<Option<String>> {
@@ -274,74 +453,200 @@ struct Gridded {
     total: usize,
 }
 
-fn to_grid(
-    src: &SourceRuns,
-    spec: &SceneSpec,
-    opts: &CompareOptions,
-    template: Option<&[Vec3]>,
-) -> (Gridded, Option<AlignmentReport>) {
-    let end = match opts.mode {
-        AnalysisMode::Study => EndPolicy::RepeatLast,
-        AnalysisMode::Default => EndPolicy::Cut,
-    };
-    let alignment = src
-        .alignment
+/// The alignment in force for a recording source (`None` for data already
+/// on the control grid).
+fn alignment_for(src: &SourceRuns, opts: &CompareOptions) -> Option<Alignment> {
+    src.alignment
         .as_ref()
         .map(|own| match (&opts.alignment, opts.mode) {
             (Some(a), _) => a.clone(),
             (None, AnalysisMode::Study) => own.clone(),
             (None, AnalysisMode::Default) => Alignment::estimate(),
-        });
-    let stride = (src.rate_hz * spec.control_period_s).round().max(1.0) as usize;
-    let mut report = alignment.as_ref().map(|a| AlignmentReport {
-        method: a.describe(),
+        })
+}
+
+/// Capture frames per control step of a source.
+fn stride_of(src: &SourceRuns, spec: &SceneSpec) -> usize {
+    (src.rate_hz * spec.control_period_s).round().max(1.0) as usize
+}
+
+/// Start frames of the included runs by [`align::align_group`] against
+/// the kinematic reference; `settings` are (stride, search frames, rest
+/// window, onset threshold in metres). Returns the starts and the group
+/// shift in frames.
+fn group_starts(
+    src: &SourceRuns,
+    kin: &KinematicTrack,
+    settings: (usize, usize, (usize, usize), f64),
+    include: &[bool],
+    fit: &[bool],
+) -> (Vec<Option<RunStart>>, i64) {
+    let (stride, search_frames, rest_frames, threshold_m) = settings;
+    let positions: Vec<Vec<Option<Vec3>>> = src
+        .runs
+        .iter()
+        .zip(include)
+        .map(|(r, inc)| {
+            if *inc {
+                r.trajectory.positions(WRIST)
+            } else {
+                vec![]
+            }
+        })
+        .collect();
+    let fit: Vec<bool> = fit.iter().zip(include).map(|(f, i)| *f && *i).collect();
+    let g = align::align_group(
+        &positions,
+        &fit,
+        &kin.wrist_m,
+        stride,
+        rest_frames,
+        threshold_m,
+        search_frames,
+    );
+    let starts = g
+        .starts
+        .iter()
+        .zip(&src.runs)
+        .zip(&positions)
+        .map(|((s, run), pos)| {
+            let start = (*s).filter(|s| *s < run.trajectory.len())?;
+            Some(RunStart {
+                start_frame: start,
+                start_s: run.trajectory.time_s[start] - run.trajectory.time_s[0],
+                onset_frame: align::motion_onset(pos, rest_frames, threshold_m),
+            })
+        })
+        .collect();
+    (starts, g.group_shift_frames)
+}
+
+/// Chooses the start frame of every run of a recording source marked in
+/// `include`, from the recordings and the scene's kinematic reference
+/// alone; templates are fitted on the runs marked in `fit`. Returns the
+/// start per run (input order) and the alignment report (`None` for a
+/// source on the control grid).
+pub(crate) fn align_runs(
+    src: &SourceRuns,
+    spec: &SceneSpec,
+    opts: &CompareOptions,
+    include: &[bool],
+    fit: &[bool],
+) -> (Vec<Option<RunStart>>, Option<AlignmentReport>) {
+    let n = src.runs.len();
+    let Some(alignment) = alignment_for(src, opts) else {
+        return (vec![None; n], None);
+    };
+    let stride = stride_of(src, spec);
+    let mut method = alignment.describe();
+    let mut group_shift = None;
+    let starts: Vec<Option<RunStart>> = match (&alignment, &spec.kinematic) {
+        (
+            Alignment::Estimate {
+                search_frames,
+                rest_frames,
+                threshold_m,
+            },
+            Some(kin),
+        ) => {
+            let (starts, shift) = group_starts(
+                src,
+                kin,
+                (stride, *search_frames, *rest_frames, *threshold_m),
+                include,
+                fit,
+            );
+            group_shift = Some(shift);
+            starts
+        }
+        (a, kin) => {
+            if matches!(a, Alignment::Estimate { .. }) && kin.is_none() {
+                method = "motion onset, no lead (no kinematic reference: the study names no scene file for this scene)".into();
+            }
+            src.runs
+                .iter()
+                .zip(include)
+                .map(|(r, inc)| {
+                    inc.then(|| align::choose_start(&r.trajectory, WRIST, a, stride, None))
+                        .flatten()
+                })
+                .collect()
+        }
+    };
+    let mut report = AlignmentReport {
+        method,
         runs: vec![],
         failed: vec![],
-    });
+        group_shift_frames: group_shift,
+    };
+    for (i, run) in src.runs.iter().enumerate() {
+        if !include[i] {
+            continue;
+        }
+        match &starts[i] {
+            Some(s) => report.runs.push(AlignedRun {
+                run: run.id.clone(),
+                start: s.clone(),
+                steps_available: align::resample(
+                    &run.trajectory,
+                    s.start_frame,
+                    src.rate_hz,
+                    spec.control_period_s,
+                    spec.steps,
+                    EndPolicy::Cut,
+                )
+                .1,
+                used_for: match (opts.runs.holdout.is_some(), fit[i]) {
+                    (false, _) => "fit+score".into(),
+                    (true, true) => "fit".into(),
+                    (true, false) => "score".into(),
+                },
+            }),
+            None => report.failed.push((
+                run.id.clone(),
+                "no motion onset found in the wrist track".into(),
+            )),
+        }
+    }
+    (starts, Some(report))
+}
+
+/// Puts every run of a source on the control grid, starting recordings at
+/// `starts` (per run, input order), and checks their health.
+fn to_grid(
+    src: &SourceRuns,
+    spec: &SceneSpec,
+    opts: &CompareOptions,
+    starts: &[Option<RunStart>],
+) -> Gridded {
+    let end = match opts.mode {
+        AnalysisMode::Study => EndPolicy::RepeatLast,
+        AnalysisMode::Default => EndPolicy::Cut,
+    };
     let mut g = Gridded {
         runs: vec![],
         flagged: vec![],
         total: src.runs.len(),
     };
-    for run in &src.runs {
+    for (i, run) in src.runs.iter().enumerate() {
         let mut flags = health::check(&run.trajectory, &opts.health).flags;
         if let Some(m) = &run.failed {
             flags.insert(0, HealthFlag::Failed { message: m.clone() });
         }
-        let start = match (&alignment, report.as_mut()) {
-            (Some(a), Some(rep)) => {
-                match align::choose_start(&run.trajectory, WRIST, a, stride, template) {
-                    Some(s) => Some((s, rep)),
-                    None => {
-                        rep.failed.push((
-                            run.id.clone(),
-                            "no motion onset found in the wrist track".into(),
-                        ));
-                        flags.push(HealthFlag::Failed {
-                            message: "could not be aligned: no motion onset".into(),
-                        });
-                        None
-                    }
-                }
-            }
-            _ => None,
-        };
-        let start_frame = start.as_ref().map_or(0, |(s, _)| s.start_frame);
+        let start = starts.get(i).cloned().flatten();
+        if src.alignment.is_some() && start.is_none() {
+            flags.push(HealthFlag::Failed {
+                message: "could not be aligned: no motion onset".into(),
+            });
+        }
         let (grid, available) = align::resample(
             &run.trajectory,
-            start_frame,
+            start.map_or(0, |s| s.start_frame),
             src.rate_hz,
             spec.control_period_s,
             spec.steps,
             end,
         );
-        if let Some((s, rep)) = start {
-            rep.runs.push(AlignedRun {
-                run: run.id.clone(),
-                start: s,
-                steps_available: available,
-            });
-        }
         if available < spec.steps && !run.trajectory.is_empty() {
             flags.push(HealthFlag::Short {
                 samples: available,
@@ -360,8 +665,11 @@ fn to_grid(
             g.runs.push((run.id.clone(), grid));
         }
     }
-    (g, report)
+    g
 }
+
+/// Largest lag searched for, control steps (2 s at 20 Hz).
+const LAG_SEARCH_STEPS: usize = 40;
 
 /// Per-source means on the grid.
 struct Means {
@@ -473,6 +781,13 @@ fn summarize(
         runs_used: g.runs.len(),
         runs_flagged: g.flagged.clone(),
         accumulated_error_m: None,
+        accumulated_error_interval_m: None,
+        bootstrap_over_source_runs: false,
+        bootstrap_replicates_m: vec![],
+        lag_s: spec.kinematic.as_ref().and_then(|k| {
+            align::lag_steps(&m.wrist.mean_m, &k.wrist_m, LAG_SEARCH_STEPS)
+                .map(|l| l * spec.control_period_s)
+        }),
         steps_compared: 0,
         mean_error_m: None,
         max_error_m: None,
@@ -523,31 +838,53 @@ fn summarize(
     out
 }
 
-/// Evaluates one scene: the reference and every source, as the module docs
-/// describe. The template for estimated alignment is the mean, over the
-/// sources that are on the control grid and have usable runs, of their mean
-/// wrist tracks.
-pub fn evaluate_scene(
+/// The reference of one scene, ready to be scored against: its scored
+/// runs (registered into the world), where each starts, and what was done
+/// to them.
+pub(crate) struct PreparedReference {
+    /// The reference with only its scored runs, registered.
+    pub runs: SourceRuns,
+    /// Start per scored run.
+    pub starts: Vec<Option<RunStart>>,
+    /// Alignment of every aligned run (fit and scored).
+    pub alignment: Option<AlignmentReport>,
+    /// Registration applied.
+    pub registration: Option<RegistrationReport>,
+    /// Runs used.
+    pub runs_report: Option<RunsReport>,
+}
+
+/// Evaluates one scene against a prepared reference: grids and screens
+/// every source, computes the measures, each source's lag behind the
+/// kinematic reference and the bootstrap intervals.
+pub(crate) fn evaluate_prepared(
     spec: &SceneSpec,
-    reference: &SourceRuns,
+    prepared: PreparedReference,
     sources: &[SourceRuns],
     opts: &CompareOptions,
 ) -> SceneReport {
-    // Sources first: they give the template for the reference's alignment.
-    let gridded: Vec<(Gridded, Option<AlignmentReport>)> = sources
+    let gridded: Vec<Gridded> = sources
         .iter()
-        .map(|s| to_grid(s, spec, opts, None))
+        .map(|s| {
+            let all = vec![true; s.runs.len()];
+            let (starts, _) = align_runs(s, spec, opts, &all, &all);
+            to_grid(s, spec, opts, &starts)
+        })
         .collect();
-    let src_means: Vec<Means> = gridded.iter().map(|(g, _)| means(g, spec.steps)).collect();
-    let template = template(&src_means, sources, spec.steps);
-    let (ref_g, alignment) = to_grid(reference, spec, opts, template.as_deref());
+    let src_means: Vec<Means> = gridded.iter().map(|g| means(g, spec.steps)).collect();
+    let ref_g = to_grid(&prepared.runs, spec, opts, &prepared.starts);
     let ref_means = means(&ref_g, spec.steps);
-    let sources_out = sources
+    let mut sources_out: Vec<SourceSummary> = sources
         .iter()
         .zip(&gridded)
         .zip(&src_means)
-        .map(|((s, (g, _)), m)| summarize(s, g, m, spec, Some(&ref_means)))
+        .map(|((s, g), m)| summarize(s, g, m, spec, Some(&ref_means)))
         .collect();
+    let bootstrap = opts.bootstrap_in_force();
+    let closest_comparison = bootstrap.and_then(|b| {
+        attach_intervals(&ref_g, &gridded, &mut sources_out, spec.steps, &b);
+        compare_closest(&sources_out, b.level)
+    });
     SceneReport {
         scene: spec.name.clone(),
         mode: opts.mode,
@@ -555,43 +892,113 @@ pub fn evaluate_scene(
         control_period_s: spec.control_period_s,
         goal_m: spec.goal_m,
         phases_s: spec.phases_s.clone(),
-        reference: summarize(reference, &ref_g, &ref_means, spec, None),
-        alignment,
+        reference: summarize(&prepared.runs, &ref_g, &ref_means, spec, None),
+        alignment: prepared.alignment,
         sources: sources_out,
+        registration: prepared.registration,
+        runs: prepared.runs_report,
+        bootstrap,
+        closest_comparison,
     }
 }
 
-/// Mean over control-grid sources of their complete mean wrist tracks.
-fn template(means: &[Means], sources: &[SourceRuns], steps: usize) -> Option<Vec<Vec3>> {
-    let full: Vec<Vec<Vec3>> = means
+/// The wrist tracks of a gridded source, packed for the bootstrap.
+fn run_tracks(g: &Gridded, steps: usize) -> RunTracks {
+    let tracks: Vec<Vec<Option<Vec3>>> = g.runs.iter().map(|(_, t)| t.positions(WRIST)).collect();
+    RunTracks::new(&tracks, steps)
+}
+
+/// Bootstrap replicates and intervals of every source with an accumulated
+/// error.
+fn attach_intervals(
+    reference: &Gridded,
+    gridded: &[Gridded],
+    summaries: &mut [SourceSummary],
+    steps: usize,
+    opts: &BootstrapOptions,
+) {
+    let ref_tracks = run_tracks(reference, steps);
+    let tracks: Vec<(usize, RunTracks)> = summaries
         .iter()
-        .zip(sources)
-        .filter(|(_, s)| s.alignment.is_none())
-        .filter_map(|(m, _)| {
-            m.wrist
-                .mean_m
-                .iter()
-                .copied()
-                .collect::<Option<Vec<Vec3>>>()
-        })
-        .filter(|t| {
-            t.len() == steps && steps > 0 && t.iter().all(|p| p.is_finite() && p.norm() < 10.0)
-        })
+        .enumerate()
+        .filter(|(_, s)| s.accumulated_error_m.is_some())
+        .map(|(i, _)| (i, run_tracks(&gridded[i], steps)))
         .collect();
-    if full.is_empty() {
-        return None;
+    let named: Vec<(&str, &RunTracks)> = tracks
+        .iter()
+        .map(|(i, t)| (summaries[*i].source.as_str(), t))
+        .collect();
+    let reps = bootstrap::replicates(&ref_tracks, &named, opts);
+    for ((i, t), r) in tracks.iter().zip(reps) {
+        let s = &mut summaries[*i];
+        s.accumulated_error_interval_m = bootstrap::percentile_interval(&r, opts.level);
+        s.bootstrap_over_source_runs = !t.all_identical();
+        s.bootstrap_replicates_m = r;
     }
-    let n = full.len() as f64;
-    Some(
-        (0..steps)
-            .map(|i| full.iter().fold(Vec3::ZERO, |a, t| a + t[i]).scale(1.0 / n))
-            .collect(),
+}
+
+/// The paired comparison of the closest source with the runner-up.
+fn compare_closest(sources: &[SourceSummary], level: f64) -> Option<PairedComparison> {
+    let mut ranked: Vec<&SourceSummary> = sources
+        .iter()
+        .filter(|s| s.accumulated_error_m.is_some_and(f64::is_finite))
+        .filter(|s| !s.bootstrap_replicates_m.is_empty())
+        .collect();
+    ranked.sort_by(|a, b| {
+        a.accumulated_error_m
+            .unwrap_or(f64::INFINITY)
+            .total_cmp(&b.accumulated_error_m.unwrap_or(f64::INFINITY))
+    });
+    let (a, b) = (ranked.first()?, ranked.get(1)?);
+    bootstrap::paired(
+        (&a.source, a.accumulated_error_m?, &a.bootstrap_replicates_m),
+        (&b.source, b.accumulated_error_m?, &b.bootstrap_replicates_m),
+        level,
     )
+}
+
+/// Evaluates one scene: the reference and every source, as the module docs
+/// describe, with the registration estimated from this scene alone. A run
+/// selection in `opts` that selects nothing here leaves the reference
+/// without runs; [`crate::study::evaluate_study`] reports it as an error.
+pub fn evaluate_scene(
+    spec: &SceneSpec,
+    reference: &SourceRuns,
+    sources: &[SourceRuns],
+    opts: &CompareOptions,
+) -> SceneReport {
+    let input = crate::study::SceneInput {
+        spec,
+        reference,
+        sources,
+    };
+    let selected = opts.runs.select_lenient(&spec.name, reference.runs.len());
+    let prepared = crate::study::prepare_references(&[input], &[selected], opts);
+    let mut reports = prepared
+        .into_iter()
+        .map(|p| evaluate_prepared(spec, p, sources, opts));
+    reports.next().unwrap_or_else(|| {
+        // prepare_references gives one reference per scene; this is the
+        // reference without runs.
+        let empty = SourceRuns {
+            runs: vec![],
+            ..reference.clone()
+        };
+        let prepared = PreparedReference {
+            runs: empty,
+            starts: vec![],
+            alignment: None,
+            registration: None,
+            runs_report: None,
+        };
+        evaluate_prepared(spec, prepared, sources, opts)
+    })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::kinematic::KinematicTrack;
     use realitygap_core::Pose;
 
     /// A run on the control grid: the wrist moves along x from 0 to `reach`
@@ -632,6 +1039,24 @@ mod tests {
             goal_tolerance_m: 0.01,
             phases_s: vec![0.0, 2.5],
             cube: None,
+            kinematic: None,
+        }
+    }
+
+    /// The spec with a kinematic reference equal to the simulated motion
+    /// (rest, then 0.5 m along x over 40 steps).
+    fn spec_with_kinematic() -> SceneSpec {
+        let wrist_m: Vec<Vec3> = run("k", 100, 1, 0, 0.5, 0.0)
+            .trajectory
+            .positions(WRIST)
+            .into_iter()
+            .take(100)
+            .flatten()
+            .collect();
+        let settled = (0..100).map(|k| k == 0 || k >= 60).collect();
+        SceneSpec {
+            kinematic: Some(KinematicTrack { wrist_m, settled }),
+            ..spec()
         }
     }
 
@@ -656,11 +1081,17 @@ mod tests {
             }),
             runs: vec![run("r1", 100, 5, 173, 0.5, 0.0)],
         };
-        let rep = evaluate_scene(&spec(), &real, &[sim.clone()], &CompareOptions::default());
+        let rep = evaluate_scene(
+            &spec_with_kinematic(),
+            &real,
+            std::slice::from_ref(&sim),
+            &CompareOptions::default(),
+        );
         assert_eq!(
             rep.alignment.as_ref().unwrap().runs[0].start.start_frame,
             173
         );
+        assert!(s_lag(&rep, 0).abs() < 0.01, "{:?}", rep.sources[0].lag_s);
         let s = &rep.sources[0];
         assert!(
             s.accumulated_error_m.unwrap() < 1e-9,
@@ -672,6 +1103,148 @@ mod tests {
         assert!(s.goal.as_ref().unwrap().final_distance_m.unwrap() < 1e-3);
         assert!(rep.reference.accumulated_error_m.is_none());
         assert_eq!(rep.closest().unwrap().source, "sim");
+    }
+
+    fn s_lag(r: &SceneReport, i: usize) -> f64 {
+        r.sources[i].lag_s.unwrap()
+    }
+
+    /// The real arm: 6 runs at 100 Hz starting at different frames, with
+    /// 1 mm run-to-run offsets.
+    fn real_runs() -> SourceRuns {
+        SourceRuns {
+            name: "real".into(),
+            kind: "real".into(),
+            rate_hz: 100.0,
+            alignment: Some(Alignment::estimate()),
+            runs: (0..6)
+                .map(|i| {
+                    run(
+                        &format!("r{i}"),
+                        100,
+                        5,
+                        150 + 13 * i,
+                        0.5,
+                        0.001 * i as f64,
+                    )
+                })
+                .collect(),
+        }
+    }
+
+    fn sim(name: &str, delay_steps: usize, reach: f64) -> SourceRuns {
+        SourceRuns {
+            name: name.into(),
+            kind: "recorded".into(),
+            rate_hz: 20.0,
+            alignment: None,
+            runs: vec![run("a", 100, 1, delay_steps, reach, 0.0)],
+        }
+    }
+
+    #[test]
+    fn start_frames_do_not_depend_on_the_sources_and_lag_is_only_measured() {
+        let spec = spec_with_kinematic();
+        let real = real_runs();
+        let late = sim("late", 6, 0.5);
+        let near = sim("near", 0, 0.52);
+        let opts = CompareOptions::default();
+        let both = evaluate_scene(&spec, &real, &[late.clone(), near.clone()], &opts);
+        let one = evaluate_scene(&spec, &real, std::slice::from_ref(&near), &opts);
+        assert_eq!(both.alignment, one.alignment);
+        let starts: Vec<usize> = one
+            .alignment
+            .as_ref()
+            .unwrap()
+            .runs
+            .iter()
+            .map(|r| r.start.start_frame)
+            .collect();
+        assert_eq!(starts, [150, 163, 176, 189, 202, 215]);
+        // The late source is 6 steps (0.3 s) behind; its error is not shrunk
+        // by it: 6 steps x 12.5 mm over the ramp, about 2 m.
+        assert!(
+            (s_lag(&both, 0) - 0.3).abs() < 0.02,
+            "{:?}",
+            both.sources[0].lag_s
+        );
+        assert!(both.sources[0].accumulated_error_m.unwrap() > 1.5);
+        // Intervals bracket the estimates, the same with or without the
+        // other source.
+        for s in &both.sources {
+            let i = s.accumulated_error_interval_m.unwrap();
+            let e = s.accumulated_error_m.unwrap();
+            assert!(
+                i.low_m <= e && e <= i.high_m + 0.05,
+                "{}: {e} {i:?}",
+                s.source
+            );
+        }
+        assert_eq!(
+            both.sources[1].accumulated_error_interval_m,
+            one.sources[0].accumulated_error_interval_m
+        );
+        let c = both.closest_comparison.as_ref().unwrap();
+        assert_eq!((c.closest.as_str(), c.runner_up.as_str()), ("near", "late"));
+        assert!(c.distinguishable && c.probability_closer > 0.99, "{c:?}");
+        assert_eq!(both.winner().unwrap().source, "near");
+        // Twins cannot be told apart, and no winner is named.
+        let twins = evaluate_scene(
+            &spec,
+            &real,
+            &[
+                near.clone(),
+                SourceRuns {
+                    name: "twin".into(),
+                    ..near
+                },
+            ],
+            &opts,
+        );
+        assert!(twins.winner().is_none());
+        assert!(
+            twins.verdict().contains("cannot be told apart"),
+            "{}",
+            twins.verdict()
+        );
+    }
+
+    #[test]
+    fn a_shifted_capture_frame_is_registered_away() {
+        let spec = spec_with_kinematic();
+        let mut real = real_runs();
+        for r in &mut real.runs {
+            for p in r.trajectory.bodies[0].poses.iter_mut().flatten() {
+                p.position_m = p.position_m + Vec3::new(0.0, 0.009, 0.004);
+            }
+        }
+        let near = sim("near", 0, 0.5);
+        let raw = CompareOptions {
+            registration: RegistrationChoice::None,
+            ..Default::default()
+        };
+        let given = CompareOptions {
+            registration: RegistrationChoice::Given {
+                registration: Registration {
+                    rotation: Quat::IDENTITY,
+                    translation_m: Vec3::new(0.0, -0.009, -0.004),
+                },
+                origin: "test".into(),
+            },
+            ..Default::default()
+        };
+        let e_raw = evaluate_scene(&spec, &real, std::slice::from_ref(&near), &raw).sources[0]
+            .accumulated_error_m
+            .unwrap();
+        let rep = evaluate_scene(&spec, &real, &[near], &given);
+        let e_reg = rep.sources[0].accumulated_error_m.unwrap();
+        assert!(
+            e_raw > 0.9 && e_reg < 0.3,
+            "raw {e_raw}, registered {e_reg}"
+        );
+        let g = rep.registration.unwrap();
+        assert!(g.residual_fit_rms_m.unwrap() < 0.003, "{g:?}");
+        assert!(g.fit.is_none() && g.method.contains("test"));
     }
 
     #[test]

@@ -13,18 +13,27 @@
 //!    error, convergence, overshoot, cube displacement and rotation, contact
 //!    onset, orientation error.
 //! 5. [`compare`]: one scene, one reference and many sources, evaluated
-//!    into a [`compare::SceneReport`]; [`table`] renders reports as
-//!    Markdown, CSV, JSON and LaTeX.
+//!    into a [`compare::SceneReport`]; [`study`] does it for every scene of
+//!    a study with one run selection ([`selection`]) and one capture-frame
+//!    registration ([`registration`]), aligning the real runs to the
+//!    scene's [`kinematic`] reference; [`bootstrap`] gives the intervals;
+//!    [`table`] renders reports as Markdown, CSV, JSON and LaTeX.
 //!
 //! Everything here is pure computation on [`realitygap_core::Trajectory`];
 //! reading files is the `realitygap-data` crate's job.
 
 pub mod align;
+pub mod bootstrap;
 pub mod compare;
 pub mod health;
+pub mod kinematic;
 pub mod metrics;
+pub mod registration;
+pub mod selection;
 pub mod stats;
+pub mod study;
 pub mod table;
 
 pub use compare::{AnalysisMode, SceneReport, SourceRuns, SourceSummary};
 pub use health::{HealthFlag, HealthOptions, RunHealth};
+pub use study::{evaluate_study, SceneInput};

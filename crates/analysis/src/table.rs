@@ -1,7 +1,8 @@
 //! Rendering scene reports: the accumulated-error table and the per-scene
 //! measures, as Markdown, CSV, JSON and LaTeX.
 
-use crate::compare::{SceneReport, SourceSummary};
+use crate::bootstrap::{self, Interval};
+use crate::compare::{fmt_interval, SceneReport, SourceSummary};
 use serde::Serialize;
 use serde_json::{json, Value};
 use std::fmt::Write;
@@ -71,6 +72,47 @@ pub fn total(reports: &[SceneReport], source: &str) -> Option<f64> {
     })
 }
 
+/// The bootstrap interval of a source's total over all scenes, metres:
+/// the replicates of the scenes (drawn independently) summed index by
+/// index. `None` when a scene lacks the source or its replicates.
+pub fn total_interval(reports: &[SceneReport], source: &str) -> Option<Interval> {
+    let mut sum: Option<Vec<f64>> = None;
+    let mut level = 0.95;
+    for r in reports {
+        let s = r.sources.iter().find(|s| s.source == source)?;
+        if s.bootstrap_replicates_m.is_empty() {
+            return None;
+        }
+        level = r.bootstrap.map_or(level, |b| b.level);
+        sum = Some(match sum {
+            None => s.bootstrap_replicates_m.clone(),
+            Some(acc) if acc.len() == s.bootstrap_replicates_m.len() => acc
+                .iter()
+                .zip(&s.bootstrap_replicates_m)
+                .map(|(a, b)| a + b)
+                .collect(),
+            Some(_) => return None,
+        });
+    }
+    bootstrap::percentile_interval(&sum?, level)
+}
+
+/// A value with its interval when there is one: `5.326 [5.102, 5.551]`.
+fn fmt_with_interval(v: Option<f64>, i: Option<Interval>) -> String {
+    match (v, i) {
+        (Some(_), Some(_)) => format!("{} {}", fmt_m(v), fmt_interval(i)),
+        _ => fmt_m(v),
+    }
+}
+
+/// The interval of a source's accumulated error in a scene.
+fn interval_of(r: &SceneReport, source: &str) -> Option<Interval> {
+    r.sources
+        .iter()
+        .find(|s| s.source == source)
+        .and_then(|s| s.accumulated_error_interval_m)
+}
+
 /// Formats metres for tables: fixed 3 decimals, or scientific beyond 1e6.
 pub fn fmt_m(v: Option<f64>) -> String {
     match v {
@@ -109,6 +151,8 @@ pub fn to_json(reports: &[SceneReport], series: bool) -> Value {
                 "source": s.source,
                 "scene": r.scene,
                 "accumulated_error_m": s.accumulated_error_m,
+                "accumulated_error_interval_m": s.accumulated_error_interval_m,
+                "lag_s": s.lag_s,
                 "runs_used": s.runs_used,
                 "runs_total": s.runs_total,
                 "runs_flagged": s.runs_flagged.iter().map(|f| FlagRow {
@@ -127,6 +171,13 @@ pub fn to_json(reports: &[SceneReport], series: bool) -> Value {
             (n, json!(t))
         })
         .collect();
+    let totals_interval: serde_json::Map<String, Value> = source_names(reports)
+        .into_iter()
+        .map(|n| {
+            let t = total_interval(reports, &n);
+            (n, json!(t))
+        })
+        .collect();
     let scenes: serde_json::Map<String, Value> = reports
         .iter()
         .map(|r| {
@@ -137,8 +188,9 @@ pub fn to_json(reports: &[SceneReport], series: bool) -> Value {
             if let Value::Object(o) = &mut v {
                 o.insert(
                     "closest_source".into(),
-                    json!(r.closest().map(|s| s.source.clone())),
+                    json!(r.winner().map(|s| s.source.clone())),
                 );
+                o.insert("verdict".into(), json!(r.verdict()));
                 o.insert("closest_per_phase".into(), json!(r.closest_per_phase()));
             }
             (r.scene.clone(), v)
@@ -149,6 +201,17 @@ pub fn to_json(reports: &[SceneReport], series: bool) -> Value {
         "mode": reports.first().map(|r| r.mode),
         "rows": rows,
         "totals": totals,
+        "totals_interval_m": totals_interval,
+        "bootstrap": reports.iter().find_map(|r| r.bootstrap),
+        "registration": reports.iter().find_map(|r| r.registration.as_ref()).map(|g| json!({
+            "method": g.method,
+            "rotation_wxyz": g.rotation_wxyz,
+            "translation_m": g.translation_m,
+            "rotation_deg": g.rotation_deg,
+            "rotation_axis": g.rotation_axis,
+            "fit": g.fit,
+        })),
+        "runs": reports.iter().find_map(|r| r.runs.as_ref().map(|x| x.selection.clone())),
         "scenes": scenes,
     })
 }
@@ -182,12 +245,17 @@ fn markdown(reports: &[SceneReport]) -> String {
             let _ = write!(
                 line,
                 " {}{} |",
-                fmt_m(s.and_then(|s| s.accumulated_error_m)),
+                fmt_with_interval(s.and_then(|s| s.accumulated_error_m), interval_of(r, n)),
                 s.map(flagged_note).unwrap_or_default()
             );
         }
-        let _ = writeln!(out, "{line} {} |", fmt_m(total(reports, n)));
+        let _ = writeln!(
+            out,
+            "{line} {} |",
+            fmt_with_interval(total(reports, n), total_interval(reports, n))
+        );
     }
+    markdown_notes(&mut out, reports);
     for r in reports {
         let _ = writeln!(out, "\n### {}\n", r.scene);
         let _ = writeln!(
@@ -208,26 +276,25 @@ fn markdown(reports: &[SceneReport]) -> String {
                 starts.join(", ")
             );
         }
-        if let Some(c) = r.closest() {
-            let _ = writeln!(out, "Closest source: {}.", c.source);
-        }
+        scene_notes(&mut out, r);
         let _ = writeln!(out);
-        let _ = writeln!(out, "| Source | Runs | Mean err (m) | Final err (m) | Goal dist (m) | Converged (s) | Overshoot (m) | Orient. err (deg) | Cube final dx (m) | Cube tilt (deg) | Contact (s) |");
+        let _ = writeln!(out, "| Source | Runs | Mean err (m) | Final err (m) | Lag (s) | Goal dist (m) | Converged (s) | Overshoot (m) | Orient. err (deg) | Cube final dx (m) | Cube tilt (deg) | Contact (s) |");
         let _ = writeln!(
             out,
-            "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+            "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
         );
         for s in std::iter::once(&r.reference).chain(&r.sources) {
             let g = s.goal.as_ref();
             let c = s.cube.as_ref();
             let _ = writeln!(
                 out,
-                "| {} | {}/{} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+                "| {} | {}/{} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
                 s.source,
                 s.runs_used,
                 s.runs_total,
                 fmt_m(s.mean_error_m),
                 fmt_m(s.final_error_m),
+                s.lag_s.map_or("n/a".into(), |v| format!("{v:.2}")),
                 fmt_m(g.and_then(|g| g.final_distance_m)),
                 g.and_then(|g| g.convergence_time_s)
                     .map_or("never".into(), |t| format!("{t:.2}")),
@@ -262,8 +329,107 @@ fn markdown(reports: &[SceneReport]) -> String {
     out
 }
 
+/// The lines under a scene's heading: runs, group shift, registration
+/// residuals and the verdict on the closest source.
+fn scene_notes(out: &mut String, r: &SceneReport) {
+    if let Some(runs) = r
+        .runs
+        .as_ref()
+        .filter(|x| x.fit != x.scored || !x.selection.starts_with("all "))
+    {
+        let _ = writeln!(
+            out,
+            "Runs: {} (fit: {}; scored: {}).",
+            runs.selection,
+            runs.fit.join(", "),
+            runs.scored.join(", ")
+        );
+    }
+    if let Some(a) = r.alignment.as_ref().and_then(|a| a.group_shift_frames) {
+        let _ = writeln!(out, "Group shift to the kinematic reference: {a} frames.");
+    }
+    if let Some(g) = &r.registration {
+        let _ = writeln!(
+            out,
+            "Registration residual at this scene's {} settled steps: {} mm on the fit runs, {} mm on the scored runs.",
+            g.settled_steps,
+            g.residual_fit_rms_m.map_or("n/a".into(), |v| format!("{:.1}", v * 1000.0)),
+            g.residual_scored_rms_m.map_or("n/a".into(), |v| format!("{:.1}", v * 1000.0))
+        );
+    }
+    if r.closest_comparison.is_some() {
+        let _ = writeln!(out, "{}.", capitalise(&r.verdict()));
+    } else if let Some(c) = r.closest() {
+        let _ = writeln!(out, "Closest source: {}.", c.source);
+    }
+}
+
+fn capitalise(s: &str) -> String {
+    let mut c = s.chars();
+    match c.next() {
+        Some(f) => f.to_uppercase().collect::<String>() + c.as_str(),
+        None => String::new(),
+    }
+}
+
+/// The registration, in words: rotation in degrees, translation in mm.
+pub fn describe_registration(reports: &[SceneReport]) -> Option<String> {
+    let g = reports.iter().find_map(|r| r.registration.as_ref())?;
+    let t = g.translation_m;
+    let a = g.rotation_axis;
+    let mut text = format!(
+        "capture frame registered into the world ({}): rotation {:.3} deg about ({:.3}, {:.3}, {:.3}), translation ({:.1}, {:.1}, {:.1}) mm",
+        g.method,
+        g.rotation_deg,
+        a[0],
+        a[1],
+        a[2],
+        t[0] * 1000.0,
+        t[1] * 1000.0,
+        t[2] * 1000.0
+    );
+    if let Some(f) = &g.fit {
+        text.push_str(&format!(
+            ", residual {:.1} mm RMS (largest {:.1} mm) over {} settled poses",
+            f.residual_rms_m * 1000.0,
+            f.residual_max_m * 1000.0,
+            f.pairs_used
+        ));
+    }
+    Some(text)
+}
+
+/// The lines under the Markdown table: intervals, verdicts, registration,
+/// runs. Nothing when no interval, registration or selection is in force
+/// (the study's own table stays as it was).
+fn markdown_notes(out: &mut String, reports: &[SceneReport]) {
+    if let Some(b) = reports.iter().find_map(|r| r.bootstrap) {
+        let _ = writeln!(
+            out,
+            "\n[low, high]: {:.0} % bootstrap interval over the real runs (and a source's own runs where they differ), {} resamples, seed {}.",
+            b.level * 100.0,
+            b.resamples,
+            b.seed
+        );
+        for r in reports {
+            let _ = writeln!(out, "- {}: {}.", r.scene, r.verdict());
+        }
+    }
+    if let Some(text) = describe_registration(reports) {
+        let _ = writeln!(out, "\nRegistration: {text}.");
+    }
+    if let Some(runs) = reports.iter().find_map(|r| r.runs.as_ref()) {
+        if reports
+            .iter()
+            .any(|r| r.bootstrap.is_some() || r.registration.is_some())
+        {
+            let _ = writeln!(out, "\nReal runs: {}.", runs.selection);
+        }
+    }
+}
+
 fn csv(reports: &[SceneReport]) -> String {
-    let mut out = String::from("source,scene,accumulated_error_m,mean_error_m,final_error_m,runs_used,runs_total,runs_excluded,flagged_runs\n");
+    let mut out = String::from("source,scene,accumulated_error_m,mean_error_m,final_error_m,runs_used,runs_total,runs_excluded,flagged_runs,interval_low_m,interval_high_m,lag_s\n");
     let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v}"));
     for r in reports {
         for s in &r.sources {
@@ -284,7 +450,7 @@ fn csv(reports: &[SceneReport]) -> String {
                 .collect();
             let _ = writeln!(
                 out,
-                "{},{},{},{},{},{},{},{},\"{}\"",
+                "{},{},{},{},{},{},{},{},\"{}\",{},{},{}",
                 csv_field(&s.source),
                 csv_field(&r.scene),
                 opt(s.accumulated_error_m),
@@ -293,16 +459,22 @@ fn csv(reports: &[SceneReport]) -> String {
                 s.runs_used,
                 s.runs_total,
                 s.runs_flagged.iter().filter(|f| f.excluded).count(),
-                flagged.join(" ").replace('"', "'")
+                flagged.join(" ").replace('"', "'"),
+                opt(s.accumulated_error_interval_m.map(|i| i.low_m)),
+                opt(s.accumulated_error_interval_m.map(|i| i.high_m)),
+                opt(s.lag_s)
             );
         }
     }
     for n in source_names(reports) {
+        let i = total_interval(reports, &n);
         let _ = writeln!(
             out,
-            "{},total,{},,,,,,",
+            "{},total,{},,,,,,,{},{},",
             csv_field(&n),
-            opt(total(reports, &n))
+            opt(total(reports, &n)),
+            opt(i.map(|i| i.low_m)),
+            opt(i.map(|i| i.high_m))
         );
     }
     out
@@ -353,7 +525,7 @@ fn latex(reports: &[SceneReport]) -> String {
                         let e = v.abs().log10().floor();
                         format!("${:.2} \\times 10^{{{}}}$", v / 10f64.powf(e), e)
                     }
-                    _ => fmt_m(v),
+                    _ => latex_interval(fmt_with_interval(v, interval_of(r, &n))),
                 }
             })
             .collect();
@@ -362,9 +534,35 @@ fn latex(reports: &[SceneReport]) -> String {
             "{} & {} & {} \\\\",
             latex_escape(&n),
             cells.join(" & "),
-            fmt_m(total(reports, &n))
+            latex_interval(fmt_with_interval(
+                total(reports, &n),
+                total_interval(reports, &n)
+            ))
         );
     }
     let _ = writeln!(out, "\\bottomrule\n\\end{{tabular}}");
+    if let Some(b) = reports.iter().find_map(|r| r.bootstrap) {
+        let _ = writeln!(
+            out,
+            "% [low, high]: {:.0} % bootstrap interval, {} resamples, seed {}.",
+            b.level * 100.0,
+            b.resamples,
+            b.seed
+        );
+        for r in reports {
+            let _ = writeln!(out, "% {}: {}.", r.scene, r.verdict());
+        }
+    }
+    if let Some(text) = describe_registration(reports) {
+        let _ = writeln!(out, "% Registration: {text}.");
+    }
     out
+}
+
+/// A table cell with an interval, the interval in a smaller font.
+fn latex_interval(cell: String) -> String {
+    match cell.split_once(' ') {
+        Some((v, i)) => format!("{v} {{\\scriptsize {i}}}"),
+        None => cell,
+    }
 }

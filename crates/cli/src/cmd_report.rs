@@ -1,10 +1,10 @@
 //! `realitygap report`: the figures, tables and `index.html` of a study.
 
-use crate::cmd_compare::{evaluate, load_study, parse_alignment};
+use crate::cmd_compare::{evaluate, load_study, MeasureArgs};
 use anyhow::{Context, Result};
 use realitygap::data_source::DataSource;
 use realitygap::study::{expand, glob, Roots, SourceFormat, SourceSpec, Study};
-use realitygap_analysis::compare::{AnalysisMode, CompareOptions};
+use realitygap_analysis::compare::AnalysisMode;
 use realitygap_data::RunStore;
 use realitygap_report::{write_report, Provenance, SourceProvenance};
 use std::path::{Path, PathBuf};
@@ -25,14 +25,9 @@ pub struct Args {
     /// relative to. Default: the study file's folder.
     #[arg(long)]
     pub results: Option<PathBuf>,
-    /// `default`: leave flagged runs out, estimate each real run's time
-    /// offset. `study`: the reference study's exact procedure.
-    #[arg(long, default_value = "default", value_parser = ["default", "study"])]
-    pub mode: String,
-    /// Override the alignment of recordings: `estimate`, `onset:LEAD` or
-    /// `fixed:FRAME`.
-    #[arg(long)]
-    pub alignment: Option<String>,
+    /// How the gap is measured.
+    #[command(flatten)]
+    pub measure: MeasureArgs,
     /// Folder to write the report into (created if missing).
     #[arg(long)]
     pub out: PathBuf,
@@ -40,24 +35,24 @@ pub struct Args {
 
 /// Runs the command.
 pub fn run(args: Args) -> Result<()> {
-    let mode = if args.mode == "study" {
-        AnalysisMode::Study
-    } else {
-        AnalysisMode::Default
-    };
-    let opts = CompareOptions {
-        mode,
-        alignment: args.alignment.as_deref().map(parse_alignment).transpose()?,
-        ..CompareOptions::default()
-    };
+    let mode = args.measure.analysis_mode();
     let (study, roots) = load_study(&args.study, &args.data, args.results.clone())?;
-    let reports = evaluate(&study, &roots, &opts)?;
+    let reports = evaluate(&args.study, &study, &roots, &args.measure)?;
     let mut provenance = provenance_for_study(&study, &args.study, &roots, mode);
     provenance.details.extend(args.data.provenance());
-    if let Some(a) = &args.alignment {
+    if let Some(a) = &args.measure.alignment {
         provenance
             .details
             .push(("Alignment override".into(), a.clone()));
+    }
+    for (what, value) in [
+        ("Registration", &args.measure.registration),
+        ("Runs", &args.measure.runs),
+        ("Held-out runs", &args.measure.holdout),
+    ] {
+        if let Some(v) = value {
+            provenance.details.push((what.into(), v.clone()));
+        }
     }
     let files = write_report(&reports, &provenance, &args.out)
         .with_context(|| format!("writing the report into {}", args.out.display()))?;

@@ -19,7 +19,7 @@ use crate::cmd_run;
 use anyhow::{bail, Context, Result};
 use realitygap::data_source::{assets_dir, DataSource};
 use realitygap::study::{Roots, SourceFormat, SourceSpec, Study, StudyScene};
-use realitygap_analysis::compare::{evaluate_scene, AnalysisMode, CompareOptions, CubeSpec};
+use realitygap_analysis::compare::{AnalysisMode, CompareOptions, CubeSpec};
 use realitygap_analysis::table::{self, Format};
 use realitygap_core::robot::{PackageResolver, RobotModel};
 use realitygap_core::scene::{Scene, TrackTarget};
@@ -200,10 +200,8 @@ pub fn run(args: Args) -> Result<()> {
         ..CompareOptions::default()
     };
     let scenes_in = study.load(&roots)?;
-    let reports: Vec<_> = scenes_in
-        .iter()
-        .map(|s| evaluate_scene(&s.spec, &s.reference, &s.sources, &opts))
-        .collect();
+    let inputs: Vec<_> = scenes_in.iter().map(|s| s.input()).collect();
+    let reports = realitygap_analysis::evaluate_study(&inputs, &opts)?;
     timings.push(("compare".into(), t.elapsed().as_secs_f64()));
     print!("{}", table::render(&reports, Format::Markdown));
 
@@ -332,6 +330,7 @@ fn cross_engine_study(scenes: &[Scene], runs_dir: &Path, engines: &[String]) -> 
             } else {
                 None
             },
+            scene: None,
             vars: BTreeMap::new(),
             reference,
             sources,
@@ -343,6 +342,9 @@ fn cross_engine_study(scenes: &[Scene], runs_dir: &Path, engines: &[String]) -> 
         control_period_s: scenes.first().map_or(0.05, |s| s.controller.period_s),
         sources: vec![],
         scenes: out,
+        runs: None,
+        holdout: None,
+        folder: PathBuf::new(),
     })
 }
 

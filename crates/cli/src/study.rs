@@ -14,8 +14,16 @@
 //! files = "Simulation/{experiment}/{prefix}_Mujoco_*.csv"
 //! quat_order = "wxyz"
 //!
+//! # Optional: the real runs fitted on and scored on (numbers from 1 in
+//! # file order); the command line's --runs / --holdout take precedence.
+//! runs = "1-15"
+//! holdout = "16-20"
+//!
 //! [[scenes]]
 //! name = "scene1_single_joint"
+//! # The scene file (relative to this study file): its schedule, controller
+//! # and robot give the kinematic reference the real runs are aligned to.
+//! scene = "../scenes/scene1_single_joint.toml"
 //! steps = 120
 //! goal_m = [0.49, 0.07, 0.29]
 //! vars = { experiment = "Experiment1", prefix = "Single" }
@@ -36,6 +44,10 @@ use anyhow::{anyhow, bail, Context, Result};
 use rayon::prelude::*;
 use realitygap_analysis::align::Alignment;
 use realitygap_analysis::compare::{CubeSpec, RunInput, SceneSpec, SourceRuns};
+use realitygap_analysis::kinematic::{kinematic_track, KinematicTrack};
+use realitygap_core::robot::{PackageResolver, RobotModel};
+use realitygap_core::scene::Scene;
+use realitygap_core::trajectory::WRIST;
 use realitygap_data::{
     qualisys, recorded, QualisysOptions, QuatOrder, RecordedOptions, RunStatus, RunStore,
     SourceKind,
@@ -61,6 +73,17 @@ pub struct Study {
     pub sources: Vec<SourceSpec>,
     /// The scenes.
     pub scenes: Vec<StudyScene>,
+    /// Real runs to fit on (and to score on without `holdout`), e.g.
+    /// `"1-15"`; default all.
+    #[serde(default)]
+    pub runs: Option<String>,
+    /// Real runs to score on and never fit on, e.g. `"16-20"`.
+    #[serde(default)]
+    pub holdout: Option<String>,
+    /// The study file's folder (scene files are relative to it); set when
+    /// the file is read.
+    #[serde(skip)]
+    pub folder: PathBuf,
 }
 
 fn default_period() -> f64 {
@@ -73,6 +96,10 @@ fn default_period() -> f64 {
 pub struct StudyScene {
     /// Scene name.
     pub name: String,
+    /// The scene file, relative to the study file's folder: its schedule,
+    /// controller and robot give the kinematic reference.
+    #[serde(default)]
+    pub scene: Option<String>,
     /// Control steps compared (120 for the study's scene 1, 400 otherwise).
     pub steps: usize,
     /// Wrist position at the final target configuration, metres.
@@ -159,8 +186,9 @@ impl Study {
 
     /// Parses and checks a study from its text; `path` names it in errors.
     pub fn from_toml_str(text: &str, path: &Path) -> Result<Study> {
-        let study: Study = toml::from_str(text)
+        let mut study: Study = toml::from_str(text)
             .map_err(|e| anyhow!("{}: {}", path.display(), toml_error(text, &e)))?;
+        study.folder = path.parent().map(Path::to_path_buf).unwrap_or_default();
         study
             .check()
             .with_context(|| format!("in study file {}", path.display()))?;
@@ -176,6 +204,11 @@ impl Study {
         }
         if self.scenes.is_empty() {
             bail!("no [[scenes]]");
+        }
+        for (field, value) in [("runs", &self.runs), ("holdout", &self.holdout)] {
+            if let Some(v) = value {
+                realitygap_analysis::selection::RunRange::parse(v, &format!("`{field}`"))?;
+            }
         }
         for s in &self.scenes {
             if s.steps == 0 {
@@ -499,6 +532,19 @@ pub fn load_store(
     })
 }
 
+impl Study {
+    /// The kinematic reference of a scene file (relative to the study's
+    /// folder) over `steps` control steps.
+    pub fn kinematic(&self, file: &str, steps: usize) -> Result<KinematicTrack> {
+        let path = self.folder.join(file);
+        let scene = Scene::from_file(&path)?;
+        let robot = RobotModel::from_urdf_file(&scene.robot.urdf, &PackageResolver::from_env())
+            .with_context(|| format!("robot of scene file {}", path.display()))?;
+        kinematic_track(&scene, &robot, WRIST, steps)
+            .map_err(|e| anyhow!("{}: {e}", path.display()))
+    }
+}
+
 /// A scene ready for analysis: its spec, reference and sources.
 pub struct LoadedScene {
     /// What the analysis needs of the scene.
@@ -507,6 +553,17 @@ pub struct LoadedScene {
     pub reference: SourceRuns,
     /// The sources' runs.
     pub sources: Vec<SourceRuns>,
+}
+
+impl LoadedScene {
+    /// The scene as input to `realitygap_analysis::evaluate_study`.
+    pub fn input(&self) -> realitygap_analysis::SceneInput<'_> {
+        realitygap_analysis::SceneInput {
+            spec: &self.spec,
+            reference: &self.reference,
+            sources: &self.sources,
+        }
+    }
 }
 
 impl Study {
@@ -524,6 +581,12 @@ impl Study {
                     .map(|src| load_source(src, &s.vars, roots, self.control_period_s))
                     .collect::<Result<Vec<_>>>()
                     .with_context(ctx)?;
+                let kinematic = match &s.scene {
+                    Some(file) => Some(self.kinematic(file, s.steps).with_context(|| {
+                        format!("scene '{}': `scene = \"{file}\"` in the study file", s.name)
+                    })?),
+                    None => None,
+                };
                 Ok(LoadedScene {
                     spec: SceneSpec {
                         name: s.name.clone(),
@@ -537,6 +600,7 @@ impl Study {
                             s.phases_s.clone()
                         },
                         cube: s.cube.clone(),
+                        kinematic,
                     },
                     reference,
                     sources,
@@ -593,5 +657,11 @@ mod tests {
         std::fs::write(&p, "name = \"x\"\n[[scenes]]\nname = \"s\"\nsteps = 3\n[scenes.reference]\nname = \"r\"\nformat = \"recorded\"\nfiles = \"a\"\n").unwrap();
         let e = format!("{:#}", Study::from_file(&p).unwrap_err());
         assert!(e.contains("quat_order"), "{e}");
+        std::fs::write(&p, "name = \"x\"\nholdout = \"16-\"\n[[scenes]]\nname = \"s\"\nsteps = 3\n[scenes.reference]\nname = \"r\"\nformat = \"store\"\ndir = \"d\"\n").unwrap();
+        let e = format!("{:#}", Study::from_file(&p).unwrap_err());
+        assert!(
+            e.contains("bad.toml") && e.contains("`holdout` \"16-\""),
+            "{e}"
+        );
     }
 }

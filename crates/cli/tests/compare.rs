@@ -219,3 +219,301 @@ fn bad_input_gives_a_located_error() {
         "{err}"
     );
 }
+
+/// The study file with absolute scene paths (so that a copy in another
+/// folder still finds them), keeping only the study-wide sources named.
+fn study_copy(dir: &std::path::Path, keep: &[&str]) -> PathBuf {
+    let text = std::fs::read_to_string(root().join("assets/studies/collins2019.toml")).unwrap();
+    let scenes = root().join("assets/scenes");
+    let text = text.replace("\"../scenes/", &format!("\"{}/", scenes.display()));
+    // Blocks start at a blank line; drop the [[sources]] blocks not kept.
+    let kept: Vec<&str> = text
+        .split("\n\n")
+        .filter(|block| {
+            let Some(rest) = block.trim_start().strip_prefix("[[sources]]") else {
+                return true;
+            };
+            keep.iter()
+                .any(|k| rest.contains(&format!("name = \"{k}\"\n")))
+        })
+        .collect();
+    let path = dir.join("study.toml");
+    std::fs::write(&path, kept.join("\n\n")).unwrap();
+    path
+}
+
+fn compare_study(study: &std::path::Path, extra: &[&str]) -> std::process::Output {
+    let data = realitygap::paper_data_for_tests().unwrap();
+    bin()
+        .arg("compare")
+        .arg(study)
+        .arg("--data")
+        .arg(data)
+        .args(extra)
+        .output()
+        .unwrap()
+}
+
+fn starts(v: &Value) -> Vec<(String, Vec<(String, u64)>)> {
+    SCENES
+        .iter()
+        .map(|scene| {
+            let runs = v["scenes"][scene]["alignment"]["runs"].as_array().unwrap();
+            (
+                scene.to_string(),
+                runs.iter()
+                    .map(|r| {
+                        (
+                            r["run"].as_str().unwrap().to_string(),
+                            r["start_frame"].as_u64().unwrap(),
+                        )
+                    })
+                    .collect(),
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn real_start_frames_do_not_depend_on_the_simulated_sources() {
+    if realitygap::paper_data_for_tests().is_none() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let full = compare_study(&study_copy(dir.path(), &SOURCES), &["--format", "json"]);
+    assert!(
+        full.status.success(),
+        "{}",
+        String::from_utf8_lossy(&full.stderr)
+    );
+    let one_dir = tempfile::tempdir().unwrap();
+    let one = compare_study(
+        &study_copy(one_dir.path(), &["PyBullet"]),
+        &["--format", "json"],
+    );
+    assert!(
+        one.status.success(),
+        "{}",
+        String::from_utf8_lossy(&one.stderr)
+    );
+    let full: Value = serde_json::from_slice(&full.stdout).unwrap();
+    let one: Value = serde_json::from_slice(&one.stdout).unwrap();
+    assert_eq!(
+        one["rows"].as_array().unwrap().len(),
+        3,
+        "one source per scene"
+    );
+    let (a, b) = (starts(&full), starts(&one));
+    assert_eq!(a, b);
+    for (scene, runs) in &a {
+        assert_eq!(runs.len(), 20, "{scene}");
+    }
+    // The registration, fitted on the real runs only, is the same too.
+    assert_eq!(full["registration"], one["registration"]);
+    assert!(full["registration"]["rotation_wxyz"].is_array());
+}
+
+#[test]
+fn fit_on_runs_1_to_15_and_score_on_16_to_20() {
+    let Some((out, _)) = compare(&["--runs", "1-15", "--holdout", "16-20", "--format", "json"])
+    else {
+        return;
+    };
+    let v: Value = serde_json::from_str(&out).unwrap();
+    assert!(
+        v["runs"].as_str().unwrap().contains("16-20"),
+        "{}",
+        v["runs"]
+    );
+    for scene in SCENES {
+        let s = &v["scenes"][scene];
+        let fit: Vec<&str> = s["runs"]["fit"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|r| r.as_str().unwrap())
+            .collect();
+        let scored: Vec<&str> = s["runs"]["scored"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|r| r.as_str().unwrap())
+            .collect();
+        assert_eq!((fit.len(), scored.len()), (15, 5), "{scene}");
+        assert!(
+            scored[0].contains("0016") && scored[4].contains("0020"),
+            "{scored:?}"
+        );
+        assert_eq!(s["reference"]["runs_total"], 5);
+        // The registration's residual on the held-out runs is reported.
+        assert!(s["registration"]["residual_scored_rms_m"].as_f64().unwrap() < 0.05);
+    }
+    for row in v["rows"].as_array().unwrap() {
+        if row["accumulated_error_m"].is_null() {
+            continue;
+        }
+        let e = row["accumulated_error_m"].as_f64().unwrap();
+        let i = &row["accumulated_error_interval_m"];
+        let (lo, hi) = (i["low_m"].as_f64().unwrap(), i["high_m"].as_f64().unwrap());
+        assert!(lo < hi && lo < e * 1.2 && hi > e * 0.8, "{row}");
+    }
+    // Every scene names its closest source, or says two cannot be told apart.
+    for scene in SCENES {
+        let verdict = v["scenes"][scene]["verdict"].as_str().unwrap();
+        let c = &v["scenes"][scene]["closest_comparison"];
+        let p = c["probability_closer"].as_f64().unwrap();
+        assert!((0.0..=1.0).contains(&p));
+        if c["distinguishable"] == true {
+            assert!(verdict.starts_with("closest source:"), "{verdict}");
+            assert_eq!(v["scenes"][scene]["closest_source"], c["closest"]);
+        } else {
+            assert!(verdict.contains("cannot be told apart"), "{verdict}");
+            assert!(v["scenes"][scene]["closest_source"].is_null());
+        }
+    }
+}
+
+#[test]
+fn intervals_in_every_format_and_a_saved_registration_reapplies() {
+    let Some((md, _)) = compare(&[]) else {
+        return;
+    };
+    let row = md.lines().find(|l| l.starts_with("| PyBullet |")).unwrap();
+    assert_eq!(row.matches(" [").count(), 4, "{row}");
+    assert!(
+        md.contains("Registration: capture frame registered into the world"),
+        "{md}"
+    );
+    let (csv, _) = compare(&["--format", "csv"]).unwrap();
+    let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+    let lo = header.iter().position(|h| *h == "interval_low_m").unwrap();
+    let py = csv
+        .lines()
+        .find(|l| l.starts_with("PyBullet,scene1"))
+        .unwrap();
+    assert!(
+        py.split(',').nth(lo).unwrap().parse::<f64>().is_ok(),
+        "{py}"
+    );
+    let (tex, _) = compare(&["--format", "latex"]).unwrap();
+    assert!(tex.contains("{\\scriptsize ["), "{tex}");
+    let dir = tempfile::tempdir().unwrap();
+    let saved = dir.path().join("registration.json");
+    let (json, _) = compare(&[
+        "--format",
+        "json",
+        "--save-registration",
+        saved.to_str().unwrap(),
+    ])
+    .unwrap();
+    let given = compare(&[
+        "--format",
+        "json",
+        "--registration",
+        saved.to_str().unwrap(),
+    ])
+    .unwrap()
+    .0;
+    let (a, b): (Value, Value) = (
+        serde_json::from_str(&json).unwrap(),
+        serde_json::from_str(&given).unwrap(),
+    );
+    for (x, y) in a["rows"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(b["rows"].as_array().unwrap())
+    {
+        match (
+            x["accumulated_error_m"].as_f64(),
+            y["accumulated_error_m"].as_f64(),
+        ) {
+            (Some(p), Some(q)) => assert!((p - q).abs() < 1e-9, "{p} {q}"),
+            (p, q) => assert_eq!(p, q),
+        }
+    }
+    assert!(b["registration"]["method"]
+        .as_str()
+        .unwrap()
+        .contains("registration.json"));
+    // Without registration the table is different (the offset is paid).
+    let (raw, _) = compare(&["--format", "json", "--registration", "none"]).unwrap();
+    let raw: Value = serde_json::from_str(&raw).unwrap();
+    assert!(raw["registration"].is_null());
+    assert_ne!(raw["totals"]["PyBullet"], a["totals"]["PyBullet"]);
+}
+
+#[test]
+fn bad_registration_files_and_run_ranges_name_the_culprit() {
+    if realitygap::paper_data_for_tests().is_none() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let study = root().join("assets/studies/collins2019.toml");
+    let cases = [
+        (
+            "nonunit.json",
+            r#"{"rotation_wxyz": [1, 0.2, 0, 0], "translation_m": [0, 0, 0]}"#,
+            "unit quaternion",
+        ),
+        (
+            "nan.json",
+            r#"{"rotation_wxyz": [1, 0, 0, 0], "translation_m": [0, NaN, 0]}"#,
+            "nan.json",
+        ),
+        (
+            "missing.json",
+            r#"{"rotation_wxyz": [1, 0, 0, 0]}"#,
+            "translation_m",
+        ),
+    ];
+    for (name, text, expect) in cases {
+        let file = dir.path().join(name);
+        std::fs::write(&file, text).unwrap();
+        let out = compare_study(&study, &["--registration", file.to_str().unwrap()]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{name} accepted");
+        assert!(err.contains(name) && err.contains(expect), "{name}: {err}");
+        assert!(!err.contains("panicked"), "{err}");
+    }
+    for (args, expect) in [
+        (
+            vec!["--runs", "25-30"],
+            "--runs \"25-30\" selects no run of scene 'scene1_single_joint'",
+        ),
+        (
+            vec!["--holdout", "1-20"],
+            "--holdout \"1-20\" holds out every run",
+        ),
+        (vec!["--runs", "1-x"], "--runs \"1-x\""),
+        (
+            vec!["--mode", "study", "--registration", "none"],
+            "--registration does not apply to --mode study",
+        ),
+    ] {
+        let out = compare_study(&study, &args);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && err.contains(expect),
+            "{args:?}: {err}"
+        );
+    }
+}
+
+/// The study mode's table is the study's procedure and must not change:
+/// it is the one in the README.
+#[test]
+fn study_mode_table_matches_the_readme() {
+    let Some((md, _)) = compare(&["--mode", "study"]) else {
+        return;
+    };
+    let readme = std::fs::read_to_string(root().join("README.md")).unwrap();
+    let block = readme.split("<!-- study-table -->\n").nth(1).unwrap();
+    let expected: Vec<&str> = block.lines().take_while(|l| l.starts_with('|')).collect();
+    let got: Vec<&str> = md
+        .lines()
+        .skip_while(|l| !l.starts_with("| Source"))
+        .take_while(|l| l.starts_with('|'))
+        .collect();
+    assert_eq!(got, expected);
+}

@@ -84,6 +84,23 @@ fn report_on_the_paper_data() {
     assert!(html.contains("Not plotted: V-Rep ODE (no usable runs: 20 of 20 left out (diverged"));
     assert!(html.contains("Closest per phase"));
     assert!(html.contains("Alignment of the reference"));
+    // Intervals, the verdict per scene, the registration and the runs used.
+    let pybullet = table.lines().find(|l| l.contains("PyBullet")).unwrap();
+    assert_eq!(pybullet.matches(" [").count(), 4, "{pybullet}");
+    assert!(html.contains("bootstrap interval over the real runs"));
+    assert!(
+        html.contains("scene1_single_joint: closest source: ")
+            || html.contains("cannot be told apart")
+    );
+    assert!(html.contains(
+        "<p id=\"registration\"><strong>Registration:</strong> capture frame registered"
+    ));
+    assert!(html.contains("<p id=\"runs\"><strong>Real runs:</strong> all 20 runs"));
+    let reg: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("registration.json")).unwrap())
+            .unwrap();
+    assert_eq!(reg["rotation_wxyz"].as_array().unwrap().len(), 4);
+    assert_eq!(reg["translation_m"].as_array().unwrap().len(), 3);
 
     let pngs: Vec<PathBuf> = std::fs::read_dir(out.join("figures"))
         .unwrap()
@@ -137,6 +154,9 @@ fn study_mode_keeps_the_diverged_runs_but_not_in_the_axes() {
     let ode = table.lines().find(|l| l.contains("V-Rep ODE")).unwrap();
     assert!(ode.contains("e17"), "{ode}");
     assert!(html.contains("Clipped at the edge of the plot: V-Rep ODE (up to "));
+    // The study's procedure: the raw capture frame and no intervals.
+    assert!(!out.join("registration.json").exists());
+    assert!(!table.contains(" ["), "{table}");
     std::fs::remove_dir_all(&out).unwrap();
 }
 

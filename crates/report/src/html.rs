@@ -3,8 +3,10 @@
 
 use crate::figures::Figure;
 use crate::provenance::Provenance;
-use realitygap_analysis::compare::{AlignmentReport, SceneReport, SourceSummary};
-use realitygap_analysis::table::{fmt_m, source_names, total};
+use realitygap_analysis::compare::{fmt_interval, AlignmentReport, SceneReport, SourceSummary};
+use realitygap_analysis::table::{
+    describe_registration, fmt_m, source_names, total, total_interval,
+};
 use std::fmt::Write;
 
 /// A figure as placed in the report.
@@ -180,8 +182,14 @@ fn summary(h: &mut String, reports: &[SceneReport], downloads: &[(String, String
     };
     let _ = writeln!(
         h,
-        "<p>Per scene, the sum over control steps of the distance between a source's mean wrist position and the mean wrist position of the reference (<strong>{}</strong>) at the same step, in metres. Smaller is closer; the best per column is highlighted.</p>",
-        escape(&reference.join(", "))
+        "<p>Per scene, the sum over control steps of the distance between a source's mean wrist position and the mean wrist position of the reference (<strong>{}</strong>) at the same step, in metres. Smaller is closer; the best per column is highlighted.{}</p>",
+        escape(&reference.join(", ")),
+        reports.iter().find_map(|r| r.bootstrap).map_or(String::new(), |b| format!(
+            " In brackets: the {:.0} % bootstrap interval over the real runs (and a source's own runs where they differ), {} resamples, seed {}.",
+            b.level * 100.0,
+            b.resamples,
+            b.seed
+        ))
     );
     let names = source_names(reports);
     h.push_str("<table id=\"accumulated-error\">\n<thead><tr><th>Source</th>");
@@ -210,6 +218,9 @@ fn summary(h: &mut String, reports: &[SceneReport], downloads: &[(String, String
         for (r, best) in reports.iter().zip(&best_per_scene) {
             let s = cell(r, n);
             let mut text = fmt_m(s.and_then(|s| s.accumulated_error_m));
+            if let Some(i) = s.and_then(|s| s.accumulated_error_interval_m) {
+                let _ = write!(text, " {}", fmt_interval(Some(i)));
+            }
             if let Some(s) = s {
                 let excluded = s.runs_flagged.iter().filter(|f| f.excluded).count();
                 if excluded > 0 {
@@ -218,24 +229,35 @@ fn summary(h: &mut String, reports: &[SceneReport], downloads: &[(String, String
             }
             num_cell(h, &text, *best == Some(i));
         }
-        num_cell(h, &fmt_m(totals[i]), best_total == Some(i));
+        let mut text = fmt_m(totals[i]);
+        if let Some(iv) = total_interval(reports, n) {
+            let _ = write!(text, " {}", fmt_interval(Some(iv)));
+        }
+        num_cell(h, &text, best_total == Some(i));
         h.push_str("</tr>\n");
     }
     h.push_str("</tbody>\n</table>\n");
     h.push_str("<p><strong>Closest per scene:</strong> ");
     let closest: Vec<String> = reports
         .iter()
-        .map(|r| {
-            format!(
-                "{}: {}",
-                escape(&r.scene),
-                r.closest()
-                    .map_or("none".to_string(), |s| escape(&s.source))
-            )
-        })
+        .map(|r| format!("{}: {}", escape(&r.scene), escape(&r.verdict())))
         .collect();
     h.push_str(&closest.join("; "));
     h.push_str(".</p>\n");
+    if let Some(text) = describe_registration(reports) {
+        let _ = writeln!(
+            h,
+            "<p id=\"registration\"><strong>Registration:</strong> {}.</p>",
+            escape(&text)
+        );
+    }
+    if let Some(runs) = reports.iter().find_map(|r| r.runs.as_ref()) {
+        let _ = writeln!(
+            h,
+            "<p id=\"runs\"><strong>Real runs:</strong> {}.</p>",
+            escape(&runs.selection)
+        );
+    }
     if !downloads.is_empty() {
         h.push_str("<p class=\"note\">Files: ");
         let links: Vec<String> = downloads
@@ -268,6 +290,36 @@ fn trim_num(v: f64) -> String {
     s.trim_end_matches('0').trim_end_matches('.').to_string()
 }
 
+fn capitalise(s: &str) -> String {
+    let mut c = s.chars();
+    match c.next() {
+        Some(f) => f.to_uppercase().collect::<String>() + c.as_str(),
+        None => String::new(),
+    }
+}
+
+/// The scene's real runs (fitted on, scored on) and the registration's
+/// residuals there.
+fn runs_and_registration(h: &mut String, r: &SceneReport) {
+    if let Some(runs) = &r.runs {
+        let _ = writeln!(
+            h,
+            "<p>Real runs fitted on: {}. Scored on: {}.</p>",
+            escape(&runs.fit.join(", ")),
+            escape(&runs.scored.join(", "))
+        );
+    }
+    if let Some(g) = &r.registration {
+        let _ = writeln!(
+            h,
+            "<p>Registration residual at this scene's {} settled steps: {} mm on the fit runs, {} mm on the scored runs.</p>",
+            g.settled_steps,
+            g.residual_fit_rms_m.map_or("n/a".into(), |v| format!("{:.1}", v * 1000.0)),
+            g.residual_scored_rms_m.map_or("n/a".into(), |v| format!("{:.1}", v * 1000.0))
+        );
+    }
+}
+
 fn scene_section(h: &mut String, r: &SceneReport, figures: &[&FigureEntry<'_>]) {
     let _ = writeln!(
         h,
@@ -288,12 +340,8 @@ fn scene_section(h: &mut String, r: &SceneReport, figures: &[&FigureEntry<'_>]) 
     if let Some(g) = r.goal_m {
         let _ = write!(h, "; goal ({:.4}, {:.4}, {:.4}) m", g[0], g[1], g[2]);
     }
-    let _ = writeln!(
-        h,
-        ". Closest source overall: <strong>{}</strong>.</p>",
-        r.closest()
-            .map_or("none".to_string(), |s| escape(&s.source))
-    );
+    let _ = writeln!(h, ". {}.</p>", escape(&capitalise(&r.verdict())));
+    runs_and_registration(h, r);
 
     // Closest per phase.
     if !r.phases_s.is_empty() {
@@ -379,7 +427,7 @@ fn opt_num(v: Option<f64>, decimals: usize) -> String {
 }
 
 fn measures_table(h: &mut String, r: &SceneReport) {
-    h.push_str("<h3>Measures</h3>\n<table class=\"measures\">\n<thead><tr><th>Source</th><th>Kind</th><th>Runs used</th><th>Accumulated error (m)</th><th>Mean error (m)</th><th>Max error (m)</th><th>Final error (m)</th><th>Orientation error (deg)</th><th>Final distance to goal (m)</th><th>Converged (s)</th><th>Overshoot (m)</th><th>Goal crossings</th></tr></thead>\n<tbody>\n");
+    h.push_str("<h3>Measures</h3>\n<table class=\"measures\">\n<thead><tr><th>Source</th><th>Kind</th><th>Runs used</th><th>Accumulated error (m)</th><th>95 % interval (m)</th><th>Lag behind kinematic reference (s)</th><th>Mean error (m)</th><th>Max error (m)</th><th>Final error (m)</th><th>Orientation error (deg)</th><th>Final distance to goal (m)</th><th>Converged (s)</th><th>Overshoot (m)</th><th>Goal crossings</th></tr></thead>\n<tbody>\n");
     let rows: Vec<&SourceSummary> = std::iter::once(&r.reference).chain(&r.sources).collect();
     let best = best_index(
         &rows
@@ -399,6 +447,8 @@ fn measures_table(h: &mut String, r: &SceneReport) {
         );
         num_cell(h, &format!("{} of {}", s.runs_used, s.runs_total), false);
         num_cell(h, &fmt_m(s.accumulated_error_m), best == Some(i));
+        num_cell(h, &fmt_interval(s.accumulated_error_interval_m), false);
+        num_cell(h, &opt_num(s.lag_s, 2), false);
         num_cell(h, &fmt_m(s.mean_error_m), false);
         num_cell(h, &fmt_m(s.max_error_m), false);
         num_cell(h, &fmt_m(s.final_error_m), false);
@@ -429,7 +479,7 @@ fn measures_table(h: &mut String, r: &SceneReport) {
     {
         let _ = writeln!(
             h,
-            "<p class=\"note\">Errors are distances to the reference's mean wrist position. Converged: the time from which the mean wrist stays within {} m of the goal. Orientation error: mean angle between the wrist's rotation since the start and the reference's.</p>",
+            "<p class=\"note\">Errors are distances to the reference's mean wrist position. Lag: the time shift that best aligns a source's mean wrist motion with the scene's kinematic reference; reported only, never used to shift a source. Converged: the time from which the mean wrist stays within {} m of the goal. Orientation error: mean angle between the wrist's rotation since the start and the reference's.</p>",
             trim_num(g.tolerance_m)
         );
     }
@@ -745,6 +795,13 @@ mod tests {
         );
         // Per phase, Alpha is closest in both.
         assert!(html.contains("phase 1 (0\u{2013}2.5 s): <strong>Alpha &lt;&amp;&gt;</strong>"));
+        // Intervals next to the values, the verdict and the registration.
+        assert!(alpha_row.contains("1.000 [0.900, 1.100]"), "{alpha_row}");
+        assert!(html.contains(
+            "closest source: Alpha &lt;&amp;&gt; (closer than Beta with probability 1.000"
+        ));
+        assert!(html.contains("translation (1.0, -2.0, 9.0) mm"));
+        assert!(html.contains("estimated &lt;test&gt;"));
         assert_eq!(tbody(&html, "scene-scene-test").matches("<tr>").count(), 3);
     }
 

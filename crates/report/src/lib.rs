@@ -11,7 +11,8 @@
 //! - `table.md`, `table.csv`, `table.json`, `table.tex`: the accumulated-
 //!   error table and measures, rendered by `realitygap_analysis::table`;
 //! - `series.json`: the same JSON with every per-step series, for
-//!   re-plotting elsewhere; `provenance.json`;
+//!   re-plotting elsewhere; `provenance.json`; `registration.json` when the
+//!   real runs were registered into the world frame;
 //! - `index.html`: one self-contained page (figures inline as SVG, style
 //!   inline, no scripts, no network) with the table, per-scene figures,
 //!   measures, the closest source per scene and phase, run-health flags,
@@ -66,7 +67,8 @@ pub struct ReportFiles {
     pub figures_png: Vec<PathBuf>,
     /// `table.md`, `table.csv`, `table.json`, `table.tex`.
     pub tables: Vec<PathBuf>,
-    /// `series.json` and `provenance.json`.
+    /// `series.json`, `provenance.json` and, when a registration was
+    /// applied, `registration.json`.
     pub data: Vec<PathBuf>,
 }
 
@@ -135,6 +137,15 @@ pub fn write_report(
     files
         .data
         .push(write(&out_dir.join("series.json"), series + "\n")?);
+    let registration = reports
+        .iter()
+        .find_map(|r| r.registration.as_ref())
+        .map(|r| r.registration());
+    if let Some(r) = &registration {
+        files
+            .data
+            .push(write(&out_dir.join("registration.json"), r.to_json())?);
+    }
     let prov = serde_json::to_string_pretty(provenance).unwrap_or_default();
     files
         .data
@@ -151,7 +162,7 @@ pub fn write_report(
             png_file,
         })
         .collect();
-    let downloads: Vec<(String, String)> = vec![
+    let mut downloads: Vec<(String, String)> = vec![
         ("table.md".into(), "table (Markdown)".into()),
         ("table.csv".into(), "table (CSV)".into()),
         ("table.json".into(), "measures (JSON)".into()),
@@ -159,6 +170,12 @@ pub fn write_report(
         ("series.json".into(), "per-step series (JSON)".into()),
         ("provenance.json".into(), "provenance (JSON)".into()),
     ];
+    if registration.is_some() {
+        downloads.push((
+            "registration.json".into(),
+            "capture-frame registration (JSON)".into(),
+        ));
+    }
     let page = html::render_index(reports, &entries, provenance, &downloads);
     files.index_html = write(&out_dir.join("index.html"), page)?;
     Ok(files)

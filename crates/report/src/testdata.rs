@@ -1,8 +1,10 @@
 //! Synthetic scene reports for the unit tests.
 
 use realitygap_analysis::align::RunStart;
+use realitygap_analysis::bootstrap::{BootstrapOptions, Interval, PairedComparison};
 use realitygap_analysis::compare::{
-    AlignedRun, AlignmentReport, FlaggedRun, SceneReport, Series, SourceSummary,
+    AlignedRun, AlignmentReport, FlaggedRun, RegistrationReport, RunsReport, SceneReport, Series,
+    SourceSummary,
 };
 use realitygap_analysis::metrics::GoalMeasures;
 use realitygap_analysis::{AnalysisMode, HealthFlag};
@@ -50,6 +52,13 @@ pub fn source(name: &str, runs: usize, f: impl Fn(f64) -> f64, scale: f64) -> So
                 .collect()
         },
         accumulated_error_m: acc,
+        accumulated_error_interval_m: acc.map(|a| Interval {
+            low_m: 0.9 * a,
+            high_m: 1.1 * a,
+        }),
+        bootstrap_over_source_runs: false,
+        bootstrap_replicates_m: vec![],
+        lag_s: usable.then_some(0.05),
         steps_compared: if usable { 100 } else { 0 },
         mean_error_m: acc.map(|a| a / 100.0),
         max_error_m: acc.map(|a| a / 100.0),
@@ -97,8 +106,38 @@ pub fn scene() -> SceneReport {
                     onset_frame: Some(132),
                 },
                 steps_available: 100,
+                used_for: "fit+score".into(),
             }],
             failed: vec![],
+            group_shift_frames: Some(-2),
+        }),
+        registration: Some(RegistrationReport {
+            method: "estimated <test>".into(),
+            rotation_wxyz: [1.0, 0.0, 0.0, 0.0],
+            translation_m: [0.001, -0.002, 0.009],
+            rotation_deg: 0.0,
+            rotation_axis: [1.0, 0.0, 0.0],
+            fit: None,
+            residual_fit_rms_m: Some(0.004),
+            residual_scored_rms_m: Some(0.005),
+            settled_steps: 18,
+        }),
+        runs: Some(RunsReport {
+            selection: "all 1 runs, fitted and scored on".into(),
+            fit: vec!["Single0001_6D".into()],
+            scored: vec!["Single0001_6D".into()],
+        }),
+        bootstrap: Some(BootstrapOptions::default()),
+        closest_comparison: Some(PairedComparison {
+            closest: "Alpha <&>".into(),
+            runner_up: "Beta".into(),
+            difference_m: 2.0,
+            difference_interval_m: Some(Interval {
+                low_m: 1.5,
+                high_m: 2.5,
+            }),
+            probability_closer: 1.0,
+            distinguishable: true,
         }),
         sources: vec![
             source("Alpha <&>", 20, |t| (0.62 - 0.21 * t).max(0.0), 1.0),
