@@ -274,6 +274,8 @@ mod tests {
         assert_eq!(CMD_CREATE_MULTI_BODY_COMPLETED, 84);
         assert_eq!(CMD_REQUEST_COLLISION_INFO_COMPLETED, 85);
         assert_eq!(CMD_REQUEST_PHYSICS_SIMULATION_PARAMETERS_COMPLETED, 91);
+        assert_eq!(CMD_BULLET_SAVING_COMPLETED, 10);
+        assert_eq!(CMD_RESTORE_STATE_COMPLETED, 95);
     }
 
     #[test]

@@ -599,7 +599,8 @@ impl BulletSimulation {
     }
 
     fn step_once(&mut self) -> Result<(), EngineError> {
-        // SAFETY: see `load`.
+        // SAFETY: the command is created on this client and submitted once,
+        // with the Bullet lock held (see the `build` module).
         let kind = unsafe {
             self.client
                 .submit(ffi::b3InitStepSimulationCommand(self.client.handle()))
@@ -622,7 +623,8 @@ impl BulletSimulation {
         let _guard = ffi::lock();
         let h = self.client.handle();
         let mut pairs = Vec::new();
-        // SAFETY: see `load`; the contact array is read within the count
+        // SAFETY: the command is created on this client and submitted once,
+        // with the Bullet lock held; the contact array is read within the count
         // Bullet reported.
         unsafe {
             let r = self
@@ -683,7 +685,8 @@ impl BulletSimulation {
             return Ok(None);
         };
         let h = self.client.handle();
-        // SAFETY: see `load`.
+        // SAFETY: the command is created on this client and submitted once,
+        // with the Bullet lock held (see the `build` module).
         unsafe {
             let cmd = ffi::b3RequestActualStateCommandInit(h, self.robot);
             ffi::b3RequestActualStateCommandComputeForwardKinematics(cmd, 1);
@@ -732,7 +735,8 @@ impl BulletSimulation {
         let _guard = ffi::lock();
         let h = self.client.handle();
         let mut p = ffi::b3PhysicsSimulationParameters::default();
-        // SAFETY: see `load`; `p` has the C layout (checked by a test).
+        // SAFETY: the command is created on this client and submitted once,
+        // with the Bullet lock held; `p` has the C layout (checked by a test).
         unsafe {
             let r = self.client.submit(ffi::b3InitRequestPhysicsParamCommand(h));
             expect(
@@ -830,7 +834,8 @@ fn create_body(
     let q = xyzw(pose.orientation);
     let inertial_p = [0.0; 3];
     let inertial_q = [0.0, 0.0, 0.0, 1.0];
-    // SAFETY: see `BulletSimulation::load`.
+    // SAFETY: the command is created on `client` and submitted once,
+    // with the Bullet lock held (see the `build` module).
     unsafe {
         let cmd = ffi::b3CreateMultiBodyCommandInit(client.handle());
         ffi::b3CreateMultiBodyBase(
@@ -860,7 +865,8 @@ fn set_friction(
     link: c_int,
     friction: f64,
 ) -> Result<(), EngineError> {
-    // SAFETY: see `BulletSimulation::load`.
+    // SAFETY: the command is created on `client` and submitted once,
+    // with the Bullet lock held (see the `build` module).
     unsafe {
         let cmd = ffi::b3InitChangeDynamicsInfo(client.handle());
         ffi::b3ChangeDynamicsInfoSetLateralFriction(cmd, body, link, friction);
@@ -878,7 +884,8 @@ fn dynamics_info(
     body: c_int,
     link: c_int,
 ) -> Result<ffi::b3DynamicsInfo, EngineError> {
-    // SAFETY: see `BulletSimulation::load`; b3DynamicsInfo has the C layout
+    // SAFETY: the command is created on `client` and submitted once,
+    // with the Bullet lock held; b3DynamicsInfo has the C layout
     // (checked by a test) and is plain data, so zeroed is a valid value.
     unsafe {
         let r = client.submit(ffi::b3GetDynamicsInfoCommandInit(
@@ -960,7 +967,8 @@ fn check_colliders(
     robot: &RobotModel,
     link_names: &[String],
 ) -> Result<(), EngineError> {
-    // SAFETY: see `BulletSimulation::load`.
+    // SAFETY: the command is created on `client` and submitted once,
+    // with the Bullet lock held (see the `build` module).
     unsafe {
         let r = client.submit(ffi::b3RequestCollisionInfoCommandInit(
             client.handle(),
