@@ -1139,6 +1139,7 @@ mod tests {
         let mut sim = scene1();
         let mut state = sim.state().unwrap();
         let native = state.native.as_mut().unwrap();
+        eprintln!("native state of scene 1: {} numbers", native.data.len());
         native.data[2] += 1.0;
         let e = sim.set_state(&state).unwrap_err();
         assert!(matches!(e, EngineError::State { .. }), "{e:?}");
