@@ -265,11 +265,11 @@ fn apply_variation(model: &mut MjModel, variation: &ModelVariation) {
     }
 }
 
+/// Per controlled joint: `qpos` addresses, `qvel` addresses, actuators.
+type JointAddresses = (Vec<usize>, Vec<usize>, Vec<usize>);
+
 /// Addresses of the controlled joints: (qpos, qvel, actuator) per joint.
-fn resolve_actuators(
-    model: &MjModel,
-    scene: &Scene,
-) -> Result<(Vec<usize>, Vec<usize>, Vec<usize>), EngineError> {
+fn resolve_actuators(model: &MjModel, scene: &Scene) -> Result<JointAddresses, EngineError> {
     let mut qpos_adr = Vec::new();
     let mut dof_adr = Vec::new();
     let mut ctrl_index = Vec::new();
