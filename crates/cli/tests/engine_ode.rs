@@ -206,7 +206,7 @@ fn bad_ode_settings_are_clear_errors() {
         ),
         (
             "ode.iterations=5",
-            "setting `iterations`: unknown setting (ODE accepts:",
+            "setting `iterations`: unknown setting (accepted:",
         ),
         (
             "ode.timestep_s=0.03",

@@ -54,14 +54,32 @@ fn every_engine_hands_its_state_to_every_other() {
                 gap_m,
                 angle_rad
             );
-            assert!(gap_m <= 1e-6, "{} -> {}: {gap_m} m", from.name(), to.name());
+            // ODE's joints are soft velocity-level constraints: a moving,
+            // loaded arm's bodies sit off the places its joint angles give
+            // (at its default 0.01 s and ERP 0.2, up to ~0.1 mm; 2 um at
+            // 1 ms and ERP 0.8, see crates/engine-ode/README.md). A portable
+            // state holds joint angles, so what ODE reports and what the
+            // receiving engine places differ by that constraint error.
+            let tolerance_m = if from.name() == "ode" {
+                2e-4
+            } else {
+                1e-6
+            };
+            assert!(
+                gap_m <= tolerance_m,
+                "{} -> {}: {gap_m} m (tolerance {tolerance_m} m)",
+                from.name(),
+                to.name()
+            );
             assert!(
                 angle_rad <= 1e-6,
                 "{} -> {}: {angle_rad} rad",
                 from.name(),
                 to.name()
             );
-            worst = worst.max(gap_m);
+            if from.name() != "ode" {
+                worst = worst.max(gap_m);
+            }
         }
     }
     eprintln!(

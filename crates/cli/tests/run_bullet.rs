@@ -196,7 +196,7 @@ fn bad_bullet_settings_fail_naming_the_setting() {
     for (set, expected) in [
         (
             "bullet.solver=dantzig",
-            "setting `solver`: unknown setting (Bullet accepts: timestep_s",
+            "setting `solver`: unknown setting (accepted: timestep_s",
         ),
         (
             "bullet.velocity_gain=2",

@@ -25,11 +25,12 @@
 //! an exact restore, and the portable fields for other engines (see the
 //! `state` module).
 //!
-//! State is read as the study's own loop read it: after the period's last
-//! `mj_step`, joint angles (`qpos`) are those at time t, and body poses
-//! (`xpos`, `xquat`) come from that step's kinematics pass, one timestep
-//! earlier (at dt = 1e-4 s and 0.5 m/s, 0.05 mm). Matching this is what
-//! makes the study's recordings reproducible to micrometres.
+//! State is read at one time: after stepping, the kinematics are computed
+//! again (`mj_kinematics`) so that the body poses (`xpos`, `xquat`) belong
+//! to the same `qpos` as the joint angles. A bare `mj_step` leaves them
+//! from its own kinematics pass, one timestep earlier, as the study's
+//! Python loop read them (at dt = 1e-4 s and 0.5 m/s, 0.05 mm); reporting
+//! both at time t is what lets a state move between engines exactly.
 //!
 //! MuJoCo ends the process on a fatal error (`mju_error`). Call
 //! [`install_message_handler`] once at the start of a program so that the
@@ -600,7 +601,9 @@ impl Simulation for MujocoSimulation {
     fn step(&mut self) -> Result<(), EngineError> {
         let t_s = self.time_s();
         self.data.step();
-        self.check_stability(t_s)
+        self.check_stability(t_s)?;
+        self.data.kinematics();
+        Ok(())
     }
 
     fn step_n(&mut self, n: u64) -> Result<(), EngineError> {
@@ -617,6 +620,9 @@ impl Simulation for MujocoSimulation {
                 return self.check_stability(t_s);
             }
         }
+        // Body poses at the current qpos (mj_step computed them before
+        // integrating); once per call, not per step.
+        self.data.kinematics();
         Ok(())
     }
 

@@ -1,16 +1,10 @@
 //! [`SimState`] for MuJoCo: reading it, restoring it exactly from the
 //! engine's own [`NativeState`], and loading its portable fields.
 //!
-//! The reported body poses follow the engine's reading convention (see the
-//! crate documentation): after `mj_step` they come from that step's
-//! kinematics pass, one timestep before `qpos`. A loaded state reports
-//! them the same way, so that a simulation continued from a state reports
-//! what the original reported:
-//! - native: the poses of every body are part of the native state and are
-//!   written back as they were;
-//! - portable: the kinematics are computed at `qpos - dt * qvel` (MuJoCo's
-//!   own position integration run backwards over one timestep, exact for
-//!   the Euler and implicit integrators up to rounding).
+//! The reported body poses belong to the current `qpos` (see the crate
+//! documentation), and a loaded state reports them the same way: native
+//! restores the poses saved with it, portable computes them with
+//! `mj_forward`.
 
 use crate::{MujocoSimulation, ENGINE_NAME};
 use mujoco_rs::mujoco_c;
@@ -147,7 +141,6 @@ impl MujocoSimulation {
             .set_state(body, NATIVE_SPEC)
             .map_err(|e| state_error(format!("mj_setState: {e}")))?;
         self.data.forward();
-        self.kinematics_one_step_back();
         let poses = &native[HEADER + size..];
         let (xpos, xquat) = poses.split_at(3 * nbody);
         // SAFETY: xpos and xquat are nbody x 3 and nbody x 4 arrays of this
@@ -196,22 +189,7 @@ impl MujocoSimulation {
         // SAFETY: writes a plain field of this simulation's own data.
         unsafe { self.data.ffi_mut().time = state.time_s };
         self.data.forward();
-        self.kinematics_one_step_back();
         self.warnings_seen = self.warning_counts();
         Ok(())
-    }
-
-    /// Leaves the kinematic quantities (body and geom poses) as `mj_step`
-    /// leaves them: computed one timestep before the current `qpos`.
-    fn kinematics_one_step_back(&mut self) {
-        let dt = self.data.model().opt().timestep;
-        let now = self.data.qpos().to_vec();
-        let mut before = now.clone();
-        self.data
-            .model()
-            .integrate_pos(&mut before, self.data.qvel(), -dt);
-        self.data.qpos_mut().copy_from_slice(&before);
-        self.data.kinematics();
-        self.data.qpos_mut().copy_from_slice(&now);
     }
 }

@@ -239,7 +239,7 @@ fn a_diverging_setting_ends_as_diverged() {
     assert!(t.is_finite(), "{:?}", out.status);
 }
 
-/// Handover between ODE and MuJoCo (feature `mujoco-comparison`). Out of
+/// Handover between ODE and MuJoCo. Out of
 /// ODE the gap is ODE's constraint error, as for ODE to ODE. Into ODE the
 /// arm is rebuilt exactly at MuJoCo's joint angles (a fresh MuJoCo placed
 /// at the same angles agrees with ODE to 1e-16 m), but a running MuJoCo
@@ -247,7 +247,6 @@ fn a_diverging_setting_ends_as_diverged() {
 /// its joint angles (measured: 18 um in scene 3 at tick 200, joint 2
 /// turning at 0.67 rad/s; 6.5e-8 m in scene 1, nearly at rest), which is
 /// the gap measured here.
-#[cfg(feature = "mujoco-comparison")]
 #[test]
 fn handover_between_ode_and_mujoco() {
     let engine = realitygap_engine_mujoco::MujocoEngine;

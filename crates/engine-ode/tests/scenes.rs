@@ -8,7 +8,6 @@ mod common;
 
 use common::*;
 use realitygap_core::controller::RunStatus;
-#[cfg(feature = "mujoco-comparison")]
 use realitygap_core::controller::{simulate, RunOptions};
 use realitygap_core::engine::{ModelVariation, Simulation};
 use realitygap_core::robot::RobotModel;
@@ -51,9 +50,7 @@ fn scene1_default_settings_reach_the_targets() {
 /// model. The same model includes the servo: MuJoCo's `<velocity kv>`
 /// actuator yields under load (joint 2 ends 1.36 degrees below -100, joint
 /// 3 1.94 degrees off), ODE's own motor does not; with `servo = "kv"` ODE
-/// applies the scene's servo law and the wrists agree. Needs the feature
-/// `mujoco-comparison` (on in `scripts/test`, which uses --all-features).
-#[cfg(feature = "mujoco-comparison")]
+/// applies the scene's servo law and the wrists agree.
 #[test]
 fn scene1_wrist_ends_where_mujoco_puts_it() {
     let s = scene("scene1_single_joint");
