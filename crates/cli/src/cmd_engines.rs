@@ -97,7 +97,7 @@ pub fn param_table(engine: &dyn Engine) -> Vec<(ParamKey, String)> {
         .iter()
         .map(|&key| {
             let mapping = match (key.core_mapping(), support.iter().find(|s| s.key == key)) {
-                (Some(core), _) => format!("controller: {core}"),
+                (Some(core), _) => format!("core controller: {core}"),
                 (None, Some(s)) => s.mapping.to_string(),
                 (None, None) => "not supported (a file setting it is an error)".to_string(),
             };
