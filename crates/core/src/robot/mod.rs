@@ -26,6 +26,7 @@
 //! non-URDF elements are ignored.
 
 mod package;
+pub mod plan;
 pub mod stl;
 mod urdf;
 
