@@ -10,7 +10,9 @@
 //!   builtin|none|DIR`);
 //! - [`measure`]: how the gap is measured ([`Measure`]: mode, alignment,
 //!   registration, run selection, intervals);
-//! - [`evaluate`](mod@evaluate): the evaluation itself.
+//! - [`evaluate`](mod@evaluate): the evaluation itself;
+//! - [`provenance`]: what a report says its runs came from;
+//! - [`reproduce`]: the study `realitygap reproduce` compares.
 
 #![warn(missing_docs)]
 
@@ -19,6 +21,8 @@ pub mod evaluate;
 pub mod files;
 pub mod load;
 pub mod measure;
+pub mod provenance;
+pub mod reproduce;
 pub mod study;
 
 pub use data_source::DataSource;
