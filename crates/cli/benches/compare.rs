@@ -10,10 +10,10 @@
 //! of several repetitions. The analysis of the default mode must stay under
 //! 0.3 s.
 
-use realitygap_study::{evaluate_scenes, Roots, Study};
 use realitygap_analysis::bootstrap::BootstrapOptions;
 use realitygap_analysis::compare::{AnalysisMode, CompareOptions};
 use realitygap_analysis::selection::{RunRange, RunSelection};
+use realitygap_study::{evaluate_scenes, Roots, Study};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 

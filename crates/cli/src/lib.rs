@@ -30,8 +30,8 @@ mod paper_tests {
     use realitygap_analysis::compare::{AnalysisMode, CompareOptions};
     use realitygap_core::robot::{PackageResolver, RobotModel};
     use realitygap_core::{Pose, Quat, Vec3};
-    use std::path::PathBuf;
     use realitygap_study::{evaluate, Roots, Study};
+    use std::path::PathBuf;
 
     fn study() -> Study {
         Study::from_file(
@@ -141,7 +141,7 @@ mod paper_tests {
                 println!(
                     "{}",
                     realitygap_analysis::table::render(
-                        &[r.clone()],
+                        std::slice::from_ref(&r),
                         realitygap_analysis::table::Format::Markdown
                     )
                 );

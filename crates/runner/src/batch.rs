@@ -61,13 +61,16 @@ struct Batch<'a> {
     stats: BatchStats,
 }
 
+/// Runs as (group index, repeat).
+pub type Runs = Vec<(usize, u32)>;
+
+/// Repeats of groups (by index) decided later.
+pub type Deferred = Vec<(usize, Vec<u32>)>;
+
 /// For a deterministic batch, the first two pending repeats of each group
 /// (simulated now) and the rest (decided after them: copied when the two
 /// are identical, else simulated); otherwise every pending repeat now.
-pub fn split_for_copies(
-    groups: &[Group],
-    deterministic: bool,
-) -> (Vec<(usize, u32)>, Vec<(usize, Vec<u32>)>) {
+pub fn split_for_copies(groups: &[Group], deterministic: bool) -> (Runs, Deferred) {
     let mut first = Vec::new();
     let mut deferred = Vec::new();
     for (i, g) in groups
@@ -167,7 +170,7 @@ fn worker(
 impl Batch<'_> {
     /// Runs `runs` in child processes, `jobs` at a time, storing each as
     /// it finishes.
-    fn execute(&mut self, runs: Vec<(usize, u32)>) -> Result<()> {
+    fn execute(&mut self, runs: Runs) -> Result<()> {
         if runs.is_empty() {
             return Ok(());
         }
@@ -227,7 +230,11 @@ impl Batch<'_> {
     }
 
     /// Records a failed run.
-    fn record_failure(&mut self, gi: usize, entry: RunEntry) -> Result<(), realitygap_data::runstore::StoreError> {
+    fn record_failure(
+        &mut self,
+        gi: usize,
+        entry: RunEntry,
+    ) -> Result<(), realitygap_data::runstore::StoreError> {
         let g = &mut self.plan.groups[gi];
         self.stats.failures += 1;
         g.done.failed += 1;
@@ -283,7 +290,7 @@ impl Batch<'_> {
     /// both completed with byte-identical runs, records the deferred ones as
     /// copies of the first (`copy_of` in the manifest); otherwise returns
     /// them to be simulated.
-    fn copy_or_simulate(&mut self, deferred: Vec<(usize, Vec<u32>)>) -> Result<Vec<(usize, u32)>> {
+    fn copy_or_simulate(&mut self, deferred: Deferred) -> Result<Runs> {
         let mut simulate = Vec::new();
         for (gi, repeats) in deferred {
             let g = &mut self.plan.groups[gi];

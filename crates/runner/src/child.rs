@@ -290,7 +290,11 @@ mod tests {
             ..ChildResult::default()
         };
         let text = serde_json::to_string(&r).unwrap();
-        let end = run_child(&sh(&format!("cat >/dev/null; echo '{text}'")), &job(false), None);
+        let end = run_child(
+            &sh(&format!("cat >/dev/null; echo '{text}'")),
+            &job(false),
+            None,
+        );
         match end {
             ChildEnd::Done(back) => assert_eq!(*back, r),
             ChildEnd::Failed(m) => panic!("{m}"),
@@ -312,9 +316,19 @@ mod tests {
         let m = failed(run_child(&sh("exit 1"), &job(false), None));
         assert_eq!(m, "exited with code 1: no message");
         let m = failed(run_child(&sh("kill -SEGV $$"), &job(false), None));
-        assert_eq!(m, "killed by signal 11 (SIGSEGV, invalid memory access): no message");
-        let m = failed(run_child(&sh("echo garbage; echo why >&2"), &job(false), None));
-        assert!(m.starts_with("the run's output could not be read") && m.ends_with("stderr: why"), "{m}");
+        assert_eq!(
+            m,
+            "killed by signal 11 (SIGSEGV, invalid memory access): no message"
+        );
+        let m = failed(run_child(
+            &sh("echo garbage; echo why >&2"),
+            &job(false),
+            None,
+        ));
+        assert!(
+            m.starts_with("the run's output could not be read") && m.ends_with("stderr: why"),
+            "{m}"
+        );
     }
 
     #[test]

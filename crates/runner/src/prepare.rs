@@ -210,7 +210,11 @@ pub fn prepare(registry: Registry, src: &RunSource<'_>) -> Result<Prepared> {
             .map_err(|e| anyhow!("{e}"))
             .with_context(|| format!("scene {} with --params", scene_file.display()))?;
     let mut settings = params.settings_over(engine.name(), &scene.settings_for(engine.name()));
-    settings.extend(overrides_for(src.set, engine.name(), &engine_names(registry))?);
+    settings.extend(overrides_for(
+        src.set,
+        engine.name(),
+        &engine_names(registry),
+    )?);
     let timestep_s = engine.check_settings(&settings).with_context(|| {
         format!(
             "scene {} ([engine.{}], --params and --set)",

@@ -95,7 +95,12 @@ impl ChildResult {
                 .iter()
                 .map(|b| b.poses.iter().map(pose_bits).collect())
                 .collect(),
-            joint_angles_rad: t.joint_angles_rad.iter().flatten().map(|r| bits(r)).collect(),
+            joint_angles_rad: t
+                .joint_angles_rad
+                .iter()
+                .flatten()
+                .map(|r| bits(r))
+                .collect(),
             commands_rad_s: t
                 .joint_velocity_commands_rad_s
                 .iter()

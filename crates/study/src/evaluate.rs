@@ -93,7 +93,10 @@ mod tests {
         std::fs::write(&path, "name = \"x\"\n[[scenes]]\nname = \"s\"\nsteps = 3\n[scenes.reference]\nname = \"r\"\nformat = \"store\"\ndir = \"d\"\n").unwrap();
         let (study, roots) = load_study(&path, &DataSource::None, None).unwrap();
         assert_eq!(reads_recordings(&study), None);
-        assert_eq!((roots.data.as_path(), roots.results.as_path()), (dir.path(), dir.path()));
+        assert_eq!(
+            (roots.data.as_path(), roots.results.as_path()),
+            (dir.path(), dir.path())
+        );
         let e = evaluate(&study, &roots, &CompareOptions::default()).unwrap_err();
         assert!(format!("{e:#}").contains("results directory"), "{e:#}");
     }
@@ -103,7 +106,9 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("s.toml");
         std::fs::write(&path, "name = \"x\"\n[[scenes]]\nname = \"s\"\nsteps = 3\n[scenes.reference]\nname = \"r\"\nformat = \"qualisys\"\nfiles = \"a/*.tsv\"\n").unwrap();
-        let e = load_study(&path, &DataSource::None, None).unwrap_err().to_string();
+        let e = load_study(&path, &DataSource::None, None)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("r: a/*.tsv") && e.contains("--data none"), "{e}");
     }
 }

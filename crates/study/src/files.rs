@@ -34,11 +34,7 @@ pub fn glob(root: &Path, pattern: &str) -> Result<Vec<PathBuf>> {
     let mut out: Vec<PathBuf> = entries
         .filter_map(|e| e.ok())
         .filter(|e| e.file_type().map(|t| t.is_file()).unwrap_or(false))
-        .filter(|e| {
-            e.file_name()
-                .to_str()
-                .is_some_and(|n| matcher.is_match(n))
-        })
+        .filter(|e| e.file_name().to_str().is_some_and(|n| matcher.is_match(n)))
         .map(|e| e.path())
         .collect();
     if out.is_empty() {
@@ -129,8 +125,14 @@ mod tests {
 
     #[test]
     fn wildcards() {
-        assert!(wildcard_match("Single_Mujoco_*.csv", "Single_Mujoco_12.csv"));
-        assert!(!wildcard_match("Single_Mujoco_*.csv", "Single_PyBullet_1.csv"));
+        assert!(wildcard_match(
+            "Single_Mujoco_*.csv",
+            "Single_Mujoco_12.csv"
+        ));
+        assert!(!wildcard_match(
+            "Single_Mujoco_*.csv",
+            "Single_PyBullet_1.csv"
+        ));
         assert!(wildcard_match("Single*_6D.tsv", "Single0001_6D.tsv"));
         assert!(!wildcard_match("a*b*c", "acb"));
         assert!(wildcard_match("a*b*c", "axxbyyc"));
@@ -158,7 +160,11 @@ mod tests {
         assert_eq!(natural_cmp("a", "a"), Ordering::Equal);
         let big = "f_123456789012345678901234567890";
         assert_eq!(natural_cmp(big, "f_99"), Ordering::Greater);
-        let mut files = vec!["Single0010_6D.tsv", "Single0002_6D.tsv", "Single0001_6D.tsv"];
+        let mut files = [
+            "Single0010_6D.tsv",
+            "Single0002_6D.tsv",
+            "Single0001_6D.tsv",
+        ];
         files.sort_by(|a, b| natural_cmp(a, b));
         assert_eq!(files[0], "Single0001_6D.tsv");
     }

@@ -200,7 +200,11 @@ mod tests {
             registration: Some("none".into()),
             ..m
         };
-        assert!(m.options(&s).unwrap_err().to_string().contains("--mode study"));
+        assert!(m
+            .options(&s)
+            .unwrap_err()
+            .to_string()
+            .contains("--mode study"));
         let none = Measure {
             save_registration: Some("r.json".into()),
             ..Measure::default()
@@ -216,7 +220,10 @@ mod tests {
         ));
         assert!(matches!(
             parse_alignment("onset:93").unwrap(),
-            Alignment::Onset { lead_frames: 93, .. }
+            Alignment::Onset {
+                lead_frames: 93,
+                ..
+            }
         ));
         assert!(parse_alignment("onset").is_err());
         assert!(parse_alignment("fixed:x").is_err());

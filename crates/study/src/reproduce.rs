@@ -77,7 +77,8 @@ pub fn reproduction_study(
                 .scenes
                 .retain(|s| loaded.iter().any(|l| l.name == s.name));
             for s in &mut study.scenes {
-                s.sources.extend(engine_sources(runs_dir, &s.name, engines)?);
+                s.sources
+                    .extend(engine_sources(runs_dir, &s.name, engines)?);
             }
             (study, path, roots(data))
         }

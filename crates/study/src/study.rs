@@ -188,7 +188,7 @@ impl Study {
     }
 
     fn check(&self) -> Result<()> {
-        if !(self.control_period_s > 0.0) {
+        if self.control_period_s.is_nan() || self.control_period_s <= 0.0 {
             bail!(
                 "control_period_s must be positive, found {}",
                 self.control_period_s
@@ -262,7 +262,6 @@ pub fn expand(pattern: &str, vars: &BTreeMap<String, String>) -> Result<String> 
     }
     Ok(out)
 }
-
 
 #[cfg(test)]
 mod tests {
