@@ -15,6 +15,7 @@
 //! - [`reproduce`]: the study `realitygap reproduce` compares.
 
 #![warn(missing_docs)]
+#![forbid(unsafe_code)]
 
 pub mod data_source;
 pub mod evaluate;
