@@ -270,3 +270,77 @@ impl Study {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use realitygap_core::pose::{Pose, Quat, Vec3};
+    use realitygap_core::Trajectory;
+    use realitygap_data::RunEntry;
+
+    fn trajectory(samples: usize, period_s: f64) -> Trajectory {
+        let mut t = Trajectory::with_bodies(&["wrist"]);
+        t.time_s = (0..samples).map(|i| i as f64 * period_s).collect();
+        t.bodies[0].poses = (0..samples)
+            .map(|i| Some(Pose::new(Vec3::new(i as f64, 0.0, 0.0), Quat::IDENTITY)))
+            .collect();
+        t
+    }
+
+    #[test]
+    fn a_results_directory_is_a_source_with_its_failed_runs_listed() {
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path().join("scene/engine");
+        let mut store =
+            RunStore::create_or_open(&dir, "engine", SourceKind::Simulated, Some("scene")).unwrap();
+        store
+            .write_run(RunEntry::new("run000"), &trajectory(5, 0.05))
+            .unwrap();
+        let mut failed = RunEntry::new("run001");
+        failed.message = Some("killed by signal 11".into());
+        store.record_failed_run(failed).unwrap();
+
+        let src = load_store(&dir, None, None).unwrap();
+        assert_eq!(
+            (src.name.as_str(), src.kind.as_str()),
+            ("engine", "simulated")
+        );
+        assert!((src.rate_hz - 20.0).abs() < 1e-9, "{}", src.rate_hz);
+        assert!(src.alignment.is_none());
+        let ids: Vec<&str> = src.runs.iter().map(|r| r.id.as_str()).collect();
+        assert_eq!(ids, ["run000", "run001"]);
+        assert_eq!(src.runs[0].trajectory.len(), 5);
+        assert_eq!(src.runs[1].failed.as_deref(), Some("killed by signal 11"));
+        assert_eq!(src.runs[1].trajectory.len(), 0);
+
+        let named = load_store(&dir, Some("Engine 1.0"), None).unwrap();
+        assert_eq!(named.name, "Engine 1.0");
+        let e = load_store(&tmp.path().join("none"), None, None).unwrap_err();
+        assert!(format!("{e:#}").contains("results directory"), "{e:#}");
+    }
+
+    #[test]
+    fn store_sources_resolve_against_the_results_root_with_placeholders() {
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path().join("scene1/mujoco");
+        let mut store =
+            RunStore::create_or_open(&dir, "mujoco", SourceKind::Simulated, Some("scene1"))
+                .unwrap();
+        store
+            .write_run(RunEntry::new("run000"), &trajectory(3, 0.1))
+            .unwrap();
+        let spec: SourceSpec =
+            toml::from_str("name = \"MuJoCo\"\nformat = \"store\"\ndir = \"{scene}/mujoco\"\n")
+                .unwrap();
+        let vars: BTreeMap<String, String> = [("scene".into(), "scene1".into())].into();
+        let roots = Roots {
+            data: tmp.path().join("unused"),
+            results: tmp.path().to_path_buf(),
+        };
+        let src = load_source(&spec, &vars, &roots, 0.05).unwrap();
+        assert_eq!((src.name.as_str(), src.runs.len()), ("MuJoCo", 1));
+        assert!((src.rate_hz - 10.0).abs() < 1e-9);
+        let e = load_source(&spec, &BTreeMap::new(), &roots, 0.05).unwrap_err();
+        assert!(format!("{e:#}").contains("source 'MuJoCo'"), "{e:#}");
+    }
+}
