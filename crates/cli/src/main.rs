@@ -44,7 +44,7 @@ enum Command {
     Reproduce(cmd_reproduce::Args),
     /// Internal: run one simulation (a job as JSON on standard input) and
     /// print its trajectory; `run` starts one such process per run.
-    #[command(name = "__run-one", hide = true)]
+    #[command(name = realitygap_runner::child::RUN_ONE, hide = true)]
     RunOne,
 }
 

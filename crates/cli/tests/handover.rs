@@ -7,6 +7,8 @@ use realitygap_core::conformance::{handover_gap, Subject};
 use realitygap_core::engine::Engine;
 use realitygap_core::testing;
 
+// The pushes depend on the features compiled in: no `vec![...]` can say that.
+#[allow(clippy::vec_init_then_push)]
 fn engines() -> Vec<Box<dyn Engine>> {
     #[allow(unused_mut)]
     let mut v: Vec<Box<dyn Engine>> = Vec::new();
