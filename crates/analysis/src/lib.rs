@@ -22,6 +22,8 @@
 //! Everything here is pure computation on [`realitygap_core::Trajectory`];
 //! reading files is the `realitygap-data` crate's job.
 
+#![forbid(unsafe_code)]
+
 pub mod align;
 pub mod bootstrap;
 pub mod compare;

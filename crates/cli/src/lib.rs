@@ -4,6 +4,8 @@
 //! runs); the binary (`main.rs`) is a thin layer of argument parsing and
 //! printing over them.
 
+#![forbid(unsafe_code)]
+
 /// The study's recordings beside the project (`../shared/paper-data`), for
 /// tests and benchmarks. When absent: `None` after a message, unless the
 /// environment variable `REALITYGAP_REQUIRE_PAPER_DATA` is set (as CI sets

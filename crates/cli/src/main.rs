@@ -1,6 +1,8 @@
 //! The `realitygap` command. A thin layer: argument parsing, progress bars
 //! and printing; the work is done by the library crates.
 
+#![forbid(unsafe_code)]
+
 use clap::{Parser, Subcommand};
 
 use std::process::ExitCode;

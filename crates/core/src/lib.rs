@@ -21,6 +21,8 @@
 //! Units everywhere: metres, radians, seconds, kilograms, unless a name says
 //! otherwise (`_deg`, `_mm`).
 
+#![forbid(unsafe_code)]
+
 pub mod conformance;
 pub mod controller;
 pub mod engine;

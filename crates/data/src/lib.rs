@@ -16,6 +16,8 @@
 //! read gives an [`ImportError`] naming the file, line, column and field;
 //! no input makes a reader panic.
 
+#![forbid(unsafe_code)]
+
 pub mod builtin;
 pub mod error;
 pub mod qualisys;

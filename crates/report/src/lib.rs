@@ -21,6 +21,8 @@
 //! The `realitygap report` and `realitygap reproduce` commands both end
 //! here.
 
+#![forbid(unsafe_code)]
+
 pub mod figures;
 pub mod html;
 pub mod provenance;
