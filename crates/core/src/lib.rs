@@ -21,8 +21,8 @@
 //! Units everywhere: metres, radians, seconds, kilograms, unless a name says
 //! otherwise (`_deg`, `_mm`).
 
-pub mod controller;
 pub mod conformance;
+pub mod controller;
 pub mod engine;
 pub mod params;
 pub mod pose;
