@@ -566,3 +566,6 @@ fn latex_interval(cell: String) -> String {
         None => cell,
     }
 }
+
+#[cfg(test)]
+mod tests;

@@ -1176,7 +1176,7 @@ fn fit_text<DB: DrawingBackend>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testdata;
+    use realitygap_analysis::testing as testdata;
 
     /// `(stroke colour, point count)` of every `<polyline>` in an SVG.
     fn polylines(svg: &str) -> Vec<(String, usize)> {
