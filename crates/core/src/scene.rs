@@ -894,6 +894,177 @@ impl Builder<'_> {
     }
 }
 
+/// The steps of [`Scene::validate`]: a scene checked against its robot.
+struct Checker<'a> {
+    scene: &'a Scene,
+    robot: &'a RobotModel,
+}
+
+impl Checker<'_> {
+    /// The robot's movable joints, for messages.
+    fn joint_list(&self) -> String {
+        self.robot
+            .joints
+            .iter()
+            .filter(|j| j.kind.is_movable())
+            .map(|j| j.name.as_str())
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+
+    /// The index of joint `name`, which must exist and not be fixed.
+    fn movable(&self, field: &str, name: &str) -> Result<usize, SceneError> {
+        let robot = self.robot;
+        let j = robot.joint_by_name(name).ok_or_else(|| {
+            self.scene.error(
+                field,
+                format!(
+                    "robot \"{}\" has no joint \"{name}\" (movable joints: {})",
+                    robot.name,
+                    self.joint_list()
+                ),
+            )
+        })?;
+        if robot.joints[j].kind == JointKind::Fixed {
+            return Err(self.scene.error(
+                field,
+                format!(
+                    "joint \"{name}\" of robot \"{}\" is fixed and cannot move",
+                    robot.name
+                ),
+            ));
+        }
+        Ok(j)
+    }
+
+    /// Checks that `value_rad` is within joint `j`'s limits (if any).
+    fn within(
+        &self,
+        field: &str,
+        j: usize,
+        value_rad: f64,
+        shown: String,
+    ) -> Result<(), SceneError> {
+        if let Some(lim) = self.robot.joints[j].limits {
+            let eps = 1e-9;
+            if value_rad < lim.lower - eps || value_rad > lim.upper + eps {
+                return Err(self.scene.error(
+                    field,
+                    format!(
+                        "{shown} is outside the limits of joint \"{}\" ({:.4} to {:.4} deg)",
+                        self.robot.joints[j].name,
+                        lim.lower.to_degrees(),
+                        lim.upper.to_degrees()
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Actuated joints are movable, revolute and not mimic joints.
+    fn actuators(&self) -> Result<(), SceneError> {
+        for (i, a) in self.scene.actuators.iter().enumerate() {
+            let field = format!("actuator[{i}].joint");
+            let j = self.movable(&field, &a.joint)?;
+            if self.robot.joints[j].mimic.is_some() {
+                return Err(self.scene.error(
+                    &field,
+                    format!(
+                        "joint \"{}\" mimics another joint and cannot be actuated",
+                        a.joint
+                    ),
+                ));
+            }
+            if self.robot.joints[j].kind == JointKind::Prismatic {
+                return Err(self.scene.error(
+                    &field,
+                    format!(
+                        "joint \"{}\" is prismatic; the controller drives revolute joints",
+                        a.joint
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Every scheduled target names a movable joint and is within its limits.
+    fn schedule_targets(&self) -> Result<(), SceneError> {
+        for (i, e) in self.scene.schedule.iter().enumerate() {
+            for (joint, &deg) in &e.targets_deg {
+                let field = format!("schedule[{i}].targets_deg.{joint}");
+                let j = self.movable(&field, joint)?;
+                self.within(&field, j, deg.to_radians(), format!("target {deg} deg"))?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Joints not named in an entry target 0: check 0 is reachable.
+    fn default_targets(&self) -> Result<(), SceneError> {
+        for a in &self.scene.actuators {
+            if let Some(j) = self.robot.joint_by_name(&a.joint) {
+                let named_everywhere = self
+                    .scene
+                    .schedule
+                    .iter()
+                    .all(|e| e.targets_deg.contains_key(&a.joint));
+                if !named_everywhere {
+                    self.within(
+                        &format!("actuator.{}", a.joint),
+                        j,
+                        0.0,
+                        "the default target 0 deg".to_string(),
+                    )?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Held joints are movable, not actuated, and held within their limits.
+    fn held_joints(&self) -> Result<(), SceneError> {
+        for (joint, &rad) in &self.scene.robot.held_joints_rad {
+            let field = format!("robot.held_joints_deg.{joint}");
+            let j = self.movable(&field, joint)?;
+            if self.scene.actuators.iter().any(|a| &a.joint == joint) {
+                return Err(self.scene.error(
+                    &field,
+                    format!("joint \"{joint}\" has an actuator and cannot also be held"),
+                ));
+            }
+            self.within(&field, j, rad, format!("{} deg", rad.to_degrees()))?;
+        }
+        Ok(())
+    }
+
+    /// Tracked links exist.
+    fn tracked_links(&self) -> Result<(), SceneError> {
+        let robot = self.robot;
+        for (i, t) in self.scene.tracked.iter().enumerate() {
+            if let TrackTarget::Link(link) = &t.target {
+                if robot.link_by_name(link).is_none() {
+                    return Err(self.scene.error(
+                        &format!("track[{i}].link"),
+                        format!(
+                            "robot \"{}\" has no link \"{link}\" (links: {})",
+                            robot.name,
+                            robot
+                                .links
+                                .iter()
+                                .map(|l| l.name.as_str())
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        ),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
 impl Scene {
     /// Reads and checks a scene file. The paths inside it are resolved
     /// against the file's directory. The robot is not loaded: call
@@ -977,132 +1148,12 @@ impl Scene {
     /// tracked name exists, actuated joints are movable, targets and held
     /// positions are within the joints' limits.
     pub fn validate(&self, robot: &RobotModel) -> Result<(), SceneError> {
-        let joint_list = || {
-            robot
-                .joints
-                .iter()
-                .filter(|j| j.kind.is_movable())
-                .map(|j| j.name.as_str())
-                .collect::<Vec<_>>()
-                .join(", ")
-        };
-        let movable = |field: &str, name: &str| -> Result<usize, SceneError> {
-            let j = robot.joint_by_name(name).ok_or_else(|| {
-                self.error(
-                    field,
-                    format!(
-                        "robot \"{}\" has no joint \"{name}\" (movable joints: {})",
-                        robot.name,
-                        joint_list()
-                    ),
-                )
-            })?;
-            if robot.joints[j].kind == JointKind::Fixed {
-                return Err(self.error(
-                    field,
-                    format!(
-                        "joint \"{name}\" of robot \"{}\" is fixed and cannot move",
-                        robot.name
-                    ),
-                ));
-            }
-            Ok(j)
-        };
-        let within =
-            |field: &str, j: usize, value_rad: f64, shown: String| -> Result<(), SceneError> {
-                if let Some(lim) = robot.joints[j].limits {
-                    let eps = 1e-9;
-                    if value_rad < lim.lower - eps || value_rad > lim.upper + eps {
-                        return Err(self.error(
-                            field,
-                            format!(
-                            "{shown} is outside the limits of joint \"{}\" ({:.4} to {:.4} deg)",
-                            robot.joints[j].name,
-                            lim.lower.to_degrees(),
-                            lim.upper.to_degrees()
-                        ),
-                        ));
-                    }
-                }
-                Ok(())
-            };
-        for (i, a) in self.actuators.iter().enumerate() {
-            let field = format!("actuator[{i}].joint");
-            let j = movable(&field, &a.joint)?;
-            if robot.joints[j].mimic.is_some() {
-                return Err(self.error(
-                    &field,
-                    format!(
-                        "joint \"{}\" mimics another joint and cannot be actuated",
-                        a.joint
-                    ),
-                ));
-            }
-            if robot.joints[j].kind == JointKind::Prismatic {
-                return Err(self.error(
-                    &field,
-                    format!(
-                        "joint \"{}\" is prismatic; the controller drives revolute joints",
-                        a.joint
-                    ),
-                ));
-            }
-        }
-        for (i, e) in self.schedule.iter().enumerate() {
-            for (joint, &deg) in &e.targets_deg {
-                let field = format!("schedule[{i}].targets_deg.{joint}");
-                let j = movable(&field, joint)?;
-                within(&field, j, deg.to_radians(), format!("target {deg} deg"))?;
-            }
-        }
-        // Joints not named in an entry target 0: check 0 is reachable.
-        for a in &self.actuators {
-            if let Some(j) = robot.joint_by_name(&a.joint) {
-                let named_everywhere = self
-                    .schedule
-                    .iter()
-                    .all(|e| e.targets_deg.contains_key(&a.joint));
-                if !named_everywhere {
-                    within(
-                        &format!("actuator.{}", a.joint),
-                        j,
-                        0.0,
-                        "the default target 0 deg".to_string(),
-                    )?;
-                }
-            }
-        }
-        for (joint, &rad) in &self.robot.held_joints_rad {
-            let field = format!("robot.held_joints_deg.{joint}");
-            let j = movable(&field, joint)?;
-            if self.actuators.iter().any(|a| &a.joint == joint) {
-                return Err(self.error(
-                    &field,
-                    format!("joint \"{joint}\" has an actuator and cannot also be held"),
-                ));
-            }
-            within(&field, j, rad, format!("{} deg", rad.to_degrees()))?;
-        }
-        for (i, t) in self.tracked.iter().enumerate() {
-            if let TrackTarget::Link(link) = &t.target {
-                if robot.link_by_name(link).is_none() {
-                    return Err(self.error(
-                        &format!("track[{i}].link"),
-                        format!(
-                            "robot \"{}\" has no link \"{link}\" (links: {})",
-                            robot.name,
-                            robot
-                                .links
-                                .iter()
-                                .map(|l| l.name.as_str())
-                                .collect::<Vec<_>>()
-                                .join(", ")
-                        ),
-                    ));
-                }
-            }
-        }
-        Ok(())
+        let c = Checker { scene: self, robot };
+        c.actuators()?;
+        c.schedule_targets()?;
+        c.default_targets()?;
+        c.held_joints()?;
+        c.tracked_links()
     }
 
     /// Number of samples a complete run records: one per control period.
