@@ -307,6 +307,65 @@ impl Samples {
     }
 }
 
+/// The run read: the errors and warnings on what the rows held, then the
+/// trajectory on the control grid.
+fn into_run(
+    samples: Samples,
+    header_lines: usize,
+    opts: &RecordedOptions,
+    file: &Path,
+    mut warnings: Vec<String>,
+) -> Result<ImportedRun, ImportError> {
+    if samples.wrist.is_empty() {
+        let what = if header_lines > 0 {
+            format!("the file has no data rows, only {header_lines} line(s) of words (taken for column names)")
+        } else {
+            "the file has no complete data rows".to_string()
+        };
+        return Err(ImportError::new(file, what));
+    }
+    if header_lines > 0 {
+        warnings.push(format!(
+            "skipped {header_lines} header line(s) before the data"
+        ));
+    }
+    samples.warnings(opts.norm_tolerance, &mut warnings);
+    let Samples {
+        wrist,
+        cube,
+        zero_rows,
+        bad_norm_rows,
+        ..
+    } = samples;
+    let samples = wrist.len();
+    let trajectory = Trajectory {
+        time_s: (0..samples)
+            .map(|i| i as f64 * opts.control_period_s)
+            .collect(),
+        bodies: vec![
+            BodyTrack {
+                role: WRIST.into(),
+                poses: wrist,
+            },
+            BodyTrack {
+                role: CUBE.into(),
+                poses: cube,
+            },
+        ],
+        joint_angles_rad: None,
+        joint_velocity_commands_rad_s: None,
+    };
+    Ok(ImportedRun {
+        trajectory,
+        frequency_hz: 1.0 / opts.control_period_s,
+        source_file: file.to_path_buf(),
+        body_names: vec![WRIST.into(), CUBE.into()],
+        warnings,
+        zero_rows,
+        bad_norm_rows,
+    })
+}
+
 /// The fourteen numbers of a row, or where and why it is not one.
 fn row_numbers(
     split: Result<usize, usize>,
@@ -413,54 +472,7 @@ pub fn parse(
     if !any_content {
         return Err(ImportError::new(file, "the file is empty"));
     }
-    if samples.wrist.is_empty() {
-        let what = if header_lines > 0 {
-            format!("the file has no data rows, only {header_lines} line(s) of words (taken for column names)")
-        } else {
-            "the file has no complete data rows".to_string()
-        };
-        return Err(ImportError::new(file, what));
-    }
-    if header_lines > 0 {
-        warnings.push(format!(
-            "skipped {header_lines} header line(s) before the data"
-        ));
-    }
-    samples.warnings(opts.norm_tolerance, &mut warnings);
-    let Samples {
-        wrist,
-        cube,
-        zero_rows,
-        bad_norm_rows,
-        ..
-    } = samples;
-    let samples = wrist.len();
-    let trajectory = Trajectory {
-        time_s: (0..samples)
-            .map(|i| i as f64 * opts.control_period_s)
-            .collect(),
-        bodies: vec![
-            BodyTrack {
-                role: WRIST.into(),
-                poses: wrist,
-            },
-            BodyTrack {
-                role: CUBE.into(),
-                poses: cube,
-            },
-        ],
-        joint_angles_rad: None,
-        joint_velocity_commands_rad_s: None,
-    };
-    Ok(ImportedRun {
-        trajectory,
-        frequency_hz: 1.0 / opts.control_period_s,
-        source_file: file.to_path_buf(),
-        body_names: vec![WRIST.into(), CUBE.into()],
-        warnings,
-        zero_rows,
-        bad_norm_rows,
-    })
+    into_run(samples, header_lines, opts, file, warnings)
 }
 
 /// Parses cells as numbers; on failure the index of the first bad cell.
