@@ -13,6 +13,7 @@
 //! reference's mean when sources were compared with a reference, and the
 //! cube's displacement and pitch change when the scene has a cube.
 
+use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::element::{DashedPathElement, Drawable, PointCollection};
 use plotters::prelude::*;
@@ -941,7 +942,29 @@ impl Figure {
                 )))
                 .map_err(e)?;
         }
-        // Sources first, the reference on top.
+        self.draw_lines(&mut chart)?;
+        let omitted: Vec<String> = self.omitted.iter().map(|o| o.source.clone()).collect();
+        let clipped: Vec<String> = self.off_scale.iter().map(|o| o.source.clone()).collect();
+        draw_legend(
+            &legend,
+            &self.lines,
+            self.band.as_ref(),
+            band_color,
+            &omitted,
+            &clipped,
+        )
+        .map_err(e)?;
+        Ok(())
+    }
+
+    /// Draws the lines, sources first and the reference on top, with about
+    /// ten markers per line, staggered between lines.
+    fn draw_lines<DB: DrawingBackend>(
+        &self,
+        chart: &mut ChartContext<'_, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    ) -> Result<(), String> {
+        let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+        let ((x0, x1), (y0, y1)) = (self.x_range, self.y_range);
         let order: Vec<&Line> = self
             .lines
             .iter()
@@ -982,17 +1005,6 @@ impl Figure {
                     .map_err(e)?;
             }
         }
-        let omitted: Vec<String> = self.omitted.iter().map(|o| o.source.clone()).collect();
-        let clipped: Vec<String> = self.off_scale.iter().map(|o| o.source.clone()).collect();
-        draw_legend(
-            &legend,
-            &self.lines,
-            self.band.as_ref(),
-            band_color,
-            &omitted,
-            &clipped,
-        )
-        .map_err(e)?;
         Ok(())
     }
 }
