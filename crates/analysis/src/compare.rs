@@ -1270,7 +1270,7 @@ mod tests {
         let rep = evaluate_scene(
             &spec(),
             &reference,
-            &[sim.clone()],
+            std::slice::from_ref(&sim),
             &CompareOptions::default(),
         );
         let s = &rep.sources[0];

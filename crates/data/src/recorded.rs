@@ -278,7 +278,7 @@ impl Samples {
             warnings.push(format!(
                 "{} rows are all zero (samples {}): the simulator wrote nothing there",
                 zero_rows.len(),
-                ranges(&zero_rows)
+                ranges(zero_rows)
             ));
         }
         if !bad_norm_rows.is_empty() {
@@ -286,7 +286,7 @@ impl Samples {
                 "{} rows have a quaternion whose norm is off 1 by more than {} (samples {})",
                 bad_norm_rows.len(),
                 norm_tolerance,
-                ranges(&bad_norm_rows)
+                ranges(bad_norm_rows)
             ));
         }
         if let Some(&(first, _)) = far_rows.first() {
@@ -301,7 +301,7 @@ impl Samples {
             warnings.push(format!(
                 "{} rows hold non-finite values (samples {}): the simulation diverged",
                 non_finite_rows.len(),
-                ranges(&non_finite_rows)
+                ranges(non_finite_rows)
             ));
         }
     }
