@@ -10,7 +10,7 @@
 //!   unpacked once into a verified cache folder.
 //!
 //! Every importer returns an [`ImportedRun`]: a
-//! [`Trajectory`](realitygap_core::Trajectory) in metres, radians and
+//! [`Trajectory`] in metres, radians and
 //! seconds, plus what the reader noticed on the way (warnings, lost-marker
 //! gaps, all-zero rows, quaternions off unit norm). Input that cannot be
 //! read gives an [`ImportError`] naming the file, line, column and field;
