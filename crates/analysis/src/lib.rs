@@ -35,6 +35,7 @@ pub mod selection;
 pub mod stats;
 pub mod study;
 pub mod table;
+pub mod testing;
 
 pub use compare::{AnalysisMode, SceneReport, SourceRuns, SourceSummary};
 pub use health::{HealthFlag, HealthOptions, RunHealth};

@@ -65,7 +65,7 @@ pub struct PerturbationError {
     pub message: String,
 }
 
-/// Keys accepted by [`Perturbation::parse`], with their meaning.
+/// Keys accepted by [`Perturbation::parse_into`], with their meaning.
 pub const PERTURBATION_KEYS: &[(&str, &str)] = &[
     (
         "initial_offset_deg",

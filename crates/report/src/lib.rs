@@ -26,8 +26,6 @@
 pub mod figures;
 pub mod html;
 pub mod provenance;
-#[cfg(test)]
-mod testdata;
 
 pub use figures::{Figure, FigureKind, SourceStyles};
 pub use provenance::{Provenance, SourceProvenance};
@@ -186,6 +184,7 @@ pub fn write_report(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use realitygap_analysis::testing as testdata;
 
     #[test]
     fn write_report_writes_every_file() {

@@ -805,7 +805,7 @@ fn find_cycle(links: &[Link], joints: &[Joint], parent_joint: &[Option<usize>]) 
 }
 
 #[cfg(test)]
-mod mico2_tests;
+pub(crate) mod mico2_tests;
 
 #[cfg(test)]
 mod tests {
