@@ -404,6 +404,8 @@ fn row_numbers(
     }
 }
 
+/// Parses the bytes of a recorded simulator file; `file` is used in
+/// messages only. Never panics, whatever the bytes.
 pub fn parse(
     bytes: &[u8],
     file: &Path,
