@@ -2,7 +2,8 @@
 //! [`BulletSimulation::load_with`](crate::BulletSimulation::load_with) with
 //! the Bullet lock held).
 //!
-//! SAFETY (every `unsafe` block of this module unless it says otherwise):
+//! Every `unsafe` block of this module has its own SAFETY comment; the
+//! argument they share:
 //! the commands are created on the client passed in and submitted once,
 //! with the Bullet lock held; the pointers passed point to live arrays of
 //! the sizes the C API reads.
@@ -20,10 +21,11 @@ pub(crate) struct BulletModel {
 }
 
 impl BulletModel {
-    /// Reads the joints of body `robot`. Lock held.
-    pub fn read(client: &ffi::Client, robot: c_int) -> BulletModel {
-        let h = client.handle();
-        // SAFETY: see the module documentation.
+    /// Reads the joints of body `robot`. Needs the Bullet lock (`lock`).
+    pub fn read(lock: &ffi::BulletLock, client: &ffi::Client, robot: c_int) -> BulletModel {
+        let h = client.handle(lock);
+        // SAFETY: `h` is the live handle of `client`, used with the Bullet
+        // lock held (`lock`); `robot` is a body id Bullet returned.
         let count = unsafe { ffi::b3GetNumJoints(h, robot) };
         let mut infos = Vec::with_capacity(count.max(0) as usize);
         for j in 0..count {
@@ -46,15 +48,18 @@ impl BulletModel {
     }
 }
 
-/// Gravity (from the scene), timestep and solver settings. Lock held.
+/// Gravity (from the scene), timestep and solver settings. Needs the Bullet lock (`lock`).
 pub(crate) fn set_physics(
+    lock: &ffi::BulletLock,
     client: &ffi::Client,
     options: &BulletSettings,
     gravity_m_s2: Vec3,
 ) -> Result<(), EngineError> {
-    // SAFETY: see the module documentation.
+    // SAFETY: the command is created on this simulation's client and
+    // submitted once, with the Bullet lock held (`lock`); the pointers
+    // passed point to live locals of the sizes Bullet expects.
     unsafe {
-        let cmd = ffi::b3InitPhysicsParamCommand(client.handle());
+        let cmd = ffi::b3InitPhysicsParamCommand(client.handle(lock));
         let g = gravity_m_s2;
         ffi::b3PhysicsParamSetGravity(cmd, g.x, g.y, g.z);
         ffi::b3PhysicsParamSetTimeStep(cmd, options.timestep_s);
@@ -90,34 +95,38 @@ pub(crate) fn set_physics(
             ffi::b3PhysicsParamSetEnableConeFriction(cmd, v as c_int);
         }
         expect(
-            client.submit(cmd).kind,
+            client.submit(lock, cmd).kind,
             ffi::CMD_CLIENT_COMMAND_COMPLETED,
             "setting the physics parameters",
         )
     }
 }
 
-/// The ground plane, when the scene has one. Lock held.
+/// The ground plane, when the scene has one. Needs the Bullet lock (`lock`).
 pub(crate) fn create_ground(
+    lock: &ffi::BulletLock,
     client: &ffi::Client,
     scene: &Scene,
 ) -> Result<Option<c_int>, EngineError> {
     let Some(g) = &scene.ground else {
         return Ok(None);
     };
-    // SAFETY: see the module documentation.
+    // SAFETY: the command is created on this simulation's client and
+    // submitted once, with the Bullet lock held (`lock`); the pointers
+    // passed point to live locals of the sizes Bullet expects.
     let shape = unsafe {
-        let cmd = ffi::b3CreateCollisionShapeCommandInit(client.handle());
+        let cmd = ffi::b3CreateCollisionShapeCommandInit(client.handle(lock));
         ffi::b3CreateCollisionShapeAddPlane(cmd, [0.0, 0.0, 1.0].as_ptr(), 0.0);
-        let r = client.submit(cmd);
+        let r = client.submit(lock, cmd);
         expect(
             r.kind,
             ffi::CMD_CREATE_COLLISION_SHAPE_COMPLETED,
             "creating the ground plane",
         )?;
-        ffi::b3GetStatusCollisionShapeUniqueId(r.handle)
+        ffi::b3GetStatusCollisionShapeUniqueId(r.handle())
     };
     let body = create_body(
+        lock,
         client,
         0.0,
         shape,
@@ -125,14 +134,15 @@ pub(crate) fn create_ground(
         "the ground",
     )?;
     if let Some(f) = g.friction {
-        set_friction(client, body, -1, f)?;
+        set_friction(lock, client, body, -1, f)?;
     }
     Ok(Some(body))
 }
 
 /// Loads the URDF file `urdf` with a fixed base at the scene's base pose.
-/// Lock held.
+/// Needs the Bullet lock (`lock`).
 pub(crate) fn load_robot(
+    lock: &ffi::BulletLock,
     client: &ffi::Client,
     options: &BulletSettings,
     scene: &Scene,
@@ -150,16 +160,19 @@ pub(crate) fn load_robot(
         flags |= ffi::URDF_USE_IMPLICIT_CYLINDER;
     }
     let base = scene.robot.base;
-    // SAFETY: see the module documentation; `urdf` is NUL-terminated.
+    // SAFETY: the command is created on this simulation's client and
+    // submitted once, with the Bullet lock held (`lock`); the pointers
+    // passed point to live locals of the sizes Bullet expects.
+    //; `urdf` is NUL-terminated.
     unsafe {
-        let cmd = ffi::b3LoadUrdfCommandInit(client.handle(), urdf.as_ptr());
+        let cmd = ffi::b3LoadUrdfCommandInit(client.handle(lock), urdf.as_ptr());
         let p = base.position_m;
         let q = base.orientation;
         ffi::b3LoadUrdfCommandSetStartPosition(cmd, p.x, p.y, p.z);
         ffi::b3LoadUrdfCommandSetStartOrientation(cmd, q.x, q.y, q.z, q.w);
         ffi::b3LoadUrdfCommandSetUseFixedBase(cmd, 1);
         ffi::b3LoadUrdfCommandSetFlags(cmd, flags);
-        let r = client.submit(cmd);
+        let r = client.submit(lock, cmd);
         if r.kind != ffi::CMD_URDF_LOADING_COMPLETED {
             return Err(load_error(format!(
                 "Bullet could not load URDF file {} ({}){}",
@@ -168,7 +181,7 @@ pub(crate) fn load_robot(
                 bullet_said()
             )));
         }
-        Ok(ffi::b3GetStatusBodyIndex(r.handle))
+        Ok(ffi::b3GetStatusBodyIndex(r.handle()))
     }
 }
 
@@ -192,8 +205,9 @@ pub(crate) fn check_mesh_messages(robot: &RobotModel) -> Result<(), EngineError>
 }
 
 /// Every scene object as a box body with its mass, pose and friction: body
-/// ids and names in scene order. Lock held.
+/// ids and names in scene order. Needs the Bullet lock (`lock`).
 pub(crate) fn create_objects(
+    lock: &ffi::BulletLock,
     client: &ffi::Client,
     scene: &Scene,
 ) -> Result<(Vec<c_int>, Vec<String>), EngineError> {
@@ -201,23 +215,25 @@ pub(crate) fn create_objects(
     let mut names = Vec::new();
     for object in &scene.objects {
         let ObjectShape::Box { size_m } = object.shape;
-        // SAFETY: see the module documentation.
+        // SAFETY: the command is created on this simulation's client and
+        // submitted once, with the Bullet lock held (`lock`); the pointers
+        // passed point to live locals of the sizes Bullet expects.
         let shape = unsafe {
-            let cmd = ffi::b3CreateCollisionShapeCommandInit(client.handle());
+            let cmd = ffi::b3CreateCollisionShapeCommandInit(client.handle(lock));
             let half = [size_m.x / 2.0, size_m.y / 2.0, size_m.z / 2.0];
             ffi::b3CreateCollisionShapeAddBox(cmd, half.as_ptr());
-            let r = client.submit(cmd);
+            let r = client.submit(lock, cmd);
             expect(
                 r.kind,
                 ffi::CMD_CREATE_COLLISION_SHAPE_COMPLETED,
                 &format!("creating the shape of object \"{}\"", object.name),
             )?;
-            ffi::b3GetStatusCollisionShapeUniqueId(r.handle)
+            ffi::b3GetStatusCollisionShapeUniqueId(r.handle())
         };
         let what = format!("object \"{}\"", object.name);
-        let body = create_body(client, object.mass_kg, shape, object.pose, &what)?;
+        let body = create_body(lock, client, object.mass_kg, shape, object.pose, &what)?;
         if let Some(f) = object.friction {
-            set_friction(client, body, -1, f)?;
+            set_friction(lock, client, body, -1, f)?;
         }
         objects.push(body);
         names.push(object.name.clone());
@@ -277,14 +293,15 @@ pub(crate) fn motor_joints(
 
 /// Puts every movable joint that is not controlled at its held angle and
 /// locks it there with a position motor (gains 1, force = its URDF effort
-/// limit). Lock held.
+/// limit). Needs the Bullet lock (`lock`).
 pub(crate) fn hold_joints(
+    lock: &ffi::BulletLock,
     client: &ffi::Client,
     scene: &Scene,
     robot: c_int,
     model: &BulletModel,
 ) -> Result<Vec<HeldJoint>, EngineError> {
-    let h = client.handle();
+    let h = client.handle(lock);
     let held: Vec<HeldJoint> = (0..model.infos.len())
         .filter(|&j| {
             model.is_movable(j)
@@ -306,7 +323,9 @@ pub(crate) fn hold_joints(
     if held.is_empty() {
         return Ok(held);
     }
-    // SAFETY: see the module documentation.
+    // SAFETY: the command is created on this simulation's client and
+    // submitted once, with the Bullet lock held (`lock`); the pointers
+    // passed point to live locals of the sizes Bullet expects.
     unsafe {
         if held.iter().any(|j| j.position != 0.0) {
             let cmd = ffi::b3CreatePoseCommandInit(h, robot);
@@ -315,7 +334,7 @@ pub(crate) fn hold_joints(
                 ffi::b3CreatePoseCommandSetJointVelocity(h, cmd, j.index, 0.0);
             }
             expect(
-                client.submit(cmd).kind,
+                client.submit(lock, cmd).kind,
                 ffi::CMD_CLIENT_COMMAND_COMPLETED,
                 "setting the held joints",
             )?;
@@ -335,7 +354,7 @@ pub(crate) fn hold_joints(
             ffi::b3JointControlSetMaximumForce(cmd, info.m_u_index, force);
         }
         expect(
-            client.submit(cmd).kind,
+            client.submit(lock, cmd).kind,
             ffi::CMD_DESIRED_STATE_RECEIVED_COMPLETED,
             "locking the held joints",
         )?;
@@ -345,8 +364,9 @@ pub(crate) fn hold_joints(
 
 /// Scales every mass and inertia, and every friction coefficient by the
 /// square root of the factor (Bullet multiplies the two coefficients of a
-/// contact). Lock held.
+/// contact). Needs the Bullet lock (`lock`).
 pub(crate) fn apply_variation(
+    lock: &ffi::BulletLock,
     client: &ffi::Client,
     variation: &ModelVariation,
     robot: c_int,
@@ -360,9 +380,9 @@ pub(crate) fn apply_variation(
     bodies.extend(objects.iter().map(|&b| (b, -1)));
     if variation.mass_scale != 1.0 {
         for &(body, link) in &bodies {
-            let info = dynamics_info(client, body, link)?;
+            let info = dynamics_info(lock, client, body, link)?;
             if info.m_mass > 0.0 {
-                set_mass(client, body, link, &info, variation.mass_scale)?;
+                set_mass(lock, client, body, link, &info, variation.mass_scale)?;
             }
         }
     }
@@ -370,15 +390,22 @@ pub(crate) fn apply_variation(
         bodies.extend(ground.map(|g| (g, -1)));
         let factor = variation.friction_scale.sqrt();
         for &(body, link) in &bodies {
-            let info = dynamics_info(client, body, link)?;
-            set_friction(client, body, link, info.m_lateralFrictionCoeff * factor)?;
+            let info = dynamics_info(lock, client, body, link)?;
+            set_friction(
+                lock,
+                client,
+                body,
+                link,
+                info.m_lateralFrictionCoeff * factor,
+            )?;
         }
     }
     Ok(())
 }
 
-/// Multiplies a body link's mass and inertia diagonal by `factor`. Lock held.
+/// Multiplies a body link's mass and inertia diagonal by `factor`. Needs the Bullet lock (`lock`).
 pub(crate) fn set_mass(
+    lock: &ffi::BulletLock,
     client: &ffi::Client,
     body: c_int,
     link: c_int,
@@ -386,13 +413,15 @@ pub(crate) fn set_mass(
     factor: f64,
 ) -> Result<(), EngineError> {
     let inertia = info.m_localInertialDiagonal.map(|i| i * factor);
-    // SAFETY: see the module documentation.
+    // SAFETY: the command is created on this simulation's client and
+    // submitted once, with the Bullet lock held (`lock`); the pointers
+    // passed point to live locals of the sizes Bullet expects.
     unsafe {
-        let cmd = ffi::b3InitChangeDynamicsInfo(client.handle());
+        let cmd = ffi::b3InitChangeDynamicsInfo(client.handle(lock));
         ffi::b3ChangeDynamicsInfoSetMass(cmd, body, link, info.m_mass * factor);
         ffi::b3ChangeDynamicsInfoSetLocalInertiaDiagonal(cmd, body, link, inertia.as_ptr());
         expect(
-            client.submit(cmd).kind,
+            client.submit(lock, cmd).kind,
             ffi::CMD_CLIENT_COMMAND_COMPLETED,
             "scaling masses",
         )

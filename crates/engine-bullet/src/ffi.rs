@@ -4,9 +4,10 @@
 //! sources it bundles), the logging hooks of `b3Logging.h`, and a client
 //! handle whose calls are serialized by a process-wide lock.
 
-use std::cell::Cell;
 use std::ffi::{c_char, c_int};
-use std::sync::{Mutex, MutexGuard};
+use std::marker::PhantomData;
+
+use parking_lot::{ReentrantMutex, ReentrantMutexGuard};
 
 pub(crate) use rubullet_sys::{
     b3ChangeDynamicsInfoSetContactStiffnessAndDamping, b3ChangeDynamicsInfoSetJointDamping,
@@ -109,39 +110,25 @@ extern "C" {
 /// (the logging hooks, the profiler's per-thread tables and counters, the
 /// allocator's statistics) that is not meant for concurrent use, so two
 /// simulations in two threads take turns; `realitygap run` runs simulations
-/// in parallel in separate processes instead.
-static BULLET: Mutex<()> = Mutex::new(());
+/// in parallel in separate processes instead. Reentrant
+/// (`parking_lot::ReentrantMutex`): a [`Client`] dropped while its owner
+/// holds the lock (a load that fails half-way) takes it again.
+static BULLET: ReentrantMutex<()> = ReentrantMutex::new(());
 
-thread_local! {
-    /// Whether this thread holds `BULLET` (the lock is reentrant per thread).
-    static HELD: Cell<bool> = const { Cell::new(false) };
-}
-
-/// The process-wide Bullet lock, held until dropped. Reentrant: taking it
-/// again on a thread that holds it is a no-op.
+/// Proof that this thread holds the process-wide Bullet lock, until dropped.
+/// Every function that calls into Bullet takes one (`&BulletLock`), so a
+/// call without the lock does not compile. Not `Send`: the lock belongs to
+/// the thread that took it.
 pub(crate) struct BulletLock {
-    guard: Option<MutexGuard<'static, ()>>,
+    _guard: ReentrantMutexGuard<'static, ()>,
 }
 
-impl Drop for BulletLock {
-    fn drop(&mut self) {
-        if self.guard.is_some() {
-            HELD.with(|h| h.set(false));
-        }
-    }
-}
-
-/// Takes the process-wide Bullet lock (a poisoned lock is still usable: the
-/// guarded data is `()`).
+/// Takes the process-wide Bullet lock (a no-op count if this thread holds
+/// it already).
 pub(crate) fn lock() -> BulletLock {
-    if HELD.with(Cell::get) {
-        return BulletLock { guard: None };
+    BulletLock {
+        _guard: BULLET.lock(),
     }
-    let guard = BULLET
-        .lock()
-        .unwrap_or_else(|poisoned| poisoned.into_inner());
-    HELD.with(|h| h.set(true));
-    BulletLock { guard: Some(guard) }
 }
 
 /// A connection to an in-process (DIRECT mode) Bullet physics server.
@@ -150,40 +137,55 @@ pub(crate) struct Client {
 }
 
 // SAFETY: a DIRECT client owns its physics server; it has no thread
-// affinity, and every use goes through `lock()`.
+// affinity, and every use needs a `BulletLock` of the thread using it.
 unsafe impl Send for Client {}
 
-/// The answer of the server to one command.
-#[derive(Clone, Copy)]
-pub(crate) struct Reply {
+/// The answer of the server to one command. It borrows the client that
+/// gave it and the lock held while it was given, so it cannot outlive
+/// either; its status handle is valid until the client's next command.
+pub(crate) struct Reply<'c> {
     /// The status handle (valid until the next command is submitted).
-    pub handle: b3SharedMemoryStatusHandle,
+    handle: b3SharedMemoryStatusHandle,
     /// Its type, a `CMD_*` status code (-1 when there was no status).
     pub kind: c_int,
+    _borrows: PhantomData<(&'c Client, &'c BulletLock)>,
+}
+
+impl Reply<'_> {
+    /// The status handle, for the C API's status readers.
+    pub(crate) fn handle(&self) -> b3SharedMemoryStatusHandle {
+        self.handle
+    }
 }
 
 impl Client {
-    /// Starts a DIRECT-mode physics server. Call with the lock held.
-    pub(crate) fn connect() -> Option<Client> {
-        // SAFETY: plain constructor; returns None when it fails.
+    /// Starts a DIRECT-mode physics server.
+    pub(crate) fn connect(_lock: &BulletLock) -> Option<Client> {
+        // SAFETY: plain constructor, called with the Bullet lock held;
+        // returns None when it fails.
         let handle = unsafe { b3ConnectPhysicsDirect() }?;
         Some(Client { handle })
     }
 
-    /// The raw handle, for the C API's command builders.
-    pub(crate) fn handle(&self) -> b3PhysicsClientHandle {
+    /// The raw handle, for the C API's command builders (which need the
+    /// lock as long as the handle is used).
+    pub(crate) fn handle(&self, _lock: &BulletLock) -> b3PhysicsClientHandle {
         self.handle
     }
 
     /// Submits a command built on this client and waits for its status.
-    /// Call with the lock held.
     ///
     /// # Safety
     /// `command` must have been created by a `b3*CommandInit` function of
     /// this client and not submitted before.
-    pub(crate) unsafe fn submit(&self, command: b3SharedMemoryCommandHandle) -> Reply {
+    pub(crate) unsafe fn submit<'c>(
+        &'c self,
+        _lock: &'c BulletLock,
+        command: b3SharedMemoryCommandHandle,
+    ) -> Reply<'c> {
         // SAFETY: `self.handle` is this client's live connection and
-        // `command` one of its unsubmitted commands (this fn's contract).
+        // `command` one of its unsubmitted commands (this fn's contract);
+        // the lock is held (`_lock`).
         let handle = unsafe { b3SubmitClientCommandAndWaitStatus(self.handle, command) };
         let kind = if handle.is_null() {
             -1
@@ -191,7 +193,11 @@ impl Client {
             // SAFETY: a non-null status handle just returned by this client.
             unsafe { b3GetStatusType(handle) }
         };
-        Reply { handle, kind }
+        Reply {
+            handle,
+            kind,
+            _borrows: PhantomData,
+        }
     }
 }
 

@@ -370,28 +370,28 @@ impl BulletSimulation {
         check_meshes(robot)?;
         let urdf = urdf_file::prepare(robot).map_err(load_error)?;
         let urdf_c_path = urdf.c_path().map_err(load_error)?;
-        let _guard = ffi::lock();
+        let lock = &ffi::lock();
         take_messages();
-        let client = ffi::Client::connect().ok_or_else(|| {
+        let client = ffi::Client::connect(lock).ok_or_else(|| {
             load_error(format!(
                 "cannot start a Bullet physics server{}",
                 bullet_said()
             ))
         })?;
-        set_physics(&client, &options, scene.gravity_m_s2)?;
-        let ground = create_ground(&client, scene)?;
-        let robot_id = load_robot(&client, &options, scene, robot, &urdf_c_path)?;
+        set_physics(lock, &client, &options, scene.gravity_m_s2)?;
+        let ground = create_ground(lock, &client, scene)?;
+        let robot_id = load_robot(lock, &client, &options, scene, robot, &urdf_c_path)?;
         drop(urdf);
-        let model = BulletModel::read(&client, robot_id);
+        let model = BulletModel::read(lock, &client, robot_id);
         check_mesh_messages(robot)?;
-        check_colliders(&client, robot_id, robot, &model.link_names)?;
-        params::apply_robot_dynamics(&client, robot_id, robot, &model)?;
-        let (objects, object_names) = create_objects(&client, scene)?;
-        contact.apply(&client, ground, robot_id, &model, &objects)?;
+        check_colliders(lock, &client, robot_id, robot, &model.link_names)?;
+        params::apply_robot_dynamics(lock, &client, robot_id, robot, &model)?;
+        let (objects, object_names) = create_objects(lock, &client, scene)?;
+        contact.apply(lock, &client, ground, robot_id, &model, &objects)?;
         let joints = motor_joints(scene, params, &options, &model, robot)?;
-        let held = hold_joints(&client, scene, robot_id, &model)?;
+        let held = hold_joints(lock, &client, scene, robot_id, &model)?;
         if !variation.is_identity() {
-            apply_variation(&client, variation, robot_id, &model, &objects, ground)?;
+            apply_variation(lock, &client, variation, robot_id, &model, &objects, ground)?;
         }
         let root_link_name = robot.links[robot.root_link].name.clone();
         let tracked = tracked_bodies(scene, robot, &root_link_name, &model, &object_names)?;
@@ -419,8 +419,8 @@ impl BulletSimulation {
             poses: vec![Pose::IDENTITY; scene.tracked.len()],
             max_speed: 0.0,
         };
-        sim.send_targets()
-            .and_then(|()| sim.refresh())
+        sim.send_targets(lock)
+            .and_then(|()| sim.refresh(lock))
             .map_err(|e| load_error(e.to_string()))?;
         for m in take_messages() {
             if m.level == Level::Error {
@@ -436,11 +436,11 @@ impl BulletSimulation {
 
     /// Sends the velocity targets to the motors (a joint with a dry
     /// friction instead of a servo holds velocity 0 with the friction
-    /// force). Call with the lock held. A failure means the simulation can
+    /// force). Needs the Bullet lock (`lock`). A failure means the simulation can
     /// no longer be driven: [`EngineError::Unstable`].
-    fn send_targets(&mut self) -> Result<(), EngineError> {
-        let h = self.client.handle();
-        // SAFETY: see `build`; the command is created on this client and
+    fn send_targets(&mut self, lock: &ffi::BulletLock) -> Result<(), EngineError> {
+        let h = self.client.handle(lock);
+        // SAFETY: the command is created on this client and
         // submitted once, with the lock held.
         let kind = unsafe {
             let cmd = ffi::b3JointControlCommandInit2(h, self.robot, ffi::CONTROL_MODE_VELOCITY);
@@ -453,7 +453,7 @@ impl BulletSimulation {
                 ffi::b3JointControlSetKd(cmd, joint.u_index, gain);
                 ffi::b3JointControlSetMaximumForce(cmd, joint.u_index, force);
             }
-            self.client.submit(cmd).kind
+            self.client.submit(lock, cmd).kind
         };
         check_status(
             kind,
@@ -466,13 +466,13 @@ impl BulletSimulation {
     }
 
     /// Reads the joint angles and velocities, the objects' states and the
-    /// tracked poses. Call with the lock held. Bullet recomputes the link
+    /// tracked poses. Needs the Bullet lock (`lock`). Bullet recomputes the link
     /// frames from the joint positions first: the frames it keeps are those
     /// of the collision detection, one position update behind after a step
     /// (3 mm at the wrist in scene 1). A failure means the state is
     /// unusable: [`EngineError::Unstable`].
-    fn refresh(&mut self) -> Result<(), EngineError> {
-        let h = self.client.handle();
+    fn refresh(&mut self, lock: &ffi::BulletLock) -> Result<(), EngineError> {
+        let h = self.client.handle(lock);
         let mut max_speed: f64 = 0.0;
         let mut track = |v: &[f64]| {
             for x in v {
@@ -483,19 +483,20 @@ impl BulletSimulation {
                 });
             }
         };
-        // SAFETY: see `build`; the state arrays are read within the sizes
+        // SAFETY: the commands are created on this client and submitted once,
+        // with the Bullet lock held (`lock`); the state arrays are read within the sizes
         // Bullet reported, before the next command is submitted.
         unsafe {
             let cmd = ffi::b3RequestActualStateCommandInit(h, self.robot);
             ffi::b3RequestActualStateCommandComputeForwardKinematics(cmd, 1);
-            let r = self.client.submit(cmd);
+            let r = self.client.submit(lock, cmd);
             check_status(
                 r.kind,
                 ffi::CMD_ACTUAL_STATE_UPDATE_COMPLETED,
                 "reading the robot's state",
             )
             .map_err(|m| self.unstable(m))?;
-            let (q, qdot) = actual_state(r).map_err(|m| self.unstable(m))?;
+            let (q, qdot) = actual_state(&r).map_err(|m| self.unstable(m))?;
             for (i, joint) in self.joints.iter().enumerate() {
                 self.angles_rad[i] = q.get(joint.q_index).copied().unwrap_or(f64::NAN);
                 self.velocities_rad_s[i] = qdot
@@ -508,7 +509,7 @@ impl BulletSimulation {
                 match *t {
                     Tracked::Link(l) => {
                         let mut state = ffi::b3LinkState::default();
-                        if ffi::b3GetLinkState(h, r.handle, l, &mut state) == 0 {
+                        if ffi::b3GetLinkState(h, r.handle(), l, &mut state) == 0 {
                             return Err(unstable_at(
                                 self.steps,
                                 self.timestep_s,
@@ -525,13 +526,13 @@ impl BulletSimulation {
             for (i, &body) in self.objects.iter().enumerate() {
                 let r = self
                     .client
-                    .submit(ffi::b3RequestActualStateCommandInit(h, body));
+                    .submit(lock, ffi::b3RequestActualStateCommandInit(h, body));
                 let read = check_status(
                     r.kind,
                     ffi::CMD_ACTUAL_STATE_UPDATE_COMPLETED,
                     "reading an object's state",
                 )
-                .and_then(|()| actual_state(r));
+                .and_then(|()| actual_state(&r));
                 let (q, qdot) = match read {
                     Ok((q, qdot)) if q.len() >= 7 && qdot.len() >= 6 => (q, qdot),
                     Ok((q, _)) => {
@@ -588,22 +589,25 @@ impl BulletSimulation {
     /// loop of the benchmark. The reported joint angles and poses are not
     /// updated (they are again after the next [`Simulation::step_n`]).
     pub fn step_raw(&mut self, n: u64) -> Result<(), EngineError> {
-        let _guard = ffi::lock();
+        let lock = &ffi::lock();
         if self.targets_pending {
-            self.send_targets()?;
+            self.send_targets(lock)?;
         }
         for _ in 0..n {
-            self.step_once()?;
+            self.step_once(lock)?;
         }
         Ok(())
     }
 
-    fn step_once(&mut self) -> Result<(), EngineError> {
+    fn step_once(&mut self, lock: &ffi::BulletLock) -> Result<(), EngineError> {
         // SAFETY: the command is created on this client and submitted once,
-        // with the Bullet lock held (see the `build` module).
+        // with the Bullet lock held (`lock`).
         let kind = unsafe {
             self.client
-                .submit(ffi::b3InitStepSimulationCommand(self.client.handle()))
+                .submit(
+                    lock,
+                    ffi::b3InitStepSimulationCommand(self.client.handle(lock)),
+                )
                 .kind
         };
         if kind != ffi::CMD_STEP_FORWARD_SIMULATION_COMPLETED {
@@ -620,8 +624,8 @@ impl BulletSimulation {
     /// The pairs of bodies in contact now, by name: robot links by their
     /// URDF name, objects as `object:NAME`, the ground as `ground`.
     pub fn contacts(&mut self) -> Result<Vec<(String, String)>, EngineError> {
-        let _guard = ffi::lock();
-        let h = self.client.handle();
+        let lock = &ffi::lock();
+        let h = self.client.handle(lock);
         let mut pairs = Vec::new();
         // SAFETY: the command is created on this client and submitted once,
         // with the Bullet lock held; the contact array is read within the count
@@ -629,7 +633,7 @@ impl BulletSimulation {
         unsafe {
             let r = self
                 .client
-                .submit(ffi::b3InitRequestContactPointInformation(h));
+                .submit(lock, ffi::b3InitRequestContactPointInformation(h));
             expect(
                 r.kind,
                 ffi::CMD_CONTACT_POINT_INFORMATION_COMPLETED,
@@ -680,24 +684,24 @@ impl BulletSimulation {
     /// World pose of the frame of the robot link called `name` (URDF
     /// convention), or `None` when the robot has no such link.
     pub fn link_pose(&mut self, name: &str) -> Result<Option<Pose>, EngineError> {
-        let _guard = ffi::lock();
+        let lock = &ffi::lock();
         let Some(l) = self.link_names.iter().position(|n| n == name) else {
             return Ok(None);
         };
-        let h = self.client.handle();
+        let h = self.client.handle(lock);
         // SAFETY: the command is created on this client and submitted once,
-        // with the Bullet lock held (see the `build` module).
+        // with the Bullet lock held (`lock`).
         unsafe {
             let cmd = ffi::b3RequestActualStateCommandInit(h, self.robot);
             ffi::b3RequestActualStateCommandComputeForwardKinematics(cmd, 1);
-            let r = self.client.submit(cmd);
+            let r = self.client.submit(lock, cmd);
             expect(
                 r.kind,
                 ffi::CMD_ACTUAL_STATE_UPDATE_COMPLETED,
                 "reading the robot's state",
             )?;
             let mut state = ffi::b3LinkState::default();
-            if ffi::b3GetLinkState(h, r.handle, l as c_int, &mut state) == 0 {
+            if ffi::b3GetLinkState(h, r.handle(), l as c_int, &mut state) == 0 {
                 return Ok(None);
             }
             Ok(Some(link_frame(&state)))
@@ -707,7 +711,7 @@ impl BulletSimulation {
     /// Mass (kg) and lateral friction coefficient of a robot link (by URDF
     /// name) or of a scene object (`object:NAME`) as Bullet holds them.
     pub fn mass_and_friction(&mut self, name: &str) -> Result<Option<(f64, f64)>, EngineError> {
-        let _guard = ffi::lock();
+        let lock = &ffi::lock();
         let target = if let Some(object) = name.strip_prefix("object:") {
             self.object_names
                 .iter()
@@ -724,7 +728,7 @@ impl BulletSimulation {
         match target {
             None => Ok(None),
             Some((body, link)) => {
-                let info = dynamics_info(&self.client, body, link)?;
+                let info = dynamics_info(lock, &self.client, body, link)?;
                 Ok(Some((info.m_mass, info.m_lateralFrictionCoeff)))
             }
         }
@@ -732,19 +736,21 @@ impl BulletSimulation {
 
     /// The physics parameters Bullet is using.
     pub fn physics_parameters(&mut self) -> Result<PhysicsParameters, EngineError> {
-        let _guard = ffi::lock();
-        let h = self.client.handle();
+        let lock = &ffi::lock();
+        let h = self.client.handle(lock);
         let mut p = ffi::b3PhysicsSimulationParameters::default();
         // SAFETY: the command is created on this client and submitted once,
         // with the Bullet lock held; `p` has the C layout (checked by a test).
         unsafe {
-            let r = self.client.submit(ffi::b3InitRequestPhysicsParamCommand(h));
+            let r = self
+                .client
+                .submit(lock, ffi::b3InitRequestPhysicsParamCommand(h));
             expect(
                 r.kind,
                 ffi::CMD_REQUEST_PHYSICS_SIMULATION_PARAMETERS_COMPLETED,
                 "reading the physics parameters",
             )?;
-            ffi::b3GetStatusPhysicsSimulationParameters(r.handle, &mut p);
+            ffi::b3GetStatusPhysicsSimulationParameters(r.handle(), &mut p);
         }
         Ok(PhysicsParameters {
             timestep_s: p.m_deltaTime,
@@ -798,16 +804,16 @@ fn unstable_at(steps: u64, timestep_s: f64, origin_s: f64, message: String) -> E
 ///
 /// # Safety
 /// `reply` must be the latest reply of its client and of type
-/// CMD_ACTUAL_STATE_UPDATE_COMPLETED; the slices are valid until the next
-/// command.
-unsafe fn actual_state<'a>(reply: ffi::Reply) -> Result<(&'a [f64], &'a [f64]), String> {
+/// CMD_ACTUAL_STATE_UPDATE_COMPLETED. The slices borrow the reply, which
+/// borrows its client and the lock; they are valid until the next command.
+unsafe fn actual_state<'r>(reply: &'r ffi::Reply<'_>) -> Result<(&'r [f64], &'r [f64]), String> {
     let (mut nq, mut nu) = (0, 0);
     let (mut q, mut qdot): (*const f64, *const f64) = (ptr::null(), ptr::null());
     // SAFETY: `reply` is the latest actual-state reply of its client (this
     // fn's contract); the out-pointers are locals or null where unused.
     let ok = unsafe {
         ffi::b3GetStatusActualState(
-            reply.handle,
+            reply.handle(),
             ptr::null_mut(),
             &mut nq,
             &mut nu,
@@ -830,8 +836,9 @@ unsafe fn actual_state<'a>(reply: ffi::Reply) -> Result<(&'a [f64], &'a [f64]), 
     })
 }
 
-/// Creates a single-body multibody with a collision shape. Lock held.
+/// Creates a single-body multibody with a collision shape. Needs the Bullet lock (`lock`).
 fn create_body(
+    lock: &ffi::BulletLock,
     client: &ffi::Client,
     mass_kg: f64,
     shape: c_int,
@@ -843,9 +850,9 @@ fn create_body(
     let inertial_p = [0.0; 3];
     let inertial_q = [0.0, 0.0, 0.0, 1.0];
     // SAFETY: the command is created on `client` and submitted once,
-    // with the Bullet lock held (see the `build` module).
+    // with the Bullet lock held (`lock`).
     unsafe {
-        let cmd = ffi::b3CreateMultiBodyCommandInit(client.handle());
+        let cmd = ffi::b3CreateMultiBodyCommandInit(client.handle(lock));
         ffi::b3CreateMultiBodyBase(
             cmd,
             mass_kg,
@@ -856,38 +863,40 @@ fn create_body(
             inertial_p.as_ptr(),
             inertial_q.as_ptr(),
         );
-        let r = client.submit(cmd);
+        let r = client.submit(lock, cmd);
         expect(
             r.kind,
             ffi::CMD_CREATE_MULTI_BODY_COMPLETED,
             &format!("creating {what}"),
         )?;
-        Ok(ffi::b3GetStatusBodyIndex(r.handle))
+        Ok(ffi::b3GetStatusBodyIndex(r.handle()))
     }
 }
 
-/// Sets the lateral friction coefficient of a body's link. Lock held.
+/// Sets the lateral friction coefficient of a body's link. Needs the Bullet lock (`lock`).
 fn set_friction(
+    lock: &ffi::BulletLock,
     client: &ffi::Client,
     body: c_int,
     link: c_int,
     friction: f64,
 ) -> Result<(), EngineError> {
     // SAFETY: the command is created on `client` and submitted once,
-    // with the Bullet lock held (see the `build` module).
+    // with the Bullet lock held (`lock`).
     unsafe {
-        let cmd = ffi::b3InitChangeDynamicsInfo(client.handle());
+        let cmd = ffi::b3InitChangeDynamicsInfo(client.handle(lock));
         ffi::b3ChangeDynamicsInfoSetLateralFriction(cmd, body, link, friction);
         expect(
-            client.submit(cmd).kind,
+            client.submit(lock, cmd).kind,
             ffi::CMD_CLIENT_COMMAND_COMPLETED,
             "setting a friction coefficient",
         )
     }
 }
 
-/// The dynamics of a body's link. Lock held.
+/// The dynamics of a body's link. Needs the Bullet lock (`lock`).
 fn dynamics_info(
+    lock: &ffi::BulletLock,
     client: &ffi::Client,
     body: c_int,
     link: c_int,
@@ -896,18 +905,17 @@ fn dynamics_info(
     // with the Bullet lock held; b3DynamicsInfo has the C layout
     // (checked by a test) and is plain data, so zeroed is a valid value.
     unsafe {
-        let r = client.submit(ffi::b3GetDynamicsInfoCommandInit(
-            client.handle(),
-            body,
-            link,
-        ));
+        let r = client.submit(
+            lock,
+            ffi::b3GetDynamicsInfoCommandInit(client.handle(lock), body, link),
+        );
         expect(
             r.kind,
             ffi::CMD_GET_DYNAMICS_INFO_COMPLETED,
             "reading masses and frictions",
         )?;
         let mut info: ffi::b3DynamicsInfo = std::mem::zeroed();
-        ffi::b3GetDynamicsInfo(r.handle, &mut info);
+        ffi::b3GetDynamicsInfo(r.handle(), &mut info);
         Ok(info)
     }
 }
@@ -970,18 +978,19 @@ fn check_meshes(robot: &RobotModel) -> Result<(), EngineError> {
 
 /// Fails when a link with collision shapes in the URDF has none in Bullet.
 fn check_colliders(
+    lock: &ffi::BulletLock,
     client: &ffi::Client,
     body: c_int,
     robot: &RobotModel,
     link_names: &[String],
 ) -> Result<(), EngineError> {
     // SAFETY: the command is created on `client` and submitted once,
-    // with the Bullet lock held (see the `build` module).
+    // with the Bullet lock held (`lock`).
     unsafe {
-        let r = client.submit(ffi::b3RequestCollisionInfoCommandInit(
-            client.handle(),
-            body,
-        ));
+        let r = client.submit(
+            lock,
+            ffi::b3RequestCollisionInfoCommandInit(client.handle(lock), body),
+        );
         expect(
             r.kind,
             ffi::CMD_REQUEST_COLLISION_INFO_COMPLETED,
@@ -1003,7 +1012,7 @@ fn check_colliders(
                 }
             };
             let (mut lo, mut hi) = ([0.0f64; 3], [0.0f64; 3]);
-            let ok = ffi::b3GetStatusAABB(r.handle, index, lo.as_mut_ptr(), hi.as_mut_ptr());
+            let ok = ffi::b3GetStatusAABB(r.handle(), index, lo.as_mut_ptr(), hi.as_mut_ptr());
             if ok == 0 || (0..3).any(|k| lo[k] > hi[k]) {
                 return Err(load_error(format!(
                     "link \"{}\" of {} has collision shapes but Bullet built none (a mesh it could not read?){}",
@@ -1045,9 +1054,9 @@ impl Simulation for BulletSimulation {
                 ),
             });
         }
-        let _guard = ffi::lock();
-        let h = self.client.handle();
-        // SAFETY: see `build`; the command is created on this client and
+        let lock = &ffi::lock();
+        let h = self.client.handle(lock);
+        // SAFETY: the command is created on this client and
         // submitted once, with the lock held.
         let kind = unsafe {
             let cmd = ffi::b3CreatePoseCommandInit(h, self.robot);
@@ -1055,7 +1064,7 @@ impl Simulation for BulletSimulation {
                 ffi::b3CreatePoseCommandSetJointPosition(h, cmd, joint.index, angle);
                 ffi::b3CreatePoseCommandSetJointVelocity(h, cmd, joint.index, 0.0);
             }
-            self.client.submit(cmd).kind
+            self.client.submit(lock, cmd).kind
         };
         check_status(
             kind,
@@ -1063,7 +1072,7 @@ impl Simulation for BulletSimulation {
             "setting the joint angles",
         )
         .map_err(|m| self.unstable(m))?;
-        self.refresh()
+        self.refresh(lock)
     }
 
     fn set_joint_velocity_targets(&mut self, rad_s: &[f64]) {
@@ -1078,14 +1087,14 @@ impl Simulation for BulletSimulation {
     }
 
     fn step_n(&mut self, n: u64) -> Result<(), EngineError> {
-        let _guard = ffi::lock();
+        let lock = &ffi::lock();
         if self.targets_pending {
-            self.send_targets()?;
+            self.send_targets(lock)?;
         }
         for _ in 0..n {
-            self.step_once()?;
+            self.step_once(lock)?;
         }
-        self.refresh()?;
+        self.refresh(lock)?;
         self.check_stability()
     }
 
@@ -1098,13 +1107,13 @@ impl Simulation for BulletSimulation {
     }
 
     fn state(&self) -> Result<SimState, EngineError> {
-        let _guard = ffi::lock();
-        self.take_state()
+        let lock = &ffi::lock();
+        self.take_state(lock)
     }
 
     fn set_state(&mut self, state: &SimState) -> Result<(), EngineError> {
-        let _guard = ffi::lock();
-        self.put_state(state)
+        let lock = &ffi::lock();
+        self.put_state(lock, state)
     }
 }
 

@@ -4,7 +4,8 @@
 //! URDF file (joint damping, link masses, joint friction, restitution,
 //! contact softness). Nothing here runs per step.
 //!
-//! SAFETY (every `unsafe` block of this module): the commands are created
+//! Every `unsafe` block of this module has its own SAFETY comment; the
+//! argument they share: the commands are created
 //! on the client passed in and submitted once, with the Bullet lock held.
 
 use crate::build::BulletModel;
@@ -112,8 +113,9 @@ fn check_uncontrolled_friction(scene: &Scene, params: &PhysicalParams) -> Result
 
 /// Joint damping and link masses from the robot model (which carries the
 /// `damping` and `mass_scale` parameters) where they differ from what
-/// Bullet read from the URDF file. Lock held.
+/// Bullet read from the URDF file. Needs the Bullet lock (`lock`).
 pub(crate) fn apply_robot_dynamics(
+    lock: &ffi::BulletLock,
     client: &ffi::Client,
     body: c_int,
     robot: &RobotModel,
@@ -126,12 +128,14 @@ pub(crate) fn apply_robot_dynamics(
         if !model.is_movable(j) || joint.damping == model.infos[j].m_joint_damping {
             continue;
         }
-        // SAFETY: see the module documentation.
+        // SAFETY: the command is created on this simulation's client and
+        // submitted once, with the Bullet lock held (`lock`); the pointers
+        // passed point to live locals of the sizes Bullet expects.
         unsafe {
-            let cmd = ffi::b3InitChangeDynamicsInfo(client.handle());
+            let cmd = ffi::b3InitChangeDynamicsInfo(client.handle(lock));
             ffi::b3ChangeDynamicsInfoSetJointDamping(cmd, body, j as c_int, joint.damping);
             expect(
-                client.submit(cmd).kind,
+                client.submit(lock, cmd).kind,
                 ffi::CMD_CLIENT_COMMAND_COMPLETED,
                 "setting a joint damping",
             )?;
@@ -149,9 +153,16 @@ pub(crate) fn apply_robot_dynamics(
                 None => continue,
             }
         };
-        let info = dynamics_info(client, body, index)?;
+        let info = dynamics_info(lock, client, body, index)?;
         if info.m_mass > 0.0 && inertial.mass_kg > 0.0 && inertial.mass_kg != info.m_mass {
-            crate::build::set_mass(client, body, index, &info, inertial.mass_kg / info.m_mass)?;
+            crate::build::set_mass(
+                lock,
+                client,
+                body,
+                index,
+                &info,
+                inertial.mass_kg / info.m_mass,
+            )?;
         }
     }
     Ok(())
@@ -205,9 +216,10 @@ impl ContactPlan {
         })
     }
 
-    /// Applies the plan to the built world. Lock held.
+    /// Applies the plan to the built world. Needs the Bullet lock (`lock`).
     pub fn apply(
         &self,
+        lock: &ffi::BulletLock,
         client: &ffi::Client,
         ground: Option<c_int>,
         robot: c_int,
@@ -222,20 +234,22 @@ impl ContactPlan {
                 .collect();
             partners.extend(ground.map(|g| (g, -1)));
             for (body, link) in partners {
-                set_restitution(client, body, link, 1.0)?;
+                set_restitution(lock, client, body, link, 1.0)?;
             }
         }
         for (i, &body) in objects.iter().enumerate() {
             if let Some(r) = self.restitution[i] {
-                set_restitution(client, body, -1, r)?;
+                set_restitution(lock, client, body, -1, r)?;
             }
             if let Some((k, d)) = self.softness[i] {
-                // SAFETY: see the module documentation.
+                // SAFETY: the command is created on this simulation's client and
+                // submitted once, with the Bullet lock held (`lock`); the pointers
+                // passed point to live locals of the sizes Bullet expects.
                 unsafe {
-                    let cmd = ffi::b3InitChangeDynamicsInfo(client.handle());
+                    let cmd = ffi::b3InitChangeDynamicsInfo(client.handle(lock));
                     ffi::b3ChangeDynamicsInfoSetContactStiffnessAndDamping(cmd, body, -1, k, d);
                     expect(
-                        client.submit(cmd).kind,
+                        client.submit(lock, cmd).kind,
                         ffi::CMD_CLIENT_COMMAND_COMPLETED,
                         "setting the contact stiffness and damping",
                     )?;
@@ -257,17 +271,20 @@ pub fn spring_damper(mass_kg: f64, tc: f64, z: f64) -> (f64, f64) {
 }
 
 fn set_restitution(
+    lock: &ffi::BulletLock,
     client: &ffi::Client,
     body: c_int,
     link: c_int,
     value: f64,
 ) -> Result<(), EngineError> {
-    // SAFETY: see the module documentation.
+    // SAFETY: the command is created on this simulation's client and
+    // submitted once, with the Bullet lock held (`lock`); the pointers
+    // passed point to live locals of the sizes Bullet expects.
     unsafe {
-        let cmd = ffi::b3InitChangeDynamicsInfo(client.handle());
+        let cmd = ffi::b3InitChangeDynamicsInfo(client.handle(lock));
         ffi::b3ChangeDynamicsInfoSetRestitution(cmd, body, link, value);
         expect(
-            client.submit(cmd).kind,
+            client.submit(lock, cmd).kind,
             ffi::CMD_CLIENT_COMMAND_COMPLETED,
             "setting a restitution",
         )

@@ -20,7 +20,8 @@
 //!   impulses) and drops the others at its next collision pass; a fresh
 //!   simulation has none.
 //!
-//! SAFETY (every `unsafe` block of this module): the commands are created
+//! Every `unsafe` block of this module has its own SAFETY comment; the
+//! argument they share: the commands are created
 //! on this simulation's client and submitted once, with the Bullet lock
 //! held by the caller; the pointers passed point to live arrays of the
 //! sizes the C API reads, or to NUL-terminated paths.
@@ -102,8 +103,8 @@ impl BulletSimulation {
         ]
     }
 
-    /// The state now (see the module documentation). Lock held.
-    pub(crate) fn take_state(&self) -> Result<SimState, EngineError> {
+    /// The state now (see the module documentation). Needs the Bullet lock (`lock`).
+    pub(crate) fn take_state(&self, lock: &ffi::BulletLock) -> Result<SimState, EngineError> {
         let objects = self
             .object_names
             .iter()
@@ -121,21 +122,23 @@ impl BulletSimulation {
             joint_velocities_rad_s: self.velocities_rad_s.clone(),
             joint_velocity_targets_rad_s: self.targets_rad_s.clone(),
             objects,
-            native: Some(self.native()?),
+            native: Some(self.native(lock)?),
         })
     }
 
-    /// Bullet's serialized world with the wrapper's header. Lock held.
-    fn native(&self) -> Result<NativeState, EngineError> {
+    /// Bullet's serialized world with the wrapper's header. Needs the Bullet lock (`lock`).
+    fn native(&self, lock: &ffi::BulletLock) -> Result<NativeState, EngineError> {
         let file = TempFile::new();
         let path = crate::urdf_file::c_path(&file.0).map_err(state_error)?;
-        // SAFETY: see the module documentation.
+        // SAFETY: the command is created on this simulation's client and
+        // submitted once, with the Bullet lock held (`lock`); the pointers
+        // passed point to live locals of the sizes Bullet expects.
         let kind = unsafe {
             self.client
-                .submit(ffi::b3SaveBulletCommandInit(
-                    self.client.handle(),
-                    path.as_ptr(),
-                ))
+                .submit(
+                    lock,
+                    ffi::b3SaveBulletCommandInit(self.client.handle(lock), path.as_ptr()),
+                )
                 .kind
         };
         check_status(kind, ffi::CMD_BULLET_SAVING_COMPLETED, "saving the world")
@@ -160,23 +163,27 @@ impl BulletSimulation {
         })
     }
 
-    /// Loads `state` (see the module documentation). Lock held.
-    pub(crate) fn put_state(&mut self, state: &SimState) -> Result<(), EngineError> {
+    /// Loads `state` (see the module documentation). Needs the Bullet lock (`lock`).
+    pub(crate) fn put_state(
+        &mut self,
+        lock: &ffi::BulletLock,
+        state: &SimState,
+    ) -> Result<(), EngineError> {
         let names: Vec<&str> = self.object_names.iter().map(String::as_str).collect();
         state
             .check(self.joints.len(), &names)
             .map_err(state_error)?;
         match &state.native {
-            Some(n) if n.engine == ENGINE_NAME => self.put_native(&n.data)?,
-            _ => self.put_portable(state)?,
+            Some(n) if n.engine == ENGINE_NAME => self.put_native(lock, &n.data)?,
+            _ => self.put_portable(lock, state)?,
         }
-        self.send_targets()?;
-        self.refresh()?;
+        self.send_targets(lock)?;
+        self.refresh(lock)?;
         self.check_stability()
     }
 
     /// Restores Bullet's serialized world and the wrapper's header.
-    fn put_native(&mut self, data: &[f64]) -> Result<(), EngineError> {
+    fn put_native(&mut self, lock: &ffi::BulletLock, data: &[f64]) -> Result<(), EngineError> {
         let bad = |what: &str| state_error(format!("the native Bullet state is {what}"));
         let n = self.joints.len();
         let header = 1 + 4 + 3;
@@ -205,11 +212,13 @@ impl BulletSimulation {
         std::fs::write(&file.0, &bytes)
             .map_err(|e| state_error(format!("cannot write {}: {e}", file.0.display())))?;
         let path = crate::urdf_file::c_path(&file.0).map_err(state_error)?;
-        // SAFETY: see the module documentation.
+        // SAFETY: the command is created on this simulation's client and
+        // submitted once, with the Bullet lock held (`lock`); the pointers
+        // passed point to live locals of the sizes Bullet expects.
         let kind = unsafe {
-            let cmd = ffi::b3LoadStateCommandInit(self.client.handle());
+            let cmd = ffi::b3LoadStateCommandInit(self.client.handle(lock));
             ffi::b3LoadStateSetFileName(cmd, path.as_ptr());
-            self.client.submit(cmd).kind
+            self.client.submit(lock, cmd).kind
         };
         check_status(
             kind,
@@ -224,9 +233,15 @@ impl BulletSimulation {
     }
 
     /// Loads the portable fields.
-    fn put_portable(&mut self, state: &SimState) -> Result<(), EngineError> {
-        let h = self.client.handle();
-        // SAFETY: see the module documentation.
+    fn put_portable(
+        &mut self,
+        lock: &ffi::BulletLock,
+        state: &SimState,
+    ) -> Result<(), EngineError> {
+        let h = self.client.handle(lock);
+        // SAFETY: the command is created on this simulation's client and
+        // submitted once, with the Bullet lock held (`lock`); the pointers
+        // passed point to live locals of the sizes Bullet expects.
         let kind = unsafe {
             let cmd = ffi::b3CreatePoseCommandInit(h, self.robot);
             for (i, joint) in self.joints.iter().enumerate() {
@@ -238,7 +253,7 @@ impl BulletSimulation {
                 ffi::b3CreatePoseCommandSetJointPosition(h, cmd, j.index, j.position);
                 ffi::b3CreatePoseCommandSetJointVelocity(h, cmd, j.index, 0.0);
             }
-            self.client.submit(cmd).kind
+            self.client.submit(lock, cmd).kind
         };
         check_status(
             kind,
@@ -250,14 +265,16 @@ impl BulletSimulation {
             let (p, q) = (o.pose.position_m, o.pose.orientation);
             let v = o.linear_velocity_m_s.to_array();
             let w = o.angular_velocity_rad_s.to_array();
-            // SAFETY: see the module documentation.
+            // SAFETY: the command is created on this simulation's client and
+            // submitted once, with the Bullet lock held (`lock`); the pointers
+            // passed point to live locals of the sizes Bullet expects.
             let kind = unsafe {
                 let cmd = ffi::b3CreatePoseCommandInit(h, body);
                 ffi::b3CreatePoseCommandSetBasePosition(cmd, p.x, p.y, p.z);
                 ffi::b3CreatePoseCommandSetBaseOrientation(cmd, q.x, q.y, q.z, q.w);
                 ffi::b3CreatePoseCommandSetBaseLinearVelocity(cmd, v.as_ptr());
                 ffi::b3CreatePoseCommandSetBaseAngularVelocity(cmd, w.as_ptr());
-                self.client.submit(cmd).kind
+                self.client.submit(lock, cmd).kind
             };
             check_status(kind, ffi::CMD_CLIENT_COMMAND_COMPLETED, "setting an object")
                 .map_err(state_error)?;
