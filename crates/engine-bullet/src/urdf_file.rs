@@ -18,6 +18,8 @@
 //! The copy is deleted as soon as Bullet has loaded it. A URDF file without
 //! meshes and visuals is loaded as it is.
 
+/// Escapes text for an XML attribute value (`<>&'"` as entities).
+use quick_xml::escape::escape as xml_escape;
 use realitygap_core::pose::{Pose, Vec3};
 use realitygap_core::robot::{Geometry, JointKind, RobotModel};
 use std::collections::BTreeMap;
@@ -167,14 +169,6 @@ fn xml_unescape(value: &str) -> Option<String> {
     Some(out)
 }
 
-fn xml_escape(value: &str) -> String {
-    value
-        .replace('&', "&amp;")
-        .replace('"', "&quot;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-}
-
 /// Replaces the value of every `filename` attribute found in `meshes` by
 /// the mapped path; returns the new text and the URIs replaced.
 fn rewrite(text: &str, meshes: &BTreeMap<String, PathBuf>) -> (String, Vec<String>) {
@@ -201,12 +195,7 @@ fn rewrite(text: &str, meshes: &BTreeMap<String, PathBuf>) -> (String, Vec<Strin
                     Some((uri, path)) => {
                         out.push_str("filename=");
                         out.push(quote);
-                        let escaped = xml_escape(&path.to_string_lossy());
-                        out.push_str(&if quote == '\'' {
-                            escaped.replace('\'', "&apos;")
-                        } else {
-                            escaped
-                        });
+                        out.push_str(&xml_escape(path.to_string_lossy()));
                         out.push(quote);
                         replaced.push(uri);
                     }
@@ -250,7 +239,7 @@ fn geometry(g: &Geometry) -> String {
         Geometry::Sphere { radius_m } => format!("<sphere radius=\"{radius_m:?}\"/>"),
         Geometry::Mesh { path, scale, .. } => format!(
             "<mesh filename=\"{}\" scale=\"{}\"/>",
-            xml_escape(&path.to_string_lossy()),
+            xml_escape(path.to_string_lossy()),
             xyz(*scale)
         ),
     }

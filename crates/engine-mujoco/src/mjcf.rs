@@ -25,9 +25,11 @@
 //! - A zero force limit (servo off) is set on the compiled model, since
 //!   MJCF rejects an empty `forcerange`.
 
+/// Escapes text for an XML attribute value (`<>&'"` as entities).
+use quick_xml::escape::escape as esc;
 use realitygap_core::pose::{Pose, Quat, Vec3};
 use realitygap_core::robot::plan;
-use realitygap_core::robot::{Geometry, JointKind, RobotModel};
+use realitygap_core::robot::{Geometry, Inertial, Joint, JointKind, RobotModel};
 use realitygap_core::scene::{ObjectShape, Scene};
 use std::fmt::Write;
 
@@ -48,22 +50,6 @@ pub fn body_name(link: &str) -> String {
 /// Name of the MuJoCo actuator of a controlled joint.
 pub fn actuator_name(joint: &str) -> String {
     format!("servo:{joint}")
-}
-
-/// Escapes text for an XML attribute value.
-fn esc(s: &str) -> String {
-    let mut out = String::with_capacity(s.len());
-    for c in s.chars() {
-        match c {
-            '&' => out.push_str("&amp;"),
-            '<' => out.push_str("&lt;"),
-            '>' => out.push_str("&gt;"),
-            '"' => out.push_str("&quot;"),
-            '\'' => out.push_str("&apos;"),
-            c => out.push(c),
-        }
-    }
-    out
 }
 
 /// Shortest text that reads back as the same f64.
@@ -98,6 +84,35 @@ pub fn scene_to_mjcf(scene: &Scene, robot: &RobotModel) -> Result<String, MjcfEr
     // planning (the MJCF keeps the tree, so the rigid groups are not used).
     let actuated = plan::actuated_joints(scene, robot).map_err(|e| MjcfError(e.0))?;
     let positions = plan::initial_positions(scene, robot, &actuated).map_err(|e| MjcfError(e.0))?;
+    check_link_names(robot)?;
+
+    let mut world = ground_xml(scene);
+    // Robot bodies, depth first.
+    let mut writer = RobotWriter {
+        robot,
+        positions: &positions,
+        actuated: &actuated,
+        assets: String::new(),
+        mesh_count: 0,
+        excludes: Vec::new(),
+    };
+    let mut body_xml = String::new();
+    writer.write_link(&mut body_xml, robot.root_link, &scene.robot.base, None, 2)?;
+    world.push_str(&body_xml);
+    write_objects(&mut world, scene);
+    let actuators = actuators_xml(scene);
+    Ok(document(
+        scene,
+        robot,
+        &writer.assets,
+        &world,
+        &writer.excludes,
+        &actuators,
+    ))
+}
+
+/// Refuses a robot link whose name clashes with the scene objects' bodies.
+fn check_link_names(robot: &RobotModel) -> Result<(), MjcfError> {
     for link in &robot.links {
         if link.name.starts_with(OBJECT_BODY_PREFIX) || link.name == "urdf:world" {
             return Err(MjcfError(format!(
@@ -106,9 +121,11 @@ pub fn scene_to_mjcf(scene: &Scene, robot: &RobotModel) -> Result<String, MjcfEr
             )));
         }
     }
+    Ok(())
+}
 
-    let mut assets = String::new();
-    let mut mesh_count = 0usize;
+/// The ground plane's `<geom>` line (empty without a ground).
+fn ground_xml(scene: &Scene) -> String {
     let mut world = String::new();
     if let Some(g) = &scene.ground {
         let friction = g
@@ -122,25 +139,11 @@ pub fn scene_to_mjcf(scene: &Scene, robot: &RobotModel) -> Result<String, MjcfEr
         )
         .unwrap();
     }
+    world
+}
 
-    // Robot bodies, depth first.
-    let mut excludes = Vec::new();
-    let mut body_xml = String::new();
-    write_link(
-        robot,
-        robot.root_link,
-        &scene.robot.base,
-        None,
-        2,
-        &positions,
-        &actuated,
-        &mut body_xml,
-        &mut assets,
-        &mut mesh_count,
-        &mut excludes,
-    )?;
-    world.push_str(&body_xml);
-
+/// The scene objects' free bodies.
+fn write_objects(world: &mut String, scene: &Scene) {
     for o in &scene.objects {
         let inertia = o.principal_inertia();
         // With priority 1 the object's coefficient is the contact's
@@ -179,7 +182,10 @@ pub fn scene_to_mjcf(scene: &Scene, robot: &RobotModel) -> Result<String, MjcfEr
         writeln!(world, "      <geom {geom}{friction}/>").unwrap();
         writeln!(world, "    </body>").unwrap();
     }
+}
 
+/// The `<velocity>` actuators of the scene's servos.
+fn actuators_xml(scene: &Scene) -> String {
     let mut actuators = String::new();
     for a in &scene.actuators {
         // A zero limit (servo off) is set on the compiled model: MuJoCo
@@ -196,18 +202,29 @@ pub fn scene_to_mjcf(scene: &Scene, robot: &RobotModel) -> Result<String, MjcfEr
         writeln!(
             actuators,
             "    <velocity name=\"{}\" joint=\"{}\" kv=\"{}\"{limit}/>",
-            esc(&actuator_name(&a.joint)),
+            esc(actuator_name(&a.joint)),
             esc(&a.joint),
             num(a.kv)
         )
         .unwrap();
     }
+    actuators
+}
 
+/// The whole `<mujoco>` document from its parts.
+fn document(
+    scene: &Scene,
+    robot: &RobotModel,
+    assets: &str,
+    world: &str,
+    excludes: &[(String, String)],
+    actuators: &str,
+) -> String {
     let mut xml = String::new();
     writeln!(
         xml,
         "<mujoco model=\"{}\">",
-        esc(&format!("{} ({})", scene.name, robot.name))
+        esc(format!("{} ({})", scene.name, robot.name))
     )
     .unwrap();
     writeln!(
@@ -221,7 +238,7 @@ pub fn scene_to_mjcf(scene: &Scene, robot: &RobotModel) -> Result<String, MjcfEr
     writeln!(xml, "  <worldbody>\n{world}  </worldbody>").unwrap();
     if !excludes.is_empty() {
         writeln!(xml, "  <contact>").unwrap();
-        for (a, b) in &excludes {
+        for (a, b) in excludes {
             writeln!(
                 xml,
                 "    <exclude body1=\"{}\" body2=\"{}\"/>",
@@ -234,100 +251,78 @@ pub fn scene_to_mjcf(scene: &Scene, robot: &RobotModel) -> Result<String, MjcfEr
     }
     writeln!(xml, "  <actuator>\n{actuators}  </actuator>").unwrap();
     writeln!(xml, "</mujoco>").unwrap();
-    Ok(xml)
+    xml
 }
 
-#[allow(clippy::too_many_arguments)]
-fn write_link(
-    robot: &RobotModel,
-    link_index: usize,
-    body_pose: &Pose,
-    joint_index: Option<usize>,
-    depth: usize,
-    positions: &[f64],
-    actuated: &[usize],
-    out: &mut String,
-    assets: &mut String,
-    mesh_count: &mut usize,
-    excludes: &mut Vec<(String, String)>,
-) -> Result<(), MjcfError> {
-    let link = &robot.links[link_index];
-    let ind = "  ".repeat(depth);
-    writeln!(
-        out,
-        "{ind}<body name=\"{}\" {}>",
-        esc(&body_name(&link.name)),
-        pose_attrs(body_pose)
-    )
-    .unwrap();
-    if let Some(j) = joint_index.filter(|j| actuated.contains(j)) {
-        let joint = &robot.joints[j];
-        let kind = match joint.kind {
-            JointKind::Revolute | JointKind::Continuous => "hinge",
-            JointKind::Prismatic => "slide",
-            JointKind::Fixed => {
-                unreachable!("fixed joints are never actuated (core's plan refuses them)")
-            }
-        };
-        let mut attrs = format!(
-            "name=\"{}\" type=\"{kind}\" axis=\"{}\"",
-            esc(&joint.name),
-            v3(joint.axis)
-        );
-        if let Some(lim) = joint.limits {
-            if lim.lower.is_finite() && lim.upper.is_finite() {
-                write!(
-                    attrs,
-                    " limited=\"true\" range=\"{} {}\"",
-                    num(lim.lower),
-                    num(lim.upper)
-                )
-                .unwrap();
-            }
+/// Writes the robot's bodies and collects what they need elsewhere in the
+/// document: the mesh assets and the parent-child contact exclusions.
+struct RobotWriter<'a> {
+    robot: &'a RobotModel,
+    /// Initial joint positions (rad or m), by URDF joint index.
+    positions: &'a [f64],
+    /// URDF indices of the actuated joints.
+    actuated: &'a [usize],
+    /// The `<mesh>` assets written so far.
+    assets: String,
+    /// Meshes written so far (names the next one).
+    mesh_count: usize,
+    /// Parent-child body pairs whose contacts are excluded.
+    excludes: Vec<(String, String)>,
+}
+
+impl RobotWriter<'_> {
+    /// Writes the body of link `link_index` at `body_pose` (in its parent's
+    /// frame), entered through joint `joint_index`, then its children.
+    fn write_link(
+        &mut self,
+        out: &mut String,
+        link_index: usize,
+        body_pose: &Pose,
+        joint_index: Option<usize>,
+        depth: usize,
+    ) -> Result<(), MjcfError> {
+        let robot = self.robot;
+        let link = &robot.links[link_index];
+        let ind = "  ".repeat(depth);
+        writeln!(
+            out,
+            "{ind}<body name=\"{}\" {}>",
+            esc(body_name(&link.name)),
+            pose_attrs(body_pose)
+        )
+        .unwrap();
+        if let Some(j) = joint_index.filter(|j| self.actuated.contains(j)) {
+            writeln!(out, "{ind}  <joint {}/>", joint_attrs(&robot.joints[j])).unwrap();
         }
-        if joint.damping > 0.0 {
-            write!(attrs, " damping=\"{}\"", num(joint.damping)).unwrap();
+        if let Some(line) = link.inertial.as_ref().and_then(inertial_xml) {
+            writeln!(out, "{ind}  {line}").unwrap();
         }
-        if joint.friction > 0.0 {
-            write!(attrs, " frictionloss=\"{}\"", num(joint.friction)).unwrap();
+        for c in &link.collisions {
+            let shape = self.geom_shape(&link.name, &c.geometry)?;
+            writeln!(out, "{ind}  <geom {shape} {}/>", pose_attrs(&c.origin)).unwrap();
         }
-        writeln!(out, "{ind}  <joint {attrs}/>").unwrap();
+        for &j in robot.child_joints(link_index) {
+            let joint = &robot.joints[j];
+            let child_pose = if self.actuated.contains(&j) || joint.kind == JointKind::Fixed {
+                joint.origin
+            } else {
+                // Held joint: welded at its held position.
+                joint.transform(self.positions[j])
+            };
+            self.excludes.push((
+                body_name(&link.name),
+                body_name(&robot.links[joint.child].name),
+            ));
+            self.write_link(out, joint.child, &child_pose, Some(j), depth + 1)?;
+        }
+        writeln!(out, "{ind}</body>").unwrap();
+        Ok(())
     }
-    if let Some(inertial) = &link.inertial {
-        if inertial.mass_kg > 0.0 {
-            // MuJoCo's fullinertia is in the body frame: rotate the URDF
-            // tensor (given in the rotated centre-of-mass frame) into it.
-            let r = inertial.origin.orientation.to_rotation_matrix();
-            let i = inertial.inertia_matrix();
-            let mut ri = [0.0; 9];
-            let mut m = [0.0; 9];
-            for a in 0..3 {
-                for b in 0..3 {
-                    ri[3 * a + b] = (0..3).map(|k| r[3 * a + k] * i[3 * k + b]).sum();
-                }
-            }
-            for a in 0..3 {
-                for b in 0..3 {
-                    m[3 * a + b] = (0..3).map(|k| ri[3 * a + k] * r[3 * b + k]).sum();
-                }
-            }
-            writeln!(
-                out,
-                "{ind}  <inertial pos=\"{}\" mass=\"{}\" fullinertia=\"{} {} {} {} {} {}\"/>",
-                v3(inertial.origin.position_m),
-                num(inertial.mass_kg),
-                num(m[0]),
-                num(m[4]),
-                num(m[8]),
-                num(m[1]),
-                num(m[2]),
-                num(m[5])
-            )
-            .unwrap();
-        }
-    }
-    for c in &link.collisions {
-        let shape = match &c.geometry {
+
+    /// The `type`/`size` (or `mesh`) attributes of a collision geometry of
+    /// link `link`; a mesh is added to the assets.
+    fn geom_shape(&mut self, link: &str, geometry: &Geometry) -> Result<String, MjcfError> {
+        Ok(match geometry {
             Geometry::Box { size_m } => format!("type=\"box\" size=\"{}\"", v3(size_m.scale(0.5))),
             Geometry::Cylinder { radius_m, length_m } => {
                 format!(
@@ -352,22 +347,20 @@ fn write_link(
                     .to_ascii_lowercase();
                 if !matches!(ext.as_str(), "stl" | "obj" | "msh") {
                     return Err(MjcfError(format!(
-                        "link \"{}\": mesh \"{uri}\" ({}) is not a format MuJoCo reads (STL, OBJ or MSH)",
-                        link.name,
+                        "link \"{link}\": mesh \"{uri}\" ({}) is not a format MuJoCo reads (STL, OBJ or MSH)",
                         path.display()
                     )));
                 }
                 let file = path.to_str().ok_or_else(|| {
                     MjcfError(format!(
-                        "link \"{}\": mesh path {} is not valid UTF-8",
-                        link.name,
+                        "link \"{link}\": mesh path {} is not valid UTF-8",
                         path.display()
                     ))
                 })?;
-                let name = format!("mesh{}", *mesh_count);
-                *mesh_count += 1;
+                let name = format!("mesh{}", self.mesh_count);
+                self.mesh_count += 1;
                 writeln!(
-                    assets,
+                    self.assets,
                     "    <mesh name=\"{name}\" file=\"{}\" scale=\"{}\"/>",
                     esc(file),
                     v3(*scale)
@@ -375,37 +368,77 @@ fn write_link(
                 .unwrap();
                 format!("type=\"mesh\" mesh=\"{name}\"")
             }
-        };
-        writeln!(out, "{ind}  <geom {shape} {}/>", pose_attrs(&c.origin)).unwrap();
+        })
     }
-    for &j in robot.child_joints(link_index) {
-        let joint = &robot.joints[j];
-        let child_pose = if actuated.contains(&j) || joint.kind == JointKind::Fixed {
-            joint.origin
-        } else {
-            // Held joint: welded at its held position.
-            joint.transform(positions[j])
-        };
-        excludes.push((
-            body_name(&link.name),
-            body_name(&robot.links[joint.child].name),
-        ));
-        write_link(
-            robot,
-            joint.child,
-            &child_pose,
-            Some(j),
-            depth + 1,
-            positions,
-            actuated,
-            out,
-            assets,
-            mesh_count,
-            excludes,
-        )?;
+}
+
+/// The attributes of an actuated joint's `<joint>` element.
+fn joint_attrs(joint: &Joint) -> String {
+    let kind = match joint.kind {
+        JointKind::Revolute | JointKind::Continuous => "hinge",
+        JointKind::Prismatic => "slide",
+        JointKind::Fixed => {
+            unreachable!("fixed joints are never actuated (core's plan refuses them)")
+        }
+    };
+    let mut attrs = format!(
+        "name=\"{}\" type=\"{kind}\" axis=\"{}\"",
+        esc(&joint.name),
+        v3(joint.axis)
+    );
+    if let Some(lim) = joint.limits {
+        if lim.lower.is_finite() && lim.upper.is_finite() {
+            write!(
+                attrs,
+                " limited=\"true\" range=\"{} {}\"",
+                num(lim.lower),
+                num(lim.upper)
+            )
+            .unwrap();
+        }
     }
-    writeln!(out, "{ind}</body>").unwrap();
-    Ok(())
+    if joint.damping > 0.0 {
+        write!(attrs, " damping=\"{}\"", num(joint.damping)).unwrap();
+    }
+    if joint.friction > 0.0 {
+        write!(attrs, " frictionloss=\"{}\"", num(joint.friction)).unwrap();
+    }
+    attrs
+}
+
+/// A link's `<inertial>` element (none for a massless link). MuJoCo's
+/// fullinertia is in the body frame: the URDF tensor (given in the rotated
+/// centre-of-mass frame) is rotated into it.
+fn inertial_xml(inertial: &Inertial) -> Option<String> {
+    // (also none for a NaN mass, as `> 0` is false)
+    if inertial.mass_kg.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+        return None;
+    }
+    let r = inertial.origin.orientation.to_rotation_matrix();
+    let i = inertial.inertia_matrix();
+    let mut ri = [0.0; 9];
+    let mut m = [0.0; 9];
+    for a in 0..3 {
+        for b in 0..3 {
+            ri[3 * a + b] = (0..3).map(|k| r[3 * a + k] * i[3 * k + b]).sum();
+        }
+    }
+    for a in 0..3 {
+        for b in 0..3 {
+            m[3 * a + b] = (0..3).map(|k| ri[3 * a + k] * r[3 * b + k]).sum();
+        }
+    }
+    Some(format!(
+        "<inertial pos=\"{}\" mass=\"{}\" fullinertia=\"{} {} {} {} {} {}\"/>",
+        v3(inertial.origin.position_m),
+        num(inertial.mass_kg),
+        num(m[0]),
+        num(m[4]),
+        num(m[8]),
+        num(m[1]),
+        num(m[2]),
+        num(m[5])
+    ))
 }
 
 #[cfg(test)]
