@@ -22,6 +22,7 @@
 //! here.
 
 pub mod figures;
+pub mod frontier;
 pub mod html;
 pub mod provenance;
 #[cfg(test)]
