@@ -726,8 +726,7 @@ fn measure_gaps(points: &mut [&mut Point], data: &Path, out: &Path) -> Result<Ve
         .first()
         .map(|p| p.scenes.iter().map(|s| s.scene.clone()).collect())
         .unwrap_or_default();
-    study.scenes.retain(|s| names.contains(&s.name));
-    let mut notes: Vec<String> = names
+    let notes: Vec<String> = names
         .iter()
         .filter(|n| !study.scenes.iter().any(|s| &s.name == *n))
         .map(|n| format!("scene {n} is not one of the study's: no gap to the real arm"))
@@ -747,36 +746,30 @@ fn measure_gaps(points: &mut [&mut Point], data: &Path, out: &Path) -> Result<Ve
         }),
         ..CompareOptions::default()
     };
-    for l in &loaded {
-        let Some(si) = names.iter().position(|n| *n == l.spec.name) else {
-            continue;
-        };
-        let sources: Vec<SourceRuns> = points
-            .iter()
-            .enumerate()
-            .filter_map(|(pi, p)| {
-                let s = &p.scenes[si];
-                let t = s.trajectory.clone().filter(|_| s.status == "ok")?;
-                Some(SourceRuns {
-                    name: format!("p{pi}"),
-                    kind: "simulated".into(),
-                    rate_hz: 1.0 / study.control_period_s,
-                    alignment: None,
-                    runs: vec![RunInput {
-                        id: "run000".into(),
-                        trajectory: t,
-                        failed: None,
-                    }],
-                })
-            })
-            .collect();
-        let input = realitygap_analysis::SceneInput {
+    // The capture frame is registered from every scene's real runs at
+    // once, so all study scenes go in, those not swept without sources.
+    let sources: Vec<Vec<SourceRuns>> = loaded
+        .iter()
+        .map(|l| match names.iter().position(|n| *n == l.spec.name) {
+            Some(si) => gap_sources(points, si, study.control_period_s),
+            None => vec![],
+        })
+        .collect();
+    let inputs: Vec<_> = loaded
+        .iter()
+        .zip(&sources)
+        .map(|(l, s)| realitygap_analysis::SceneInput {
             spec: &l.spec,
             reference: &l.reference,
-            sources: &sources,
+            sources: s,
+        })
+        .collect();
+    let reports = realitygap_analysis::evaluate_study(&inputs, &opts)?;
+    for report in &reports {
+        let Some(si) = names.iter().position(|n| *n == report.scene) else {
+            continue;
         };
-        let report = realitygap_analysis::evaluate_study(&[input], &opts)?;
-        for summary in report.iter().flat_map(|r| &r.sources) {
+        for summary in &report.sources {
             let Some(pi) = summary.source.strip_prefix('p').and_then(|i| i.parse::<usize>().ok()) else {
                 continue;
             };
@@ -785,13 +778,33 @@ fn measure_gaps(points: &mut [&mut Point], data: &Path, out: &Path) -> Result<Ve
             }
         }
     }
-    if loaded.is_empty() {
-        notes.push("no study scene among the scenes: no gap measured".into());
-    }
     for p in points.iter_mut() {
         p.gap_m = p.scenes.iter().map(|s| s.gap_m).sum::<Option<f64>>();
     }
     Ok(notes)
+}
+
+/// The completed runs of scene `si`, one source per point (`p<index>`).
+fn gap_sources(points: &[&mut Point], si: usize, period_s: f64) -> Vec<SourceRuns> {
+    points
+        .iter()
+        .enumerate()
+        .filter_map(|(pi, p)| {
+            let s = &p.scenes[si];
+            let t = s.trajectory.clone().filter(|_| s.status == "ok")?;
+            Some(SourceRuns {
+                name: format!("p{pi}"),
+                kind: "simulated".into(),
+                rate_hz: 1.0 / period_s,
+                alignment: None,
+                runs: vec![RunInput {
+                    id: "run000".into(),
+                    trajectory: t,
+                    failed: None,
+                }],
+            })
+        })
+        .collect()
 }
 
 /// The fastest point within the tolerance.
@@ -813,6 +826,12 @@ fn figure(
     tolerance_m: Option<f64>,
     recommended: Option<usize>,
 ) -> FrontierFigure {
+    // A diverged or failed point is drawn as a cross at the top of the plot.
+    let top = points
+        .iter()
+        .filter_map(value)
+        .filter(|v| v.is_finite())
+        .fold(f64::NAN, f64::max);
     FrontierFigure {
         stem: stem.into(),
         title,
@@ -823,7 +842,11 @@ fn figure(
                 label: p.label.clone(),
                 group: p.group.clone(),
                 real_time_factor: p.real_time_factor,
-                value_m: value(p),
+                value_m: if p.status == "ok" {
+                    value(p)
+                } else {
+                    Some(top).filter(|t| t.is_finite())
+                },
                 diverged: p.status != "ok",
             })
             .collect(),
