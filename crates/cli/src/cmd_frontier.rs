@@ -104,7 +104,10 @@ pub type Overlay = Vec<(String, SettingValue)>;
 
 /// Parses `--sweep KEY=V1,V2,...` values, checking each key against the
 /// engine's settings; the lists in order.
-pub fn parse_sweeps(specs: &[String], engine: &dyn Engine) -> Result<Vec<(String, Vec<SettingValue>)>> {
+pub fn parse_sweeps(
+    specs: &[String],
+    engine: &dyn Engine,
+) -> Result<Vec<(String, Vec<SettingValue>)>> {
     let known: Vec<&str> = engine.settings_help().iter().map(|s| s.key).collect();
     let mut out: Vec<(String, Vec<SettingValue>)> = Vec::new();
     for spec in specs {
@@ -155,7 +158,10 @@ pub fn cross(lists: &[(String, Vec<SettingValue>)]) -> Vec<Overlay> {
 }
 
 fn texts(values: &[&str]) -> Vec<SettingValue> {
-    values.iter().map(|v| SettingValue::Text(v.to_string())).collect()
+    values
+        .iter()
+        .map(|v| SettingValue::Text(v.to_string()))
+        .collect()
 }
 
 fn floats(values: &[f64]) -> Vec<SettingValue> {
@@ -184,10 +190,7 @@ pub fn default_grid(engine: &str) -> Result<Vec<Overlay>> {
             ("solver_iterations".into(), ints(&[10, 50, 200])),
             ts(&coarse),
         ]),
-        "rapier" => cross(&[
-            ("solver_iterations".into(), ints(&[1, 4, 8])),
-            ts(&coarse),
-        ]),
+        "rapier" => cross(&[("solver_iterations".into(), ints(&[1, 4, 8])), ts(&coarse)]),
         "ode" => {
             let mut points = cross(&[
                 ("stepper".into(), texts(&["quick_step"])),
@@ -269,13 +272,9 @@ fn load_scenes(files: &[PathBuf], engine: &dyn Engine) -> Result<Vec<SceneCase>>
         let robot = RobotModel::from_urdf_file(&scene.robot.urdf, &resolver)
             .with_context(|| format!("the robot of scene {}", file.display()))?;
         scene.validate(&robot)?;
-        let (scene, robot) = realitygap_core::controller::prepare(
-            engine,
-            &scene,
-            &robot,
-            &PhysicalParams::none(),
-        )
-        .map_err(|e| anyhow!("scene {}: {e}", file.display()))?;
+        let (scene, robot) =
+            realitygap_core::controller::prepare(engine, &scene, &robot, &PhysicalParams::none())
+                .map_err(|e| anyhow!("scene {}: {e}", file.display()))?;
         if out.iter().any(|c| c.scene.name == scene.name) {
             bail!("scene \"{}\" is given twice", scene.name);
         }
@@ -300,7 +299,10 @@ fn settings_for(case: &SceneCase, engine: &dyn Engine, point: &Overlay) -> Resul
 
 /// `--set` form of a point, e.g. `mujoco.timestep_s=0.002`.
 pub fn set_args(engine: &str, point: &Overlay) -> Vec<String> {
-    point.iter().map(|(k, v)| format!("{engine}.{k}={v}")).collect()
+    point
+        .iter()
+        .map(|(k, v)| format!("{engine}.{k}={v}"))
+        .collect()
 }
 
 fn label(point: &Overlay) -> (String, String) {
@@ -395,7 +397,12 @@ pub struct SceneResult {
 
 /// Runs one scene at `settings`, `repeats` times; never fails: a refused
 /// setting or a panic is a `failed` result.
-fn run_case(case: &SceneCase, engine: &dyn Engine, settings: &EngineSettings, repeats: u32) -> SceneResult {
+fn run_case(
+    case: &SceneCase,
+    engine: &dyn Engine,
+    settings: &EngineSettings,
+    repeats: u32,
+) -> SceneResult {
     let mut result = SceneResult {
         scene: case.scene.name.clone(),
         status: "ok".into(),
@@ -481,8 +488,15 @@ pub fn deviation(run: &Trajectory, reference: &Trajectory) -> Option<BTreeMap<St
             continue;
         }
         let max = d.iter().copied().fold(0.0, f64::max);
-        let max = if d.iter().any(|x| x.is_nan()) { f64::INFINITY } else { max };
-        out.insert(body.role.clone(), [max, d.iter().sum::<f64>() / d.len() as f64]);
+        let max = if d.iter().any(|x| x.is_nan()) {
+            f64::INFINITY
+        } else {
+            max
+        };
+        out.insert(
+            body.role.clone(),
+            [max, d.iter().sum::<f64>() / d.len() as f64],
+        );
     }
     Some(out)
 }
@@ -568,7 +582,10 @@ fn measure(cases: &[SceneCase], engine: &dyn Engine, overlay: &Overlay, repeats:
     Point {
         label,
         group,
-        settings: overlay.iter().map(|(k, v)| (k.clone(), json_of(v))).collect(),
+        settings: overlay
+            .iter()
+            .map(|(k, v)| (k.clone(), json_of(v)))
+            .collect(),
         set: set_args(engine.name(), overlay),
         scene_setting: overlay.is_empty(),
         cpu_s,
@@ -696,7 +713,10 @@ fn converge(
             .find(|(k, _)| k == "timestep_s")
             .and_then(|(_, v)| v.as_f64())
             .unwrap_or(f64::NAN);
-        eprintln!("  reference: timestep {ts} s changes the runs by {:.3e} m", change);
+        eprintln!(
+            "  reference: timestep {ts} s changes the runs by {:.3e} m",
+            change
+        );
         halvings.push((ts, change));
         (overlay, point, trajectories) = (finer, next, next_traj);
         if change < threshold_m {
@@ -770,7 +790,11 @@ fn measure_gaps(points: &mut [&mut Point], data: &Path, out: &Path) -> Result<Ve
             continue;
         };
         for summary in &report.sources {
-            let Some(pi) = summary.source.strip_prefix('p').and_then(|i| i.parse::<usize>().ok()) else {
+            let Some(pi) = summary
+                .source
+                .strip_prefix('p')
+                .and_then(|i| i.parse::<usize>().ok())
+            else {
                 continue;
             };
             if let Some(p) = points.get_mut(pi) {
@@ -879,7 +903,6 @@ fn grid(args: &Args, engine: &dyn Engine, cases: &[SceneCase]) -> Result<Vec<Ove
     Ok(points)
 }
 
-
 /// Writes the reference's runs as results directories
 /// `OUT/reference/<scene>/<engine>/` (run000.csv), to compare other runs
 /// with.
@@ -916,7 +939,10 @@ fn params_file(engine: &str, point: &Point, tolerance_mm: f64) -> String {
 /// `realitygap frontier`.
 pub fn run(args: Args) -> Result<()> {
     if !(args.tolerance_mm.is_finite() && args.tolerance_mm > 0.0) {
-        bail!("--tolerance-mm {}: expected a positive number of millimetres", args.tolerance_mm);
+        bail!(
+            "--tolerance-mm {}: expected a positive number of millimetres",
+            args.tolerance_mm
+        );
     }
     let tolerance_m = args.tolerance_mm * 1e-3;
     cmd_engines::install_native_handlers();
@@ -954,13 +980,18 @@ pub fn run(args: Args) -> Result<()> {
             overlays.len(),
             p.label,
             p.status,
-            p.max_deviation_m.map_or("n/a".into(), |d| format!("{:.3e} m", d)),
+            p.max_deviation_m
+                .map_or("n/a".into(), |d| format!("{:.3e} m", d)),
             p.real_time_factor
         );
         points.push(p);
     }
     let mut reference = reference;
-    score(&mut reference.point, &reference.trajectories.clone(), tolerance_m);
+    score(
+        &mut reference.point,
+        &reference.trajectories.clone(),
+        tolerance_m,
+    );
     let notes = match &data {
         Some(d) => {
             let mut all: Vec<&mut Point> = points.iter_mut().collect();
@@ -1060,7 +1091,10 @@ fn write_outputs(
     match recommended {
         Some(i) => {
             let p = &points[i];
-            write("recommended.toml", params_file(engine.name(), p, args.tolerance_mm))?;
+            write(
+                "recommended.toml",
+                params_file(engine.name(), p, args.tolerance_mm),
+            )?;
             println!(
                 "recommended: {} ({}), max deviation {:.3} mm, {:.1}x faster than the reference{}",
                 p.label,
@@ -1068,7 +1102,10 @@ fn write_outputs(
                 p.max_deviation_m.unwrap_or(f64::NAN) * 1e3,
                 speedup(r, p),
                 scene_setting
-                    .map(|s| format!(", {:.1}x faster than the scene's own setting", speedup(&points[s], p)))
+                    .map(|s| format!(
+                        ", {:.1}x faster than the scene's own setting",
+                        speedup(&points[s], p)
+                    ))
                     .unwrap_or_default()
             );
         }

@@ -104,7 +104,11 @@ pub fn pareto_front(points: &[FrontierPoint]) -> Vec<usize> {
         })
         .map(|(i, _, _)| *i)
         .collect();
-    front.sort_by(|a, b| points[*a].real_time_factor.total_cmp(&points[*b].real_time_factor));
+    front.sort_by(|a, b| {
+        points[*a]
+            .real_time_factor
+            .total_cmp(&points[*b].real_time_factor)
+    });
     front
 }
 
@@ -182,9 +186,7 @@ impl FrontierFigure {
             let mut enc = png::Encoder::new(&mut out, WIDTH_PX, HEIGHT_PX);
             enc.set_color(png::ColorType::Rgb);
             enc.set_depth(png::BitDepth::Eight);
-            let mut w = enc
-                .write_header()
-                .map_err(|e| self.error(e.to_string()))?;
+            let mut w = enc.write_header().map_err(|e| self.error(e.to_string()))?;
             w.write_image_data(&rgb)
                 .map_err(|e| self.error(e.to_string()))?;
             w.finish().map_err(|e| self.error(e.to_string()))?;
@@ -238,7 +240,13 @@ impl FrontierFigure {
             .label_style((FAMILY, 12))
             .light_line_style(RGBColor(240, 240, 240))
             .bold_line_style(RGBColor(220, 220, 220))
-            .x_label_formatter(&|v| format!("{v:.3e}"))
+            .x_label_formatter(&|v| {
+                if *v >= 1.0 {
+                    format!("{v:.0}")
+                } else {
+                    format!("{v:.2}")
+                }
+            })
             .y_label_formatter(&|v| format!("{v:.0e}"))
             .draw()
             .map_err(e)?;
@@ -314,7 +322,8 @@ impl FrontierFigure {
         area: &DrawingArea<DB, plotters::coord::Shift>,
         groups: &[&str],
     ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
-        let style = TextStyle::from((FAMILY, 12).into_font()).pos(Pos::new(HPos::Left, VPos::Center));
+        let style =
+            TextStyle::from((FAMILY, 12).into_font()).pos(Pos::new(HPos::Left, VPos::Center));
         let mut y = 44;
         for (gi, g) in groups.iter().enumerate() {
             let (r, gr, b) = PALETTE[gi % PALETTE.len()];
@@ -327,7 +336,10 @@ impl FrontierFigure {
             area.draw(&Text::new(g.to_string(), (24, y), style.clone()))?;
             y += 20;
         }
-        area.draw(&PathElement::new(vec![(4, y), (20, y)], BLACK.stroke_width(2)))?;
+        area.draw(&PathElement::new(
+            vec![(4, y), (20, y)],
+            BLACK.stroke_width(2),
+        ))?;
         area.draw(&Text::new("Pareto front", (24, y), style.clone()))?;
         y += 20;
         area.draw(&Cross::new((12, y), 5, BLACK.stroke_width(2)))?;
@@ -365,7 +377,7 @@ mod tests {
         let pts = vec![
             point("a", 1.0, 1e-6, false),
             point("b", 10.0, 1e-4, false),
-            point("c", 5.0, 1e-3, false), // dominated by b
+            point("c", 5.0, 1e-3, false),  // dominated by b
             point("d", 100.0, 1e-5, true), // diverged
             point("e", 50.0, 1e-2, false),
         ];
