@@ -974,14 +974,19 @@ pub fn run(args: Args) -> Result<()> {
             p.group = "scene's own".into();
         }
         score(&mut p, &reference.trajectories, tolerance_m);
+        let outcome = match (p.status.as_str(), p.max_deviation_m) {
+            ("ok", Some(d)) => format!("max deviation {d:.3e} m"),
+            _ => p
+                .scenes
+                .iter()
+                .find_map(|s| s.message.clone())
+                .unwrap_or_else(|| p.status.clone()),
+        };
         eprintln!(
-            "  [{}/{}] {}: {} , max deviation {}, {:.1}x real time",
+            "  [{}/{}] {}: {outcome}, {:.1}x real time",
             i + 1,
             overlays.len(),
             p.label,
-            p.status,
-            p.max_deviation_m
-                .map_or("n/a".into(), |d| format!("{:.3e} m", d)),
             p.real_time_factor
         );
         points.push(p);
