@@ -630,8 +630,12 @@ fn score(point: &mut Point, reference: &[Trajectory], tolerance_m: f64) {
     point.max_deviation_m = all(|s| s.max_deviation_m).and_then(|v| v.into_iter().reduce(f64::max));
     point.mean_deviation_m =
         all(|s| s.mean_deviation_m).map(|v| v.iter().sum::<f64>() / v.len().max(1) as f64);
-    point.within_tolerance =
-        point.status == "ok" && point.max_deviation_m.is_some_and(|d| d <= tolerance_m);
+    if point.status != "ok" {
+        // Only the runs' own entries keep the deviation before the end.
+        point.max_deviation_m = None;
+        point.mean_deviation_m = None;
+    }
+    point.within_tolerance = point.max_deviation_m.is_some_and(|d| d <= tolerance_m);
 }
 
 /// The converged reference: the finest point, its timestep halved until a

@@ -149,6 +149,7 @@ fn a_diverging_setting_is_recorded_and_the_sweep_goes_on() {
     assert_eq!(points.len(), 3);
     assert_eq!(points[0]["status"], "diverged", "{}", points[0]);
     assert_eq!(points[0]["within_tolerance"], false);
+    assert!(points[0]["max_deviation_m"].is_null(), "{}", points[0]);
     let message = points[0]["scenes"][0]["message"].as_str().unwrap();
     assert!(message.contains("diverged at t ="), "{message}");
     assert_eq!(points[1]["status"], "ok");
