@@ -14,7 +14,9 @@
 //!   finest setting of the sweep (smallest timestep; the largest number of
 //!   every other numeric key; the last value listed of every text key),
 //!   rerun with its timestep halved until two successive runs differ by
-//!   less than a tenth of the tolerance (at most [`MAX_HALVINGS`] times);
+//!   less than a tenth of the tolerance (at most `--max-halvings` times;
+//!   each halving is timed once, the finest setting itself `--repeats`
+//!   times);
 //! - with `--data`, the accumulated gap to the real arm, by the same
 //!   analysis as `compare` and `reproduce` (the study's scenes only);
 //! - the status: `ok`, `diverged` (the run stopped at a non-finite or
@@ -66,8 +68,8 @@ const COLLINS2019: &str = include_str!(concat!(
     "/../../assets/studies/collins2019.toml"
 ));
 
-/// Most times the finest timestep is halved in search of convergence.
-pub const MAX_HALVINGS: usize = 4;
+/// Default of `--max-halvings`.
+pub const MAX_HALVINGS: usize = 3;
 
 /// Arguments of `realitygap frontier`.
 #[derive(clap::Args, Debug)]
@@ -94,6 +96,11 @@ pub struct Args {
     /// Timed runs per setting and scene; the minimum CPU time is kept.
     #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=100))]
     pub repeats: u32,
+    /// Most times the finest setting's timestep is halved in search of a
+    /// converged reference (each halving doubles its cost; contact scenes
+    /// may need many).
+    #[arg(long, default_value_t = MAX_HALVINGS, value_parser = clap::value_parser!(u64).range(0..=10).map(|v| v as usize))]
+    pub max_halvings: usize,
     /// Output folder.
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
@@ -665,6 +672,7 @@ fn converge(
     finest: &Overlay,
     repeats: u32,
     threshold_m: f64,
+    max_halvings: usize,
 ) -> Result<Reference> {
     let trajectories_of = |p: &Point| -> Result<Vec<Trajectory>> {
         p.scenes
@@ -694,7 +702,7 @@ fn converge(
     let mut trajectories = trajectories_of(&point)?;
     let mut halvings = Vec::new();
     let mut converged = false;
-    for _ in 0..MAX_HALVINGS {
+    for _ in 0..max_halvings {
         let finer: Overlay = overlay
             .iter()
             .map(|(k, v)| match (k.as_str(), v.as_f64()) {
@@ -702,7 +710,7 @@ fn converge(
                 _ => (k.clone(), v.clone()),
             })
             .collect();
-        let next = measure(cases, engine, &finer, repeats);
+        let next = measure(cases, engine, &finer, 1);
         let Ok(next_traj) = trajectories_of(&next) else {
             break;
         };
@@ -969,7 +977,14 @@ pub fn run(args: Args) -> Result<()> {
         cases.len(),
         set_args(engine.name(), &finest).join(" ")
     );
-    let reference = converge(&cases, engine, &finest, args.repeats, tolerance_m / 10.0)?;
+    let reference = converge(
+        &cases,
+        engine,
+        &finest,
+        args.repeats,
+        tolerance_m / 10.0,
+        args.max_halvings,
+    )?;
     let mut points: Vec<Point> = Vec::new();
     for (i, o) in overlays.iter().enumerate() {
         let mut p = measure(&cases, engine, o, args.repeats);
@@ -1057,6 +1072,7 @@ fn write_outputs(
             "real_time_factor": r.real_time_factor,
             "gap_m": r.gap_m,
             "finest_set": reference.finest_set,
+            "repeats": if reference.halvings.is_empty() { args.repeats } else { 1 },
             "halvings": reference.halvings.iter().map(|(ts, c)| serde_json::json!({"timestep_s": ts, "change_m": c})).collect::<Vec<_>>(),
             "converged": reference.converged,
             "threshold_m": reference.threshold_m,
