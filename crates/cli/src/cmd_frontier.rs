@@ -69,7 +69,7 @@ const COLLINS2019: &str = include_str!(concat!(
 ));
 
 /// Default of `--max-halvings`.
-pub const MAX_HALVINGS: usize = 3;
+pub const MAX_HALVINGS: u32 = 3;
 
 /// Arguments of `realitygap frontier`.
 #[derive(clap::Args, Debug)]
@@ -99,8 +99,8 @@ pub struct Args {
     /// Most times the finest setting's timestep is halved in search of a
     /// converged reference (each halving doubles its cost; contact scenes
     /// may need many).
-    #[arg(long, default_value_t = MAX_HALVINGS, value_parser = clap::value_parser!(u64).range(0..=10).map(|v| v as usize))]
-    pub max_halvings: usize,
+    #[arg(long, default_value_t = MAX_HALVINGS, value_parser = clap::value_parser!(u32).range(0..=10))]
+    pub max_halvings: u32,
     /// Output folder.
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
@@ -672,7 +672,7 @@ fn converge(
     finest: &Overlay,
     repeats: u32,
     threshold_m: f64,
-    max_halvings: usize,
+    max_halvings: u32,
 ) -> Result<Reference> {
     let trajectories_of = |p: &Point| -> Result<Vec<Trajectory>> {
         p.scenes
