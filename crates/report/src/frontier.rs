@@ -275,28 +275,7 @@ impl FrontierFigure {
             )))
             .map_err(e)?;
         let groups = self.groups();
-        for p in &self.points {
-            let Some(v) = p.value_m.filter(|v| v.is_finite()) else {
-                continue;
-            };
-            let at = (p.real_time_factor, v.max(FLOOR_M));
-            let gi = groups.iter().position(|g| *g == p.group).unwrap_or(0);
-            let (r, g, b) = PALETTE[gi % PALETTE.len()];
-            let color = RGBColor(r, g, b);
-            if p.diverged {
-                chart
-                    .draw_series(std::iter::once(Cross::new(at, 5, color.stroke_width(2))))
-                    .map_err(e)?;
-            } else if gi % 2 == 0 {
-                chart
-                    .draw_series(std::iter::once(Circle::new(at, 4, color.filled())))
-                    .map_err(e)?;
-            } else {
-                chart
-                    .draw_series(std::iter::once(TriangleMarker::new(at, 5, color.filled())))
-                    .map_err(e)?;
-            }
-        }
+        self.draw_points(&mut chart, &groups).map_err(e)?;
         if let Some(p) = self.recommended.and_then(|i| self.points.get(i)) {
             if let Some(v) = p.value_m {
                 let at = (p.real_time_factor, v.max(FLOOR_M));
@@ -315,6 +294,32 @@ impl FrontierFigure {
             }
         }
         self.draw_legend(&legend, &groups).map_err(e)
+    }
+
+    /// One marker per point: a circle or triangle in its group's colour, a
+    /// cross for a diverged one.
+    fn draw_points<DB: DrawingBackend>(
+        &self,
+        chart: &mut ChartContext<'_, DB, Cartesian2d<LogCoord<f64>, LogCoord<f64>>>,
+        groups: &[&str],
+    ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+        for p in &self.points {
+            let Some(v) = p.value_m.filter(|v| v.is_finite()) else {
+                continue;
+            };
+            let at = (p.real_time_factor, v.max(FLOOR_M));
+            let gi = groups.iter().position(|g| *g == p.group).unwrap_or(0);
+            let (r, g, b) = PALETTE[gi % PALETTE.len()];
+            let color = RGBColor(r, g, b);
+            if p.diverged {
+                chart.draw_series(std::iter::once(Cross::new(at, 5, color.stroke_width(2))))?;
+            } else if gi % 2 == 0 {
+                chart.draw_series(std::iter::once(Circle::new(at, 4, color.filled())))?;
+            } else {
+                chart.draw_series(std::iter::once(TriangleMarker::new(at, 5, color.filled())))?;
+            }
+        }
+        Ok(())
     }
 
     fn draw_legend<DB: DrawingBackend>(
