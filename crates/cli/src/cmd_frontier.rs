@@ -655,15 +655,26 @@ pub struct Reference {
     pub point: Point,
     /// The finest setting of the sweep it started from.
     pub finest_set: Vec<String>,
-    /// Each halving: the timestep, s, and the largest change from the run
-    /// before, m.
-    pub halvings: Vec<(f64, f64)>,
+    /// Each halving, in order.
+    pub halvings: Vec<Halving>,
     /// The last change fell below the threshold.
     pub converged: bool,
     /// The threshold: a tenth of the tolerance, m.
     pub threshold_m: f64,
     #[serde(skip)]
     trajectories: Vec<Trajectory>,
+}
+
+/// One halving of the reference's timestep.
+#[derive(Debug, Clone, Serialize)]
+pub struct Halving {
+    /// The halved timestep, s.
+    pub timestep_s: f64,
+    /// Largest change of a tracked body from the run before, over the
+    /// scenes, m.
+    pub change_m: f64,
+    /// The same per scene (in the order given), m.
+    pub change_by_scene_m: Vec<f64>,
 }
 
 fn converge(
@@ -714,12 +725,16 @@ fn converge(
         let Ok(next_traj) = trajectories_of(&next) else {
             break;
         };
-        let change = next_traj
+        let by_scene: Vec<f64> = next_traj
             .iter()
             .zip(&trajectories)
-            .filter_map(|(a, b)| deviation(a, b))
-            .flat_map(|m| m.into_values().map(|v| v[0]))
-            .fold(0.0, f64::max);
+            .map(|(a, b)| {
+                deviation(a, b).map_or(f64::INFINITY, |m| {
+                    m.into_values().map(|v| v[0]).fold(0.0, f64::max)
+                })
+            })
+            .collect();
+        let change = by_scene.iter().copied().fold(0.0, f64::max);
         let ts = finer
             .iter()
             .find(|(k, _)| k == "timestep_s")
@@ -729,7 +744,11 @@ fn converge(
             "  reference: timestep {ts} s changes the runs by {:.3e} m",
             change
         );
-        halvings.push((ts, change));
+        halvings.push(Halving {
+            timestep_s: ts,
+            change_m: change,
+            change_by_scene_m: by_scene,
+        });
         (overlay, point, trajectories) = (finer, next, next_traj);
         if change < threshold_m {
             converged = true;
@@ -1073,7 +1092,7 @@ fn write_outputs(
             "gap_m": r.gap_m,
             "finest_set": reference.finest_set,
             "repeats": if reference.halvings.is_empty() { args.repeats } else { 1 },
-            "halvings": reference.halvings.iter().map(|(ts, c)| serde_json::json!({"timestep_s": ts, "change_m": c})).collect::<Vec<_>>(),
+            "halvings": reference.halvings,
             "converged": reference.converged,
             "threshold_m": reference.threshold_m,
             "scenes": r.scenes,

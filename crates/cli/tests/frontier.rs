@@ -72,6 +72,8 @@ fn a_two_setting_sweep_writes_frontier_json_figures_and_a_usable_params_file() {
     assert_eq!(j["reference"]["finest_set"][1], "mujoco.timestep_s=0.001");
     let halvings = j["reference"]["halvings"].as_array().unwrap();
     assert!(!halvings.is_empty());
+    assert_eq!(halvings[0]["timestep_s"], 0.0005);
+    assert_eq!(halvings[0]["change_by_scene_m"].as_array().unwrap().len(), 1);
     assert!(j["reference"]["cpu_s"].as_f64().unwrap() > 0.0);
     let points = j["points"].as_array().unwrap();
     assert_eq!(points.len(), 3, "two settings and the scene's own");
