@@ -73,7 +73,10 @@ fn a_two_setting_sweep_writes_frontier_json_figures_and_a_usable_params_file() {
     let halvings = j["reference"]["halvings"].as_array().unwrap();
     assert!(!halvings.is_empty());
     assert_eq!(halvings[0]["timestep_s"], 0.0005);
-    assert_eq!(halvings[0]["change_by_scene_m"].as_array().unwrap().len(), 1);
+    assert_eq!(
+        halvings[0]["change_by_scene_m"].as_array().unwrap().len(),
+        1
+    );
     assert!(j["reference"]["cpu_s"].as_f64().unwrap() > 0.0);
     let points = j["points"].as_array().unwrap();
     assert_eq!(points.len(), 3, "two settings and the scene's own");
@@ -214,4 +217,42 @@ fn bad_sweeps_give_clear_errors() {
         "{err}"
     );
     assert!(!out.join("frontier.json").exists(), "nothing ran");
+}
+
+#[test]
+fn with_data_the_gap_is_the_one_reproduce_reports() {
+    let Some(data) = realitygap::paper_data_for_tests() else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let scene =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/scenes/scene1_single_joint.toml");
+    let out = tmp.path().join("f");
+    ok(&[
+        "frontier",
+        scene.to_str().unwrap(),
+        "--engine",
+        "mujoco",
+        "--sweep",
+        "integrator=implicitfast",
+        "--sweep",
+        "timestep_s=0.005",
+        "--repeats",
+        "1",
+        "--max-halvings",
+        "1",
+        "--data",
+        data.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let j = frontier_json(&out);
+    let points = j["points"].as_array().unwrap();
+    // The scene's own setting (Euler, 1e-4 s): MuJoCo's scene-1 entry of
+    // the reproduce table, 8.347 m.
+    let own = points[1]["gap_m"].as_f64().unwrap();
+    assert!((own - 8.347).abs() < 0.001, "{own}");
+    assert!(points[0]["gap_m"].as_f64().unwrap().is_finite());
+    assert!(j["reference"]["gap_m"].as_f64().unwrap().is_finite());
+    assert!(out.join("frontier_gap.svg").is_file() && out.join("frontier_gap.png").is_file());
 }
