@@ -1270,7 +1270,7 @@ mod tests {
         let rep = evaluate_scene(
             &spec(),
             &reference,
-            &[sim.clone()],
+            std::slice::from_ref(&sim),
             &CompareOptions::default(),
         );
         let s = &rep.sources[0];
@@ -1284,5 +1284,128 @@ mod tests {
         let rep = evaluate_scene(&spec(), &reference, &[sim], &study);
         assert_eq!(rep.sources[0].runs_used, 2);
         assert!(rep.sources[0].accumulated_error_m.unwrap() > 1e15);
+    }
+
+    /// Sources with several runs that differ run by run, over a reference
+    /// of several runs, so that the bootstrap has something to resample.
+    fn spread_sources() -> (SourceRuns, Vec<SourceRuns>) {
+        let runs = |name: &str, reach: f64| SourceRuns {
+            name: name.into(),
+            kind: "recorded".into(),
+            rate_hz: 20.0,
+            alignment: None,
+            runs: (0..6)
+                .map(|i| {
+                    run(
+                        &format!("{name}{i}"),
+                        100,
+                        1,
+                        0,
+                        reach + 0.002 * i as f64,
+                        0.0,
+                    )
+                })
+                .collect(),
+        };
+        (runs("ref", 0.5), vec![runs("near", 0.51), runs("far", 0.6)])
+    }
+
+    #[test]
+    fn bootstrap_gives_intervals_around_the_value_and_a_verdict() {
+        let (reference, sources) = spread_sources();
+        let opts = CompareOptions {
+            bootstrap: Some(BootstrapOptions {
+                resamples: 200,
+                ..BootstrapOptions::default()
+            }),
+            ..Default::default()
+        };
+        assert_eq!(opts.bootstrap_in_force().unwrap().resamples, 200);
+        let rep = evaluate_scene(&spec(), &reference, &sources, &opts);
+        for s in &rep.sources {
+            let (v, i) = (
+                s.accumulated_error_m.unwrap(),
+                s.accumulated_error_interval_m.unwrap(),
+            );
+            assert!(
+                i.low_m <= v && v <= i.high_m,
+                "{}: {v} not in {i:?}",
+                s.source
+            );
+            assert_eq!(s.bootstrap_replicates_m.len(), 200);
+        }
+        assert_eq!(rep.closest().unwrap().source, "near");
+        let c = rep.closest_comparison.as_ref().unwrap();
+        assert_eq!((c.closest.as_str(), c.runner_up.as_str()), ("near", "far"));
+        assert!(c.distinguishable && c.probability_closer > 0.95, "{c:?}");
+        assert_eq!(rep.winner().unwrap().source, "near");
+        assert!(rep
+            .verdict()
+            .starts_with("closest source: near (closer than far with probability"));
+        assert_eq!(
+            rep.closest_per_phase(),
+            [Some("near".to_string()), Some("near".to_string())]
+        );
+        // Study mode computes no interval unless asked.
+        let study = CompareOptions {
+            mode: AnalysisMode::Study,
+            ..Default::default()
+        };
+        assert_eq!(study.bootstrap_in_force(), None);
+        let rep = evaluate_scene(&spec(), &reference, &sources, &study);
+        assert!(rep
+            .sources
+            .iter()
+            .all(|s| s.accumulated_error_interval_m.is_none()));
+        assert_eq!(rep.closest_comparison, None);
+        assert_eq!(rep.verdict(), "closest source: near");
+        // Zero resamples switch the bootstrap off in default mode too.
+        let off = CompareOptions {
+            bootstrap: Some(BootstrapOptions {
+                resamples: 0,
+                ..BootstrapOptions::default()
+            }),
+            ..Default::default()
+        };
+        assert_eq!(off.bootstrap_in_force(), None);
+        assert_eq!(
+            CompareOptions::default().bootstrap_in_force(),
+            Some(BootstrapOptions::default())
+        );
+    }
+
+    #[test]
+    fn verdicts_name_the_closest_or_say_they_cannot_be_told_apart() {
+        let mut r = crate::testing::scene();
+        assert_eq!(r.closest().unwrap().source, "Alpha <&>");
+        assert_eq!(r.winner().unwrap().source, "Alpha <&>");
+        assert_eq!(
+            r.verdict(),
+            "closest source: Alpha <&> (closer than Beta with probability 1.000; difference 2.000 m, 95 % interval [1.500, 2.500])"
+        );
+        if let Some(c) = r.closest_comparison.as_mut() {
+            c.distinguishable = false;
+            c.probability_closer = 0.6;
+            c.difference_interval_m = None;
+        }
+        assert!(r.winner().is_none());
+        assert_eq!(
+            r.verdict(),
+            "Alpha <&> and Beta cannot be told apart (probability 0.600 that Alpha <&> is closer; difference 2.000 m, 95 % interval n/a)"
+        );
+        // A non-finite error is never the closest; no source at all: no verdict.
+        r.sources[0].accumulated_error_m = Some(f64::NAN);
+        assert_eq!(r.closest().unwrap().source, "Beta");
+        r.sources.clear();
+        assert_eq!(r.verdict(), "no source could be compared");
+        assert_eq!(r.closest_per_phase(), [None, None]);
+        assert_eq!(fmt_interval(None), "n/a");
+        assert_eq!(
+            fmt_interval(Some(Interval {
+                low_m: -0.0001,
+                high_m: 2.0
+            })),
+            "[-0.000, 2.000]"
+        );
     }
 }

@@ -156,13 +156,16 @@ impl RunHealth {
     }
 }
 
-/// Runs every health check on a trajectory.
-pub fn check(traj: &Trajectory, opts: &HealthOptions) -> RunHealth {
-    let n = traj.len();
-    let mut flags = Vec::new();
-    let t_at = |i: usize| traj.time_s.get(i).copied().unwrap_or(f64::NAN);
+/// Seconds at sample `i` (`NaN` past the end).
+fn t_at(traj: &Trajectory, i: usize) -> f64 {
+    traj.time_s.get(i).copied().unwrap_or(f64::NAN)
+}
 
-    // Non-finite and diverged.
+/// The first non-finite sample and the first diverged one (a position
+/// beyond the bound), with the largest finite coordinate, metres.
+fn non_finite_and_diverged(traj: &Trajectory, opts: &HealthOptions, flags: &mut Vec<HealthFlag>) {
+    let t_at = |i: usize| t_at(traj, i);
+    let n = traj.len();
     let mut first_nonfinite = None;
     let mut first_diverged = None;
     let mut max_abs = 0.0f64;
@@ -202,9 +205,12 @@ pub fn check(traj: &Trajectory, opts: &HealthOptions) -> RunHealth {
             max_abs_m: max_abs,
         });
     }
+}
 
-    // All-zero rows: every seen body at exactly the origin.
-    let zero_rows: Vec<usize> = (0..n)
+/// Samples where every seen body is exactly at the origin.
+fn zero_rows(traj: &Trajectory) -> Vec<usize> {
+    let n = traj.len();
+    (0..n)
         .filter(|&i| {
             let mut seen = false;
             let all_zero = traj.bodies.iter().all(|b| match b.poses[i] {
@@ -216,15 +222,19 @@ pub fn check(traj: &Trajectory, opts: &HealthOptions) -> RunHealth {
             });
             seen && all_zero
         })
-        .collect();
-    if let Some(&first) = zero_rows.first() {
-        flags.push(HealthFlag::ZeroRows {
-            count: zero_rows.len(),
-            first_sample: first,
-        });
-    }
+        .collect()
+}
 
-    // Frozen: longest stretch of bit-identical rows (zero rows excluded).
+/// The longest stretch of bit-identical rows (zero rows excluded), flagged
+/// when it lasts long enough, absolutely and as a share of the run.
+fn frozen(
+    traj: &Trajectory,
+    opts: &HealthOptions,
+    zero_rows: &[usize],
+    flags: &mut Vec<HealthFlag>,
+) {
+    let t_at = |i: usize| t_at(traj, i);
+    let n = traj.len();
     if n > 1 {
         let mut best = (0usize, 0usize); // (start, len in samples)
         let mut start = 0usize;
@@ -256,7 +266,21 @@ pub fn check(traj: &Trajectory, opts: &HealthOptions) -> RunHealth {
             }
         }
     }
+}
 
+/// Runs every health check on a trajectory.
+pub fn check(traj: &Trajectory, opts: &HealthOptions) -> RunHealth {
+    let mut flags = Vec::new();
+    non_finite_and_diverged(traj, opts, &mut flags);
+    let zero_rows = zero_rows(traj);
+    if let Some(&first) = zero_rows.first() {
+        flags.push(HealthFlag::ZeroRows {
+            count: zero_rows.len(),
+            first_sample: first,
+        });
+    }
+
+    frozen(traj, opts, &zero_rows, &mut flags);
     // Gaps.
     for b in &traj.bodies {
         let count = b.poses.iter().filter(|p| p.is_none()).count();

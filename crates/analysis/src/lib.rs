@@ -22,6 +22,8 @@
 //! Everything here is pure computation on [`realitygap_core::Trajectory`];
 //! reading files is the `realitygap-data` crate's job.
 
+#![forbid(unsafe_code)]
+
 pub mod align;
 pub mod bootstrap;
 pub mod compare;
@@ -33,6 +35,7 @@ pub mod selection;
 pub mod stats;
 pub mod study;
 pub mod table;
+pub mod testing;
 
 pub use compare::{AnalysisMode, SceneReport, SourceRuns, SourceSummary};
 pub use health::{HealthFlag, HealthOptions, RunHealth};

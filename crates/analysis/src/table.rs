@@ -257,76 +257,82 @@ fn markdown(reports: &[SceneReport]) -> String {
     }
     markdown_notes(&mut out, reports);
     for r in reports {
-        let _ = writeln!(out, "\n### {}\n", r.scene);
-        let _ = writeln!(
-            out,
-            "Reference: {} ({} of {} runs used).",
-            r.reference.source, r.reference.runs_used, r.reference.runs_total
-        );
-        if let Some(a) = &r.alignment {
-            let starts: Vec<String> = a
-                .runs
-                .iter()
-                .map(|x| x.start.start_frame.to_string())
-                .collect();
-            let _ = writeln!(
-                out,
-                "Alignment: {}; start frames {}.",
-                a.method,
-                starts.join(", ")
-            );
-        }
-        scene_notes(&mut out, r);
-        let _ = writeln!(out);
-        let _ = writeln!(out, "| Source | Runs | Mean err (m) | Final err (m) | Lag (s) | Goal dist (m) | Converged (s) | Overshoot (m) | Orient. err (deg) | Cube final dx (m) | Cube tilt (deg) | Contact (s) |");
-        let _ = writeln!(
-            out,
-            "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
-        );
-        for s in std::iter::once(&r.reference).chain(&r.sources) {
-            let g = s.goal.as_ref();
-            let c = s.cube.as_ref();
-            let _ = writeln!(
-                out,
-                "| {} | {}/{} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
-                s.source,
-                s.runs_used,
-                s.runs_total,
-                fmt_m(s.mean_error_m),
-                fmt_m(s.final_error_m),
-                s.lag_s.map_or("n/a".into(), |v| format!("{v:.2}")),
-                fmt_m(g.and_then(|g| g.final_distance_m)),
-                g.and_then(|g| g.convergence_time_s)
-                    .map_or("never".into(), |t| format!("{t:.2}")),
-                fmt_m(g.and_then(|g| g.overshoot_m)),
-                s.orientation_error_deg
-                    .map_or("n/a".into(), |v| format!("{v:.1}")),
-                fmt_m(c.and_then(|c| c.final_offset_from_nominal_m.map(|o| o[0]))),
-                c.map_or("n/a".into(), |c| format!("{:.1}", c.max_tilt_deg)),
-                c.and_then(|c| c.contact_onset_s)
-                    .map_or("n/a".into(), |t| format!("{t:.2}")),
-            );
-        }
-        let flagged: Vec<String> = std::iter::once(&r.reference)
-            .chain(&r.sources)
-            .flat_map(|s| {
-                s.runs_flagged.iter().map(move |f| {
-                    let what: Vec<String> = f.flags.iter().map(|x| x.describe()).collect();
-                    format!(
-                        "- {} / {}{}: {}",
-                        s.source,
-                        f.run,
-                        if f.excluded { " (left out)" } else { "" },
-                        what.join("; ")
-                    )
-                })
-            })
-            .collect();
-        if !flagged.is_empty() {
-            let _ = writeln!(out, "\nFlagged runs:\n{}", flagged.join("\n"));
-        }
+        markdown_scene(&mut out, r);
     }
     out
+}
+
+/// A scene's section of the Markdown: heading, reference, alignment,
+/// notes, the measures table and the flagged runs.
+fn markdown_scene(out: &mut String, r: &SceneReport) {
+    let _ = writeln!(out, "\n### {}\n", r.scene);
+    let _ = writeln!(
+        out,
+        "Reference: {} ({} of {} runs used).",
+        r.reference.source, r.reference.runs_used, r.reference.runs_total
+    );
+    if let Some(a) = &r.alignment {
+        let starts: Vec<String> = a
+            .runs
+            .iter()
+            .map(|x| x.start.start_frame.to_string())
+            .collect();
+        let _ = writeln!(
+            out,
+            "Alignment: {}; start frames {}.",
+            a.method,
+            starts.join(", ")
+        );
+    }
+    scene_notes(out, r);
+    let _ = writeln!(out);
+    let _ = writeln!(out, "| Source | Runs | Mean err (m) | Final err (m) | Lag (s) | Goal dist (m) | Converged (s) | Overshoot (m) | Orient. err (deg) | Cube final dx (m) | Cube tilt (deg) | Contact (s) |");
+    let _ = writeln!(
+        out,
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+    );
+    for s in std::iter::once(&r.reference).chain(&r.sources) {
+        let g = s.goal.as_ref();
+        let c = s.cube.as_ref();
+        let _ = writeln!(
+            out,
+            "| {} | {}/{} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            s.source,
+            s.runs_used,
+            s.runs_total,
+            fmt_m(s.mean_error_m),
+            fmt_m(s.final_error_m),
+            s.lag_s.map_or("n/a".into(), |v| format!("{v:.2}")),
+            fmt_m(g.and_then(|g| g.final_distance_m)),
+            g.and_then(|g| g.convergence_time_s)
+                .map_or("never".into(), |t| format!("{t:.2}")),
+            fmt_m(g.and_then(|g| g.overshoot_m)),
+            s.orientation_error_deg
+                .map_or("n/a".into(), |v| format!("{v:.1}")),
+            fmt_m(c.and_then(|c| c.final_offset_from_nominal_m.map(|o| o[0]))),
+            c.map_or("n/a".into(), |c| format!("{:.1}", c.max_tilt_deg)),
+            c.and_then(|c| c.contact_onset_s)
+                .map_or("n/a".into(), |t| format!("{t:.2}")),
+        );
+    }
+    let flagged: Vec<String> = std::iter::once(&r.reference)
+        .chain(&r.sources)
+        .flat_map(|s| {
+            s.runs_flagged.iter().map(move |f| {
+                let what: Vec<String> = f.flags.iter().map(|x| x.describe()).collect();
+                format!(
+                    "- {} / {}{}: {}",
+                    s.source,
+                    f.run,
+                    if f.excluded { " (left out)" } else { "" },
+                    what.join("; ")
+                )
+            })
+        })
+        .collect();
+    if !flagged.is_empty() {
+        let _ = writeln!(out, "\nFlagged runs:\n{}", flagged.join("\n"));
+    }
 }
 
 /// The lines under a scene's heading: runs, group shift, registration
@@ -566,3 +572,6 @@ fn latex_interval(cell: String) -> String {
         None => cell,
     }
 }
+
+#[cfg(test)]
+mod tests;

@@ -1,7 +1,7 @@
 //! `realitygap engines`: the physics engines compiled into this binary, and
 //! the registry the other commands find them in.
 
-use anyhow::{bail, Result};
+use anyhow::Result;
 use realitygap_core::engine::Engine;
 use realitygap_core::params::ParamKey;
 
@@ -19,6 +19,8 @@ pub struct Args {
 }
 
 /// Every engine compiled in (cargo features of this crate), by name.
+// The pushes depend on the features compiled in: no `vec![...]` can say that.
+#[allow(clippy::vec_init_then_push)]
 pub fn compiled() -> Vec<Box<dyn Engine>> {
     #[allow(unused_mut)]
     let mut engines: Vec<Box<dyn Engine>> = Vec::new();
@@ -31,20 +33,6 @@ pub fn compiled() -> Vec<Box<dyn Engine>> {
     #[cfg(feature = "bullet")]
     engines.push(Box::new(realitygap_engine_bullet::BulletEngine));
     engines
-}
-
-/// The compiled-in engine called `name`.
-pub fn find(name: &str) -> Result<Box<dyn Engine>> {
-    let engines = compiled();
-    let names: Vec<&str> = engines.iter().map(|e| e.name()).collect();
-    if names.is_empty() {
-        bail!("no physics engine is compiled into this binary (build it with a feature such as `--features mujoco`)");
-    }
-    let list = names.join(", ");
-    match engines.into_iter().find(|e| e.name() == name) {
-        Some(e) => Ok(e),
-        None => bail!("unknown engine \"{name}\" (compiled in: {list})"),
-    }
 }
 
 /// Prepares the engines' native libraries for this process (MuJoCo: route
@@ -97,7 +85,7 @@ pub fn param_table(engine: &dyn Engine) -> Vec<(ParamKey, String)> {
         .iter()
         .map(|&key| {
             let mapping = match (key.core_mapping(), support.iter().find(|s| s.key == key)) {
-                (Some(core), _) => format!("controller: {core}"),
+                (Some(core), _) => format!("core controller: {core}"),
                 (None, Some(s)) => s.mapping.to_string(),
                 (None, None) => "not supported (a file setting it is an error)".to_string(),
             };

@@ -1,13 +1,11 @@
 //! `realitygap report`: the figures, tables and `index.html` of a study.
 
-use crate::cmd_compare::{evaluate, load_study, MeasureArgs};
+use crate::cmd_compare::MeasureArgs;
 use anyhow::{Context, Result};
-use realitygap::data_source::DataSource;
-use realitygap::study::{expand, glob, Roots, SourceFormat, SourceSpec, Study};
-use realitygap_analysis::compare::AnalysisMode;
-use realitygap_data::RunStore;
-use realitygap_report::{write_report, Provenance, SourceProvenance};
-use std::path::{Path, PathBuf};
+use realitygap_report::write_report;
+use realitygap_study::provenance::{measure_details, provenance_for_study};
+use realitygap_study::{evaluate_measured, load_study, DataSource};
+use std::path::PathBuf;
 
 /// Arguments of `realitygap report`.
 #[derive(clap::Args)]
@@ -35,25 +33,12 @@ pub struct Args {
 
 /// Runs the command.
 pub fn run(args: Args) -> Result<()> {
-    let mode = args.measure.analysis_mode();
+    let measure = args.measure.measure();
     let (study, roots) = load_study(&args.study, &args.data, args.results.clone())?;
-    let reports = evaluate(&args.study, &study, &roots, &args.measure)?;
-    let mut provenance = provenance_for_study(&study, &args.study, &roots, mode);
+    let reports = evaluate_measured(&args.study, &study, &roots, &measure)?;
+    let mut provenance = provenance_for_study(&study, &args.study, &roots, measure.mode);
     provenance.details.extend(args.data.provenance());
-    if let Some(a) = &args.measure.alignment {
-        provenance
-            .details
-            .push(("Alignment override".into(), a.clone()));
-    }
-    for (what, value) in [
-        ("Registration", &args.measure.registration),
-        ("Runs", &args.measure.runs),
-        ("Held-out runs", &args.measure.holdout),
-    ] {
-        if let Some(v) = value {
-            provenance.details.push((what.into(), v.clone()));
-        }
-    }
+    provenance.details.extend(measure_details(&measure));
     let files = write_report(&reports, &provenance, &args.out)
         .with_context(|| format!("writing the report into {}", args.out.display()))?;
     eprintln!(
@@ -63,160 +48,4 @@ pub fn run(args: Args) -> Result<()> {
     );
     println!("{}", files.index_html.display());
     Ok(())
-}
-
-/// Provenance of a report of `study`: the study's title, file and folders,
-/// the mode, and per source (reference and sources, each once) where its
-/// runs came from: the format and files for recordings, the engine,
-/// settings and seeds from the manifest for results directories.
-pub fn provenance_for_study(
-    study: &Study,
-    study_path: &Path,
-    roots: &Roots,
-    mode: AnalysisMode,
-) -> Provenance {
-    let mut p = Provenance::new(study.title.clone().unwrap_or_else(|| study.name.clone()));
-    let absolute = |p: &Path| {
-        std::fs::canonicalize(p)
-            .unwrap_or_else(|_| p.to_path_buf())
-            .display()
-            .to_string()
-    };
-    p.study = Some(absolute(study_path));
-    p.data_dir = Some(absolute(&roots.data));
-    p.results_dir = Some(absolute(&roots.results));
-    p.mode = mode;
-    p.details.push((
-        "Control period".into(),
-        format!("{} s", study.control_period_s),
-    ));
-    for scene in &study.scenes {
-        for spec in std::iter::once(&scene.reference)
-            .chain(&study.sources)
-            .chain(&scene.sources)
-        {
-            let entry = match p.sources.iter().position(|s| s.name == spec.name) {
-                Some(i) => i,
-                None => {
-                    p.sources.push(source_header(spec));
-                    p.sources.len() - 1
-                }
-            };
-            let details = scene_details(spec, &scene.vars, roots);
-            for (k, v) in details {
-                p.sources[entry]
-                    .details
-                    .push((format!("{}: {k}", scene.name), v));
-            }
-        }
-    }
-    p
-}
-
-/// What is the same for a source in every scene.
-fn source_header(spec: &SourceSpec) -> SourceProvenance {
-    let mut s = SourceProvenance::new(&spec.name).with(
-        "format",
-        match spec.format {
-            SourceFormat::Qualisys => "Qualisys 6DOF TSV (motion capture)",
-            SourceFormat::Recorded => "recorded simulator CSV",
-            SourceFormat::Store => "realitygap results directory",
-        },
-    );
-    if let Some(about) = &spec.about {
-        s = s.with("about", about.clone());
-    }
-    if let Some(q) = spec.quat_order {
-        s = s.with("quaternion order", q.to_string());
-    }
-    s
-}
-
-/// What a source's runs in one scene came from.
-fn scene_details(
-    spec: &SourceSpec,
-    vars: &std::collections::BTreeMap<String, String>,
-    roots: &Roots,
-) -> Vec<(String, String)> {
-    let mut out = Vec::new();
-    if let Some(a) = &spec.alignment {
-        out.push(("alignment in the study file".into(), a.describe()));
-    }
-    match spec.format {
-        SourceFormat::Qualisys | SourceFormat::Recorded => {
-            let Some(pattern) = spec.files.as_deref().and_then(|f| expand(f, vars).ok()) else {
-                return out;
-            };
-            let count = glob(&roots.data, &pattern).map(|f| f.len()).unwrap_or(0);
-            out.push(("files".into(), format!("{pattern} ({count} files)")));
-        }
-        SourceFormat::Store => {
-            let Some(dir) = spec.dir.as_deref().and_then(|d| expand(d, vars).ok()) else {
-                return out;
-            };
-            let path = roots.results.join(&dir);
-            out.push(("results directory".into(), dir));
-            match RunStore::open(&path) {
-                Ok(store) => {
-                    let m = store.manifest();
-                    if let Some(e) = &m.engine {
-                        out.push(("engine".into(), format!("{} {}", e.name, e.version)));
-                    }
-                    out.push((
-                        "written by".into(),
-                        format!("realitygap {}", m.tool_version),
-                    ));
-                    if let serde_json::Value::Object(settings) = &m.settings {
-                        for (k, v) in settings {
-                            let v = match v {
-                                serde_json::Value::String(s) => s.clone(),
-                                other => other.to_string(),
-                            };
-                            out.push((k.clone(), v));
-                        }
-                    }
-                    let mut seeds: Vec<u64> = m.runs.iter().filter_map(|r| r.seed).collect();
-                    if !seeds.is_empty() {
-                        seeds.sort_unstable();
-                        seeds.dedup();
-                        out.push(("seeds".into(), ranges(&seeds)));
-                    }
-                    out.push(("runs".into(), m.runs.len().to_string()));
-                }
-                Err(e) => out.push(("manifest".into(), format!("unreadable: {e}"))),
-            }
-        }
-    }
-    out
-}
-
-/// Sorted distinct numbers as ranges: `0-19, 25, 30-31`.
-fn ranges(v: &[u64]) -> String {
-    let mut parts: Vec<String> = Vec::new();
-    let mut i = 0;
-    while i < v.len() {
-        let mut j = i;
-        while j + 1 < v.len() && v[j + 1] == v[j] + 1 {
-            j += 1;
-        }
-        parts.push(if i == j {
-            v[i].to_string()
-        } else {
-            format!("{}-{}", v[i], v[j])
-        });
-        i = j + 1;
-    }
-    parts.join(", ")
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn seed_ranges() {
-        assert_eq!(ranges(&[0, 1, 2, 3, 7, 9, 10]), "0-3, 7, 9-10");
-        assert_eq!(ranges(&[5]), "5");
-        assert_eq!(ranges(&[]), "");
-    }
 }

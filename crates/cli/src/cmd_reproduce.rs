@@ -13,27 +13,17 @@
 //!
 //! A rerun skips the finished simulations and redoes the (fast) rest.
 
+use crate::cmd_compare::mode_parser;
 use crate::cmd_engines;
-use crate::cmd_report::provenance_for_study;
 use crate::cmd_run;
 use anyhow::{bail, Context, Result};
-use realitygap::data_source::{assets_dir, DataSource};
-use realitygap::study::{Roots, SourceFormat, SourceSpec, Study, StudyScene};
-use realitygap_analysis::compare::{AnalysisMode, CompareOptions, CubeSpec};
+use realitygap_analysis::compare::{AnalysisMode, CompareOptions, SceneReport};
 use realitygap_analysis::table::{self, Format};
-use realitygap_core::robot::{PackageResolver, RobotModel};
-use realitygap_core::scene::{Scene, TrackTarget};
-use realitygap_core::trajectory::WRIST;
-use realitygap_data::RunStore;
-use std::collections::BTreeMap;
+use realitygap_study::provenance::provenance_for_study;
+use realitygap_study::reproduce::{reproduction_study, study_recordings, study_scene_files};
+use realitygap_study::{evaluate, DataSource, Roots, Study};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-
-/// The study definition, built in.
-const COLLINS2019: &str = include_str!(concat!(
-    env!("CARGO_MANIFEST_DIR"),
-    "/../../assets/studies/collins2019.toml"
-));
 
 /// Arguments of `realitygap reproduce`.
 #[derive(clap::Args, Debug)]
@@ -60,8 +50,8 @@ pub struct Args {
     #[arg(long, short = 'j', value_name = "N")]
     pub jobs: Option<usize>,
     /// `default` (flagged runs left out, estimated alignment) or `study`.
-    #[arg(long, default_value = "default", value_parser = ["default", "study"])]
-    pub mode: String,
+    #[arg(long, default_value = "default", value_parser = mode_parser())]
+    pub mode: AnalysisMode,
     /// Give up on a simulation after this many seconds.
     #[arg(long, value_name = "SECONDS")]
     pub timeout_s: Option<f64>,
@@ -70,30 +60,15 @@ pub struct Args {
     pub params: Option<PathBuf>,
 }
 
+/// Stage timings, seconds, in order.
+type Timings = Vec<(String, f64)>;
+
 /// Runs the command.
 pub fn run(args: Args) -> Result<()> {
     let started = Instant::now();
-    let mode = if args.mode == "study" {
-        AnalysisMode::Study
-    } else {
-        AnalysisMode::Default
-    };
-    let data = args.data.resolve()?;
-    if let Some(d) = &data {
-        if !d.join("MotionCapture").is_dir() || !d.join("Simulation").is_dir() {
-            bail!("--data {}: expected the study's recordings there (folders MotionCapture/ and Simulation/)", d.display());
-        }
-    }
+    let data = study_recordings(&args.data)?;
     let scenes: Vec<PathBuf> = if args.scenes.is_empty() {
-        let dir = assets_dir().join("scenes");
-        [
-            "scene1_single_joint",
-            "scene2_two_joints",
-            "scene3_cube_push",
-        ]
-        .iter()
-        .map(|s| dir.join(format!("{s}.toml")))
-        .collect()
+        study_scene_files()
     } else {
         args.scenes.clone()
     };
@@ -111,10 +86,46 @@ pub fn run(args: Args) -> Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
     let runs_dir = args.out.join("runs");
-    let mut timings: Vec<(String, f64)> = Vec::new();
-    let mut problems: Vec<String> = Vec::new();
+    let mut timings: Timings = Vec::new();
 
-    // 1. Simulate.
+    let t = Instant::now();
+    let problems = simulate(&args, &scenes, &engines, &runs_dir);
+    timings.push(("simulate".into(), t.elapsed().as_secs_f64()));
+
+    eprintln!("[2/3] comparing");
+    let t = Instant::now();
+    let (study, study_path, roots) =
+        reproduction_study(&scenes, data.as_deref(), &args.out, &runs_dir, &engines)?;
+    let opts = CompareOptions {
+        mode: args.mode,
+        ..CompareOptions::default()
+    };
+    let reports = evaluate(&study, &roots, &opts)?;
+    timings.push(("compare".into(), t.elapsed().as_secs_f64()));
+    print!("{}", table::render(&reports, Format::Markdown));
+
+    eprintln!("[3/3] writing the report");
+    let t = Instant::now();
+    let index_html = write_report(&args, &reports, &study, &study_path, &roots)?;
+    timings.push(("report".into(), t.elapsed().as_secs_f64()));
+
+    timings.push(("total".into(), started.elapsed().as_secs_f64()));
+    write_timings(&args.out, &timings)?;
+    eprintln!("report: {}", index_html.display());
+    if !problems.is_empty() {
+        bail!(
+            "the study finished, but not every simulation did: {}",
+            problems.join("; ")
+        );
+    }
+    Ok(())
+}
+
+/// Stage 1: every scene in every engine, `--repeats` times, into
+/// `runs_dir`, exactly as `realitygap run` does. Failed runs are listed in
+/// the report and the comparison goes on with the runs that finished, so
+/// a failure is a problem to report at the end, not an error now.
+fn simulate(args: &Args, scenes: &[PathBuf], engines: &[String], runs_dir: &Path) -> Vec<String> {
     eprintln!(
         "[1/3] simulating {} scenes x {} engines ({}) x {} repeats -> {}",
         scenes.len(),
@@ -123,12 +134,11 @@ pub fn run(args: Args) -> Result<()> {
         args.repeats,
         runs_dir.display()
     );
-    let t = Instant::now();
     let run_args = cmd_run::Args {
-        scenes: scenes.clone(),
-        engines: engines.clone(),
+        scenes: scenes.to_vec(),
+        engines: engines.to_vec(),
         repeats: args.repeats,
-        out: runs_dir.clone(),
+        out: runs_dir.to_path_buf(),
         robot: None,
         packages: vec![],
         jobs: args.jobs,
@@ -138,77 +148,25 @@ pub fn run(args: Args) -> Result<()> {
         timeout_s: args.timeout_s,
         params: args.params.clone(),
     };
-    if let Err(e) = cmd_run::run(run_args) {
-        // Failed runs are listed in the report; the comparison goes on with
-        // the runs that finished.
-        eprintln!("warning: {e:#}");
-        problems.push(format!("{e:#}"));
-    }
-    timings.push(("simulate".into(), t.elapsed().as_secs_f64()));
-
-    // 2. Compare.
-    eprintln!("[2/3] comparing");
-    let t = Instant::now();
-    let loaded: Vec<Scene> = scenes
-        .iter()
-        .map(|p| Scene::from_file(p).map_err(anyhow::Error::from))
-        .collect::<Result<_>>()?;
-    let (study, study_path, roots) = match &data {
-        Some(data) => {
-            let path = assets_dir().join("studies/collins2019.toml");
-            let mut study = Study::from_toml_str(COLLINS2019, &path)?;
-            study
-                .scenes
-                .retain(|s| loaded.iter().any(|l| l.name == s.name));
-            for s in &mut study.scenes {
-                s.sources
-                    .extend(engine_sources(&runs_dir, &s.name, &engines)?);
-            }
-            (
-                study,
-                path,
-                Roots {
-                    data: data.clone(),
-                    results: runs_dir.clone(),
-                },
-            )
+    match cmd_run::run(run_args) {
+        Ok(()) => Vec::new(),
+        Err(e) => {
+            eprintln!("warning: {e:#}");
+            vec![format!("{e:#}")]
         }
-        None => {
-            let study = cross_engine_study(&loaded, &runs_dir, &engines)?;
-            (
-                study,
-                args.out.join("study.toml"),
-                Roots {
-                    data: args.out.clone(),
-                    results: runs_dir.clone(),
-                },
-            )
-        }
-    };
-    if study.scenes.is_empty() {
-        bail!(
-            "none of the scenes is part of the study (expected scene names {:?})",
-            [
-                "scene1_single_joint",
-                "scene2_two_joints",
-                "scene3_cube_push"
-            ]
-        );
     }
-    let opts = CompareOptions {
-        mode,
-        ..CompareOptions::default()
-    };
-    let scenes_in = study.load(&roots)?;
-    let inputs: Vec<_> = scenes_in.iter().map(|s| s.input()).collect();
-    let reports = realitygap_analysis::evaluate_study(&inputs, &opts)?;
-    timings.push(("compare".into(), t.elapsed().as_secs_f64()));
-    print!("{}", table::render(&reports, Format::Markdown));
+}
 
-    // 3. Report.
-    eprintln!("[3/3] writing the report");
-    let t = Instant::now();
-    let mut provenance = provenance_for_study(&study, &study_path, &roots, mode);
+/// Stage 3: tables, figures and `OUT/report/index.html`, with the
+/// provenance of every source and of this command; the page's path.
+fn write_report(
+    args: &Args,
+    reports: &[SceneReport],
+    study: &Study,
+    study_path: &Path,
+    roots: &Roots,
+) -> Result<PathBuf> {
+    let mut provenance = provenance_for_study(study, study_path, roots, args.mode);
     provenance.details.extend(args.data.provenance());
     provenance.details.push((
         "Command".into(),
@@ -219,21 +177,22 @@ pub fn run(args: Args) -> Result<()> {
         args.repeats.to_string(),
     ));
     let report_dir = args.out.join("report");
-    let files = realitygap_report::write_report(&reports, &provenance, &report_dir)
+    let files = realitygap_report::write_report(reports, &provenance, &report_dir)
         .with_context(|| format!("writing the report into {}", report_dir.display()))?;
-    timings.push(("report".into(), t.elapsed().as_secs_f64()));
+    Ok(files.index_html)
+}
 
-    let total = started.elapsed().as_secs_f64();
-    timings.push(("total".into(), total));
+/// Writes `OUT/timings.json` and says the timings on standard error.
+fn write_timings(out: &Path, timings: &Timings) -> Result<()> {
     let timing_json: serde_json::Map<String, serde_json::Value> = timings
         .iter()
         .map(|(k, v)| (format!("{k}_s"), serde_json::json!(v)))
         .collect();
     std::fs::write(
-        args.out.join("timings.json"),
+        out.join("timings.json"),
         serde_json::to_string_pretty(&timing_json)? + "\n",
     )
-    .with_context(|| format!("cannot write {}", args.out.join("timings.json").display()))?;
+    .with_context(|| format!("cannot write {}", out.join("timings.json").display()))?;
     eprintln!(
         "stage timings: {}",
         timings
@@ -242,134 +201,5 @@ pub fn run(args: Args) -> Result<()> {
             .collect::<Vec<_>>()
             .join(", ")
     );
-    eprintln!("report: {}", files.index_html.display());
-    if !problems.is_empty() {
-        bail!(
-            "the study finished, but not every simulation did: {}",
-            problems.join("; ")
-        );
-    }
     Ok(())
-}
-
-/// One `store` source per engine results directory of a scene, named after
-/// the engine and version in its manifest, e.g. `MuJoCo 3.17.0 (this tool)`.
-fn engine_sources(runs_dir: &Path, scene: &str, engines: &[String]) -> Result<Vec<SourceSpec>> {
-    let mut out = Vec::new();
-    for engine in engines {
-        let dir = runs_dir.join(scene).join(engine);
-        if !dir.join("manifest.json").is_file() {
-            continue;
-        }
-        let store = RunStore::open(&dir)?;
-        let m = store.manifest();
-        // "MuJoCo 3.17.0 (mujoco-rs 7.0.0)" -> "MuJoCo 3.17.0 (this tool)".
-        let version = m
-            .engine
-            .as_ref()
-            .map(|e| e.version.clone())
-            .unwrap_or_default();
-        let label = version.split(" (").next().unwrap_or_default().trim();
-        out.push(SourceSpec {
-            name: format!(
-                "{} (this tool)",
-                if label.is_empty() {
-                    engine.as_str()
-                } else {
-                    label
-                }
-            ),
-            about: Some(format!("simulated by this tool: {version}")),
-            format: SourceFormat::Store,
-            files: None,
-            dir: Some(format!("{scene}/{engine}")),
-            quat_order: None,
-            alignment: None,
-            frequency_hz: None,
-            bodies: None,
-            roles: None,
-        });
-    }
-    Ok(out)
-}
-
-/// Without recordings: a study comparing the engines with the first one.
-/// Each scene's goal is the wrist at the final targets, by forward
-/// kinematics of the scene's robot.
-fn cross_engine_study(scenes: &[Scene], runs_dir: &Path, engines: &[String]) -> Result<Study> {
-    let mut out = Vec::new();
-    for scene in scenes {
-        let mut sources = engine_sources(runs_dir, &scene.name, engines)?;
-        if sources.is_empty() {
-            continue;
-        }
-        let reference = sources.remove(0);
-        let robot = RobotModel::from_urdf_file(&scene.robot.urdf, &PackageResolver::from_env())
-            .with_context(|| format!("scene {}", scene.name))?;
-        let goal = final_wrist(scene, &robot);
-        let cube = scene.objects.first().map(|o| CubeSpec {
-            nominal_start_m: Some(o.pose.position_m.to_array()),
-            contact_threshold_m: 0.005,
-        });
-        let mut phases: Vec<f64> = scene.schedule.iter().map(|e| e.t_s).collect();
-        if phases.first() != Some(&0.0) {
-            phases.insert(0, 0.0);
-        }
-        out.push(StudyScene {
-            name: scene.name.clone(),
-            steps: scene.sample_count(),
-            goal_m: goal,
-            goal_tolerance_m: 0.01,
-            phases_s: phases,
-            cube: if scene
-                .tracked
-                .iter()
-                .any(|t| matches!(t.target, TrackTarget::Object(_)))
-            {
-                cube
-            } else {
-                None
-            },
-            scene: None,
-            vars: BTreeMap::new(),
-            reference,
-            sources,
-        });
-    }
-    Ok(Study {
-        name: "cross-engine".into(),
-        title: Some("The engines compared with each other (no real recordings given)".into()),
-        control_period_s: scenes.first().map_or(0.05, |s| s.controller.period_s),
-        sources: vec![],
-        scenes: out,
-        runs: None,
-        holdout: None,
-        folder: PathBuf::new(),
-    })
-}
-
-/// The wrist's world position at the scene's final targets.
-fn final_wrist(scene: &Scene, robot: &RobotModel) -> Option<[f64; 3]> {
-    let link = scene
-        .tracked
-        .iter()
-        .find(|t| t.role == WRIST)
-        .and_then(|t| match &t.target {
-            TrackTarget::Link(l) => robot.link_by_name(l),
-            TrackTarget::Object(_) => None,
-        })?;
-    let last_tick = scene.sample_count().saturating_sub(1);
-    let targets = scene.targets_deg_at_tick(last_tick);
-    let mut q = vec![0.0; robot.joints.len()];
-    for (name, deg) in scene.controlled_joints().iter().zip(targets) {
-        q[robot.joint_by_name(name)?] = deg.to_radians();
-    }
-    for (name, rad) in &scene.robot.held_joints_rad {
-        if let Some(j) = robot.joint_by_name(name) {
-            q[j] = *rad;
-        }
-    }
-    robot
-        .link_pose(&scene.robot.base, &q, link)
-        .map(|p| p.position_m.to_array())
 }

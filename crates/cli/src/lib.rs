@@ -1,10 +1,10 @@
-//! Library side of the `realitygap` command: the study definition and the
-//! loading of every source it names, shared by `compare`, `report`,
-//! `reproduce` and the benchmarks. The binary (`main.rs`) is a thin layer
-//! of argument parsing and printing over it.
+//! Library side of the `realitygap` command: helpers for its tests and
+//! benchmarks. The work is done by the library crates (`realitygap-study`
+//! for studies and their evaluation, `realitygap-runner` for batches of
+//! runs); the binary (`main.rs`) is a thin layer of argument parsing and
+//! printing over them.
 
-pub mod data_source;
-pub mod study;
+#![forbid(unsafe_code)]
 
 /// The study's recordings beside the project (`../shared/paper-data`), for
 /// tests and benchmarks. When absent: `None` after a message, unless the
@@ -29,11 +29,11 @@ pub fn paper_data_for_tests() -> Option<std::path::PathBuf> {
 #[cfg(test)]
 mod paper_tests {
     use super::*;
-    use realitygap_analysis::compare::{evaluate_scene, AnalysisMode, CompareOptions};
+    use realitygap_analysis::compare::{AnalysisMode, CompareOptions};
     use realitygap_core::robot::{PackageResolver, RobotModel};
     use realitygap_core::{Pose, Quat, Vec3};
+    use realitygap_study::{evaluate, Roots, Study};
     use std::path::PathBuf;
-    use study::{Roots, Study};
 
     fn study() -> Study {
         Study::from_file(
@@ -85,20 +85,15 @@ mod paper_tests {
             return;
         };
         let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
-        let scenes = study()
-            .load(&Roots {
-                data,
-                results: root,
-            })
-            .unwrap();
         let opts = CompareOptions {
             mode: AnalysisMode::Study,
             ..Default::default()
         };
-        let reports: Vec<_> = scenes
-            .iter()
-            .map(|s| evaluate_scene(&s.spec, &s.reference, &s.sources, &opts))
-            .collect();
+        let roots = Roots {
+            data,
+            results: root,
+        };
+        let reports = evaluate(&study(), &roots, &opts).unwrap();
         for r in &reports {
             assert_eq!(r.sources.len(), 7);
             for s in &r.sources {
@@ -139,24 +134,16 @@ mod paper_tests {
             return;
         };
         let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
-        let scenes = study()
-            .load(&Roots {
-                data,
-                results: root,
-            })
-            .unwrap();
-        for s in &scenes {
-            let r = evaluate_scene(
-                &s.spec,
-                &s.reference,
-                &s.sources,
-                &CompareOptions::default(),
-            );
+        let roots = Roots {
+            data,
+            results: root,
+        };
+        for r in evaluate(&study(), &roots, &CompareOptions::default()).unwrap() {
             if std::env::var_os("RG_PRINT").is_some() {
                 println!(
                     "{}",
                     realitygap_analysis::table::render(
-                        &[r.clone()],
+                        std::slice::from_ref(&r),
                         realitygap_analysis::table::Format::Markdown
                     )
                 );

@@ -1,6 +1,8 @@
 //! The `realitygap` command. A thin layer: argument parsing, progress bars
 //! and printing; the work is done by the library crates.
 
+#![forbid(unsafe_code)]
+
 use clap::{Parser, Subcommand};
 
 use std::process::ExitCode;
@@ -49,7 +51,7 @@ enum Command {
     Frontier(cmd_frontier::Args),
     /// Internal: run one simulation (a job as JSON on standard input) and
     /// print its trajectory; `run` starts one such process per run.
-    #[command(name = "__run-one", hide = true)]
+    #[command(name = realitygap_runner::child::RUN_ONE, hide = true)]
     RunOne,
 }
 

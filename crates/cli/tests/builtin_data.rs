@@ -314,7 +314,10 @@ fn a_study_of_results_directories_needs_no_recordings() {
             args.extend([os("--data"), os(d)]);
         }
         let (out, _) = ok(&realitygap(&cache, &args));
-        assert!(out.contains("| rapier again | 0.000 [0.000, 0.000] |"), "{out}");
+        assert!(
+            out.contains("| rapier again | 0.000 [0.000, 0.000] |"),
+            "{out}"
+        );
         tables.push(out);
     }
     assert_eq!(tables[0], tables[1]);

@@ -7,6 +7,8 @@ use realitygap_core::conformance::{handover_gap, Subject};
 use realitygap_core::engine::Engine;
 use realitygap_core::testing;
 
+// The pushes depend on the features compiled in: no `vec![...]` can say that.
+#[allow(clippy::vec_init_then_push)]
 fn engines() -> Vec<Box<dyn Engine>> {
     #[allow(unused_mut)]
     let mut v: Vec<Box<dyn Engine>> = Vec::new();
@@ -60,11 +62,7 @@ fn every_engine_hands_its_state_to_every_other() {
             // 1 ms and ERP 0.8, see crates/engine-ode/README.md). A portable
             // state holds joint angles, so what ODE reports and what the
             // receiving engine places differ by that constraint error.
-            let tolerance_m = if from.name() == "ode" {
-                2e-4
-            } else {
-                1e-6
-            };
+            let tolerance_m = if from.name() == "ode" { 2e-4 } else { 1e-6 };
             assert!(
                 gap_m <= tolerance_m,
                 "{} -> {}: {gap_m} m (tolerance {tolerance_m} m)",

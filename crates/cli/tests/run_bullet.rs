@@ -267,3 +267,32 @@ fn broken_mesh_fails_the_run_with_a_clear_message() {
     assert!(!all.contains("panicked"), "{all}");
     assert_no_bullet_output(&out);
 }
+
+/// `--robot mico2` (the built-in description, which is no file on disk)
+/// runs in Bullet, which needs a URDF file: the engine writes one from the
+/// robot model.
+#[test]
+fn the_built_in_mico2_runs_in_bullet() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = Command::new(exe())
+        .arg("run")
+        .arg(scene("scene1_single_joint"))
+        .args(["--engine", "bullet", "--robot", "mico2", "--out"])
+        .arg(tmp.path().join("r"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let csv = tmp
+        .path()
+        .join("r/scene1_single_joint/bullet-mico2/runs/run000.csv");
+    let last = last_row(&csv);
+    assert!(
+        (last["q2_rad"].to_degrees() + 100.0).abs() < 1.0,
+        "joint 2 ends at {} degrees",
+        last["q2_rad"].to_degrees()
+    );
+}

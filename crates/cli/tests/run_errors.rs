@@ -123,6 +123,15 @@ fn bad_scenes_are_reported_with_file_line_and_field() {
         &["link.toml:", "track[0].link", "no link \"hand\""],
     );
 
+    // Nothing was written for any of these.
+    assert!(!out.exists() || std::fs::read_dir(&out).unwrap().next().is_none());
+}
+
+#[test]
+fn bad_options_are_reported() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+
     // The control period is not a whole number of timesteps.
     let scene = assets().join("scenes/scene1_single_joint.toml");
     fails_with(

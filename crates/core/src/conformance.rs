@@ -218,7 +218,8 @@ pub fn force_limit_effect_m(subject: Subject<'_>, limit: f64) -> f64 {
     );
     let wrist = |params: &PhysicalParams| {
         let (scene, mut sim) = load(subject, &scene, &robot, params);
-        let mut run = ControllerLoop::new(&scene, &RunOptions::default(), &ControlParams::default());
+        let mut run =
+            ControllerLoop::new(&scene, &RunOptions::default(), &ControlParams::default());
         run.start(sim.as_mut()).unwrap();
         run.advance(sim.as_mut(), 31).unwrap();
         let out = run.finish();
@@ -307,6 +308,5 @@ pub fn gravity_effect_rad(subject: Subject<'_>) -> (f64, f64) {
 pub fn diverges(engine: &dyn Engine, settings: &EngineSettings) -> RunOutcome {
     let scene = testing::scene("scene1_single_joint");
     let robot = testing::mico2();
-    crate::controller::simulate(engine, &scene, &robot, settings, &RunOptions::default())
-        .unwrap()
+    crate::controller::simulate(engine, &scene, &robot, settings, &RunOptions::default()).unwrap()
 }

@@ -65,7 +65,7 @@ pub struct PerturbationError {
     pub message: String,
 }
 
-/// Keys accepted by [`Perturbation::parse`], with their meaning.
+/// Keys accepted by [`Perturbation::parse_into`], with their meaning.
 pub const PERTURBATION_KEYS: &[(&str, &str)] = &[
     (
         "initial_offset_deg",
@@ -556,7 +556,8 @@ impl ControllerLoop {
             let t_s = tick as f64 * self.period_s;
             sim.joint_angles_rad(&mut angles);
             sim.tracked_poses(&mut poses);
-            if let Some(reason) = divergence(&angles, &poses, &self.roles, self.divergence_bound_m) {
+            if let Some(reason) = divergence(&angles, &poses, &self.roles, self.divergence_bound_m)
+            {
                 self.status = Some(RunStatus::Diverged { t_s, reason });
                 break;
             }
@@ -641,7 +642,11 @@ impl ControllerLoop {
 
 fn steps_per_period(timestep_s: f64, period_s: f64) -> Result<u64, SceneError> {
     let ratio = period_s / timestep_s;
-    if timestep_s.is_nan() || timestep_s <= 0.0 || ratio < 1.0 - 1e-9 || (ratio - ratio.round()).abs() > 1e-6 * ratio {
+    if timestep_s.is_nan()
+        || timestep_s <= 0.0
+        || ratio < 1.0 - 1e-9
+        || (ratio - ratio.round()).abs() > 1e-6 * ratio
+    {
         return Err(SceneError::Parse {
             path: std::path::PathBuf::new(),
             line: None,
@@ -686,7 +691,14 @@ pub fn simulate(
     settings: &EngineSettings,
     options: &RunOptions,
 ) -> Result<RunOutcome, RunError> {
-    simulate_with(engine, scene, robot, settings, &PhysicalParams::none(), options)
+    simulate_with(
+        engine,
+        scene,
+        robot,
+        settings,
+        &PhysicalParams::none(),
+        options,
+    )
 }
 
 /// Loads `scene` into `engine` with physical parameters and runs it:
@@ -702,7 +714,12 @@ pub fn simulate_with(
 ) -> Result<RunOutcome, RunError> {
     let (scene, robot) = prepare(engine, scene, robot, params)?;
     let mut sim = load_prepared(engine, &scene, &robot, settings, params, options)?;
-    run_scene_with(sim.as_mut(), &scene, options, &ControlParams::from_params(params, &scene))
+    run_scene_with(
+        sim.as_mut(),
+        &scene,
+        options,
+        &ControlParams::from_params(params, &scene),
+    )
 }
 
 /// Checks that `engine` honours every key of `params` and writes the
@@ -897,7 +914,8 @@ link = "l2"
         let scene = scene();
         let whole = run_scene(&mut ideal(0.01), &scene, &RunOptions::default()).unwrap();
         let mut a = ideal(0.01);
-        let mut run = ControllerLoop::new(&scene, &RunOptions::default(), &ControlParams::default());
+        let mut run =
+            ControllerLoop::new(&scene, &RunOptions::default(), &ControlParams::default());
         run.start(&mut a).unwrap();
         assert!(run.advance(&mut a, 7).unwrap());
         assert_eq!(run.tick(), 7);
@@ -917,12 +935,16 @@ link = "l2"
             offsets_rad: Vec::new(),
             delay_s: 0.025,
         };
-        let out = run_scene_with(&mut ideal(0.01), &scene, &RunOptions::default(), &control)
-            .unwrap();
+        let out =
+            run_scene_with(&mut ideal(0.01), &scene, &RunOptions::default(), &control).unwrap();
         let q = out.trajectory.joint_angles_rad.as_ref().unwrap();
         // The first command (-30 deg/s) reaches the servo at 0.03 s: two of
         // the period's five steps at it.
-        assert!((q[1][0].to_degrees() + 0.6).abs() < 1e-9, "{}", q[1][0].to_degrees());
+        assert!(
+            (q[1][0].to_degrees() + 0.6).abs() < 1e-9,
+            "{}",
+            q[1][0].to_degrees()
+        );
         // Whole periods as seconds equal the perturbation's whole periods.
         let by_periods = RunOptions {
             perturbation: Some(
@@ -955,11 +977,15 @@ link = "l2"
             offsets_rad: vec![0.0, 1f64.to_radians()],
             delay_s: 0.0,
         };
-        let out = run_scene_with(&mut ideal(0.01), &scene, &RunOptions::default(), &control)
-            .unwrap();
+        let out =
+            run_scene_with(&mut ideal(0.01), &scene, &RunOptions::default(), &control).unwrap();
         let last = out.trajectory.joint_angles_rad.unwrap()[19].clone();
         // Target 2 deg measured, so 3 deg true.
-        assert!((last[1].to_degrees() - 3.0).abs() < 0.05, "{}", last[1].to_degrees());
+        assert!(
+            (last[1].to_degrees() - 3.0).abs() < 0.05,
+            "{}",
+            last[1].to_degrees()
+        );
     }
 
     #[test]

@@ -162,7 +162,10 @@ impl<'a> SettingsReader<'a> {
         known: &[SettingInfo],
     ) -> Result<SettingsReader<'a>, EngineError> {
         let reader = SettingsReader { engine, settings };
-        if let Some(key) = settings.keys().find(|k| !known.iter().any(|i| i.key == k.as_str())) {
+        if let Some(key) = settings
+            .keys()
+            .find(|k| !known.iter().any(|i| i.key == k.as_str()))
+        {
             let names: Vec<&str> = known.iter().map(|i| i.key).collect();
             return Err(reader.error(
                 key,
@@ -239,7 +242,11 @@ impl<'a> SettingsReader<'a> {
     }
 
     /// One of `choices` by name (case-insensitive), when set.
-    pub fn choice<T: Copy>(&self, key: &str, choices: &[(&str, T)]) -> Result<Option<T>, EngineError> {
+    pub fn choice<T: Copy>(
+        &self,
+        key: &str,
+        choices: &[(&str, T)],
+    ) -> Result<Option<T>, EngineError> {
         let Some(value) = self.settings.get(key) else {
             return Ok(None);
         };
@@ -429,7 +436,10 @@ impl SimState {
         let vectors = [
             ("joint_angles_rad", &self.joint_angles_rad),
             ("joint_velocities_rad_s", &self.joint_velocities_rad_s),
-            ("joint_velocity_targets_rad_s", &self.joint_velocity_targets_rad_s),
+            (
+                "joint_velocity_targets_rad_s",
+                &self.joint_velocity_targets_rad_s,
+            ),
         ];
         for (name, v) in vectors {
             if v.len() != joints {
@@ -457,7 +467,10 @@ impl SimState {
                     .iter()
                     .all(|v| v.x.is_finite() && v.y.is_finite() && v.z.is_finite());
             if !finite {
-                return Err(format!("object '{}' has a non-finite pose or twist", o.name));
+                return Err(format!(
+                    "object '{}' has a non-finite pose or twist",
+                    o.name
+                ));
             }
         }
         Ok(())
@@ -517,10 +530,22 @@ mod tests {
     #[test]
     fn settings_reader_gives_one_error_style() {
         let known = [
-            SettingInfo { key: "timestep_s", help: "" },
-            SettingInfo { key: "iterations", help: "" },
-            SettingInfo { key: "solver", help: "" },
-            SettingInfo { key: "warm", help: "" },
+            SettingInfo {
+                key: "timestep_s",
+                help: "",
+            },
+            SettingInfo {
+                key: "iterations",
+                help: "",
+            },
+            SettingInfo {
+                key: "solver",
+                help: "",
+            },
+            SettingInfo {
+                key: "warm",
+                help: "",
+            },
         ];
         let mut s = EngineSettings::new();
         s.insert("timestep_s".into(), SettingValue::Integer(1));
@@ -528,13 +553,25 @@ mod tests {
         s.insert("solver".into(), SettingValue::Text("PGS".into()));
         s.insert("warm".into(), SettingValue::Bool(true));
         let r = SettingsReader::new("toy", &s, &known).unwrap();
-        assert_eq!(r.number("timestep_s", |v| v > 0.0, "> 0").unwrap(), Some(1.0));
+        assert_eq!(
+            r.number("timestep_s", |v| v > 0.0, "> 0").unwrap(),
+            Some(1.0)
+        );
         assert_eq!(r.number("absent", |v| v > 0.0, "> 0").unwrap(), None);
         assert_eq!(r.integer("iterations", 1, 100).unwrap(), Some(20));
-        assert_eq!(r.choice("solver", &[("pgs", 1), ("tgs", 2)]).unwrap(), Some(1));
+        assert_eq!(
+            r.choice("solver", &[("pgs", 1), ("tgs", 2)]).unwrap(),
+            Some(1)
+        );
         assert_eq!(r.boolean("warm").unwrap(), Some(true));
-        let e = r.number("timestep_s", |v| v < 0.5, "below 0.5 s").unwrap_err().to_string();
-        assert_eq!(e, "engine toy: setting `timestep_s`: must be below 0.5 s, found 1");
+        let e = r
+            .number("timestep_s", |v| v < 0.5, "below 0.5 s")
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e,
+            "engine toy: setting `timestep_s`: must be below 0.5 s, found 1"
+        );
         let e = r.integer("iterations", 1, 10).unwrap_err().to_string();
         assert!(e.contains("from 1 to 10, found 20"), "{e}");
         let e = r.choice("solver", &[("tgs", 2)]).unwrap_err().to_string();
@@ -542,8 +579,14 @@ mod tests {
         let e = r.boolean("solver").unwrap_err().to_string();
         assert!(e.contains("expected true or false"), "{e}");
         s.insert("bogus".into(), SettingValue::Integer(1));
-        let e = SettingsReader::new("toy", &s, &known).err().unwrap().to_string();
-        assert!(e.contains("setting `bogus`: unknown setting (accepted: timestep_s"), "{e}");
+        let e = SettingsReader::new("toy", &s, &known)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(
+            e.contains("setting `bogus`: unknown setting (accepted: timestep_s"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -21,8 +21,10 @@
 //! Units everywhere: metres, radians, seconds, kilograms, unless a name says
 //! otherwise (`_deg`, `_mm`).
 
-pub mod controller;
+#![forbid(unsafe_code)]
+
 pub mod conformance;
+pub mod controller;
 pub mod engine;
 pub mod params;
 pub mod pose;

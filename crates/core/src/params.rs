@@ -258,10 +258,10 @@ impl ParamKey {
     pub fn core_mapping(self) -> Option<&'static str> {
         match self {
             ParamKey::JointOffset => {
-                Some("controller reads angle - offset (the servo settles at target + offset)")
+                Some("the controller reads angle - offset, so the joint settles at target + offset")
             }
             ParamKey::ControllerDelay => {
-                Some("commands reach the servos delay_s later, at the next engine step")
+                Some("commands reach the servos delay_s after they are computed, at the next engine step")
             }
             ParamKey::ControllerGain => Some("replaces the scene's controller gain"),
             ParamKey::ControllerMaxSpeed => Some("replaces the scene's command clamp"),
@@ -477,12 +477,8 @@ impl PhysicalParams {
             text,
             locations: BTreeMap::new(),
         };
-        let file: FileParams = toml::from_str(text).map_err(|e| {
-            r.error_at(
-                e.span().map(|s| s.start),
-                e.message().trim().to_string(),
-            )
-        })?;
+        let file: FileParams = toml::from_str(text)
+            .map_err(|e| r.error_at(e.span().map(|s| s.start), e.message().trim().to_string()))?;
         let mut p = PhysicalParams {
             source: Some(path.to_path_buf()),
             ..PhysicalParams::default()
@@ -502,8 +498,11 @@ impl PhysicalParams {
         }
         for (name, l) in &file.links {
             let n = r.name(format!("links.{}", name.get_ref()), name);
-            let mass_scale =
-                r.value(&format!("links.{n}.mass_scale"), &l.mass_scale, Range::Positive)?;
+            let mass_scale = r.value(
+                &format!("links.{n}.mass_scale"),
+                &l.mass_scale,
+                Range::Positive,
+            )?;
             p.links.insert(n, LinkParams { mass_scale });
         }
         for (name, o) in &file.objects {
@@ -523,7 +522,11 @@ impl PhysicalParams {
                     &c.time_constant_s,
                     Range::Positive,
                 )?,
-                damping_ratio: r.value("contact.damping_ratio", &c.damping_ratio, Range::Positive)?,
+                damping_ratio: r.value(
+                    "contact.damping_ratio",
+                    &c.damping_ratio,
+                    Range::Positive,
+                )?,
             };
         }
         if let Some(c) = &file.controller {
@@ -688,7 +691,10 @@ impl PhysicalParams {
             (ParamKey::ContactDampingRatio, self.contact.damping_ratio),
             (ParamKey::ControllerDelay, self.controller.delay_s),
             (ParamKey::ControllerGain, self.controller.gain_per_s),
-            (ParamKey::ControllerMaxSpeed, self.controller.max_speed_deg_s),
+            (
+                ParamKey::ControllerMaxSpeed,
+                self.controller.max_speed_deg_s,
+            ),
         ] {
             if v.is_some() {
                 keys.push((k, None));
@@ -752,7 +758,11 @@ impl PhysicalParams {
     /// into the robot, object `mass_kg` and `friction` into the scene's
     /// objects, and the controller's gain and clamp into the scene's
     /// controller. Names that the robot or scene lacks are errors.
-    pub fn apply(&self, scene: &Scene, robot: &RobotModel) -> Result<(Scene, RobotModel), ParamsError> {
+    pub fn apply(
+        &self,
+        scene: &Scene,
+        robot: &RobotModel,
+    ) -> Result<(Scene, RobotModel), ParamsError> {
         let mut scene = scene.clone();
         let mut robot = robot.clone();
         for (name, j) in &self.joints {
@@ -799,7 +809,10 @@ impl PhysicalParams {
             let Some(li) = robot.link_by_name(name) else {
                 return Err(self.name_error(
                     &format!("links.{name}"),
-                    format!("links.{name}: the robot {} has no link of that name", robot.name),
+                    format!(
+                        "links.{name}: the robot {} has no link of that name",
+                        robot.name
+                    ),
                 ));
             };
             if let (Some(s), Some(inertial)) = (l.mass_scale, robot.links[li].inertial.as_mut()) {
@@ -813,7 +826,10 @@ impl PhysicalParams {
             let Some(object) = scene.objects.iter_mut().find(|x| &x.name == name) else {
                 return Err(self.name_error(
                     &format!("objects.{name}"),
-                    format!("objects.{name}: the scene {} has no object of that name", scene.name),
+                    format!(
+                        "objects.{name}: the scene {} has no object of that name",
+                        scene.name
+                    ),
                 ));
             };
             if let Some(m) = o.mass_kg {
@@ -889,8 +905,7 @@ fn key_field(key: ParamKey, name: Option<&str>) -> String {
 
 fn quote_key(k: &str) -> String {
     if !k.is_empty()
-        && k
-            .chars()
+        && k.chars()
             .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
     {
         k.to_string()
@@ -977,14 +992,20 @@ integrator = "implicitfast"
         let s = e.to_string();
         assert!(s.starts_with("/p/params.toml:3:1:"), "{s}");
         assert!(s.contains("bogus"), "{s}");
-        let e = parse("[joints.a]\ndamping = -1.0\n").unwrap_err().to_string();
+        let e = parse("[joints.a]\ndamping = -1.0\n")
+            .unwrap_err()
+            .to_string();
         assert!(e.starts_with("/p/params.toml:2:11:"), "{e}");
         assert!(e.contains("joints.a.damping") && e.contains(">= 0"), "{e}");
-        let e = parse("[objects.cube]\nrestitution = 1.5\n").unwrap_err().to_string();
+        let e = parse("[objects.cube]\nrestitution = 1.5\n")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("from 0 to 1"), "{e}");
         let e = parse("[joints.a\n").unwrap_err().to_string();
         assert!(e.starts_with("/p/params.toml:1:"), "{e}");
-        let e = parse("[controller]\ndelay_s = 50\n").unwrap_err().to_string();
+        let e = parse("[controller]\ndelay_s = 50\n")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("longer than 10 s"), "{e}");
         let e = parse("[joints.a]\nkv = nan\n").unwrap_err().to_string();
         assert!(e.contains("> 0"), "{e}");
@@ -1017,7 +1038,11 @@ integrator = "implicitfast"
         let robot = testing::mico2();
         let p = parse(FULL).unwrap();
         let (s, r) = p.apply(&scene, &robot).unwrap();
-        let a = s.actuators.iter().find(|a| a.joint == "m1n6s300_joint_2").unwrap();
+        let a = s
+            .actuators
+            .iter()
+            .find(|a| a.joint == "m1n6s300_joint_2")
+            .unwrap();
         assert_eq!((a.kv, a.force_limit), (40.0, 30.0));
         let j = &r.joints[r.joint_by_name("m1n6s300_joint_2").unwrap()];
         assert_eq!((j.damping, j.friction), (0.5, 0.2));

@@ -529,92 +529,74 @@ fn valid_name(name: &str) -> bool {
         && !name.starts_with('.')
 }
 
-impl Scene {
-    /// Reads and checks a scene file. The paths inside it are resolved
-    /// against the file's directory. The robot is not loaded: call
-    /// [`Scene::validate`] with it.
-    pub fn from_file(path: &Path) -> Result<Scene, SceneError> {
-        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        let abs = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
-        Scene::from_toml_str(&text, &abs)
-    }
-
-    /// Parses scene TOML text; `path` names the file in errors and is the
-    /// base for relative paths.
-    pub fn from_toml_str(text: &str, path: &Path) -> Result<Scene, SceneError> {
-        let file: FileScene = toml::from_str(text).map_err(|e| {
-            let (line, column) = match e.span() {
-                Some(span) => {
-                    let (l, c) = line_col(text, span.start);
-                    (Some(l), Some(c))
-                }
-                None => (None, None),
-            };
-            SceneError::Parse {
-                path: path.to_path_buf(),
-                line,
-                column,
-                message: e.message().trim().to_string(),
+/// Reads the TOML into the file's shape; a syntax or type error names its
+/// line and column.
+fn parse_file(text: &str, path: &Path) -> Result<FileScene, SceneError> {
+    toml::from_str(text).map_err(|e| {
+        let (line, column) = match e.span() {
+            Some(span) => {
+                let (l, c) = line_col(text, span.start);
+                (Some(l), Some(c))
             }
-        })?;
-        let mut b = Builder {
-            path,
-            text,
-            locations: HashMap::new(),
+            None => (None, None),
         };
-
-        let name = file.name.get_ref().clone();
-        if !valid_name(&name) {
-            return Err(b.invalid(
-                "name",
-                Some(&file.name),
-                format!("\"{name}\" is not a usable name: use letters, digits, '_', '-' and '.' (it names result directories)"),
-            ));
+        SceneError::Parse {
+            path: path.to_path_buf(),
+            line,
+            column,
+            message: e.message().trim().to_string(),
         }
-        let duration_s = b.positive("duration_s", &file.duration_s)?;
-        b.at("duration_s", &file.duration_s);
+    })
+}
 
-        // Robot.
-        let r = &file.robot;
+/// The steps of [`Scene::from_toml_str`], one per part of the file.
+impl Builder<'_> {
+    /// The `[robot]` table.
+    fn robot(&mut self, r: &FileRobot) -> Result<RobotSpec, SceneError> {
         if r.urdf.get_ref().trim().is_empty() {
-            return Err(b.invalid("robot.urdf", Some(&r.urdf), "must name a URDF file"));
+            return Err(self.invalid("robot.urdf", Some(&r.urdf), "must name a URDF file"));
         }
-        b.at("robot.urdf", &r.urdf);
-        let urdf = b.resolve(r.urdf.get_ref());
+        self.at("robot.urdf", &r.urdf);
+        let urdf = self.resolve(r.urdf.get_ref());
         let base = Pose::new(
-            b.vec3("robot.base_position_m", &r.base_position_m)?,
-            b.rpy("robot.base_rpy_deg", r.base_rpy_deg.as_ref())?,
+            self.vec3("robot.base_position_m", &r.base_position_m)?,
+            self.rpy("robot.base_rpy_deg", r.base_rpy_deg.as_ref())?,
         );
         let mjcf = match &r.mjcf {
             Some(m) => {
-                b.at("robot.mjcf", m);
-                Some(b.resolve(m.get_ref()))
+                self.at("robot.mjcf", m);
+                Some(self.resolve(m.get_ref()))
             }
             None => None,
         };
         let mut held_joints_rad = BTreeMap::new();
         for (joint, value) in &r.held_joints_deg {
             let field = format!("robot.held_joints_deg.{}", joint.get_ref());
-            let v = b.finite(&field, value)?;
-            b.at(&field, joint);
+            let v = self.finite(&field, value)?;
+            self.at(&field, joint);
             held_joints_rad.insert(joint.get_ref().clone(), v.to_radians());
         }
+        Ok(RobotSpec {
+            urdf,
+            base,
+            mjcf,
+            held_joints_rad,
+        })
+    }
 
-        // Ground and objects.
-        let ground = match &file.ground {
+    /// The optional `[ground]` table.
+    fn ground(&self, g: Option<&FileGround>) -> Result<Option<Ground>, SceneError> {
+        let ground = match g {
             Some(g) => {
                 if !g.height_m.is_finite() {
-                    return Err(b.invalid::<f64>(
+                    return Err(self.invalid::<f64>(
                         "ground.height_m",
                         None,
                         "must be a finite number",
                     ));
                 }
                 let friction = match &g.friction {
-                    Some(f) => Some(b.non_negative("ground.friction", f)?),
+                    Some(f) => Some(self.non_negative("ground.friction", f)?),
                     None => None,
                 };
                 Some(Ground {
@@ -624,30 +606,35 @@ impl Scene {
             }
             None => None,
         };
+        Ok(ground)
+    }
+
+    /// The `[[object]]` entries.
+    fn objects(&mut self, file_objects: &[FileObject]) -> Result<Vec<SceneObject>, SceneError> {
         let mut objects: Vec<SceneObject> = Vec::new();
-        for (i, o) in file.objects.iter().enumerate() {
+        for (i, o) in file_objects.iter().enumerate() {
             let f = |k: &str| format!("object[{i}].{k}");
             let name = o.name.get_ref().clone();
             if !valid_name(&name) {
-                return Err(b.invalid(
+                return Err(self.invalid(
                     &f("name"),
                     Some(&o.name),
                     format!("\"{name}\" is not a usable name (letters, digits, '_', '-', '.')"),
                 ));
             }
             if objects.iter().any(|p| p.name == name) {
-                return Err(b.invalid(
+                return Err(self.invalid(
                     &f("name"),
                     Some(&o.name),
                     format!("another object is already named \"{name}\""),
                 ));
             }
-            b.at(&f("name"), &o.name);
+            self.at(&f("name"), &o.name);
             let shape = match o.shape.get_ref().as_str() {
                 "box" => {
-                    let s = b.vec3(&f("size_m"), &o.size_m)?;
+                    let s = self.vec3(&f("size_m"), &o.size_m)?;
                     if s.x <= 0.0 || s.y <= 0.0 || s.z <= 0.0 {
-                        return Err(b.invalid(
+                        return Err(self.invalid(
                             &f("size_m"),
                             Some(&o.size_m),
                             "every edge length must be greater than 0",
@@ -656,20 +643,20 @@ impl Scene {
                     ObjectShape::Box { size_m: s }
                 }
                 other => {
-                    return Err(b.invalid(
+                    return Err(self.invalid(
                         &f("shape"),
                         Some(&o.shape),
                         format!("unknown shape \"{other}\" (expected \"box\")"),
                     ))
                 }
             };
-            let mass_kg = b.positive(&f("mass_kg"), &o.mass_kg)?;
+            let mass_kg = self.positive(&f("mass_kg"), &o.mass_kg)?;
             let pose = Pose::new(
-                b.vec3(&f("position_m"), &o.position_m)?,
-                b.rpy(&f("rpy_deg"), o.rpy_deg.as_ref())?,
+                self.vec3(&f("position_m"), &o.position_m)?,
+                self.rpy(&f("rpy_deg"), o.rpy_deg.as_ref())?,
             );
             let friction = match &o.friction {
-                Some(fr) => Some(b.non_negative(&f("friction"), fr)?),
+                Some(fr) => Some(self.non_negative(&f("friction"), fr)?),
                 None => None,
             };
             objects.push(SceneObject {
@@ -680,51 +667,67 @@ impl Scene {
                 friction,
             });
         }
+        Ok(objects)
+    }
 
-        // Controller and actuators.
-        let c = &file.controller;
+    /// The `[controller]` table, and the check that the run lasts a whole
+    /// number of control periods.
+    fn controller(
+        &mut self,
+        c: &FileController,
+        duration: &Spanned<f64>,
+        duration_s: f64,
+    ) -> Result<ControllerSpec, SceneError> {
         let controller = ControllerSpec {
-            gain_per_s: b.positive("controller.gain_per_s", &c.gain_per_s)?,
-            max_speed_deg_s: b.positive("controller.max_speed_deg_s", &c.max_speed_deg_s)?,
-            period_s: b.positive("controller.period_s", &c.period_s)?,
+            gain_per_s: self.positive("controller.gain_per_s", &c.gain_per_s)?,
+            max_speed_deg_s: self.positive("controller.max_speed_deg_s", &c.max_speed_deg_s)?,
+            period_s: self.positive("controller.period_s", &c.period_s)?,
         };
-        b.at("controller.period_s", &c.period_s);
+        self.at("controller.period_s", &c.period_s);
         let ticks = duration_s / controller.period_s;
         if (ticks - ticks.round()).abs() > 1e-6 * ticks.max(1.0) {
-            return Err(b.invalid(
-                "duration_s",
-                Some(&file.duration_s),
-                format!(
-                    "{duration_s} s is not a whole number of control periods ({} s): a run records one sample per period",
-                    controller.period_s
-                ),
-            ));
+            return Err(self.invalid(
+            "duration_s",
+            Some(duration),
+            format!(
+                "{duration_s} s is not a whole number of control periods ({} s): a run records one sample per period",
+                controller.period_s
+            ),
+        ));
         }
-        if file.actuators.is_empty() {
-            return Err(b.invalid::<f64>(
+        Ok(controller)
+    }
+
+    /// The `[[actuator]]` entries (at least one).
+    fn actuators(
+        &mut self,
+        file_actuators: &[FileActuator],
+    ) -> Result<Vec<ActuatorSpec>, SceneError> {
+        if file_actuators.is_empty() {
+            return Err(self.invalid::<f64>(
                 "actuator",
                 None,
                 "the scene needs at least one [[actuator]] (a controlled joint)",
             ));
         }
         let mut actuators: Vec<ActuatorSpec> = Vec::new();
-        for (i, a) in file.actuators.iter().enumerate() {
+        for (i, a) in file_actuators.iter().enumerate() {
             let f = |k: &str| format!("actuator[{i}].{k}");
             let joint = a.joint.get_ref().clone();
             if actuators.iter().any(|p| p.joint == joint) {
-                return Err(b.invalid(
+                return Err(self.invalid(
                     &f("joint"),
                     Some(&a.joint),
                     format!("joint \"{joint}\" already has an actuator"),
                 ));
             }
-            b.at(&f("joint"), &a.joint);
-            let kv = b.positive(&f("kv"), &a.kv)?;
+            self.at(&f("joint"), &a.joint);
+            let kv = self.positive(&f("kv"), &a.kv)?;
             let force_limit = match &a.force_limit {
                 Some(fl) => {
                     let v = *fl.get_ref();
                     if v.is_nan() || v <= 0.0 {
-                        return Err(b.invalid(
+                        return Err(self.invalid(
                             &f("force_limit"),
                             Some(fl),
                             format!("must be greater than 0, found {v}"),
@@ -740,21 +743,30 @@ impl Scene {
                 force_limit,
             });
         }
+        Ok(actuators)
+    }
 
-        // Schedule.
-        if file.schedule.is_empty() {
-            return Err(b.invalid::<f64>(
+    /// The `[[schedule]]` entries (at least one; times increasing, before
+    /// the end; targets only for actuated joints).
+    fn schedule(
+        &mut self,
+        entries: &[FileScheduleEntry],
+        duration_s: f64,
+        actuators: &[ActuatorSpec],
+    ) -> Result<Vec<ScheduleEntry>, SceneError> {
+        if entries.is_empty() {
+            return Err(self.invalid::<f64>(
                 "schedule",
                 None,
                 "the scene needs at least one [[schedule]] entry",
             ));
         }
         let mut schedule: Vec<ScheduleEntry> = Vec::new();
-        for (i, e) in file.schedule.iter().enumerate() {
+        for (i, e) in entries.iter().enumerate() {
             let field = format!("schedule[{i}].t_s");
-            let t_s = b.non_negative(&field, &e.t_s)?;
+            let t_s = self.non_negative(&field, &e.t_s)?;
             if t_s >= duration_s {
-                return Err(b.invalid(
+                return Err(self.invalid(
                     &field,
                     Some(&e.t_s),
                     format!("{t_s} s is not before the end of the run ({duration_s} s)"),
@@ -762,7 +774,7 @@ impl Scene {
             }
             if let Some(prev) = schedule.last() {
                 if t_s <= prev.t_s {
-                    return Err(b.invalid(
+                    return Err(self.invalid(
                         &field,
                         Some(&e.t_s),
                         format!("times must increase: {t_s} s follows {} s", prev.t_s),
@@ -772,9 +784,9 @@ impl Scene {
             let mut targets_deg = BTreeMap::new();
             for (joint, value) in &e.targets_deg {
                 let field = format!("schedule[{i}].targets_deg.{}", joint.get_ref());
-                let v = b.finite(&field, value)?;
+                let v = self.finite(&field, value)?;
                 if !actuators.iter().any(|a| &a.joint == joint.get_ref()) {
-                    return Err(b.invalid(
+                    return Err(self.invalid(
                         &field,
                         Some(joint),
                         format!(
@@ -788,22 +800,29 @@ impl Scene {
                         ),
                     ));
                 }
-                b.at(&field, joint);
+                self.at(&field, joint);
                 targets_deg.insert(joint.get_ref().clone(), v);
             }
             schedule.push(ScheduleEntry { t_s, targets_deg });
         }
+        Ok(schedule)
+    }
 
-        // Tracked bodies.
+    /// The `[[track]]` entries: each a link or one of the objects.
+    fn tracks(
+        &mut self,
+        tracks: &[FileTrack],
+        objects: &[SceneObject],
+    ) -> Result<Vec<TrackedBody>, SceneError> {
         let mut tracked: Vec<TrackedBody> = Vec::new();
-        for (i, t) in file.tracks.iter().enumerate() {
+        for (i, t) in tracks.iter().enumerate() {
             let f = |k: &str| format!("track[{i}].{k}");
             let role = t.role.get_ref().clone();
             if role.trim().is_empty() {
-                return Err(b.invalid(&f("role"), Some(&t.role), "must not be empty"));
+                return Err(self.invalid(&f("role"), Some(&t.role), "must not be empty"));
             }
             if tracked.iter().any(|p| p.role == role) {
-                return Err(b.invalid(
+                return Err(self.invalid(
                     &f("role"),
                     Some(&t.role),
                     format!("role \"{role}\" is tracked twice"),
@@ -811,12 +830,12 @@ impl Scene {
             }
             let target = match (&t.link, &t.object) {
                 (Some(l), None) => {
-                    b.at(&f("link"), l);
+                    self.at(&f("link"), l);
                     TrackTarget::Link(l.get_ref().clone())
                 }
                 (None, Some(o)) => {
                     if !objects.iter().any(|x| &x.name == o.get_ref()) {
-                        return Err(b.invalid(
+                        return Err(self.invalid(
                             &f("object"),
                             Some(o),
                             format!(
@@ -837,7 +856,7 @@ impl Scene {
                     TrackTarget::Object(o.get_ref().clone())
                 }
                 _ => {
-                    return Err(b.invalid(
+                    return Err(self.invalid(
                         &f("role"),
                         Some(&t.role),
                         "give exactly one of `link` or `object`",
@@ -846,26 +865,247 @@ impl Scene {
             };
             tracked.push(TrackedBody { role, target });
         }
+        Ok(tracked)
+    }
 
-        // Engine settings.
+    /// The `[engine.<name>]` tables.
+    fn engine_settings(
+        &mut self,
+        engine: &BTreeMap<String, BTreeMap<Spanned<String>, Spanned<toml::Value>>>,
+    ) -> Result<BTreeMap<String, EngineSettings>, SceneError> {
         let mut engine_settings = BTreeMap::new();
-        for (engine, table) in &file.engine {
+        for (engine, table) in engine {
             let mut settings = EngineSettings::new();
             for (key, value) in table {
                 let field = format!("engine.{engine}.{}", key.get_ref());
                 let v = setting_value(value.get_ref()).ok_or_else(|| {
-                    b.invalid(
+                    self.invalid(
                         &field,
                         Some(value),
                         "must be a boolean, integer, float or string",
                     )
                 })?;
-                b.at(&field, key);
+                self.at(&field, key);
                 settings.insert(key.get_ref().clone(), v);
             }
             engine_settings.insert(engine.clone(), settings);
         }
+        Ok(engine_settings)
+    }
+}
 
+/// The steps of [`Scene::validate`]: a scene checked against its robot.
+struct Checker<'a> {
+    scene: &'a Scene,
+    robot: &'a RobotModel,
+}
+
+impl Checker<'_> {
+    /// The robot's movable joints, for messages.
+    fn joint_list(&self) -> String {
+        self.robot
+            .joints
+            .iter()
+            .filter(|j| j.kind.is_movable())
+            .map(|j| j.name.as_str())
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+
+    /// The index of joint `name`, which must exist and not be fixed.
+    fn movable(&self, field: &str, name: &str) -> Result<usize, SceneError> {
+        let robot = self.robot;
+        let j = robot.joint_by_name(name).ok_or_else(|| {
+            self.scene.error(
+                field,
+                format!(
+                    "robot \"{}\" has no joint \"{name}\" (movable joints: {})",
+                    robot.name,
+                    self.joint_list()
+                ),
+            )
+        })?;
+        if robot.joints[j].kind == JointKind::Fixed {
+            return Err(self.scene.error(
+                field,
+                format!(
+                    "joint \"{name}\" of robot \"{}\" is fixed and cannot move",
+                    robot.name
+                ),
+            ));
+        }
+        Ok(j)
+    }
+
+    /// Checks that `value_rad` is within joint `j`'s limits (if any).
+    fn within(
+        &self,
+        field: &str,
+        j: usize,
+        value_rad: f64,
+        shown: String,
+    ) -> Result<(), SceneError> {
+        if let Some(lim) = self.robot.joints[j].limits {
+            let eps = 1e-9;
+            if value_rad < lim.lower - eps || value_rad > lim.upper + eps {
+                return Err(self.scene.error(
+                    field,
+                    format!(
+                        "{shown} is outside the limits of joint \"{}\" ({:.4} to {:.4} deg)",
+                        self.robot.joints[j].name,
+                        lim.lower.to_degrees(),
+                        lim.upper.to_degrees()
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Actuated joints are movable, revolute and not mimic joints.
+    fn actuators(&self) -> Result<(), SceneError> {
+        for (i, a) in self.scene.actuators.iter().enumerate() {
+            let field = format!("actuator[{i}].joint");
+            let j = self.movable(&field, &a.joint)?;
+            if self.robot.joints[j].mimic.is_some() {
+                return Err(self.scene.error(
+                    &field,
+                    format!(
+                        "joint \"{}\" mimics another joint and cannot be actuated",
+                        a.joint
+                    ),
+                ));
+            }
+            if self.robot.joints[j].kind == JointKind::Prismatic {
+                return Err(self.scene.error(
+                    &field,
+                    format!(
+                        "joint \"{}\" is prismatic; the controller drives revolute joints",
+                        a.joint
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Every scheduled target names a movable joint and is within its limits.
+    fn schedule_targets(&self) -> Result<(), SceneError> {
+        for (i, e) in self.scene.schedule.iter().enumerate() {
+            for (joint, &deg) in &e.targets_deg {
+                let field = format!("schedule[{i}].targets_deg.{joint}");
+                let j = self.movable(&field, joint)?;
+                self.within(&field, j, deg.to_radians(), format!("target {deg} deg"))?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Joints not named in an entry target 0: check 0 is reachable.
+    fn default_targets(&self) -> Result<(), SceneError> {
+        for a in &self.scene.actuators {
+            if let Some(j) = self.robot.joint_by_name(&a.joint) {
+                let named_everywhere = self
+                    .scene
+                    .schedule
+                    .iter()
+                    .all(|e| e.targets_deg.contains_key(&a.joint));
+                if !named_everywhere {
+                    self.within(
+                        &format!("actuator.{}", a.joint),
+                        j,
+                        0.0,
+                        "the default target 0 deg".to_string(),
+                    )?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Held joints are movable, not actuated, and held within their limits.
+    fn held_joints(&self) -> Result<(), SceneError> {
+        for (joint, &rad) in &self.scene.robot.held_joints_rad {
+            let field = format!("robot.held_joints_deg.{joint}");
+            let j = self.movable(&field, joint)?;
+            if self.scene.actuators.iter().any(|a| &a.joint == joint) {
+                return Err(self.scene.error(
+                    &field,
+                    format!("joint \"{joint}\" has an actuator and cannot also be held"),
+                ));
+            }
+            self.within(&field, j, rad, format!("{} deg", rad.to_degrees()))?;
+        }
+        Ok(())
+    }
+
+    /// Tracked links exist.
+    fn tracked_links(&self) -> Result<(), SceneError> {
+        let robot = self.robot;
+        for (i, t) in self.scene.tracked.iter().enumerate() {
+            if let TrackTarget::Link(link) = &t.target {
+                if robot.link_by_name(link).is_none() {
+                    return Err(self.scene.error(
+                        &format!("track[{i}].link"),
+                        format!(
+                            "robot \"{}\" has no link \"{link}\" (links: {})",
+                            robot.name,
+                            robot
+                                .links
+                                .iter()
+                                .map(|l| l.name.as_str())
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        ),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Scene {
+    /// Reads and checks a scene file. The paths inside it are resolved
+    /// against the file's directory. The robot is not loaded: call
+    /// [`Scene::validate`] with it.
+    pub fn from_file(path: &Path) -> Result<Scene, SceneError> {
+        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let abs = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+        Scene::from_toml_str(&text, &abs)
+    }
+
+    /// Parses scene TOML text; `path` names the file in errors and is the
+    /// base for relative paths.
+    pub fn from_toml_str(text: &str, path: &Path) -> Result<Scene, SceneError> {
+        let file = parse_file(text, path)?;
+        let mut b = Builder {
+            path,
+            text,
+            locations: HashMap::new(),
+        };
+        let name = file.name.get_ref().clone();
+        if !valid_name(&name) {
+            return Err(b.invalid(
+                "name",
+                Some(&file.name),
+                format!("\"{name}\" is not a usable name: use letters, digits, '_', '-' and '.' (it names result directories)"),
+            ));
+        }
+        let duration_s = b.positive("duration_s", &file.duration_s)?;
+        b.at("duration_s", &file.duration_s);
+
+        let robot = b.robot(&file.robot)?;
+        let ground = b.ground(file.ground.as_ref())?;
+        let objects = b.objects(&file.objects)?;
+        let controller = b.controller(&file.controller, &file.duration_s, duration_s)?;
+        let actuators = b.actuators(&file.actuators)?;
+        let schedule = b.schedule(&file.schedule, duration_s, &actuators)?;
+        let tracked = b.tracks(&file.tracks, &objects)?;
+        let engine_settings = b.engine_settings(&file.engine)?;
         let gravity_m_s2 = match &file.gravity_m_s2 {
             Some(g) => b.vec3("gravity_m_s2", g)?,
             None => Vec3::new(0.0, 0.0, -STANDARD_GRAVITY_M_S2),
@@ -876,12 +1116,7 @@ impl Scene {
             source: path.to_path_buf(),
             duration_s,
             gravity_m_s2,
-            robot: RobotSpec {
-                urdf,
-                base,
-                mjcf,
-                held_joints_rad,
-            },
+            robot,
             ground,
             objects,
             controller,
@@ -913,132 +1148,12 @@ impl Scene {
     /// tracked name exists, actuated joints are movable, targets and held
     /// positions are within the joints' limits.
     pub fn validate(&self, robot: &RobotModel) -> Result<(), SceneError> {
-        let joint_list = || {
-            robot
-                .joints
-                .iter()
-                .filter(|j| j.kind.is_movable())
-                .map(|j| j.name.as_str())
-                .collect::<Vec<_>>()
-                .join(", ")
-        };
-        let movable = |field: &str, name: &str| -> Result<usize, SceneError> {
-            let j = robot.joint_by_name(name).ok_or_else(|| {
-                self.error(
-                    field,
-                    format!(
-                        "robot \"{}\" has no joint \"{name}\" (movable joints: {})",
-                        robot.name,
-                        joint_list()
-                    ),
-                )
-            })?;
-            if robot.joints[j].kind == JointKind::Fixed {
-                return Err(self.error(
-                    field,
-                    format!(
-                        "joint \"{name}\" of robot \"{}\" is fixed and cannot move",
-                        robot.name
-                    ),
-                ));
-            }
-            Ok(j)
-        };
-        let within =
-            |field: &str, j: usize, value_rad: f64, shown: String| -> Result<(), SceneError> {
-                if let Some(lim) = robot.joints[j].limits {
-                    let eps = 1e-9;
-                    if value_rad < lim.lower - eps || value_rad > lim.upper + eps {
-                        return Err(self.error(
-                            field,
-                            format!(
-                            "{shown} is outside the limits of joint \"{}\" ({:.4} to {:.4} deg)",
-                            robot.joints[j].name,
-                            lim.lower.to_degrees(),
-                            lim.upper.to_degrees()
-                        ),
-                        ));
-                    }
-                }
-                Ok(())
-            };
-        for (i, a) in self.actuators.iter().enumerate() {
-            let field = format!("actuator[{i}].joint");
-            let j = movable(&field, &a.joint)?;
-            if robot.joints[j].mimic.is_some() {
-                return Err(self.error(
-                    &field,
-                    format!(
-                        "joint \"{}\" mimics another joint and cannot be actuated",
-                        a.joint
-                    ),
-                ));
-            }
-            if robot.joints[j].kind == JointKind::Prismatic {
-                return Err(self.error(
-                    &field,
-                    format!(
-                        "joint \"{}\" is prismatic; the controller drives revolute joints",
-                        a.joint
-                    ),
-                ));
-            }
-        }
-        for (i, e) in self.schedule.iter().enumerate() {
-            for (joint, &deg) in &e.targets_deg {
-                let field = format!("schedule[{i}].targets_deg.{joint}");
-                let j = movable(&field, joint)?;
-                within(&field, j, deg.to_radians(), format!("target {deg} deg"))?;
-            }
-        }
-        // Joints not named in an entry target 0: check 0 is reachable.
-        for a in &self.actuators {
-            if let Some(j) = robot.joint_by_name(&a.joint) {
-                let named_everywhere = self
-                    .schedule
-                    .iter()
-                    .all(|e| e.targets_deg.contains_key(&a.joint));
-                if !named_everywhere {
-                    within(
-                        &format!("actuator.{}", a.joint),
-                        j,
-                        0.0,
-                        "the default target 0 deg".to_string(),
-                    )?;
-                }
-            }
-        }
-        for (joint, &rad) in &self.robot.held_joints_rad {
-            let field = format!("robot.held_joints_deg.{joint}");
-            let j = movable(&field, joint)?;
-            if self.actuators.iter().any(|a| &a.joint == joint) {
-                return Err(self.error(
-                    &field,
-                    format!("joint \"{joint}\" has an actuator and cannot also be held"),
-                ));
-            }
-            within(&field, j, rad, format!("{} deg", rad.to_degrees()))?;
-        }
-        for (i, t) in self.tracked.iter().enumerate() {
-            if let TrackTarget::Link(link) = &t.target {
-                if robot.link_by_name(link).is_none() {
-                    return Err(self.error(
-                        &format!("track[{i}].link"),
-                        format!(
-                            "robot \"{}\" has no link \"{link}\" (links: {})",
-                            robot.name,
-                            robot
-                                .links
-                                .iter()
-                                .map(|l| l.name.as_str())
-                                .collect::<Vec<_>>()
-                                .join(", ")
-                        ),
-                    ));
-                }
-            }
-        }
-        Ok(())
+        let c = Checker { scene: self, robot };
+        c.actuators()?;
+        c.schedule_targets()?;
+        c.default_targets()?;
+        c.held_joints()?;
+        c.tracked_links()
     }
 
     /// Number of samples a complete run records: one per control period.

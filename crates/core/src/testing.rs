@@ -15,28 +15,77 @@ pub fn workspace() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
 
-/// The study's recordings beside the project (`../shared/paper-data`), or
-/// `None` after a message when they are absent. When the environment
-/// variable `REALITYGAP_REQUIRE_PAPER_DATA` is set (CI sets it) their
-/// absence is a panic, so that tests cannot pass by skipping.
+/// Environment variable that lets the tests needing the study's recordings
+/// skip (after a message) when no copy is found, outside CI.
+pub const ALLOW_MISSING_PAPER_DATA: &str = "REALITYGAP_ALLOW_MISSING_PAPER_DATA";
+
+/// The study's recordings (with the `kinova_description` package): found by
+/// [`find_paper_data`]. When there is none, a panic that says how to get
+/// them, so that no test passes without checking; outside CI (neither `CI`
+/// nor `REALITYGAP_REQUIRE_PAPER_DATA` set) with
+/// `REALITYGAP_ALLOW_MISSING_PAPER_DATA` set, `None` after a message instead.
 pub fn paper_data() -> Option<PathBuf> {
-    let dir = workspace().join("../shared/paper-data");
-    if dir.join("MotionCapture").is_dir()
-        && dir.join("kinova_description/urdf/m1n6s300.urdf").is_file()
-    {
-        Some(dir)
-    } else if std::env::var_os("REALITYGAP_REQUIRE_PAPER_DATA").is_some() {
-        panic!(
-            "paper-data not found at {} but REALITYGAP_REQUIRE_PAPER_DATA is set",
-            dir.display()
-        );
-    } else {
-        eprintln!(
-            "SKIPPED: paper-data not found at {}; this test needs the study's recordings",
-            dir.display()
-        );
-        None
+    if let Some(dir) = find_paper_data() {
+        return Some(dir);
     }
+    let ci = ["CI", "REALITYGAP_REQUIRE_PAPER_DATA"]
+        .iter()
+        .any(|v| std::env::var_os(v).is_some());
+    if !ci && std::env::var_os(ALLOW_MISSING_PAPER_DATA).is_some() {
+        eprintln!(
+            "SKIPPED ({ALLOW_MISSING_PAPER_DATA} is set): this test needs the study's recordings"
+        );
+        return None;
+    }
+    panic!(
+        "the study's recordings were found neither at {} nor unpacked from the built-in archive in the cache; \
+         unpack them with `cargo test -p realitygap-data` (or `realitygap compare --data builtin`), \
+         or set {ALLOW_MISSING_PAPER_DATA}=1 outside CI to skip the tests that need them",
+        workspace().join("../shared/paper-data").display()
+    );
+}
+
+/// Where the study's recordings are: `../shared/paper-data` beside the
+/// project, else the built-in archive's copy already unpacked in the cache
+/// (`<cache root>/study-data/<first 16 hex digits of its SHA-256>/`, the
+/// cache root as `realitygap-data` chooses it). `None` when neither is there.
+pub fn find_paper_data() -> Option<PathBuf> {
+    let complete = |dir: &Path| {
+        dir.join("MotionCapture").is_dir()
+            && dir.join("Simulation").is_dir()
+            && dir.join("kinova_description/urdf/m1n6s300.urdf").is_file()
+    };
+    let shared = workspace().join("../shared/paper-data");
+    if complete(&shared) {
+        return Some(shared);
+    }
+    builtin_copy().filter(|d| complete(d))
+}
+
+/// The built-in archive's unpacked copy in the cache, if finished (its
+/// manifest is written last).
+fn builtin_copy() -> Option<PathBuf> {
+    let checksum =
+        std::fs::read_to_string(workspace().join("assets/study-data/paper-data.tar.zst.sha256"))
+            .ok()?;
+    let key = checksum
+        .split_whitespace()
+        .next()?
+        .get(..16)?
+        .to_ascii_lowercase();
+    let var = |name: &str| {
+        std::env::var_os(name)
+            .filter(|v| !v.is_empty())
+            .map(PathBuf::from)
+    };
+    let root = var("REALITYGAP_CACHE_DIR")
+        .or_else(|| var("XDG_CACHE_HOME").map(|d| d.join("realitygap")))
+        .or_else(|| var("HOME").map(|d| d.join(".cache/realitygap")))
+        .unwrap_or_else(|| std::env::temp_dir().join("realitygap-test-cache"));
+    let dir = root.join("study-data").join(key);
+    dir.join(".realitygap-unpacked.json")
+        .is_file()
+        .then_some(dir)
 }
 
 /// One of the project's scenes, by name (`scene1_single_joint`, ...).
@@ -114,4 +163,20 @@ pub fn final_angles_deg(out: &RunOutcome) -> Vec<f64> {
         .iter()
         .map(|a| a.to_degrees())
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Once the built-in archive is unpacked, the helper the engines' tests
+    /// use finds that copy (so they run without `../shared/paper-data`).
+    #[test]
+    fn the_unpacked_builtin_copy_is_found() {
+        let unpacked = crate::robot::mico2_tests::paper_data();
+        assert_eq!(builtin_copy(), Some(unpacked.clone()));
+        let found = find_paper_data().expect("a copy is found");
+        assert!(found == unpacked || found == workspace().join("../shared/paper-data"));
+        assert_eq!(paper_data(), Some(found));
+    }
 }

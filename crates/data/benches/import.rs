@@ -1,12 +1,13 @@
 //! Import benchmark: reads the study's 60 motion-capture files and 420
-//! recorded simulator files (from `../shared/paper-data`), single-threaded
+//! recorded simulator files (from `../shared/paper-data`, else the built-in
+//! archive unpacked into the cache), single-threaded
 //! and on all cores, and prints files, MB, wall seconds and MB/s.
 //!
 //! Run with `cargo bench -p realitygap-data --bench import`.
 
 use realitygap_data::qualisys::{self, QualisysOptions};
 use realitygap_data::recorded::{self, QuatOrder, RecordedOptions};
-use realitygap_data::{format_run_csv, parse_run_csv, ImportedRun};
+use realitygap_data::{builtin, format_run_csv, parse_run_csv, ImportedRun};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
@@ -132,37 +133,33 @@ fn report(what: &str, files: usize, bytes: usize, t: Timing) {
     );
 }
 
-fn main() {
+/// The study's recordings: `../shared/paper-data` when it is there, else
+/// the built-in archive unpacked into the cache.
+fn paper_data() -> PathBuf {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/paper-data");
-    if !root.join("MotionCapture").is_dir() {
-        println!(
-            "SKIPPED: paper-data not found at {} (nothing to benchmark)",
-            root.display()
-        );
-        return;
+    if root.join("MotionCapture").is_dir() {
+        return root;
     }
-    let jobs = jobs(&root);
+    let assets = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../assets");
+    let archive = builtin::StudyArchive::in_assets(&assets).unwrap_or_else(|e| panic!("{e}"));
+    let cache = builtin::default_cache_root().unwrap_or_else(|e| panic!("{e}"));
+    builtin::open_or_unpack(&archive, &cache)
+        .unwrap_or_else(|e| panic!("{e}"))
+        .dir
+}
+
+/// Times the importers: read + parse and parse only, on 1 and all threads,
+/// then each format alone.
+fn bench_imports(jobs: &[Job], contents: &[Vec<u8>], threads: usize) {
     let n = jobs.len();
-    let threads = std::thread::available_parallelism().map_or(1, |p| p.get());
-    let contents: Vec<Vec<u8>> = jobs
-        .iter()
-        .map(|j| std::fs::read(j.path()).unwrap())
-        .collect();
     let total: usize = contents.iter().map(Vec::len).sum();
     let capture_bytes: usize = jobs
         .iter()
-        .zip(&contents)
+        .zip(contents)
         .filter(|(j, _)| matches!(j, Job::Capture(_)))
         .map(|(_, c)| c.len())
         .sum();
     let captures = jobs.iter().filter(|j| matches!(j, Job::Capture(_))).count();
-    println!(
-        "paper-data: {} capture + {} simulator files, {} threads available",
-        captures,
-        n - captures,
-        threads
-    );
-
     let repeats = 10;
     let read_and_parse = |i: usize| {
         let bytes = std::fs::read(jobs[i].path()).unwrap();
@@ -215,9 +212,13 @@ fn main() {
         total - capture_bytes,
         subset(&recorded_idx),
     );
+}
 
-    // The results-directory format: write every trajectory as run CSV and
-    // read it back.
+/// Times the results-directory format: every trajectory written as run CSV
+/// and read back.
+fn bench_run_csv(jobs: &[Job], contents: &[Vec<u8>]) {
+    let n = jobs.len();
+    let repeats = 10;
     let runs: Vec<ImportedRun> = (0..n).map(|i| jobs[i].parse(&contents[i])).collect();
     let texts: Vec<String> = runs
         .iter()
@@ -236,4 +237,23 @@ fn main() {
         })
     });
     report("run CSV parse, 1 thread", n, csv_bytes, parse_s);
+}
+
+fn main() {
+    let root = paper_data();
+    let jobs = jobs(&root);
+    let threads = std::thread::available_parallelism().map_or(1, |p| p.get());
+    let contents: Vec<Vec<u8>> = jobs
+        .iter()
+        .map(|j| std::fs::read(j.path()).unwrap())
+        .collect();
+    let captures = jobs.iter().filter(|j| matches!(j, Job::Capture(_))).count();
+    println!(
+        "paper-data: {} capture + {} simulator files, {} threads available",
+        captures,
+        jobs.len() - captures,
+        threads
+    );
+    bench_imports(&jobs, &contents, threads);
+    bench_run_csv(&jobs, &contents);
 }

@@ -685,7 +685,7 @@ mod tests {
     /// same files, byte for byte, as the paper-data folder (less its README).
     #[test]
     fn the_archive_holds_paper_data_byte_for_byte() {
-        let Some(paper) = crate::paper_data() else {
+        let Some(paper) = crate::published_paper_data() else {
             return;
         };
         let tmp = tempfile::tempdir().unwrap();

@@ -10,11 +10,13 @@
 //!   unpacked once into a verified cache folder.
 //!
 //! Every importer returns an [`ImportedRun`]: a
-//! [`Trajectory`](realitygap_core::Trajectory) in metres, radians and
+//! [`Trajectory`] in metres, radians and
 //! seconds, plus what the reader noticed on the way (warnings, lost-marker
 //! gaps, all-zero rows, quaternions off unit norm). Input that cannot be
 //! read gives an [`ImportError`] naming the file, line, column and field;
 //! no input makes a reader panic.
+
+#![forbid(unsafe_code)]
 
 pub mod builtin;
 pub mod error;
@@ -71,25 +73,49 @@ impl ImportedRun {
     }
 }
 
-/// Path of the study's recordings, for tests: `../../../shared/paper-data`
-/// from this crate. `None` (after printing why) when it is absent; a panic
-/// instead when `REALITYGAP_REQUIRE_PAPER_DATA` is set (CI sets it), so the
-/// tests cannot pass by skipping.
+/// The study's recordings for tests: the built-in archive
+/// (`assets/study-data/`), unpacked once per process into the cache
+/// ([`builtin::default_cache_root`], else a folder in the system's temporary
+/// folder) and reused. Always there: the tests that need the recordings
+/// never skip. Panics if the archive cannot be unpacked.
 #[cfg(test)]
-pub(crate) fn paper_data() -> Option<PathBuf> {
+pub(crate) fn paper_data() -> PathBuf {
+    static DIR: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+    DIR.get_or_init(|| {
+        let assets = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../assets");
+        let archive = builtin::StudyArchive::in_assets(&assets).unwrap_or_else(|e| panic!("{e}"));
+        let cache = builtin::default_cache_root()
+            .unwrap_or_else(|_| std::env::temp_dir().join("realitygap-test-cache"));
+        builtin::open_or_unpack(&archive, &cache)
+            .unwrap_or_else(|e| panic!("{e}"))
+            .dir
+    })
+    .clone()
+}
+
+/// The study's recordings as published, beside the project
+/// (`../shared/paper-data`), for the one test that compares the built-in
+/// archive with them. Panics when they are absent, unless
+/// `REALITYGAP_ALLOW_MISSING_PAPER_DATA` is set outside CI (neither `CI`
+/// nor `REALITYGAP_REQUIRE_PAPER_DATA` set): then `None` after a message.
+#[cfg(test)]
+pub(crate) fn published_paper_data() -> Option<PathBuf> {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/paper-data");
     if dir.join("MotionCapture").is_dir() && dir.join("Simulation").is_dir() {
-        Some(dir)
-    } else if std::env::var_os("REALITYGAP_REQUIRE_PAPER_DATA").is_some() {
-        panic!(
-            "paper-data not found at {} but REALITYGAP_REQUIRE_PAPER_DATA is set",
-            dir.display()
-        );
-    } else {
-        eprintln!(
-            "SKIPPED: paper-data not found at {} (tests on the study's recordings did not run)",
-            dir.display()
-        );
-        None
+        return Some(dir);
     }
+    let ci = ["CI", "REALITYGAP_REQUIRE_PAPER_DATA"]
+        .iter()
+        .any(|v| std::env::var_os(v).is_some());
+    if !ci && std::env::var_os("REALITYGAP_ALLOW_MISSING_PAPER_DATA").is_some() {
+        eprintln!(
+            "SKIPPED (REALITYGAP_ALLOW_MISSING_PAPER_DATA is set): paper-data not found at {}",
+            dir.display()
+        );
+        return None;
+    }
+    panic!(
+        "paper-data not found at {}: put the study's recordings there, or set REALITYGAP_ALLOW_MISSING_PAPER_DATA=1 (outside CI) to skip this test",
+        dir.display()
+    );
 }

@@ -172,22 +172,24 @@ impl Layout {
     }
 }
 
-/// Parses the bytes of a Qualisys 6DOF TSV export; `file` is used in
-/// messages only. Never panics, whatever the bytes.
-pub fn parse(
-    bytes: &[u8],
-    file: &Path,
-    opts: &QualisysOptions,
-) -> Result<ImportedRun, ImportError> {
-    let mut warnings = Vec::new();
-    let mut lines = Lines::new(bytes);
+/// The lines before the data: header block, column-name line, first data row.
+struct Preamble<'a> {
+    header: Header,
+    /// The column-name line, if any.
+    column_line: Option<Line<'a>>,
+    /// The first data row.
+    first_data: Line<'a>,
+    /// The input from the first data row on.
+    data: &'a [u8],
+}
 
-    // Header block, column-name line, first data row.
+/// Reads the header block and the column-name line up to the first data row.
+fn read_preamble<'a>(bytes: &'a [u8], file: &Path) -> Result<Preamble<'a>, ImportError> {
+    let mut lines = Lines::new(bytes);
     let mut header = Header::default();
     let mut column_line: Option<Line> = None;
     let mut first_data: Option<Line> = None;
     let mut any_content = false;
-    // The input from the first data row on.
     let mut data: &[u8] = &[];
     loop {
         let rest = lines.rest();
@@ -229,9 +231,22 @@ pub fn parse(
             "the file has a header but no data rows",
         ));
     };
+    Ok(Preamble {
+        header,
+        column_line,
+        first_data,
+        data,
+    })
+}
 
-    // Frequency and body names: header first, then options.
-    let frequency_hz = match (header.frequency_hz, opts.frequency_hz) {
+/// The capture frequency, Hz: the header's, else the options'.
+fn frequency(
+    header: &Header,
+    opts: &QualisysOptions,
+    file: &Path,
+    warnings: &mut Vec<String>,
+) -> Result<f64, ImportError> {
+    Ok(match (header.frequency_hz, opts.frequency_hz) {
         (Some(h), Some(o)) => {
             if h != o {
                 warnings.push(format!("the header's FREQUENCY {h} Hz is used instead of the given {o} Hz"));
@@ -247,7 +262,16 @@ pub fn parse(
                 "the file has no FREQUENCY header line: the capture frequency must be given (e.g. --frequency 100)",
             ))
         }
-    };
+    })
+}
+
+/// The rigid bodies' names in file order: the header's, else the options'.
+fn body_names(
+    header: &mut Header,
+    opts: &QualisysOptions,
+    file: &Path,
+    warnings: &mut Vec<String>,
+) -> Result<Vec<String>, ImportError> {
     let body_names = match (header.body_names.take(), &opts.body_names) {
         (Some(h), Some(o)) => {
             if &h != o {
@@ -278,7 +302,16 @@ pub fn parse(
         }
     }
 
-    // Roles.
+    Ok(body_names)
+}
+
+/// The bodies' roles (distinct); warns of roles given for absent bodies.
+fn roles(
+    body_names: &[String],
+    opts: &QualisysOptions,
+    file: &Path,
+    warnings: &mut Vec<String>,
+) -> Result<Vec<String>, ImportError> {
     let roles: Vec<String> = body_names.iter().map(|n| opts.role_of(n)).collect();
     for (i, role) in roles.iter().enumerate() {
         if let Some(j) = roles[..i].iter().position(|r| r == role) {
@@ -305,28 +338,109 @@ pub fn parse(
         ));
     }
 
-    // Layout: from the column-name line if any, and the first row's width.
-    let names_frame_time = match &column_line {
-        Some(line) => Some(check_column_names(line, file, &body_names)?),
-        None => None,
-    };
-    let layout = choose_layout(&first_data, file, body_names.len(), names_frame_time)?;
+    Ok(roles)
+}
+
+/// The data rows read so far.
+struct Rows {
+    /// Per body, its pose (or gap) per sample.
+    poses: Vec<Vec<Option<Pose>>>,
+    /// Per body, samples lost.
+    lost: Vec<usize>,
+    /// Per body, samples whose Rot[] is not a rotation.
+    not_rotation: Vec<usize>,
+    /// Frame numbers (frame-time layout).
+    frames: Vec<u64>,
+    /// Time cells, `NaN` when empty (frame-time layout).
+    times: Vec<f64>,
+    /// The first problem with the time column, if any.
+    time_problem: Option<String>,
+}
+
+impl Rows {
+    fn new(bodies: usize) -> Self {
+        Rows {
+            poses: vec![Vec::new(); bodies],
+            lost: vec![0; bodies],
+            not_rotation: vec![0; bodies],
+            frames: Vec::new(),
+            times: Vec::new(),
+            time_problem: None,
+        }
+    }
+
+    /// Records a row's frame number and time; frames must increase, a bad
+    /// time is remembered (times then come from the frames).
+    fn push_frame_time(
+        &mut self,
+        frame: u64,
+        time: Option<f64>,
+        file: &Path,
+        number: usize,
+    ) -> Result<(), ImportError> {
+        if let Some(&prev) = self.frames.last() {
+            if frame <= prev {
+                return Err(ImportError::at_line(
+                    file,
+                    number,
+                    format!("frame numbers must increase, but frame {frame} follows frame {prev}"),
+                )
+                .with_column(1)
+                .with_field("Frame"));
+            }
+        }
+        self.frames.push(frame);
+        match time {
+            Some(t) if t.is_finite() && self.times.last().is_none_or(|&p| t > p) => {}
+            Some(t) if self.time_problem.is_none() => {
+                self.time_problem = Some(format!(
+                    "line {}: time {t} does not follow the previous one",
+                    number
+                ));
+            }
+            None if self.time_problem.is_none() => {
+                self.time_problem = Some(format!("line {}: the time cell is empty", number));
+            }
+            _ => {}
+        }
+        self.times.push(time.unwrap_or(f64::NAN));
+        Ok(())
+    }
+
+    /// Records a row's bodies.
+    fn push_cells(&mut self, row_cells: &mut Vec<Cells>) {
+        for (b, cells) in row_cells.drain(..).enumerate() {
+            let pose = match cells {
+                Cells::Pose(p) => Some(p),
+                Cells::Lost => {
+                    self.lost[b] += 1;
+                    None
+                }
+                Cells::NotRotation => {
+                    self.not_rotation[b] += 1;
+                    None
+                }
+            };
+            self.poses[b].push(pose);
+        }
+    }
+}
+
+/// Reads the data rows, split in one pass over the bytes; a cut last line
+/// (an interrupted copy) is dropped with a warning.
+fn read_rows(
+    pre: &Preamble,
+    layout: Layout,
+    body_names: &[String],
+    file: &Path,
+    warnings: &mut Vec<String>,
+) -> Result<Rows, ImportError> {
     let columns = layout.columns();
-
-    // Data rows.
-    let n_bodies = body_names.len();
-    let mut poses: Vec<Vec<Option<Pose>>> = vec![Vec::new(); n_bodies];
-    let mut lost = vec![0usize; n_bodies];
-    let mut not_rotation = vec![0usize; n_bodies];
-    let mut frames: Vec<u64> = Vec::new();
-    let mut times: Vec<f64> = Vec::new();
-    let mut time_problem: Option<String> = None;
+    let mut rows = Rows::new(body_names.len());
     let mut fields: Vec<&[u8]> = Vec::with_capacity(columns + 1);
-
-    let mut row_cells: Vec<Cells> = Vec::with_capacity(n_bodies);
-    // Data rows, split in one pass over the bytes.
-    let mut rest = data;
-    let mut number = first_data.number - 1;
+    let mut row_cells: Vec<Cells> = Vec::with_capacity(body_names.len());
+    let mut rest = pre.data;
+    let mut number = pre.first_data.number - 1;
     while !rest.is_empty() {
         number += 1;
         fields.clear();
@@ -353,7 +467,7 @@ pub fn parse(
                     format!("expected {what}, found {}", show_bytes(fields[col], 40)),
                 )
                 .with_column(col + 1)
-                .with_field(column_name(layout, &body_names, col))
+                .with_field(column_name(layout, body_names, col))
             })
         };
         let (frame, time) = match parsed {
@@ -375,59 +489,27 @@ pub fn parse(
             }
         };
         if layout.frame_time {
-            if let Some(&prev) = frames.last() {
-                if frame <= prev {
-                    return Err(ImportError::at_line(
-                        file,
-                        number,
-                        format!(
-                            "frame numbers must increase, but frame {frame} follows frame {prev}"
-                        ),
-                    )
-                    .with_column(1)
-                    .with_field("Frame"));
-                }
-            }
-            frames.push(frame);
-            match time {
-                Some(t) if t.is_finite() && times.last().is_none_or(|&p| t > p) => {}
-                Some(t) if time_problem.is_none() => {
-                    time_problem = Some(format!(
-                        "line {}: time {t} does not follow the previous one",
-                        number
-                    ));
-                }
-                None if time_problem.is_none() => {
-                    time_problem = Some(format!("line {}: the time cell is empty", number));
-                }
-                _ => {}
-            }
-            times.push(time.unwrap_or(f64::NAN));
+            rows.push_frame_time(frame, time, file, number)?;
         }
-        for (b, cells) in row_cells.drain(..).enumerate() {
-            let pose = match cells {
-                Cells::Pose(p) => Some(p),
-                Cells::Lost => {
-                    lost[b] += 1;
-                    None
-                }
-                Cells::NotRotation => {
-                    not_rotation[b] += 1;
-                    None
-                }
-            };
-            poses[b].push(pose);
-        }
+        rows.push_cells(&mut row_cells);
     }
-    let samples = poses.first().map_or(0, Vec::len);
-    if samples == 0 {
-        return Err(ImportError::new(file, "the file has no complete data rows"));
-    }
+    Ok(rows)
+}
 
-    // Sample times.
-    let time_s: Vec<f64> = if layout.frame_time {
+/// The sample times, seconds from the first: the time column when it is
+/// usable (warning when it disagrees with the frames), else frame numbers
+/// at the frequency; without frame-time columns, the row index.
+fn sample_times(
+    rows: &Rows,
+    layout: Layout,
+    frequency_hz: f64,
+    samples: usize,
+    warnings: &mut Vec<String>,
+) -> Vec<f64> {
+    let (frames, times) = (&rows.frames, &rows.times);
+    if layout.frame_time {
         let by_frame = |f: u64| (f - frames[0]) as f64 / frequency_hz;
-        match time_problem {
+        match &rows.time_problem {
             None => {
                 let span = times[samples - 1] - times[0];
                 let expected = by_frame(frames[samples - 1]);
@@ -448,8 +530,19 @@ pub fn parse(
         }
     } else {
         (0..samples).map(|i| i as f64 / frequency_hz).collect()
-    };
+    }
+}
 
+/// Warnings on counts: NO_OF_FRAMES against the rows, gaps and non-rotations.
+fn count_warnings(
+    header: &Header,
+    rows: &Rows,
+    body_names: &[String],
+    roles: &[String],
+    samples: usize,
+    warnings: &mut Vec<String>,
+) {
+    let (lost, not_rotation) = (&rows.lost, &rows.not_rotation);
     if let Some((n, line)) = header.frames {
         if n != samples {
             warnings.push(format!(
@@ -457,7 +550,7 @@ pub fn parse(
             ));
         }
     }
-    for b in 0..n_bodies {
+    for b in 0..body_names.len() {
         if lost[b] > 0 {
             warnings.push(format!(
                 "body '{}' ({}): lost in {} of {samples} samples (gaps)",
@@ -471,12 +564,46 @@ pub fn parse(
             ));
         }
     }
+}
 
+/// Parses the bytes of a Qualisys 6DOF TSV export; `file` is used in
+/// messages only. Never panics, whatever the bytes.
+pub fn parse(
+    bytes: &[u8],
+    file: &Path,
+    opts: &QualisysOptions,
+) -> Result<ImportedRun, ImportError> {
+    let mut warnings = Vec::new();
+    let mut pre = read_preamble(bytes, file)?;
+    // Frequency and body names: header first, then options.
+    let frequency_hz = frequency(&pre.header, opts, file, &mut warnings)?;
+    let body_names = body_names(&mut pre.header, opts, file, &mut warnings)?;
+    let roles = roles(&body_names, opts, file, &mut warnings)?;
+    // Layout: from the column-name line if any, and the first row's width.
+    let names_frame_time = match &pre.column_line {
+        Some(line) => Some(check_column_names(line, file, &body_names)?),
+        None => None,
+    };
+    let layout = choose_layout(&pre.first_data, file, body_names.len(), names_frame_time)?;
+    let rows = read_rows(&pre, layout, &body_names, file, &mut warnings)?;
+    let samples = rows.poses.first().map_or(0, Vec::len);
+    if samples == 0 {
+        return Err(ImportError::new(file, "the file has no complete data rows"));
+    }
+    let time_s = sample_times(&rows, layout, frequency_hz, samples, &mut warnings);
+    count_warnings(
+        &pre.header,
+        &rows,
+        &body_names,
+        &roles,
+        samples,
+        &mut warnings,
+    );
     let trajectory = Trajectory {
         time_s,
         bodies: roles
             .into_iter()
-            .zip(poses)
+            .zip(rows.poses)
             .map(|(role, poses)| BodyTrack { role, poses })
             .collect(),
         joint_angles_rad: None,

@@ -193,11 +193,8 @@ fn split_cells(line: &[u8], out: &mut [(usize, usize)]) -> Result<usize, usize> 
 
 /// Parses the bytes of a recorded simulator file; `file` is used in
 /// messages only. Never panics, whatever the bytes.
-pub fn parse(
-    bytes: &[u8],
-    file: &Path,
-    opts: &RecordedOptions,
-) -> Result<ImportedRun, ImportError> {
+/// Checks the options: a positive control period, a norm tolerance >= 0.
+fn check_options(opts: &RecordedOptions, file: &Path) -> Result<(), ImportError> {
     if !(opts.control_period_s.is_finite() && opts.control_period_s > 0.0) {
         return Err(ImportError::new(
             file,
@@ -213,118 +210,48 @@ pub fn parse(
             format!("the norm tolerance {} is not >= 0", opts.norm_tolerance),
         ));
     }
-    let order = opts.quat_order;
-    let mut warnings = Vec::new();
-    let mut wrist = Vec::new();
-    let mut cube = Vec::new();
-    let mut zero_rows = Vec::new();
-    let mut bad_norm_rows = Vec::new();
-    let mut non_finite_rows = Vec::new();
-    let mut far_rows: Vec<(usize, f64)> = Vec::new();
-    let mut header_lines = 0usize;
-    let mut any_content = false;
-    let mut ranges_buf = [(0usize, 0usize); NUMBERS];
+    Ok(())
+}
 
-    for line in Lines::new(bytes) {
-        if line.bytes.iter().all(|&b| b == b' ' || b == b'\t') {
-            continue;
-        }
-        any_content = true;
-        // Validate the line's UTF-8 once; a damaged line is read lossily so
-        // the bad cell shows up as a non-number at its own column.
-        let lossy;
-        let text: &str = match std::str::from_utf8(line.bytes) {
-            Ok(s) => s,
-            Err(_) => {
-                lossy = String::from_utf8_lossy(line.bytes);
-                &lossy
-            }
-        };
-        let split = split_cells(text.as_bytes(), &mut ranges_buf);
-        let cells: [&str; NUMBERS] =
-            std::array::from_fn(|i| text.get(ranges_buf[i].0..ranges_buf[i].1).unwrap_or(""));
-        // A column-name header before the data.
-        if wrist.is_empty() && split.is_ok() {
-            let first = cells[0];
-            if first
-                .as_bytes()
-                .first()
-                .is_some_and(u8::is_ascii_alphabetic)
-                && parse_f64_str(first).is_none()
-            {
-                header_lines += 1;
-                continue;
-            }
-        }
-        let row = match split {
-            Err(col) => Err(ImportError::at_line(file, line.number, "expected a number, found an empty cell")
-                .with_column(col + 1)
-                .with_field(field_name(order, col.min(NUMBERS - 1)))),
-            Ok(n) => parse_numbers(&cells[..n.min(NUMBERS)]).map_err(|i| {
-                ImportError::at_line(file, line.number, format!("expected a number, found {}", show_bytes(cells[i].as_bytes(), 40)))
-                    .with_column(i + 1)
-                    .with_field(field_name(order, i))
-            }).and_then(|v| {
-                if n == NUMBERS {
-                    return Ok(v);
-                }
-                let what = if n < NUMBERS {
-                    format!("the row ends after {n}, before {}", field_name(order, n))
-                } else {
-                    format!("the row has {n}")
-                };
-                Err(ImportError::at_line(
-                    file,
-                    line.number,
-                    format!(
-                        "expected {NUMBERS} numbers (wrist x y z, wrist quaternion {order}, cube x y z, \
-                         cube quaternion {order}), but {what}"
-                    ),
-                )
-                .with_column(n.min(NUMBERS) + 1))
-            }),
-        };
-        let v = match row {
-            Ok(v) => v,
-            Err(e) => {
-                // Cut short: too few cells, or the last cell present is not a
-                // number, on a last line without a line end.
-                let short =
-                    matches!(split, Ok(n) if n <= NUMBERS && e.column.is_some_and(|c| c >= n));
-                if !line.terminated && short {
-                    warnings.push(format!(
-                        "line {}: the last line is cut short and was dropped",
-                        line.number
-                    ));
-                    break;
-                }
-                return Err(e);
-            }
-        };
+/// The samples read so far, and the rows worth a warning.
+#[derive(Default)]
+struct Samples {
+    wrist: Vec<Option<Pose>>,
+    cube: Vec<Option<Pose>>,
+    zero_rows: Vec<usize>,
+    bad_norm_rows: Vec<usize>,
+    non_finite_rows: Vec<usize>,
+    far_rows: Vec<(usize, f64)>,
+}
 
-        let index = wrist.len();
+impl Samples {
+    /// Adds one row: an all-zero row becomes identity poses (and is noted);
+    /// quaternions are normalised, a norm off 1 by more than
+    /// `norm_tolerance` noted.
+    fn push(&mut self, v: [f64; NUMBERS], order: QuatOrder, norm_tolerance: f64) {
+        let index = self.wrist.len();
         if v.iter().all(|&x| x == 0.0) {
-            zero_rows.push(index);
-            wrist.push(Some(Pose::IDENTITY));
-            cube.push(Some(Pose::IDENTITY));
-            continue;
+            self.zero_rows.push(index);
+            self.wrist.push(Some(Pose::IDENTITY));
+            self.cube.push(Some(Pose::IDENTITY));
+            return;
         }
         if v.iter().any(|x| !x.is_finite()) {
-            non_finite_rows.push(index);
+            self.non_finite_rows.push(index);
         }
         let farthest = [v[0], v[1], v[2], v[7], v[8], v[9]]
             .iter()
             .map(|x| x.abs())
             .fold(0.0, f64::max);
         if farthest > FAR_M {
-            far_rows.push((index, farthest));
+            self.far_rows.push((index, farthest));
         }
         let mut norm_off = false;
-        for (offset, track) in [(0, &mut wrist), (7, &mut cube)] {
+        for (offset, track) in [(0, &mut self.wrist), (7, &mut self.cube)] {
             let position = Vec3::new(v[offset], v[offset + 1], v[offset + 2]);
             let q = order.quat(&[v[offset + 3], v[offset + 4], v[offset + 5], v[offset + 6]]);
             let norm = q.norm();
-            if norm.is_nan() || (norm - 1.0).abs() > opts.norm_tolerance {
+            if norm.is_nan() || (norm - 1.0).abs() > norm_tolerance {
                 norm_off = true;
             }
             let orientation = if norm == 0.0 {
@@ -335,13 +262,61 @@ pub fn parse(
             track.push(Some(Pose::new(position, orientation)));
         }
         if norm_off {
-            bad_norm_rows.push(index);
+            self.bad_norm_rows.push(index);
         }
     }
-    if !any_content {
-        return Err(ImportError::new(file, "the file is empty"));
+
+    /// The warnings on the rows noted.
+    fn warnings(&self, norm_tolerance: f64, warnings: &mut Vec<String>) {
+        let (zero_rows, bad_norm_rows, far_rows, non_finite_rows) = (
+            &self.zero_rows,
+            &self.bad_norm_rows,
+            &self.far_rows,
+            &self.non_finite_rows,
+        );
+        if !zero_rows.is_empty() {
+            warnings.push(format!(
+                "{} rows are all zero (samples {}): the simulator wrote nothing there",
+                zero_rows.len(),
+                ranges(zero_rows)
+            ));
+        }
+        if !bad_norm_rows.is_empty() {
+            warnings.push(format!(
+                "{} rows have a quaternion whose norm is off 1 by more than {} (samples {})",
+                bad_norm_rows.len(),
+                norm_tolerance,
+                ranges(bad_norm_rows)
+            ));
+        }
+        if let Some(&(first, _)) = far_rows.first() {
+            let largest = far_rows.iter().map(|r| r.1).fold(0.0, f64::max);
+            warnings.push(format!(
+                "{} rows have positions beyond {FAR_M} m (first at sample {first}, largest {largest:e} m): \
+                 the simulation probably diverged",
+                far_rows.len()
+            ));
+        }
+        if !non_finite_rows.is_empty() {
+            warnings.push(format!(
+                "{} rows hold non-finite values (samples {}): the simulation diverged",
+                non_finite_rows.len(),
+                ranges(non_finite_rows)
+            ));
+        }
     }
-    if wrist.is_empty() {
+}
+
+/// The run read: the errors and warnings on what the rows held, then the
+/// trajectory on the control grid.
+fn into_run(
+    samples: Samples,
+    header_lines: usize,
+    opts: &RecordedOptions,
+    file: &Path,
+    mut warnings: Vec<String>,
+) -> Result<ImportedRun, ImportError> {
+    if samples.wrist.is_empty() {
         let what = if header_lines > 0 {
             format!("the file has no data rows, only {header_lines} line(s) of words (taken for column names)")
         } else {
@@ -354,37 +329,14 @@ pub fn parse(
             "skipped {header_lines} header line(s) before the data"
         ));
     }
-    if !zero_rows.is_empty() {
-        warnings.push(format!(
-            "{} rows are all zero (samples {}): the simulator wrote nothing there",
-            zero_rows.len(),
-            ranges(&zero_rows)
-        ));
-    }
-    if !bad_norm_rows.is_empty() {
-        warnings.push(format!(
-            "{} rows have a quaternion whose norm is off 1 by more than {} (samples {})",
-            bad_norm_rows.len(),
-            opts.norm_tolerance,
-            ranges(&bad_norm_rows)
-        ));
-    }
-    if let Some(&(first, _)) = far_rows.first() {
-        let largest = far_rows.iter().map(|r| r.1).fold(0.0, f64::max);
-        warnings.push(format!(
-            "{} rows have positions beyond {FAR_M} m (first at sample {first}, largest {largest:e} m): \
-             the simulation probably diverged",
-            far_rows.len()
-        ));
-    }
-    if !non_finite_rows.is_empty() {
-        warnings.push(format!(
-            "{} rows hold non-finite values (samples {}): the simulation diverged",
-            non_finite_rows.len(),
-            ranges(&non_finite_rows)
-        ));
-    }
-
+    samples.warnings(opts.norm_tolerance, &mut warnings);
+    let Samples {
+        wrist,
+        cube,
+        zero_rows,
+        bad_norm_rows,
+        ..
+    } = samples;
     let samples = wrist.len();
     let trajectory = Trajectory {
         time_s: (0..samples)
@@ -412,6 +364,117 @@ pub fn parse(
         zero_rows,
         bad_norm_rows,
     })
+}
+
+/// The fourteen numbers of a row, or where and why it is not one.
+fn row_numbers(
+    split: Result<usize, usize>,
+    cells: &[&str; NUMBERS],
+    order: QuatOrder,
+    file: &Path,
+    line: usize,
+) -> Result<[f64; NUMBERS], ImportError> {
+    match split {
+        Err(col) => Err(ImportError::at_line(file, line, "expected a number, found an empty cell")
+            .with_column(col + 1)
+            .with_field(field_name(order, col.min(NUMBERS - 1)))),
+        Ok(n) => parse_numbers(&cells[..n.min(NUMBERS)]).map_err(|i| {
+            ImportError::at_line(file, line, format!("expected a number, found {}", show_bytes(cells[i].as_bytes(), 40)))
+                .with_column(i + 1)
+                .with_field(field_name(order, i))
+        }).and_then(|v| {
+            if n == NUMBERS {
+                return Ok(v);
+            }
+            let what = if n < NUMBERS {
+                format!("the row ends after {n}, before {}", field_name(order, n))
+            } else {
+                format!("the row has {n}")
+            };
+            Err(ImportError::at_line(
+                file,
+                line,
+                format!(
+                    "expected {NUMBERS} numbers (wrist x y z, wrist quaternion {order}, cube x y z, \
+                     cube quaternion {order}), but {what}"
+                ),
+            )
+            .with_column(n.min(NUMBERS) + 1))
+        }),
+    }
+}
+
+/// Parses the bytes of a recorded simulator file; `file` is used in
+/// messages only. Never panics, whatever the bytes.
+pub fn parse(
+    bytes: &[u8],
+    file: &Path,
+    opts: &RecordedOptions,
+) -> Result<ImportedRun, ImportError> {
+    check_options(opts, file)?;
+    let order = opts.quat_order;
+    let mut warnings = Vec::new();
+    let mut samples = Samples::default();
+    let mut header_lines = 0usize;
+    let mut any_content = false;
+    let mut ranges_buf = [(0usize, 0usize); NUMBERS];
+
+    for line in Lines::new(bytes) {
+        if line.bytes.iter().all(|&b| b == b' ' || b == b'\t') {
+            continue;
+        }
+        any_content = true;
+        // Validate the line's UTF-8 once; a damaged line is read lossily so
+        // the bad cell shows up as a non-number at its own column.
+        let lossy;
+        let text: &str = match std::str::from_utf8(line.bytes) {
+            Ok(s) => s,
+            Err(_) => {
+                lossy = String::from_utf8_lossy(line.bytes);
+                &lossy
+            }
+        };
+        let split = split_cells(text.as_bytes(), &mut ranges_buf);
+        let cells: [&str; NUMBERS] =
+            std::array::from_fn(|i| text.get(ranges_buf[i].0..ranges_buf[i].1).unwrap_or(""));
+        // A column-name header before the data.
+        if samples.wrist.is_empty() && split.is_ok() {
+            let first = cells[0];
+            if first
+                .as_bytes()
+                .first()
+                .is_some_and(u8::is_ascii_alphabetic)
+                && parse_f64_str(first).is_none()
+            {
+                header_lines += 1;
+                continue;
+            }
+        }
+        let row = row_numbers(split, &cells, order, file, line.number);
+        let v = match row {
+            Ok(v) => v,
+            Err(e) => {
+                // Cut short: too few cells, or the last cell present is not a
+                // number, on a last line without a line end.
+                let short =
+                    matches!(split, Ok(n) if n <= NUMBERS && e.column.is_some_and(|c| c >= n));
+                if !line.terminated && short {
+                    warnings.push(format!(
+                        "line {}: the last line is cut short and was dropped",
+                        line.number
+                    ));
+                    break;
+                }
+                return Err(e);
+            }
+        };
+
+        samples.push(v, order, opts.norm_tolerance);
+    }
+    if !any_content {
+        return Err(ImportError::new(file, "the file is empty"));
+    }
+    into_run(samples, header_lines, opts, file, warnings)
 }
 
 /// Parses cells as numbers; on failure the index of the first bad cell.

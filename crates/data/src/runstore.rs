@@ -28,15 +28,16 @@
 //! 1e16 on; `NaN`, `inf`, `-inf`), so a written run reads back exactly.
 //! `pandas.read_csv` reads it as is.
 
-use crate::error::{show_bytes, ImportError};
-use crate::text::{parse_f64_str, Lines};
-use realitygap_core::{Pose, Quat, Trajectory, TrajectoryError, Vec3};
+use crate::error::ImportError;
+use realitygap_core::Trajectory;
 use serde::{Deserialize, Serialize};
-use std::fmt::{self, Write as _};
+use std::fmt;
 use std::fs;
 use std::io::{self, Write as _};
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
+
+mod runcsv;
+pub use runcsv::{format_run_csv, parse_run_csv, read_run_csv};
 
 /// File name of the manifest in a results directory.
 pub const MANIFEST_FILE: &str = "manifest.json";
@@ -515,34 +516,24 @@ pub fn sanitize_run_id(text: &str) -> String {
     id
 }
 
-static TEMP_COUNTER: AtomicU64 = AtomicU64::new(0);
-
-/// Writes a file atomically: a temporary file in the same directory,
-/// fsync, rename over the target, fsync of the directory.
+/// Writes a file atomically: a temporary file in the same directory
+/// (removed again if anything fails), fsync, rename over the target, fsync
+/// of the directory.
 fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), StoreError> {
     let dir = path
         .parent()
         .filter(|d| !d.as_os_str().is_empty())
         .unwrap_or(Path::new("."));
-    let name = path
-        .file_name()
-        .map_or_else(|| "file".into(), |n| n.to_string_lossy().into_owned());
-    let tmp = dir.join(format!(
-        ".{name}.tmp-{}-{}",
-        std::process::id(),
-        TEMP_COUNTER.fetch_add(1, Ordering::Relaxed)
-    ));
-    let result = (|| {
-        let mut f = fs::File::create(&tmp).map_err(io_err("create", &tmp))?;
-        f.write_all(bytes).map_err(io_err("write", &tmp))?;
-        f.sync_all().map_err(io_err("sync", &tmp))?;
-        drop(f);
-        fs::rename(&tmp, path).map_err(io_err("replace", path))
-    })();
-    if result.is_err() {
-        let _ = fs::remove_file(&tmp);
-    }
-    result?;
+    let mut tmp = tempfile::Builder::new()
+        .prefix(".tmp-")
+        .tempfile_in(dir)
+        .map_err(io_err("create a temporary file in", dir))?;
+    tmp.write_all(bytes).map_err(io_err("write", tmp.path()))?;
+    tmp.as_file()
+        .sync_all()
+        .map_err(io_err("sync", tmp.path()))?;
+    tmp.persist(path)
+        .map_err(|e| io_err("replace", path)(e.error))?;
     // Make the rename itself durable (best effort: not every platform
     // can open a directory).
     if let Ok(d) = fs::File::open(dir) {
@@ -578,336 +569,6 @@ pub fn discover(root: &Path) -> Vec<PathBuf> {
     visit(root, 0, &mut out);
     out.sort();
     out
-}
-
-// ---- Run CSV ---------------------------------------------------------------
-
-/// Suffixes of a body's seven columns.
-const BODY_SUFFIXES: [&str; 7] = ["_x_m", "_y_m", "_z_m", "_qw", "_qx", "_qy", "_qz"];
-
-/// Appends a number in the shortest form that reads back to the same
-/// `f64`; exponent form for magnitudes below 1e-5 or from 1e16 on.
-fn push_f64(out: &mut String, x: f64) {
-    let a = x.abs();
-    let _ = if x.is_nan() {
-        out.write_str("NaN")
-    } else if a == 0.0 || a.is_infinite() || (1e-5..1e16).contains(&a) {
-        write!(out, "{x}")
-    } else {
-        write!(out, "{x:e}")
-    };
-}
-
-/// Formats a trajectory as run CSV text (see the module docs). Roles must
-/// be non-empty and free of `,`, `"` and line breaks.
-pub fn format_run_csv(trajectory: &Trajectory) -> Result<String, StoreError> {
-    let invalid = |message: String| StoreError::InvalidTrajectory {
-        id: String::new(),
-        message,
-    };
-    trajectory
-        .validate()
-        .map_err(|e: TrajectoryError| invalid(e.to_string()))?;
-    for b in &trajectory.bodies {
-        if b.role.is_empty() || b.role.contains([',', '"', '\n', '\r']) {
-            return Err(invalid(format!(
-                "body role {:?} cannot be a CSV column prefix",
-                b.role
-            )));
-        }
-    }
-    if let Some(i) = trajectory.time_s.iter().position(|t| !t.is_finite()) {
-        return Err(invalid(format!("sample {i} has a non-finite time")));
-    }
-    let joints = trajectory
-        .joint_angles_rad
-        .as_ref()
-        .and_then(|r| r.first())
-        .map_or(0, Vec::len);
-    let commands = trajectory
-        .joint_velocity_commands_rad_s
-        .as_ref()
-        .and_then(|r| r.first())
-        .map_or(0, Vec::len);
-
-    let mut out =
-        String::with_capacity(64 + trajectory.len() * (24 + 7 * 20 * trajectory.bodies.len()));
-    out.push_str("t_s");
-    for b in &trajectory.bodies {
-        for s in BODY_SUFFIXES {
-            let _ = write!(out, ",{}{s}", b.role);
-        }
-    }
-    for j in 1..=joints {
-        let _ = write!(out, ",q{j}_rad");
-    }
-    for j in 1..=commands {
-        let _ = write!(out, ",qd_cmd{j}_rad_s");
-    }
-    out.push('\n');
-    for (i, &t) in trajectory.time_s.iter().enumerate() {
-        push_f64(&mut out, t);
-        for b in &trajectory.bodies {
-            match &b.poses[i] {
-                Some(p) => {
-                    let o = p.orientation;
-                    for v in [
-                        p.position_m.x,
-                        p.position_m.y,
-                        p.position_m.z,
-                        o.w,
-                        o.x,
-                        o.y,
-                        o.z,
-                    ] {
-                        out.push(',');
-                        push_f64(&mut out, v);
-                    }
-                }
-                None => out.push_str(",,,,,,,"),
-            }
-        }
-        for rows in [
-            &trajectory.joint_angles_rad,
-            &trajectory.joint_velocity_commands_rad_s,
-        ]
-        .into_iter()
-        .flatten()
-        {
-            for &v in &rows[i] {
-                out.push(',');
-                push_f64(&mut out, v);
-            }
-        }
-        out.push('\n');
-    }
-    Ok(out)
-}
-
-/// What a run-CSV column holds.
-#[derive(Debug, Clone, Copy)]
-enum Column {
-    Body(usize, usize),
-    Joint,
-    Command,
-}
-
-/// Reads a run CSV file.
-pub fn read_run_csv(path: &Path) -> Result<Trajectory, ImportError> {
-    let bytes =
-        fs::read(path).map_err(|e| ImportError::new(path, format!("cannot read the file: {e}")))?;
-    parse_run_csv(&bytes, path)
-}
-
-/// Parses run CSV text (see the module docs); `file` is used in messages
-/// only. Never panics, whatever the bytes.
-pub fn parse_run_csv(bytes: &[u8], file: &Path) -> Result<Trajectory, ImportError> {
-    let mut lines = Lines::new(bytes).filter(|l| !l.bytes.is_empty());
-    let header = lines
-        .next()
-        .ok_or_else(|| ImportError::new(file, "the file is empty"))?;
-    let names: Vec<&[u8]> = header.bytes.split(|&b| b == b',').map(unquote).collect();
-    let at = |col: usize, message: String| {
-        ImportError::at_line(file, header.number, message).with_column(col + 1)
-    };
-    if names[0] != b"t_s" {
-        return Err(at(
-            0,
-            format!(
-                "expected the column name \"t_s\", found {}",
-                show_bytes(names[0], 40)
-            ),
-        ));
-    }
-    let mut columns: Vec<Column> = Vec::with_capacity(names.len());
-    let mut roles: Vec<String> = Vec::new();
-    let (mut joints, mut commands) = (0usize, 0usize);
-    let mut i = 1;
-    while i < names.len() {
-        let name = names[i];
-        if let Some(role) = name.strip_suffix(b"_x_m") {
-            let role_text = String::from_utf8_lossy(role).into_owned();
-            if role.is_empty() {
-                return Err(at(i, "a body column needs a role before \"_x_m\"".into()));
-            }
-            if roles.contains(&role_text) {
-                return Err(at(i, format!("body role '{role_text}' appears twice")));
-            }
-            for (k, suffix) in BODY_SUFFIXES.iter().enumerate() {
-                let want = format!("{role_text}{suffix}");
-                match names.get(i + k) {
-                    Some(n) if *n == want.as_bytes() => columns.push(Column::Body(roles.len(), k)),
-                    Some(n) => {
-                        return Err(at(
-                            i + k,
-                            format!(
-                                "expected the column name {want:?}, found {}",
-                                show_bytes(n, 40)
-                            ),
-                        ))
-                    }
-                    None => {
-                        return Err(at(
-                            i + k,
-                            format!("the header ends before the column {want:?}"),
-                        ))
-                    }
-                }
-            }
-            roles.push(role_text);
-            i += 7;
-        } else if name == format!("q{}_rad", joints + 1).as_bytes() {
-            columns.push(Column::Joint);
-            joints += 1;
-            i += 1;
-        } else if name == format!("qd_cmd{}_rad_s", commands + 1).as_bytes() {
-            columns.push(Column::Command);
-            commands += 1;
-            i += 1;
-        } else {
-            return Err(at(
-                i,
-                format!(
-                    "unexpected column name {}: expected <role>_x_m, q{}_rad or qd_cmd{}_rad_s",
-                    show_bytes(name, 40),
-                    joints + 1,
-                    commands + 1
-                ),
-            ));
-        }
-    }
-
-    let mut trajectory = Trajectory::with_bodies(&roles);
-    let mut angles: Vec<Vec<f64>> = Vec::new();
-    let mut velocity_commands: Vec<Vec<f64>> = Vec::new();
-    let mut ranges: Vec<(usize, usize)> = Vec::with_capacity(names.len());
-    let mut body_cells: Vec<[Option<f64>; 7]> = vec![[None; 7]; roles.len()];
-    for line in lines {
-        // Validate the line's UTF-8 once; a damaged line is read lossily so
-        // the bad cell shows up as a non-number at its own column.
-        let lossy;
-        let text: &str = match std::str::from_utf8(line.bytes) {
-            Ok(s) => s,
-            Err(_) => {
-                lossy = String::from_utf8_lossy(line.bytes);
-                &lossy
-            }
-        };
-        ranges.clear();
-        let mut from = 0;
-        for (i, b) in text.bytes().enumerate() {
-            if b == b',' {
-                ranges.push((from, i));
-                from = i + 1;
-            }
-        }
-        ranges.push((from, text.len()));
-        let cell = |col: usize| text.get(ranges[col].0..ranges[col].1).unwrap_or("");
-        let fields = &ranges;
-        let err = |col: usize, message: String| {
-            let e = ImportError::at_line(file, line.number, message).with_column(col + 1);
-            match names.get(col) {
-                Some(n) => e.with_field(String::from_utf8_lossy(n).into_owned()),
-                None => e,
-            }
-        };
-        if fields.len() != names.len() {
-            return Err(ImportError::at_line(
-                file,
-                line.number,
-                format!(
-                    "expected {} columns as in the header, found {}",
-                    names.len(),
-                    fields.len()
-                ),
-            ));
-        }
-        let number = |col: usize| {
-            parse_f64_str(cell(col)).ok_or_else(|| {
-                err(
-                    col,
-                    format!(
-                        "expected a number, found {}",
-                        show_bytes(cell(col).as_bytes(), 40)
-                    ),
-                )
-            })
-        };
-        let t = number(0)?;
-        if !t.is_finite() || trajectory.time_s.last().is_some_and(|&p| t < p) {
-            return Err(err(
-                0,
-                format!("time {t} s is not finite or goes backwards"),
-            ));
-        }
-        trajectory.time_s.push(t);
-        let mut angle_row = Vec::with_capacity(joints);
-        let mut command_row = Vec::with_capacity(commands);
-        for (col, column) in columns.iter().enumerate() {
-            let col = col + 1;
-            match *column {
-                Column::Body(b, k) => {
-                    body_cells[b][k] = if cell(col).is_empty() {
-                        None
-                    } else {
-                        Some(number(col)?)
-                    };
-                }
-                Column::Joint => angle_row.push(number(col)?),
-                Column::Command => command_row.push(number(col)?),
-            }
-        }
-        for (b, cells) in body_cells.iter().enumerate() {
-            let pose = if cells.iter().all(Option::is_none) {
-                None
-            } else if let Some(k) = cells.iter().position(Option::is_none) {
-                let col = 1 + columns
-                    .iter()
-                    .position(|c| matches!(c, Column::Body(bb, kk) if *bb == b && *kk == k))
-                    .unwrap_or(0);
-                return Err(err(
-                    col,
-                    "a pose needs all seven cells, or none for a gap; this one is empty".into(),
-                ));
-            } else {
-                let v: [f64; 7] = std::array::from_fn(|k| cells[k].unwrap_or(f64::NAN));
-                Some(Pose::new(
-                    Vec3::new(v[0], v[1], v[2]),
-                    Quat::new(v[3], v[4], v[5], v[6]),
-                ))
-            };
-            trajectory.bodies[b].poses.push(pose);
-        }
-        if joints > 0 {
-            angles.push(angle_row);
-        }
-        if commands > 0 {
-            velocity_commands.push(command_row);
-        }
-    }
-    if joints > 0 {
-        trajectory.joint_angles_rad = Some(angles);
-    }
-    if commands > 0 {
-        trajectory.joint_velocity_commands_rad_s = Some(velocity_commands);
-    }
-    debug_assert!(trajectory.validate().is_ok());
-    Ok(trajectory)
-}
-
-/// A header cell without surrounding spaces and double quotes.
-fn unquote(cell: &[u8]) -> &[u8] {
-    let mut c = cell;
-    while let [b' ', rest @ ..] = c {
-        c = rest;
-    }
-    while let [rest @ .., b' '] = c {
-        c = rest;
-    }
-    match c {
-        [b'"', inner @ .., b'"'] => inner,
-        _ => c,
-    }
 }
 
 #[cfg(test)]

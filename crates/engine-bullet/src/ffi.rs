@@ -182,11 +182,14 @@ impl Client {
     /// `command` must have been created by a `b3*CommandInit` function of
     /// this client and not submitted before.
     pub(crate) unsafe fn submit(&self, command: b3SharedMemoryCommandHandle) -> Reply {
-        let handle = b3SubmitClientCommandAndWaitStatus(self.handle, command);
+        // SAFETY: `self.handle` is this client's live connection and
+        // `command` one of its unsubmitted commands (this fn's contract).
+        let handle = unsafe { b3SubmitClientCommandAndWaitStatus(self.handle, command) };
         let kind = if handle.is_null() {
             -1
         } else {
-            b3GetStatusType(handle)
+            // SAFETY: a non-null status handle just returned by this client.
+            unsafe { b3GetStatusType(handle) }
         };
         Reply { handle, kind }
     }

@@ -803,23 +803,31 @@ fn unstable_at(steps: u64, timestep_s: f64, origin_s: f64, message: String) -> E
 unsafe fn actual_state<'a>(reply: ffi::Reply) -> Result<(&'a [f64], &'a [f64]), String> {
     let (mut nq, mut nu) = (0, 0);
     let (mut q, mut qdot): (*const f64, *const f64) = (ptr::null(), ptr::null());
-    let ok = ffi::b3GetStatusActualState(
-        reply.handle,
-        ptr::null_mut(),
-        &mut nq,
-        &mut nu,
-        ptr::null_mut(),
-        &mut q,
-        &mut qdot,
-        ptr::null_mut(),
-    );
+    // SAFETY: `reply` is the latest actual-state reply of its client (this
+    // fn's contract); the out-pointers are locals or null where unused.
+    let ok = unsafe {
+        ffi::b3GetStatusActualState(
+            reply.handle,
+            ptr::null_mut(),
+            &mut nq,
+            &mut nu,
+            ptr::null_mut(),
+            &mut q,
+            &mut qdot,
+            ptr::null_mut(),
+        )
+    };
     if ok == 0 || q.is_null() || qdot.is_null() {
         return Err("Bullet returned no state".to_string());
     }
-    Ok((
-        std::slice::from_raw_parts(q, nq.max(0) as usize),
-        std::slice::from_raw_parts(qdot, nu.max(0) as usize),
-    ))
+    // SAFETY: Bullet reports `nq` positions at `q` and `nu` velocities at
+    // `qdot`, valid until the client's next command (this fn's contract).
+    Ok(unsafe {
+        (
+            std::slice::from_raw_parts(q, nq.max(0) as usize),
+            std::slice::from_raw_parts(qdot, nu.max(0) as usize),
+        )
+    })
 }
 
 /// Creates a single-body multibody with a collision shape. Lock held.

@@ -26,6 +26,7 @@
 //!   MJCF rejects an empty `forcerange`.
 
 use realitygap_core::pose::{Pose, Quat, Vec3};
+use realitygap_core::robot::plan;
 use realitygap_core::robot::{Geometry, JointKind, RobotModel};
 use realitygap_core::scene::{ObjectShape, Scene};
 use std::fmt::Write;
@@ -93,18 +94,10 @@ pub struct MjcfError(pub String);
 /// Writes the MJCF model of `scene` with `robot` (see the module
 /// documentation). The robot must have been validated against the scene.
 pub fn scene_to_mjcf(scene: &Scene, robot: &RobotModel) -> Result<String, MjcfError> {
-    let actuated: Vec<usize> = scene
-        .actuators
-        .iter()
-        .map(|a| {
-            robot.joint_by_name(&a.joint).ok_or_else(|| {
-                MjcfError(format!(
-                    "robot \"{}\" has no joint \"{}\"",
-                    robot.name, a.joint
-                ))
-            })
-        })
-        .collect::<Result<_, _>>()?;
+    // The scene's names and held positions, resolved by core's shared
+    // planning (the MJCF keeps the tree, so the rigid groups are not used).
+    let actuated = plan::actuated_joints(scene, robot).map_err(|e| MjcfError(e.0))?;
+    let positions = plan::initial_positions(scene, robot, &actuated).map_err(|e| MjcfError(e.0))?;
     for link in &robot.links {
         if link.name.starts_with(OBJECT_BODY_PREFIX) || link.name == "urdf:world" {
             return Err(MjcfError(format!(
@@ -139,7 +132,7 @@ pub fn scene_to_mjcf(scene: &Scene, robot: &RobotModel) -> Result<String, MjcfEr
         &scene.robot.base,
         None,
         2,
-        scene,
+        &positions,
         &actuated,
         &mut body_xml,
         &mut assets,
@@ -251,7 +244,7 @@ fn write_link(
     body_pose: &Pose,
     joint_index: Option<usize>,
     depth: usize,
-    scene: &Scene,
+    positions: &[f64],
     actuated: &[usize],
     out: &mut String,
     assets: &mut String,
@@ -273,7 +266,7 @@ fn write_link(
             JointKind::Revolute | JointKind::Continuous => "hinge",
             JointKind::Prismatic => "slide",
             JointKind::Fixed => {
-                unreachable!("fixed joints are never actuated (the scene was validated)")
+                unreachable!("fixed joints are never actuated (core's plan refuses them)")
             }
         };
         let mut attrs = format!(
@@ -391,21 +384,7 @@ fn write_link(
             joint.origin
         } else {
             // Held joint: welded at its held position.
-            if let Some(m) = &joint.mimic {
-                if actuated.contains(&m.joint) {
-                    return Err(MjcfError(format!(
-                        "joint \"{}\" mimics the actuated joint \"{}\"; mimic joints that follow a controlled joint are not supported",
-                        joint.name, robot.joints[m.joint].name
-                    )));
-                }
-            }
-            let held = scene
-                .robot
-                .held_joints_rad
-                .get(&joint.name)
-                .copied()
-                .unwrap_or(0.0);
-            joint.transform(held)
+            joint.transform(positions[j])
         };
         excludes.push((
             body_name(&link.name),
@@ -417,7 +396,7 @@ fn write_link(
             &child_pose,
             Some(j),
             depth + 1,
-            scene,
+            positions,
             actuated,
             out,
             assets,

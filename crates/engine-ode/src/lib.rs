@@ -49,7 +49,9 @@ pub mod world;
     non_snake_case,
     dead_code,
     missing_docs,
-    clippy::all
+    unsafe_op_in_unsafe_fn,
+    clippy::all,
+    clippy::undocumented_unsafe_blocks
 )]
 mod ffi {
     include!(concat!(env!("OUT_DIR"), "/ode_bindings.rs"));

@@ -23,21 +23,17 @@
 use crate::settings::{Base, OdeSettings, Weld};
 use realitygap_core::engine::ModelVariation;
 use realitygap_core::pose::{Pose, Quat, Vec3};
+use realitygap_core::robot::plan::{self as shared, GroupSplit, TrackedRef};
+pub use realitygap_core::robot::plan::{is_positive_definite, pose_inverse};
 use realitygap_core::robot::stl::TriangleMesh;
 use realitygap_core::robot::{Geometry, JointKind, RobotModel};
-use realitygap_core::scene::{ObjectShape, Scene, TrackTarget};
+use realitygap_core::scene::{ObjectShape, Scene};
 use std::collections::HashMap;
 use std::f64::consts::PI;
 
 /// Why a scene and robot cannot be built as an ODE model.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PlanError(pub String);
-
-/// The inverse of a rigid pose.
-pub fn pose_inverse(p: &Pose) -> Pose {
-    let q = p.orientation.conjugate();
-    Pose::new(-q.rotate(p.position_m), q)
-}
 
 /// A pure translation.
 fn translation(v: Vec3) -> Pose {
@@ -278,71 +274,6 @@ pub struct ModelPlan {
     pub contact_softness: Option<ContactSoftness>,
 }
 
-/// Scales a 3x3 matrix.
-fn scaled(m: &[f64; 9], s: f64) -> [f64; 9] {
-    m.map(|x| x * s)
-}
-
-/// `R I R^T` for a rotation `r` (row-major).
-fn rotate_inertia(r: &[f64; 9], i: &[f64; 9]) -> [f64; 9] {
-    let mut ri = [0.0; 9];
-    let mut out = [0.0; 9];
-    for a in 0..3 {
-        for b in 0..3 {
-            ri[3 * a + b] = (0..3).map(|k| r[3 * a + k] * i[3 * k + b]).sum();
-        }
-    }
-    for a in 0..3 {
-        for b in 0..3 {
-            out[3 * a + b] = (0..3).map(|k| ri[3 * a + k] * r[3 * b + k]).sum();
-        }
-    }
-    out
-}
-
-/// Combines point masses with inertias (position, mass, inertia about its
-/// own centre in common axes) into total mass, centre and inertia about
-/// that centre (parallel-axis theorem). `None` when the total mass is 0.
-pub fn combine_masses(parts: &[(Vec3, f64, [f64; 9])]) -> Option<(MassPlan, Vec3)> {
-    let mass: f64 = parts.iter().map(|p| p.1).sum();
-    if mass <= 0.0 {
-        return None;
-    }
-    let com = parts
-        .iter()
-        .fold(Vec3::ZERO, |acc, (p, m, _)| acc + p.scale(*m))
-        .scale(1.0 / mass);
-    let mut inertia = [0.0; 9];
-    for (p, m, i) in parts {
-        let d = *p - com;
-        let dd = d.dot(d);
-        let dv = [d.x, d.y, d.z];
-        for a in 0..3 {
-            for b in 0..3 {
-                let delta = if a == b { 1.0 } else { 0.0 };
-                inertia[3 * a + b] += i[3 * a + b] + m * (dd * delta - dv[a] * dv[b]);
-            }
-        }
-    }
-    Some((
-        MassPlan {
-            mass_kg: mass,
-            inertia,
-        },
-        com,
-    ))
-}
-
-/// Whether a symmetric 3x3 matrix is positive definite (Sylvester's
-/// criterion) and finite.
-pub fn is_positive_definite(m: &[f64; 9]) -> bool {
-    let d1 = m[0];
-    let d2 = m[0] * m[4] - m[1] * m[3];
-    let d3 = m[0] * (m[4] * m[8] - m[5] * m[7]) - m[1] * (m[3] * m[8] - m[5] * m[6])
-        + m[2] * (m[3] * m[7] - m[4] * m[6]);
-    m.iter().all(|x| x.is_finite()) && d1 > 0.0 && d2 > 0.0 && d3 > 0.0
-}
-
 /// Reads an STL mesh, scales it, and welds equal vertices.
 pub fn mesh_plan(
     path: &std::path::Path,
@@ -465,8 +396,26 @@ fn shape_plan(geometry: &Geometry, link_name: &str) -> Result<ShapePlan, PlanErr
     })
 }
 
+/// Combines point masses with inertias (position, mass, inertia about its
+/// own centre in common axes) into total mass, centre and inertia about
+/// that centre (the shared [`shared::combine_masses`]). `None` when the
+/// total mass is 0.
+pub fn combine_masses(parts: &[shared::MassPart]) -> Option<(MassPlan, Vec3)> {
+    shared::combine_masses(parts).map(|m| {
+        (
+            MassPlan {
+                mass_kg: m.mass_kg,
+                inertia: m.inertia_kg_m2,
+            },
+            m.com_m,
+        )
+    })
+}
+
 /// Works out the ODE model of `scene` with `robot` (validated against the
-/// scene), configured by `settings` and changed by `variation`.
+/// scene), configured by `settings` and changed by `variation`. The rigid
+/// groups, their masses and the scene's names come from core's shared
+/// planning ([`realitygap_core::robot::plan`]).
 pub fn plan(
     scene: &Scene,
     robot: &RobotModel,
@@ -475,30 +424,38 @@ pub fn plan(
 ) -> Result<ModelPlan, PlanError> {
     let actuated = actuated_joints(scene, robot)?;
     check_variation(variation)?;
-    let initial_positions = initial_positions(scene, robot, &actuated)?;
-    let (body_of_link, roots, welds) = partition(robot, &actuated, settings);
-    let world = robot.forward_kinematics(&Pose::IDENTITY, &initial_positions);
-    let link_in_root: Vec<Pose> = (0..robot.links.len())
-        .map(|l| pose_inverse(&world[roots[body_of_link[l]]]).compose(&world[l]))
+    let initial_positions =
+        shared::initial_positions(scene, robot, &actuated).map_err(|e| PlanError(e.0))?;
+    let split = match settings.weld {
+        Weld::FixedJoint => GroupSplit::AlsoAtLinksWithMass,
+        Weld::Merge => GroupSplit::AtActuatedJoints,
+    };
+    let groups = shared::rigid_groups(robot, &actuated, &initial_positions, split);
+    let welds = groups
+        .groups
+        .iter()
+        .enumerate()
+        .filter_map(|(b, g)| g.parent.filter(|_| g.welded).map(|(_, parent)| (b, parent)))
         .collect();
     let parts = Parts {
         robot,
-        body_of_link: &body_of_link,
-        link_in_root: &link_in_root,
+        body_of_link: &groups.group_of_link,
+        link_in_root: &groups.link_in_group,
     };
-    let bodies = roots
+    let bodies = groups
+        .groups
         .iter()
         .enumerate()
-        .map(|(b, &root)| parts.body(b, root, settings, variation))
+        .map(|(b, g)| parts.body(b, g, settings, variation))
         .collect::<Result<Vec<_>, _>>()?;
-    let hinges = hinge_plans(scene, robot, &actuated, &body_of_link);
+    let hinges = hinge_plans(scene, robot, &actuated, &groups.group_of_link);
     let friction = |f: Option<f64>| f.unwrap_or(settings.contact_mu) * variation.friction_scale;
     let objects = object_plans(scene, variation, &friction);
     let tracked = tracked_plans(scene, &parts, &bodies)?;
     Ok(ModelPlan {
         bodies,
-        body_of_link,
-        link_in_root,
+        body_of_link: groups.group_of_link,
+        link_in_root: groups.link_in_group,
         hinges,
         welds,
         objects,
@@ -511,21 +468,10 @@ pub fn plan(
     })
 }
 
-/// The controlled joints (actuator order), which must be revolute or
-/// continuous.
+/// The controlled joints (actuator order, resolved by core), which must be
+/// revolute or continuous.
 fn actuated_joints(scene: &Scene, robot: &RobotModel) -> Result<Vec<usize>, PlanError> {
-    let actuated: Vec<usize> = scene
-        .actuators
-        .iter()
-        .map(|a| {
-            robot.joint_by_name(&a.joint).ok_or_else(|| {
-                PlanError(format!(
-                    "robot \"{}\" has no joint \"{}\"",
-                    robot.name, a.joint
-                ))
-            })
-        })
-        .collect::<Result<_, _>>()?;
+    let actuated = shared::actuated_joints(scene, robot).map_err(|e| PlanError(e.0))?;
     for &j in &actuated {
         let joint = &robot.joints[j];
         if !matches!(joint.kind, JointKind::Revolute | JointKind::Continuous) {
@@ -552,67 +498,6 @@ fn check_variation(variation: &ModelVariation) -> Result<(), PlanError> {
     Ok(())
 }
 
-/// Joint positions of the initial configuration (held joints at their
-/// positions); mimic joints that follow a controlled joint cannot be
-/// welded.
-fn initial_positions(
-    scene: &Scene,
-    robot: &RobotModel,
-    actuated: &[usize],
-) -> Result<Vec<f64>, PlanError> {
-    let mut initial_positions = vec![0.0; robot.joints.len()];
-    for (j, joint) in robot.joints.iter().enumerate() {
-        if actuated.contains(&j) || !joint.kind.is_movable() {
-            continue;
-        }
-        if let Some(m) = &joint.mimic {
-            if actuated.contains(&m.joint) {
-                return Err(PlanError(format!(
-                    "joint \"{}\" mimics the controlled joint \"{}\"; mimic joints that follow a controlled joint are not supported",
-                    joint.name, robot.joints[m.joint].name
-                )));
-            }
-        }
-        initial_positions[j] = scene
-            .robot
-            .held_joints_rad
-            .get(&joint.name)
-            .copied()
-            .unwrap_or(0.0);
-    }
-    Ok(initial_positions)
-}
-
-/// Which body each link belongs to: a new body at the root and below
-/// every controlled joint (and, with `weld = "fixed_joint"`, below every
-/// link with mass). Returns the body of each link, each body's root link,
-/// and the welded (child, parent) body pairs.
-fn partition(
-    robot: &RobotModel,
-    actuated: &[usize],
-    settings: &OdeSettings,
-) -> (Vec<usize>, Vec<usize>, Vec<(usize, usize)>) {
-    let has_mass = |l: usize| robot.links[l].inertial.is_some_and(|i| i.mass_kg > 0.0);
-    let mut body_of_link = vec![usize::MAX; robot.links.len()];
-    let mut roots = vec![robot.root_link];
-    let mut welds = Vec::new();
-    body_of_link[robot.root_link] = 0;
-    for &j in robot.joints_in_tree_order() {
-        let joint = &robot.joints[j];
-        let welded_body = settings.weld == Weld::FixedJoint && has_mass(joint.child);
-        if actuated.contains(&j) || welded_body {
-            body_of_link[joint.child] = roots.len();
-            if !actuated.contains(&j) {
-                welds.push((roots.len(), body_of_link[joint.parent]));
-            }
-            roots.push(joint.child);
-        } else {
-            body_of_link[joint.child] = body_of_link[joint.parent];
-        }
-    }
-    (body_of_link, roots, welds)
-}
-
 /// The robot and how its links are grouped into bodies.
 struct Parts<'a> {
     robot: &'a RobotModel,
@@ -621,20 +506,21 @@ struct Parts<'a> {
 }
 
 impl Parts<'_> {
-    /// Body `b` (root link `root`): merged mass, centre and inertia, and
-    /// its shapes.
+    /// Body `b` (rigid group `group`): merged mass, centre and inertia, and
+    /// its shapes, its links in index order.
     fn body(
         &self,
         b: usize,
-        root: usize,
+        group: &shared::RigidGroup,
         settings: &OdeSettings,
         variation: &ModelVariation,
     ) -> Result<BodyPlan, PlanError> {
         let robot = self.robot;
-        let links: Vec<usize> = (0..robot.links.len())
-            .filter(|&l| self.body_of_link[l] == b)
-            .collect();
-        let (mass, com) = match combine_masses(&self.mass_parts(&links, variation)) {
+        let root = group.top_link;
+        let mut links = group.links.clone();
+        links.sort_unstable();
+        let parts = shared::link_mass_parts(robot, &links, self.link_in_root, variation.mass_scale);
+        let (mass, com) = match combine_masses(&parts) {
             Some((m, c)) => (Some(m), c),
             None => (None, Vec3::ZERO),
         };
@@ -662,31 +548,6 @@ impl Parts<'_> {
             }
         }
         Ok(BodyPlan { geoms, ..body })
-    }
-
-    /// The links' masses with their inertias in the body's root frame
-    /// (scaled by the variation).
-    fn mass_parts(
-        &self,
-        links: &[usize],
-        variation: &ModelVariation,
-    ) -> Vec<(Vec3, f64, [f64; 9])> {
-        let mut parts = Vec::new();
-        for &l in links {
-            if let Some(inertial) = &self.robot.links[l].inertial {
-                if inertial.mass_kg > 0.0 {
-                    let frame = self.link_in_root[l].compose(&inertial.origin);
-                    let r = frame.orientation.to_rotation_matrix();
-                    let i = rotate_inertia(&r, &inertial.inertia_matrix());
-                    parts.push((
-                        frame.position_m,
-                        inertial.mass_kg * variation.mass_scale,
-                        scaled(&i, variation.mass_scale),
-                    ));
-                }
-            }
-        }
-        parts
     }
 
     /// A moving body needs a mass and a positive definite inertia.
@@ -796,36 +657,20 @@ fn tracked_plans(
     parts: &Parts<'_>,
     bodies: &[BodyPlan],
 ) -> Result<Vec<TrackedPlan>, PlanError> {
-    let robot = parts.robot;
-    let mut tracked = Vec::with_capacity(scene.tracked.len());
-    for t in &scene.tracked {
-        tracked.push(match &t.target {
-            TrackTarget::Link(name) => {
-                let l = robot.link_by_name(name).ok_or_else(|| {
-                    PlanError(format!(
-                        "robot \"{}\" has no link \"{name}\" to track",
-                        robot.name
-                    ))
-                })?;
+    let targets = shared::tracked_targets(scene, parts.robot).map_err(|e| PlanError(e.0))?;
+    Ok(targets
+        .into_iter()
+        .map(|t| match t {
+            TrackedRef::Link(l) => {
                 let b = parts.body_of_link[l];
                 TrackedPlan::Link {
                     body: b,
                     link_in_body: bodies[b].link_in_body(&parts.link_in_root[l]),
                 }
             }
-            TrackTarget::Object(name) => {
-                let i = scene
-                    .objects
-                    .iter()
-                    .position(|o| &o.name == name)
-                    .ok_or_else(|| {
-                        PlanError(format!("the scene has no object \"{name}\" to track"))
-                    })?;
-                TrackedPlan::Object(i)
-            }
-        });
-    }
-    Ok(tracked)
+            TrackedRef::Object(i) => TrackedPlan::Object(i),
+        })
+        .collect())
 }
 
 impl ModelPlan {
@@ -893,53 +738,6 @@ impl ModelPlan {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn close(a: f64, b: f64) -> bool {
-        (a - b).abs() < 1e-12
-    }
-
-    #[test]
-    fn combined_masses_follow_the_parallel_axis_theorem() {
-        // Two 1 kg point masses 2 m apart on x: centre in the middle,
-        // inertia 2 kg m^2 about y and z, none about x.
-        let zero = [0.0; 9];
-        let (m, c) = combine_masses(&[
-            (Vec3::new(1.0, 0.0, 0.0), 1.0, zero),
-            (Vec3::new(3.0, 0.0, 0.0), 1.0, zero),
-        ])
-        .unwrap();
-        assert_eq!(m.mass_kg, 2.0);
-        assert!(close(c.x, 2.0) && close(c.y, 0.0));
-        assert!(close(m.inertia[0], 0.0) && close(m.inertia[4], 2.0) && close(m.inertia[8], 2.0));
-        assert!(combine_masses(&[(Vec3::ZERO, 0.0, zero)]).is_none());
-        // Off-diagonal terms for an offset in x and y.
-        let (m, _) = combine_masses(&[
-            (Vec3::new(1.0, 1.0, 0.0), 1.0, zero),
-            (Vec3::new(-1.0, -1.0, 0.0), 1.0, zero),
-        ])
-        .unwrap();
-        assert!(close(m.inertia[1], -2.0) && close(m.inertia[3], -2.0));
-        assert!(!is_positive_definite(&m.inertia));
-    }
-
-    #[test]
-    fn rotated_inertia_swaps_axes() {
-        // A quarter turn about z exchanges the x and y moments.
-        let r = Quat::from_axis_angle(Vec3::new(0.0, 0.0, 1.0), PI / 2.0).to_rotation_matrix();
-        let i = rotate_inertia(&r, &[1.0, 0.0, 0.0, 0.0, 2.0, 0.0, 0.0, 0.0, 3.0]);
-        assert!(close(i[0], 2.0) && close(i[4], 1.0) && close(i[8], 3.0) && close(i[1], 0.0));
-        assert!(is_positive_definite(&i));
-    }
-
-    #[test]
-    fn pose_inverse_undoes_a_pose() {
-        let p = Pose::new(
-            Vec3::new(0.1, -0.2, 0.3),
-            Quat::from_euler_rpy(0.3, -0.4, 1.2),
-        );
-        let id = p.compose(&pose_inverse(&p));
-        assert!(id.position_m.norm() < 1e-15 && id.orientation.angle_to(Quat::IDENTITY) < 1e-7);
-    }
 
     fn write_stl(dir: &std::path::Path, name: &str, tris: &[[[f32; 3]; 3]]) -> std::path::PathBuf {
         let mut b = vec![0u8; 80];

@@ -59,11 +59,18 @@ unsafe fn format_message(fmt: *const c_char, ap: *mut __va_list_tag) -> String {
         return String::new();
     }
     let mut buf = [0 as c_char; 1024];
-    let n = vsnprintf(buf.as_mut_ptr(), buf.len() as _, fmt, ap);
+    // SAFETY: `buf` is writable for its length, which vsnprintf is told and
+    // never exceeds (it NUL-terminates within it); `fmt` and `ap` match, as
+    // this function's contract says.
+    let n = unsafe { vsnprintf(buf.as_mut_ptr(), buf.len() as _, fmt, ap) };
     if n < 0 {
-        return CStr::from_ptr(fmt).to_string_lossy().into_owned();
+        // SAFETY: `fmt` is a non-null NUL-terminated string (contract).
+        return unsafe { CStr::from_ptr(fmt) }
+            .to_string_lossy()
+            .into_owned();
     }
-    CStr::from_ptr(buf.as_ptr())
+    // SAFETY: vsnprintf succeeded, so `buf` holds a NUL-terminated string.
+    unsafe { CStr::from_ptr(buf.as_ptr()) }
         .to_string_lossy()
         .trim()
         .to_string()
@@ -78,18 +85,23 @@ fn record(text: String) {
 }
 
 unsafe extern "C" fn on_message(num: c_int, fmt: *const c_char, ap: *mut __va_list_tag) {
-    record(format!("ODE message {num}: {}", format_message(fmt, ap)));
+    // SAFETY: ODE calls its message handlers with a printf format and the
+    // matching argument list.
+    let text = unsafe { format_message(fmt, ap) };
+    record(format!("ODE message {num}: {text}"));
 }
 
 unsafe extern "C" fn on_error(num: c_int, fmt: *const c_char, ap: *mut __va_list_tag) {
-    let text = format_message(fmt, ap);
+    // SAFETY: as in on_message.
+    let text = unsafe { format_message(fmt, ap) };
     // ODE ends the process when this returns: the parent reads this line.
     eprintln!("ODE error {num}: {text}");
     record(format!("ODE error {num}: {text}"));
 }
 
 unsafe extern "C" fn on_debug(num: c_int, fmt: *const c_char, ap: *mut __va_list_tag) {
-    let text = format_message(fmt, ap);
+    // SAFETY: as in on_message.
+    let text = unsafe { format_message(fmt, ap) };
     eprintln!("ODE error (internal check {num} failed, ODE aborts): {text}");
     record(format!("ODE internal error {num}: {text}"));
 }
@@ -248,8 +260,9 @@ unsafe extern "C" fn no_contacts(_data: *mut c_void, _o1: dGeomID, _o2: dGeomID)
 unsafe extern "C" fn near_callback(data: *mut c_void, o1: dGeomID, o2: dGeomID) {
     // SAFETY: `data` is the CollideContext passed to dSpaceCollide by
     // OdeWorld::step, alive and exclusively ours for the call.
-    let ctx = &mut *(data as *mut CollideContext);
-    let index = |g: dGeomID| (dGeomGetData(g) as usize).wrapping_sub(1);
+    let ctx = unsafe { &mut *(data as *mut CollideContext) };
+    // SAFETY: o1 and o2 are live geoms of the space being collided.
+    let index = |g: dGeomID| (unsafe { dGeomGetData(g) } as usize).wrapping_sub(1);
     let (i1, i2) = (index(o1), index(o2));
     let (Some(&g1), Some(&g2)) = (ctx.geoms.get(i1), ctx.geoms.get(i2)) else {
         return;
@@ -258,7 +271,8 @@ unsafe extern "C" fn near_callback(data: *mut c_void, o1: dGeomID, o2: dGeomID) 
     if !ctx.may_touch[s1 * ctx.slots + s2] {
         return;
     }
-    let (b1, b2) = (dGeomGetBody(o1), dGeomGetBody(o2));
+    // SAFETY: o1 and o2 are live geoms of the space being collided.
+    let (b1, b2) = unsafe { (dGeomGetBody(o1), dGeomGetBody(o2)) };
     if b1.is_null() && b2.is_null() {
         return;
     }
@@ -267,12 +281,18 @@ unsafe extern "C" fn near_callback(data: *mut c_void, o1: dGeomID, o2: dGeomID) 
     let Some(first) = ctx.buffer.first_mut() else {
         return;
     };
-    let n = dCollide(o1, o2, max, &mut first.geom, stride);
+    // SAFETY: the buffer holds `max` contacts `stride` bytes apart, and
+    // dCollide writes at most `max` of them.
+    let n = unsafe { dCollide(o1, o2, max, &mut first.geom, stride) };
     let surface = ctx.surface(&g1, &g2, n.max(0) as usize);
     for c in ctx.buffer.iter_mut().take(n.max(0) as usize) {
         c.surface = surface;
-        let joint = dJointCreateContact(ctx.world, ctx.group, c);
-        dJointAttach(joint, b1, b2);
+        // SAFETY: world and contact group are this world's, alive during
+        // the step; b1 and b2 are the geoms' bodies (or null: the world).
+        unsafe {
+            let joint = dJointCreateContact(ctx.world, ctx.group, c);
+            dJointAttach(joint, b1, b2);
+        }
     }
     if n > 0 {
         ctx.contacts += n as usize;
@@ -793,12 +813,15 @@ impl OdeWorld {
     /// Called while building, with the lock held.
     fn create_geom(&mut self, shape: &ShapePlan) -> dGeomID {
         let space = self.space;
-        // SAFETY (every block below): `space` is this world's space; the
-        // new geom is placed in it and destroyed with it.
         match shape {
+            // SAFETY: `space` is this world's space; the new geom is
+            // placed in it and destroyed with it (the same below).
             ShapePlan::Box(s) => unsafe { dCreateBox(space, s.x, s.y, s.z) },
+            // SAFETY: as above.
             ShapePlan::Sphere(r) => unsafe { dCreateSphere(space, *r) },
+            // SAFETY: as above.
             ShapePlan::Cylinder(r, l) => unsafe { dCreateCylinder(space, *r, *l) },
+            // SAFETY: as above.
             ShapePlan::Capsule(r, l) => unsafe { dCreateCapsule(space, *r, *l) },
             ShapePlan::Mesh(m) => {
                 let vertices = m.vertices.clone();

@@ -2,16 +2,19 @@
 //!
 //! The stages, in order:
 //!
-//! 1. **Groups.** The robot's links are split into rigid groups: a group
-//!    starts at the root link or at the child of an actuated joint, and takes
-//!    in every link reached through fixed, held (non-actuated) and mimic
-//!    joints, each at its fixed or held position. A group is one Rapier rigid
-//!    body whose frame is the frame of its top link; every member link keeps
-//!    its offset from that frame.
+//! 1. **Groups.** The robot's links are split into rigid groups by core's
+//!    shared planning ([`realitygap_core::robot::plan`], which also resolves
+//!    the scene's joint, link and object names): a group starts at the root
+//!    link or at the child of an actuated joint, and takes in every link
+//!    reached through fixed, held (non-actuated) and mimic joints, each at
+//!    its fixed or held position. A group is one Rapier rigid body whose
+//!    frame is the frame of its top link; every member link keeps its
+//!    offset from that frame.
 //! 2. **Bodies.** The root group is a fixed body at the scene's base pose;
 //!    every other group is a dynamic body with the URDF mass properties of
-//!    its links combined (masses summed, centre of mass, inertia tensors
-//!    rotated into the group frame and moved by the parallel-axis theorem).
+//!    its links combined by core ([`shared::group_mass`]: masses summed,
+//!    centre of mass, inertia tensors rotated into the group frame and moved
+//!    by the parallel-axis theorem).
 //!    Colliders carry no mass of their own. Robot bodies never sleep: they
 //!    are driven by motors whose targets change from outside.
 //! 3. **Colliders.** Every URDF `<collision>` shape of every member link,
@@ -47,8 +50,9 @@ use rapier3d::prelude::{
 use realitygap_core::engine::ModelVariation;
 use realitygap_core::params::PhysicalParams;
 use realitygap_core::pose::{Pose, Quat, Vec3};
+use realitygap_core::robot::plan::{self as shared, GroupSplit, RigidGroups, TrackedRef};
 use realitygap_core::robot::{JointKind, RobotModel};
-use realitygap_core::scene::{ObjectShape, Scene, TrackTarget};
+use realitygap_core::scene::{ObjectShape, Scene};
 use std::collections::HashMap;
 
 /// A controlled joint in the assembled world.
@@ -96,16 +100,6 @@ pub struct Assembly {
     pub objects: Vec<RigidBodyHandle>,
 }
 
-/// A rigid group of links (one Rapier body).
-struct Group {
-    /// The top link (its frame is the group's frame).
-    top_link: usize,
-    /// The top link's world pose at the initial configuration.
-    world_pose: Pose,
-    /// Member links and their offsets in the group frame.
-    members: Vec<(usize, Pose)>,
-}
-
 pub(crate) fn to_rapier_pose(p: &Pose) -> RPose {
     let q = p.orientation.normalized().unwrap_or(Quat::IDENTITY);
     RPose::from_parts(
@@ -143,67 +137,6 @@ fn x_onto(axis: Vec3) -> Quat {
         .unwrap_or(Quat::IDENTITY)
 }
 
-fn mat_mul(a: &[f64; 9], b: &[f64; 9]) -> [f64; 9] {
-    let mut m = [0.0; 9];
-    for r in 0..3 {
-        for c in 0..3 {
-            m[3 * r + c] = (0..3).map(|k| a[3 * r + k] * b[3 * k + c]).sum();
-        }
-    }
-    m
-}
-
-fn transpose(a: &[f64; 9]) -> [f64; 9] {
-    [a[0], a[3], a[6], a[1], a[4], a[7], a[2], a[5], a[8]]
-}
-
-/// Combined mass properties of a group in its frame: (mass kg, centre of
-/// mass m, inertia about the centre of mass, row-major kg m^2), scaled by
-/// `mass_scale`. Links without an inertial or with zero mass add nothing.
-fn group_mass(
-    robot: &RobotModel,
-    members: &[(usize, Pose)],
-    mass_scale: f64,
-) -> (f64, Vec3, [f64; 9]) {
-    let mut parts = Vec::new();
-    for &(link, offset) in members {
-        let Some(inertial) = robot.links[link].inertial else {
-            continue;
-        };
-        if inertial.mass_kg <= 0.0 {
-            continue;
-        }
-        let frame = offset.compose(&inertial.origin);
-        let r = frame.orientation.to_rotation_matrix();
-        let i = mat_mul(&mat_mul(&r, &inertial.inertia_matrix()), &transpose(&r));
-        parts.push((
-            inertial.mass_kg * mass_scale,
-            frame.position_m,
-            i.map(|v| v * mass_scale),
-        ));
-    }
-    let mass: f64 = parts.iter().map(|p| p.0).sum();
-    if mass <= 0.0 {
-        return (0.0, Vec3::ZERO, [0.0; 9]);
-    }
-    let com = parts
-        .iter()
-        .fold(Vec3::ZERO, |acc, p| acc + p.1.scale(p.0 / mass));
-    let mut inertia = [0.0; 9];
-    for (m, c, i) in &parts {
-        let d = *c - com;
-        let dd = d.dot(d);
-        let dv = [d.x, d.y, d.z];
-        for r in 0..3 {
-            for k in 0..3 {
-                let delta = if r == k { 1.0 } else { 0.0 };
-                inertia[3 * r + k] += i[3 * r + k] + m * (dd * delta - dv[r] * dv[k]);
-            }
-        }
-    }
-    (mass, com, inertia)
-}
-
 /// Builds the world of `scene` with `robot` (see the module documentation),
 /// with the engine-mapped keys of `params` (already checked by
 /// [`crate::params::check`]). Errors are messages for
@@ -216,26 +149,32 @@ pub fn assemble(
     params: &PhysicalParams,
 ) -> Result<Assembly, String> {
     check_variation(variation)?;
-    let actuated = check_actuators(scene, robot)?;
-    let plan = plan_groups(scene, robot, &actuated)?;
+    let shared_plan =
+        shared::plan_robot(scene, robot, GroupSplit::AtActuatedJoints).map_err(|e| e.0)?;
+    check_servos(scene)?;
+    let plan = &shared_plan.groups;
+    let world_poses = robot.forward_kinematics(&scene.robot.base, &shared_plan.initial_positions);
     let mut world = new_world(scene, settings, params);
-    let bodies = add_bodies(&mut world, robot, &plan, settings, variation)?;
-    let handles = add_joints(&mut world, scene, robot, &actuated, &plan, &bodies)?;
+    let bodies = add_bodies(&mut world, robot, plan, &world_poses, settings, variation)?;
+    let handles = add_joints(
+        &mut world,
+        scene,
+        robot,
+        &shared_plan.actuated,
+        plan,
+        &bodies,
+    )?;
     set_dof_parameters(&mut world, robot, &handles, params);
-    let joints = controlled_joints(&world, scene, robot, &handles);
+    let joints = controlled_joints(&world, scene, robot, &shared_plan.actuated, &handles);
+    let link_frame = |l: usize| BodyFrame {
+        body: bodies[plan.group_of_link[l]],
+        offset: plan.link_in_group[l],
+    };
     let links: HashMap<String, BodyFrame> = robot
         .links
         .iter()
         .enumerate()
-        .map(|(l, link)| {
-            (
-                link.name.clone(),
-                BodyFrame {
-                    body: bodies[plan.group_of[l]],
-                    offset: plan.offset[l],
-                },
-            )
-        })
+        .map(|(l, link)| (link.name.clone(), link_frame(l)))
         .collect();
     let mut body_names: HashMap<RigidBodyHandle, String> = plan
         .groups
@@ -245,7 +184,17 @@ pub fn assemble(
         .collect();
     add_ground(&mut world, scene, variation, &mut body_names);
     let objects = add_objects(&mut world, scene, variation, params, &mut body_names)?;
-    let tracked = tracked_frames(scene, robot, &links, &objects)?;
+    let tracked = shared_plan
+        .tracked
+        .iter()
+        .map(|t| match *t {
+            TrackedRef::Link(l) => link_frame(l),
+            TrackedRef::Object(i) => BodyFrame {
+                body: objects[i],
+                offset: Pose::IDENTITY,
+            },
+        })
+        .collect();
     Ok(Assembly {
         world,
         joints,
@@ -272,26 +221,10 @@ fn check_variation(variation: &ModelVariation) -> Result<(), String> {
     Ok(())
 }
 
-/// The controlled joints, checked: robot joint index -> actuator index.
-fn check_actuators(scene: &Scene, robot: &RobotModel) -> Result<HashMap<usize, usize>, String> {
-    let mut actuated: HashMap<usize, usize> = HashMap::new(); // joint index -> actuator index
-    for (i, a) in scene.actuators.iter().enumerate() {
-        let j = robot
-            .joint_by_name(&a.joint)
-            .ok_or_else(|| format!("robot \"{}\" has no joint \"{}\"", robot.name, a.joint))?;
-        let joint = &robot.joints[j];
-        if !joint.kind.is_movable() {
-            return Err(format!(
-                "joint \"{}\" is fixed and cannot carry an actuator",
-                a.joint
-            ));
-        }
-        if joint.mimic.is_some() {
-            return Err(format!(
-                "joint \"{}\" mimics another joint and cannot carry an actuator",
-                a.joint
-            ));
-        }
+/// The servos' gains and force limits, checked (the joints themselves are
+/// resolved by core's shared planning).
+fn check_servos(scene: &Scene) -> Result<(), String> {
+    for a in &scene.actuators {
         if !(a.kv.is_finite() && a.kv > 0.0) {
             return Err(format!(
                 "actuator of joint \"{}\": kv must be positive and finite, found {}",
@@ -304,97 +237,8 @@ fn check_actuators(scene: &Scene, robot: &RobotModel) -> Result<HashMap<usize, u
                 a.joint, a.force_limit
             ));
         }
-        if actuated.insert(j, i).is_some() {
-            return Err(format!("joint \"{}\" has two actuators", a.joint));
-        }
     }
-
-    Ok(actuated)
-}
-
-/// The rigid groups of the robot's links (stage 1).
-struct Plan {
-    groups: Vec<Group>,
-    /// Each link's group.
-    group_of: Vec<usize>,
-    /// Each link's pose in its group's frame.
-    offset: Vec<Pose>,
-}
-
-/// Stage 1: splits the links into rigid groups.
-fn plan_groups(
-    scene: &Scene,
-    robot: &RobotModel,
-    actuated: &HashMap<usize, usize>,
-) -> Result<Plan, String> {
-    let mut group_of = vec![usize::MAX; robot.links.len()];
-    let mut offset = vec![Pose::IDENTITY; robot.links.len()];
-    let mut link_world = vec![scene.robot.base; robot.links.len()];
-    let mut groups = vec![Group {
-        top_link: robot.root_link,
-        world_pose: scene.robot.base,
-        members: vec![],
-    }];
-    group_of[robot.root_link] = 0;
-    groups[0].members.push((robot.root_link, Pose::IDENTITY));
-    let held = |j: usize| -> f64 {
-        let joint = &robot.joints[j];
-        match scene.robot.held_joints_rad.get(&joint.name) {
-            Some(&v) => v,
-            None => match &joint.mimic {
-                Some(m) => {
-                    let leader = &robot.joints[m.joint].name;
-                    m.multiplier
-                        * scene
-                            .robot
-                            .held_joints_rad
-                            .get(leader)
-                            .copied()
-                            .unwrap_or(0.0)
-                        + m.offset
-                }
-                None => 0.0,
-            },
-        }
-    };
-    for &j in robot.joints_in_tree_order() {
-        let joint = &robot.joints[j];
-        if let Some(m) = &joint.mimic {
-            if actuated.contains_key(&m.joint) {
-                return Err(format!(
-                    "joint \"{}\" mimics the actuated joint \"{}\"; mimic joints that follow a controlled joint are not supported",
-                    joint.name, robot.joints[m.joint].name
-                ));
-            }
-        }
-        let (parent, child) = (joint.parent, joint.child);
-        if actuated.contains_key(&j) {
-            link_world[child] = link_world[parent].compose(&joint.origin);
-            group_of[child] = groups.len();
-            offset[child] = Pose::IDENTITY;
-            groups.push(Group {
-                top_link: child,
-                world_pose: link_world[child],
-                members: vec![(child, Pose::IDENTITY)],
-            });
-        } else {
-            let position = if joint.kind.is_movable() {
-                held(j)
-            } else {
-                0.0
-            };
-            let transform = joint.transform(position);
-            link_world[child] = link_world[parent].compose(&transform);
-            group_of[child] = group_of[parent];
-            offset[child] = offset[parent].compose(&transform);
-            groups[group_of[child]].members.push((child, offset[child]));
-        }
-    }
-    Ok(Plan {
-        groups,
-        group_of,
-        offset,
-    })
+    Ok(())
 }
 
 /// An empty world with the scene's gravity, the solver settings and the
@@ -422,7 +266,8 @@ fn friction(f: Option<f64>, variation: &ModelVariation) -> f32 {
 fn add_bodies(
     world: &mut PhysicsWorld,
     robot: &RobotModel,
-    plan: &Plan,
+    plan: &RigidGroups,
+    world_poses: &[Pose],
     settings: &RapierSettings,
     variation: &ModelVariation,
 ) -> Result<Vec<RigidBodyHandle>, String> {
@@ -430,17 +275,28 @@ fn add_bodies(
     let mut bodies = Vec::with_capacity(plan.groups.len());
     for (g, group) in plan.groups.iter().enumerate() {
         let top = &robot.links[group.top_link].name;
+        let world_pose = world_poses[group.top_link];
         let builder = if g == 0 {
-            RigidBodyBuilder::fixed().pose(to_rapier_pose(&group.world_pose))
+            RigidBodyBuilder::fixed().pose(to_rapier_pose(&world_pose))
         } else {
-            let (mass, com, inertia) = group_mass(robot, &group.members, variation.mass_scale);
-            if mass <= 0.0 {
+            let merged = shared::group_mass(
+                robot,
+                &group.links,
+                &plan.link_in_group,
+                variation.mass_scale,
+            );
+            let Some(shared::MassProperties {
+                mass_kg: mass,
+                com_m: com,
+                inertia_kg_m2: inertia,
+            }) = merged
+            else {
                 return Err(format!(
                     "link \"{top}\" and the links fixed to it have no mass; a moving body needs a positive mass \
                      (give it an <inertial> in {})",
                     robot.source.display()
                 ));
-            }
+            };
             if !(mass as f32).is_normal() || inertia.iter().any(|v| !(*v as f32).is_finite()) {
                 return Err(format!(
                     "link \"{top}\" and the links fixed to it: mass {mass} kg is out of single-precision range"
@@ -453,12 +309,13 @@ fn add_bodies(
                 m,
             );
             RigidBodyBuilder::dynamic()
-                .pose(to_rapier_pose(&group.world_pose))
+                .pose(to_rapier_pose(&world_pose))
                 .additional_mass_properties(props)
                 .can_sleep(false)
         };
         let body = world.bodies.insert(builder.build());
-        for &(link, link_offset) in &group.members {
+        for &link in &group.links {
+            let link_offset = plan.link_in_group[link];
             for (c, collision) in robot.links[link].collisions.iter().enumerate() {
                 let (shape, shape_pose) = shapes
                     .shape(&collision.geometry, settings.mesh_shape)
@@ -494,17 +351,19 @@ fn add_joints(
     world: &mut PhysicsWorld,
     scene: &Scene,
     robot: &RobotModel,
-    actuated: &HashMap<usize, usize>,
-    plan: &Plan,
+    actuated: &[usize],
+    plan: &RigidGroups,
     bodies: &[RigidBodyHandle],
 ) -> Result<HashMap<usize, MultibodyJointHandle>, String> {
     let mut handles: HashMap<usize, MultibodyJointHandle> = HashMap::new();
     for &j in robot.joints_in_tree_order() {
-        let Some(&a) = actuated.get(&j) else { continue };
+        let Some(a) = actuated.iter().position(|&k| k == j) else {
+            continue;
+        };
         let joint = &robot.joints[j];
         let spec = &scene.actuators[a];
         let basis = Pose::new(Vec3::ZERO, x_onto(joint.axis));
-        let frame1 = plan.offset[joint.parent]
+        let frame1 = plan.link_in_group[joint.parent]
             .compose(&joint.origin)
             .compose(&basis);
         let (locked, axis) = match joint.kind {
@@ -534,8 +393,8 @@ fn add_joints(
         let handle = world
             .multibody_joints
             .insert(
-                bodies[plan.group_of[joint.parent]],
-                bodies[plan.group_of[joint.child]],
+                bodies[plan.group_of_link[joint.parent]],
+                bodies[plan.group_of_link[joint.child]],
                 builder.build(),
                 true,
             )
@@ -580,13 +439,14 @@ fn controlled_joints(
     world: &PhysicsWorld,
     scene: &Scene,
     robot: &RobotModel,
+    actuated: &[usize],
     handles: &HashMap<usize, MultibodyJointHandle>,
 ) -> Vec<ControlledJoint> {
     scene
         .actuators
         .iter()
-        .map(|a| {
-            let j = robot.joint_by_name(&a.joint).expect("checked above");
+        .zip(actuated)
+        .map(|(a, &j)| {
             let axis = if robot.joints[j].kind == JointKind::Prismatic {
                 JointAxis::LinX
             } else {
@@ -687,38 +547,6 @@ fn add_objects(
     Ok(object_bodies)
 }
 
-/// The tracked frames, in the scene's `[[track]]` order.
-fn tracked_frames(
-    scene: &Scene,
-    robot: &RobotModel,
-    links: &HashMap<String, BodyFrame>,
-    objects: &[RigidBodyHandle],
-) -> Result<Vec<BodyFrame>, String> {
-    scene
-        .tracked
-        .iter()
-        .map(|t| match &t.target {
-            TrackTarget::Link(link) => links.get(link).copied().ok_or_else(|| {
-                format!(
-                    "tracked link \"{link}\" is not a link of robot \"{}\"",
-                    robot.name
-                )
-            }),
-            TrackTarget::Object(name) => scene
-                .objects
-                .iter()
-                .zip(objects)
-                .find(|(o, _)| &o.name == name)
-                .map(|(_, &body)| body)
-                .map(|body| BodyFrame {
-                    body,
-                    offset: Pose::IDENTITY,
-                })
-                .ok_or_else(|| format!("tracked object \"{name}\" is not an object of the scene")),
-        })
-        .collect::<Result<Vec<_>, _>>()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -748,34 +576,5 @@ mod tests {
         let back = from_rapier_pose(&to_rapier_pose(&p));
         assert!(back.position_m.distance(p.position_m) < 1e-7);
         assert!(back.orientation.angle_to(p.orientation) < 1e-6);
-    }
-
-    #[test]
-    fn combined_inertia_uses_the_parallel_axis_theorem() {
-        use realitygap_core::robot::PackageResolver;
-        // Two 1 kg point-like links 0.2 m apart along x, the second turned
-        // by 90 degrees about z: the group's inertia about z is
-        // 2 * 1 * 0.1^2 plus each link's own izz.
-        let urdf = r#"<robot name="pair">
-          <link name="a"><inertial><mass value="1"/><inertia ixx="0.001" ixy="0" ixz="0" iyy="0.002" iyz="0" izz="0.003"/></inertial></link>
-          <link name="b"><inertial><mass value="1"/><inertia ixx="0.001" ixy="0" ixz="0" iyy="0.002" iyz="0" izz="0.003"/></inertial></link>
-          <joint name="ab" type="fixed"><parent link="a"/><child link="b"/><origin xyz="0.2 0 0" rpy="0 0 1.5707963267948966"/></joint>
-        </robot>"#;
-        let robot =
-            RobotModel::from_urdf_str(urdf, std::path::Path::new("."), &PackageResolver::new())
-                .unwrap();
-        let b_offset = robot.joints[0].transform(0.0);
-        let (mass, com, i) = group_mass(&robot, &[(0, Pose::IDENTITY), (1, b_offset)], 1.0);
-        assert!((mass - 2.0).abs() < 1e-12);
-        assert!(com.distance(Vec3::new(0.1, 0.0, 0.0)) < 1e-12);
-        // ixx: a's 0.001 + b's iyy (turned) 0.002, no offset along y/z.
-        assert!((i[0] - 0.003).abs() < 1e-12, "{i:?}");
-        // iyy: a's 0.002 + b's ixx 0.001 + 2 * 0.1^2.
-        assert!((i[4] - (0.003 + 0.02)).abs() < 1e-12, "{i:?}");
-        assert!((i[8] - (0.006 + 0.02)).abs() < 1e-12, "{i:?}");
-        assert!(i[1].abs() < 1e-12 && i[2].abs() < 1e-12 && i[5].abs() < 1e-12);
-        // Scaled masses scale everything.
-        let (m2, _, i2) = group_mass(&robot, &[(0, Pose::IDENTITY), (1, b_offset)], 1.5);
-        assert!((m2 - 3.0).abs() < 1e-12 && (i2[8] - 1.5 * i[8]).abs() < 1e-12);
     }
 }

@@ -27,6 +27,8 @@
 //! and sets it (portable, and native with the exact single-precision
 //! values).
 
+#![forbid(unsafe_code)]
+
 pub mod assemble;
 pub mod params;
 pub mod settings;

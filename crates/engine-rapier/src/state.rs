@@ -2,7 +2,7 @@
 //! setting it, portably or natively.
 //!
 //! Setting a state always starts from the world as it was loaded (a clone
-//! of every Rapier set taken at load, [`Pristine`]), so a state set into a
+//! of every Rapier set taken at load, `Pristine`), so a state set into a
 //! running simulation continues exactly as in a freshly loaded one, and
 //! contact caches, warm starts, islands and broad-phase pairs are reset.
 //!

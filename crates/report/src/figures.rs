@@ -13,6 +13,7 @@
 //! reference's mean when sources were compared with a reference, and the
 //! cube's displacement and pitch change when the scene has a cube.
 
+use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::element::{DashedPathElement, Drawable, PointCollection};
 use plotters::prelude::*;
@@ -473,13 +474,64 @@ pub fn scene_figures(report: &SceneReport, styles: &SourceStyles) -> Vec<Figure>
         .collect()
 }
 
+/// The reference's spread as a band: around its curve for the goal
+/// distance, from zero for the distance to the reference; `None` for one
+/// run, no spread, or another kind of figure.
+fn spread_band(reference: &SourceSummary, kind: FigureKind) -> Option<Band> {
+    let spread = &reference.series.wrist_spread_m;
+    if reference.runs_used <= 1 || !spread.iter().any(Option::is_some) {
+        return None;
+    }
+    let ref_goal = &reference.series.wrist_distance_to_goal_m;
+    let t = &reference.series.t_s;
+    match kind {
+        FigureKind::GoalDistance if ref_goal.iter().any(Option::is_some) => Some(Band {
+            label: format!("{} \u{b1} RMS spread", reference.source),
+            points: t
+                .iter()
+                .enumerate()
+                .map(|(i, t)| {
+                    let b = match (
+                        ref_goal.get(i).copied().flatten(),
+                        spread.get(i).copied().flatten(),
+                    ) {
+                        (Some(d), Some(s)) if d.is_finite() && s.is_finite() => {
+                            Some(((d - s).max(0.0), d + s))
+                        }
+                        _ => None,
+                    };
+                    (*t, b)
+                })
+                .collect(),
+        }),
+        FigureKind::ReferenceDistance => Some(Band {
+            label: format!("{} RMS spread", reference.source),
+            points: t
+                .iter()
+                .enumerate()
+                .map(|(i, t)| {
+                    (
+                        *t,
+                        spread
+                            .get(i)
+                            .copied()
+                            .flatten()
+                            .filter(|s| s.is_finite())
+                            .map(|s| (0.0, s)),
+                    )
+                })
+                .collect(),
+        }),
+        _ => None,
+    }
+}
+
 /// Builds one figure of a scene (also for a kind the scene lacks data
 /// for: then every source is listed as omitted).
 pub fn build_figure(report: &SceneReport, kind: FigureKind, styles: &SourceStyles) -> Figure {
     let reference = &report.reference;
     let mut lines = Vec::new();
     let mut omitted = Vec::new();
-    let mut band = None;
     if kind.shows_reference() {
         match omission_reason(reference, kind) {
             Some(reason) => omitted.push(Omitted {
@@ -489,57 +541,7 @@ pub fn build_figure(report: &SceneReport, kind: FigureKind, styles: &SourceStyle
             None => lines.push(line_of(reference, kind, LineStyle::REFERENCE)),
         }
     }
-    // The reference's spread: around its curve for the goal distance,
-    // from zero for the distance to the reference.
-    let spread = &reference.series.wrist_spread_m;
-    if reference.runs_used > 1 && spread.iter().any(Option::is_some) {
-        let ref_goal = &reference.series.wrist_distance_to_goal_m;
-        let t = &reference.series.t_s;
-        match kind {
-            FigureKind::GoalDistance if ref_goal.iter().any(Option::is_some) => {
-                band = Some(Band {
-                    label: format!("{} \u{b1} RMS spread", reference.source),
-                    points: t
-                        .iter()
-                        .enumerate()
-                        .map(|(i, t)| {
-                            let b = match (
-                                ref_goal.get(i).copied().flatten(),
-                                spread.get(i).copied().flatten(),
-                            ) {
-                                (Some(d), Some(s)) if d.is_finite() && s.is_finite() => {
-                                    Some(((d - s).max(0.0), d + s))
-                                }
-                                _ => None,
-                            };
-                            (*t, b)
-                        })
-                        .collect(),
-                })
-            }
-            FigureKind::ReferenceDistance => {
-                band = Some(Band {
-                    label: format!("{} RMS spread", reference.source),
-                    points: t
-                        .iter()
-                        .enumerate()
-                        .map(|(i, t)| {
-                            (
-                                *t,
-                                spread
-                                    .get(i)
-                                    .copied()
-                                    .flatten()
-                                    .filter(|s| s.is_finite())
-                                    .map(|s| (0.0, s)),
-                            )
-                        })
-                        .collect(),
-                })
-            }
-            _ => {}
-        }
-    }
+    let band = spread_band(reference, kind);
     for s in &report.sources {
         match omission_reason(s, kind) {
             Some(reason) => omitted.push(Omitted {
@@ -940,7 +942,29 @@ impl Figure {
                 )))
                 .map_err(e)?;
         }
-        // Sources first, the reference on top.
+        self.draw_lines(&mut chart)?;
+        let omitted: Vec<String> = self.omitted.iter().map(|o| o.source.clone()).collect();
+        let clipped: Vec<String> = self.off_scale.iter().map(|o| o.source.clone()).collect();
+        draw_legend(
+            &legend,
+            &self.lines,
+            self.band.as_ref(),
+            band_color,
+            &omitted,
+            &clipped,
+        )
+        .map_err(e)?;
+        Ok(())
+    }
+
+    /// Draws the lines, sources first and the reference on top, with about
+    /// ten markers per line, staggered between lines.
+    fn draw_lines<DB: DrawingBackend>(
+        &self,
+        chart: &mut ChartContext<'_, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    ) -> Result<(), String> {
+        let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+        let ((x0, x1), (y0, y1)) = (self.x_range, self.y_range);
         let order: Vec<&Line> = self
             .lines
             .iter()
@@ -981,17 +1005,6 @@ impl Figure {
                     .map_err(e)?;
             }
         }
-        let omitted: Vec<String> = self.omitted.iter().map(|o| o.source.clone()).collect();
-        let clipped: Vec<String> = self.off_scale.iter().map(|o| o.source.clone()).collect();
-        draw_legend(
-            &legend,
-            &self.lines,
-            self.band.as_ref(),
-            band_color,
-            &omitted,
-            &clipped,
-        )
-        .map_err(e)?;
         Ok(())
     }
 }
@@ -1176,7 +1189,7 @@ fn fit_text<DB: DrawingBackend>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testdata;
+    use realitygap_analysis::testing as testdata;
 
     /// `(stroke colour, point count)` of every `<polyline>` in an SVG.
     fn polylines(svg: &str) -> Vec<(String, usize)> {

@@ -703,7 +703,7 @@ fn provenance_section(h: &mut String, p: &Provenance) {
 mod tests {
     use super::*;
     use crate::figures::{build_figure, FigureKind, SourceStyles};
-    use crate::testdata;
+    use realitygap_analysis::testing as testdata;
 
     fn page() -> (String, usize) {
         let report = testdata::scene();
@@ -755,6 +755,32 @@ mod tests {
         let rest = &html[start..];
         let body = &rest[rest.find("<tbody>").unwrap()..];
         &body[..body.find("</tbody>").unwrap()]
+    }
+
+    /// The element `<table ... id="{id}" ...>` .. `</table>`, or the
+    /// `class` one when `id` is not found.
+    fn table<'a>(html: &'a str, marker: &str) -> &'a str {
+        let at = html.find(marker).unwrap();
+        let start = html[..at].rfind("<table").unwrap();
+        let end = at + html[at..].find("</table>").unwrap() + "</table>".len();
+        &html[start..end]
+    }
+
+    /// Snapshots of the HTML tables (`tests/snapshots/`; rerun with
+    /// `UPDATE_SNAPSHOTS=1` after an intended change).
+    #[test]
+    fn html_table_snapshots() {
+        let (html, _) = page();
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/snapshots");
+        for (name, marker) in [
+            ("accumulated-error.html", "id=\"accumulated-error\""),
+            ("phases.html", "class=\"phases\""),
+            ("measures.html", "class=\"measures\""),
+            ("health.html", "class=\"health\""),
+            ("alignment.html", "class=\"alignment\""),
+        ] {
+            testdata::assert_snapshot(&dir, name, &format!("{}\n", table(&html, marker)));
+        }
     }
 
     #[test]

@@ -21,12 +21,12 @@
 //! The `realitygap report` and `realitygap reproduce` commands both end
 //! here.
 
+#![forbid(unsafe_code)]
+
 pub mod figures;
 pub mod frontier;
 pub mod html;
 pub mod provenance;
-#[cfg(test)]
-mod testdata;
 
 pub use figures::{Figure, FigureKind, SourceStyles};
 pub use provenance::{Provenance, SourceProvenance};
@@ -185,6 +185,7 @@ pub fn write_report(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use realitygap_analysis::testing as testdata;
 
     #[test]
     fn write_report_writes_every_file() {

@@ -16,25 +16,23 @@ pub(super) fn mico2() -> RobotModel {
         .expect("the project's mico2.urdf loads")
 }
 
-/// The reference data directory, or `None` (with a message) when absent;
-/// absent data fails the test when `REALITYGAP_REQUIRE_PAPER_DATA` is set
-/// (as CI sets it).
-pub(super) fn paper_data() -> Option<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/paper-data");
-    if dir.is_dir() {
-        Some(dir)
-    } else if std::env::var_os("REALITYGAP_REQUIRE_PAPER_DATA").is_some() {
-        panic!(
-            "paper-data not found at {} but REALITYGAP_REQUIRE_PAPER_DATA is set",
-            dir.display()
-        );
-    } else {
-        eprintln!(
-            "SKIPPED: paper-data not found at {}; this test needs the study's recordings",
-            dir.display()
-        );
-        None
-    }
+/// The study's recordings and the official robot package: the project's
+/// built-in archive (`assets/study-data/`), unpacked once into the cache by
+/// `realitygap-data` (a dev-dependency) and reused. Always there, so these
+/// tests never skip.
+pub(crate) fn paper_data() -> PathBuf {
+    static DIR: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+    DIR.get_or_init(|| {
+        use realitygap_data::builtin;
+        let assets = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets");
+        let archive = builtin::StudyArchive::in_assets(&assets).unwrap_or_else(|e| panic!("{e}"));
+        let cache = builtin::default_cache_root()
+            .unwrap_or_else(|_| std::env::temp_dir().join("realitygap-test-cache"));
+        builtin::open_or_unpack(&archive, &cache)
+            .unwrap_or_else(|e| panic!("{e}"))
+            .dir
+    })
+    .clone()
 }
 
 pub(super) fn official(data: &Path) -> RobotModel {
@@ -455,7 +453,7 @@ const COVERAGE: [(&str, f64, f64); 8] = [
 
 #[test]
 fn mico2_primitives_fit_the_kinova_meshes() {
-    let Some(data) = paper_data() else { return };
+    let data = paper_data();
     let off = official(&data);
     let m = mico2();
     let mut checked = 0;
@@ -555,7 +553,7 @@ impl Lcg {
 
 #[test]
 fn mico2_matches_the_official_urdf() {
-    let Some(data) = paper_data() else { return };
+    let data = paper_data();
     let off = official(&data);
     let m = mico2();
     // Same joints with the same numbers.
@@ -660,7 +658,7 @@ fn csv_row(path: &Path, row: usize) -> Vec<f64> {
 
 #[test]
 fn official_fk_reproduces_the_study_mujoco_wrist() {
-    let Some(data) = paper_data() else { return };
+    let data = paper_data();
     let off = official(&data);
     let wrist = off.link_by_name("m1n6s300_link_6").unwrap();
     let file = data.join("Simulation/Experiment1/Single_Mujoco_0.csv");

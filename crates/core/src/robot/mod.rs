@@ -26,6 +26,7 @@
 //! non-URDF elements are ignored.
 
 mod package;
+pub mod plan;
 pub mod stl;
 mod urdf;
 
@@ -804,7 +805,7 @@ fn find_cycle(links: &[Link], joints: &[Joint], parent_joint: &[Option<usize>]) 
 }
 
 #[cfg(test)]
-mod mico2_tests;
+pub(crate) mod mico2_tests;
 
 #[cfg(test)]
 mod tests {

@@ -75,43 +75,7 @@ pub(super) fn build(
         joints.push(ctx.joint(j, &link_index, &robot.links)?);
     }
     // Mimic references need every joint's index and kind.
-    for (i, j) in robot.joints.iter().enumerate() {
-        let Some(m) = &j.mimic else { continue };
-        let line = ctx.element_line("joint", &j.name);
-        let invalid = |message: String| RobotError::InvalidValue {
-            source_file: source.to_path_buf(),
-            line,
-            element: format!("joint \"{}\" <mimic>", j.name),
-            message,
-        };
-        let Some(&leader) = joint_index.get(m.joint.as_str()) else {
-            return Err(invalid(format!(
-                "mimics joint \"{}\", which is not defined",
-                m.joint
-            )));
-        };
-        if !joints[leader].kind.is_movable() || robot.joints[leader].mimic.is_some() || leader == i
-        {
-            return Err(invalid(format!(
-                "mimics joint \"{}\", which is fixed or itself a mimic joint (not supported)",
-                m.joint
-            )));
-        }
-        let multiplier = m.multiplier.unwrap_or(1.0);
-        let offset = m.offset.unwrap_or(0.0);
-        if !(multiplier.is_finite() && offset.is_finite()) {
-            return Err(invalid(
-                "multiplier and offset must be finite numbers".into(),
-            ));
-        }
-        if joints[i].kind.is_movable() {
-            joints[i].mimic = Some(Mimic {
-                joint: leader,
-                multiplier,
-                offset,
-            });
-        }
-    }
+    ctx.mimics(&robot.joints, &joint_index, &mut joints)?;
 
     RobotModel::from_parts(robot.name.clone(), links, joints, source.to_path_buf())
 }
@@ -352,51 +316,9 @@ impl Ctx<'_> {
         Ok(path)
     }
 
-    fn joint(
-        &self,
-        j: &urdf_rs::Joint,
-        link_index: &HashMap<&str, usize>,
-        urdf_links: &[urdf_rs::Link],
-    ) -> Result<Joint, RobotError> {
+    /// A joint's unit axis (any axis for a fixed joint, which has none).
+    fn joint_axis(&self, j: &urdf_rs::Joint, kind: JointKind) -> Result<Vec3, RobotError> {
         let name = j.name.as_str();
-        let line = self.element_line("joint", name);
-        let kind = match j.joint_type {
-            urdf_rs::JointType::Revolute => JointKind::Revolute,
-            urdf_rs::JointType::Continuous => JointKind::Continuous,
-            urdf_rs::JointType::Prismatic => JointKind::Prismatic,
-            urdf_rs::JointType::Fixed => JointKind::Fixed,
-            ref other => {
-                return Err(RobotError::UnsupportedJoint {
-                    source_file: self.source.to_path_buf(),
-                    line,
-                    joint: j.name.clone(),
-                    kind: format!("{other:?}").to_lowercase(),
-                })
-            }
-        };
-        let find_link = |role: LinkRole, link: &str| {
-            link_index
-                .get(link)
-                .copied()
-                .ok_or_else(|| RobotError::UnknownLink {
-                    source_file: self.source.to_path_buf(),
-                    line,
-                    joint: j.name.clone(),
-                    role,
-                    link: link.to_string(),
-                    known_links: urdf_links.iter().map(|l| l.name.clone()).collect(),
-                })
-        };
-        let parent = find_link(LinkRole::Parent, &j.parent.link)?;
-        let child = find_link(LinkRole::Child, &j.child.link)?;
-        if parent == child {
-            return Err(RobotError::Cycle {
-                source_file: self.source.to_path_buf(),
-                links: vec![j.parent.link.clone(), j.child.link.clone()],
-            });
-        }
-        let origin = self.pose("joint", name, "<origin>", &j.origin)?;
-
         let raw_axis = Vec3::from_array(j.axis.xyz.0);
         let axis = if !raw_axis.is_finite() {
             None
@@ -405,22 +327,30 @@ impl Ctx<'_> {
         } else {
             None
         };
-        let axis = match (axis, kind) {
-            (Some(a), _) => a,
-            (None, JointKind::Fixed) => Vec3::new(1.0, 0.0, 0.0),
-            (None, _) => {
-                return Err(self.invalid(
-                    "joint",
-                    name,
-                    format!("joint \"{name}\" <axis>"),
-                    format!(
-                        "axis {:?} must be a finite, non-zero vector for a {kind} joint",
-                        j.axis.xyz.0
-                    ),
-                ))
-            }
-        };
+        match (axis, kind) {
+            (Some(a), _) => Ok(a),
+            (None, JointKind::Fixed) => Ok(Vec3::new(1.0, 0.0, 0.0)),
+            (None, _) => Err(self.invalid(
+                "joint",
+                name,
+                format!("joint \"{name}\" <axis>"),
+                format!(
+                    "axis {:?} must be a finite, non-zero vector for a {kind} joint",
+                    j.axis.xyz.0
+                ),
+            )),
+        }
+    }
 
+    /// A joint's limits: none for a fixed joint, infinite positions for a
+    /// continuous one, required for revolute and prismatic joints; effort
+    /// and velocity >= 0.
+    fn joint_limits(
+        &self,
+        j: &urdf_rs::Joint,
+        kind: JointKind,
+    ) -> Result<Option<JointLimits>, RobotError> {
+        let name = j.name.as_str();
         let l = &j.limit;
         let absent = l.lower == 0.0 && l.upper == 0.0 && l.effort == 0.0 && l.velocity == 0.0;
         let or_inf = |v: f64| if absent { f64::INFINITY } else { v };
@@ -474,6 +404,106 @@ impl Ctx<'_> {
                 ));
             }
         }
+        Ok(limits)
+    }
+
+    /// Resolves `<mimic>` references: the leader must exist, move and not
+    /// mimic another joint; multiplier and offset must be finite.
+    fn mimics(
+        &self,
+        urdf_joints: &[urdf_rs::Joint],
+        joint_index: &HashMap<&str, usize>,
+        joints: &mut [Joint],
+    ) -> Result<(), RobotError> {
+        for (i, j) in urdf_joints.iter().enumerate() {
+            let Some(m) = &j.mimic else { continue };
+            let line = self.element_line("joint", &j.name);
+            let invalid = |message: String| RobotError::InvalidValue {
+                source_file: self.source.to_path_buf(),
+                line,
+                element: format!("joint \"{}\" <mimic>", j.name),
+                message,
+            };
+            let Some(&leader) = joint_index.get(m.joint.as_str()) else {
+                return Err(invalid(format!(
+                    "mimics joint \"{}\", which is not defined",
+                    m.joint
+                )));
+            };
+            if !joints[leader].kind.is_movable()
+                || urdf_joints[leader].mimic.is_some()
+                || leader == i
+            {
+                return Err(invalid(format!(
+                    "mimics joint \"{}\", which is fixed or itself a mimic joint (not supported)",
+                    m.joint
+                )));
+            }
+            let multiplier = m.multiplier.unwrap_or(1.0);
+            let offset = m.offset.unwrap_or(0.0);
+            if !(multiplier.is_finite() && offset.is_finite()) {
+                return Err(invalid(
+                    "multiplier and offset must be finite numbers".into(),
+                ));
+            }
+            if joints[i].kind.is_movable() {
+                joints[i].mimic = Some(Mimic {
+                    joint: leader,
+                    multiplier,
+                    offset,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    fn joint(
+        &self,
+        j: &urdf_rs::Joint,
+        link_index: &HashMap<&str, usize>,
+        urdf_links: &[urdf_rs::Link],
+    ) -> Result<Joint, RobotError> {
+        let name = j.name.as_str();
+        let line = self.element_line("joint", name);
+        let kind = match j.joint_type {
+            urdf_rs::JointType::Revolute => JointKind::Revolute,
+            urdf_rs::JointType::Continuous => JointKind::Continuous,
+            urdf_rs::JointType::Prismatic => JointKind::Prismatic,
+            urdf_rs::JointType::Fixed => JointKind::Fixed,
+            ref other => {
+                return Err(RobotError::UnsupportedJoint {
+                    source_file: self.source.to_path_buf(),
+                    line,
+                    joint: j.name.clone(),
+                    kind: format!("{other:?}").to_lowercase(),
+                })
+            }
+        };
+        let find_link = |role: LinkRole, link: &str| {
+            link_index
+                .get(link)
+                .copied()
+                .ok_or_else(|| RobotError::UnknownLink {
+                    source_file: self.source.to_path_buf(),
+                    line,
+                    joint: j.name.clone(),
+                    role,
+                    link: link.to_string(),
+                    known_links: urdf_links.iter().map(|l| l.name.clone()).collect(),
+                })
+        };
+        let parent = find_link(LinkRole::Parent, &j.parent.link)?;
+        let child = find_link(LinkRole::Child, &j.child.link)?;
+        if parent == child {
+            return Err(RobotError::Cycle {
+                source_file: self.source.to_path_buf(),
+                links: vec![j.parent.link.clone(), j.child.link.clone()],
+            });
+        }
+        let origin = self.pose("joint", name, "<origin>", &j.origin)?;
+
+        let axis = self.joint_axis(j, kind)?;
+        let limits = self.joint_limits(j, kind)?;
         let (damping, friction) = j
             .dynamics
             .as_ref()

@@ -555,7 +555,7 @@ fn capture_files(root: &Path) -> Vec<PathBuf> {
 
 #[test]
 fn every_capture_file_imports_without_gaps() {
-    let Some(root) = paper_data() else { return };
+    let root = paper_data();
     let files = capture_files(&root);
     assert_eq!(files.len(), 60);
     let opts = QualisysOptions::collins2019();
@@ -599,7 +599,7 @@ fn every_capture_file_imports_without_gaps() {
 
 #[test]
 fn experiment3_real_cube_slides_about_a_decimetre() {
-    let Some(root) = paper_data() else { return };
+    let root = paper_data();
     let files: Vec<PathBuf> = capture_files(&root)
         .into_iter()
         .filter(|f| f.to_string_lossy().contains("CubeExp"))
@@ -634,7 +634,7 @@ fn experiment3_real_cube_slides_about_a_decimetre() {
 /// printed precision), the row-major one must not.
 #[test]
 fn rotation_matrix_is_column_major_on_real_data() {
-    let Some(root) = paper_data() else { return };
+    let root = paper_data();
     for rel in [
         "MotionCapture/Experiment1/Single0001_6D.tsv",
         "MotionCapture/Experiment3/CubeExp0005_6D.tsv",
@@ -687,7 +687,7 @@ fn rotation_matrix_is_column_major_on_real_data() {
 
 #[test]
 fn data_format_file_with_header() {
-    let Some(root) = paper_data() else { return };
+    let root = paper_data();
     let run = read(
         &root.join("MotionCapture/Data_Format.tsv"),
         &QualisysOptions::collins2019(),

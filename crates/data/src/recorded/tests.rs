@@ -339,7 +339,7 @@ pub(crate) fn simulator_files(root: &Path) -> Vec<(PathBuf, QuatOrder)> {
 
 #[test]
 fn every_simulator_file_imports() {
-    let Some(root) = paper_data() else { return };
+    let root = paper_data();
     let files = simulator_files(&root);
     assert_eq!(files.len(), 420);
     for (f, order) in &files {
@@ -384,7 +384,7 @@ fn every_simulator_file_imports() {
 
 #[test]
 fn vrep_ode_runs_reach_huge_values() {
-    let Some(root) = paper_data() else { return };
+    let root = paper_data();
     let f = root.join("Simulation/Experiment1/Single_VRepODE_0.csv");
     let run = read(&f, &RecordedOptions::new(QuatOrder::Xyzw)).unwrap();
     assert!(
@@ -410,7 +410,7 @@ fn vrep_ode_runs_reach_huge_values() {
 
 #[test]
 fn sim_data_format_header_file() {
-    let Some(root) = paper_data() else { return };
+    let root = paper_data();
     let run = read(
         &root.join("Simulation/Sim_Data_Format.csv"),
         &RecordedOptions::new(QuatOrder::Xyzw),

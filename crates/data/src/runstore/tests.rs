@@ -1,5 +1,6 @@
 use super::*;
 use proptest::prelude::*;
+use realitygap_core::{Pose, Quat, Vec3};
 
 fn sample_trajectory() -> Trajectory {
     let mut t = Trajectory::with_bodies(&["wrist", "cube"]);

@@ -1,13 +1,15 @@
-//! Synthetic scene reports for the unit tests.
+//! Synthetic scene reports for the tests of the tables (here) and of the
+//! figures and HTML report (`realitygap-report`). Not for production code.
 
-use realitygap_analysis::align::RunStart;
-use realitygap_analysis::bootstrap::{BootstrapOptions, Interval, PairedComparison};
-use realitygap_analysis::compare::{
+use crate::align::RunStart;
+use crate::bootstrap::{BootstrapOptions, Interval, PairedComparison};
+use crate::compare::{
     AlignedRun, AlignmentReport, FlaggedRun, RegistrationReport, RunsReport, SceneReport, Series,
     SourceSummary,
 };
-use realitygap_analysis::metrics::GoalMeasures;
-use realitygap_analysis::{AnalysisMode, HealthFlag};
+use crate::metrics::GoalMeasures;
+use crate::{AnalysisMode, HealthFlag};
+use std::path::Path;
 
 /// A source whose distance to the goal is `f(t)` over 0..5 s at 20 Hz
 /// (100 steps), with a constant 5 mm spread and a distance to the
@@ -144,5 +146,46 @@ pub fn scene() -> SceneReport {
             source("Beta", 20, |t| (0.65 - 0.15 * t).max(0.02), 3.0),
             source("Dead", 0, |_| 0.0, 0.0),
         ],
+    }
+}
+
+/// Compares `actual` with the snapshot file `dir/name` and panics with the
+/// first differing line when they differ. The tool's version is replaced by
+/// `<version>` first, so that a release does not change the files. With the
+/// environment variable `UPDATE_SNAPSHOTS` set, writes the file instead
+/// (review the diff before committing it).
+pub fn assert_snapshot(dir: &Path, name: &str, actual: &str) {
+    let path = dir.join(name);
+    let v = realitygap_core::TOOL_VERSION;
+    let actual = actual
+        .replace(&format!("realitygap {v}"), "realitygap <version>")
+        .replace(
+            &format!("\"tool_version\": \"{v}\""),
+            "\"tool_version\": \"<version>\"",
+        );
+    if std::env::var_os("UPDATE_SNAPSHOTS").is_some() {
+        std::fs::create_dir_all(dir).unwrap();
+        std::fs::write(&path, &actual).unwrap();
+        return;
+    }
+    let expected = std::fs::read_to_string(&path).unwrap_or_else(|e| {
+        panic!(
+            "{}: {e}; run with UPDATE_SNAPSHOTS=1 to create it",
+            path.display()
+        )
+    });
+    if expected != actual {
+        let line = expected
+            .lines()
+            .zip(actual.lines())
+            .position(|(a, b)| a != b)
+            .unwrap_or(expected.lines().count().min(actual.lines().count()));
+        panic!(
+            "{} differs from the output first at line {}:\n  expected: {:?}\n  actual:   {:?}\n(rerun with UPDATE_SNAPSHOTS=1 if the change is intended)\n--- actual ---\n{actual}",
+            path.display(),
+            line + 1,
+            expected.lines().nth(line),
+            actual.lines().nth(line)
+        );
     }
 }

@@ -1,0 +1,352 @@
+//! Child processes: the parent starts one per run ([`run_child`]) and the
+//! child runs it ([`run_one`]). A crash, abort or `exit` inside an engine's
+//! native code therefore fails only that run, with the engine's last words
+//! as its message.
+
+use crate::prepare::{parse_perturbation, prepare, RunSource};
+use crate::protocol::{ChildResult, Job};
+use crate::Registry;
+use anyhow::{Context, Result};
+use realitygap_core::controller::{load_prepared, run_scene_with, ControlParams, RunOptions};
+use std::io::{Read, Write};
+use std::path::PathBuf;
+use std::process::{Command, ExitStatus, Stdio};
+use std::time::Duration;
+use wait_timeout::ChildExt;
+
+/// The hidden subcommand of the `realitygap` binary that runs one job.
+pub const RUN_ONE: &str = "__run-one";
+
+/// How to start a child process that reads a [`Job`] on standard input and
+/// writes a [`ChildResult`] on standard output.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Launcher {
+    /// The program; `None`: this executable (`std::env::current_exe`).
+    pub program: Option<PathBuf>,
+    /// Its arguments.
+    pub args: Vec<String>,
+}
+
+impl Launcher {
+    /// This executable with the [`RUN_ONE`] subcommand.
+    pub fn this_executable() -> Launcher {
+        Launcher {
+            program: None,
+            args: vec![RUN_ONE.to_string()],
+        }
+    }
+}
+
+/// How one child process ended.
+#[derive(Debug)]
+pub enum ChildEnd {
+    /// It wrote a result (empty for a check-only job).
+    Done(Box<ChildResult>),
+    /// It failed, timed out or could not start: the message.
+    Failed(String),
+}
+
+/// The child's side, `realitygap __run-one`: reads a [`Job`] as JSON on
+/// standard input, runs it, writes a [`ChildResult`] as JSON on standard
+/// output. `setup` prepares the engines' native libraries first.
+pub fn run_one(registry: Registry, setup: fn()) -> Result<()> {
+    #[cfg(target_os = "linux")]
+    die_with_parent();
+    setup();
+    let mut input = String::new();
+    std::io::stdin()
+        .read_to_string(&mut input)
+        .context("reading the job from standard input")?;
+    let job: Job =
+        serde_json::from_str(&input).context("the job on standard input is not valid")?;
+    let Some(result) = simulate(registry, &job)? else {
+        return Ok(());
+    };
+    let text = serde_json::to_string(&result)?;
+    let mut out = std::io::stdout().lock();
+    out.write_all(text.as_bytes())
+        .and_then(|_| out.flush())
+        .context("writing the result to standard output")?;
+    Ok(())
+}
+
+/// Runs `job` in this process; `None` for a check-only job whose model
+/// loaded.
+pub fn simulate(registry: Registry, job: &Job) -> Result<Option<ChildResult>> {
+    let p = prepare(
+        registry,
+        &RunSource {
+            scene_file: &job.scene_file,
+            engine: &job.engine,
+            robot: job.robot.as_deref(),
+            packages: &job.packages,
+            set: &job.set,
+            params_file: job.params.as_deref(),
+        },
+    )?;
+    let perturbation = parse_perturbation(&job.perturb)?;
+    let sample =
+        (!perturbation.is_none()).then(|| perturbation.sample(job.seed, p.scene.actuators.len()));
+    let options = RunOptions {
+        perturbation: sample,
+        ..RunOptions::default()
+    };
+    let mut sim = load_prepared(
+        p.engine.as_ref(),
+        &p.scene,
+        &p.robot,
+        &p.settings,
+        &p.params,
+        &options,
+    )?;
+    if job.check_only {
+        return Ok(None);
+    }
+    let control = ControlParams::from_params(&p.params, &p.scene);
+    let outcome = run_scene_with(sim.as_mut(), &p.scene, &options, &control)?;
+    Ok(Some(ChildResult::from_outcome(&outcome)))
+}
+
+/// Ends this child process when the parent dies (Linux), so that killing a
+/// batch does not leave simulations running.
+#[cfg(target_os = "linux")]
+fn die_with_parent() {
+    extern "C" {
+        fn prctl(option: i32, arg2: u64, arg3: u64, arg4: u64, arg5: u64) -> i32;
+        fn getppid() -> i32;
+    }
+    const PR_SET_PDEATHSIG: i32 = 1;
+    const SIGKILL: u64 = 9;
+    // SAFETY: plain system calls with integer arguments, declared with
+    // their C signatures; neither touches memory of this process.
+    unsafe {
+        prctl(PR_SET_PDEATHSIG, SIGKILL, 0, 0, 0);
+        if getppid() == 1 {
+            std::process::exit(1);
+        }
+    }
+}
+
+/// The last `n` non-blank lines of `text`, joined by ` | `.
+pub fn last_lines(text: &str, n: usize) -> String {
+    let lines: Vec<&str> = text.lines().filter(|l| !l.trim().is_empty()).collect();
+    lines[lines.len().saturating_sub(n)..].join(" | ")
+}
+
+/// How a process ended, in words: `exited with code 3`, `killed by signal
+/// 11 (SIGSEGV, invalid memory access)`.
+pub fn describe_exit(status: ExitStatus) -> String {
+    #[cfg(unix)]
+    {
+        use std::os::unix::process::ExitStatusExt;
+        if let Some(sig) = status.signal() {
+            let name = match sig {
+                4 => " (SIGILL)",
+                6 => " (SIGABRT, abort)",
+                7 => " (SIGBUS)",
+                8 => " (SIGFPE)",
+                9 => " (SIGKILL)",
+                11 => " (SIGSEGV, invalid memory access)",
+                15 => " (SIGTERM)",
+                _ => "",
+            };
+            return format!("killed by signal {sig}{name}");
+        }
+    }
+    match status.code() {
+        Some(c) => format!("exited with code {c}"),
+        None => "ended abnormally".to_string(),
+    }
+}
+
+/// Reads a pipe to its end on a thread of its own.
+fn drain<R: Read + Send + 'static>(mut pipe: R) -> std::thread::JoinHandle<Vec<u8>> {
+    std::thread::spawn(move || {
+        let mut buf = Vec::new();
+        let _ = pipe.read_to_end(&mut buf);
+        buf
+    })
+}
+
+/// What the child's standard output and error and exit status mean.
+fn interpret(job: &Job, status: ExitStatus, out: &[u8], err: &str) -> ChildEnd {
+    if status.success() {
+        if job.check_only {
+            return ChildEnd::Done(Box::default());
+        }
+        return match serde_json::from_slice::<ChildResult>(out) {
+            Ok(r) => ChildEnd::Done(Box::new(r)),
+            Err(e) => ChildEnd::Failed(format!(
+                "the run's output could not be read ({e}); stderr: {}",
+                last_lines(err, 5)
+            )),
+        };
+    }
+    let err: String = err
+        .lines()
+        .map(|l| l.strip_prefix("error: ").unwrap_or(l))
+        .collect::<Vec<_>>()
+        .join("\n");
+    let said = last_lines(&err, 5);
+    let said = if said.is_empty() {
+        "no message".to_string()
+    } else {
+        said
+    };
+    ChildEnd::Failed(format!("{}: {said}", describe_exit(status)))
+}
+
+/// Runs `job` in a child process started by `launcher`, killed after
+/// `timeout_s` seconds if given.
+pub fn run_child(launcher: &Launcher, job: &Job, timeout_s: Option<f64>) -> ChildEnd {
+    let program = match &launcher.program {
+        Some(p) => p.clone(),
+        None => match std::env::current_exe() {
+            Ok(e) => e,
+            Err(e) => {
+                return ChildEnd::Failed(format!("cannot find this program to start a run: {e}"))
+            }
+        },
+    };
+    let mut child = match Command::new(program)
+        .args(&launcher.args)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+    {
+        Ok(c) => c,
+        Err(e) => return ChildEnd::Failed(format!("cannot start a child process: {e}")),
+    };
+    let input = serde_json::to_vec(job).expect("a job always serialises");
+    if let Some(mut stdin) = child.stdin.take() {
+        // A child that dies at once closes its stdin; its exit status says why.
+        let _ = stdin.write_all(&input);
+    }
+    let out_reader = drain(child.stdout.take().expect("piped"));
+    let err_reader = drain(child.stderr.take().expect("piped"));
+    // A limit too large for a `Duration` (or NaN) never comes, as before.
+    let limit = timeout_s
+        .filter(|t| !t.is_nan())
+        .and_then(|t| Duration::try_from_secs_f64(t.max(0.0)).ok());
+    let waited = match limit {
+        Some(limit) => child.wait_timeout(limit),
+        None => child.wait().map(Some),
+    };
+    let status = match waited {
+        Ok(Some(status)) => Some(status),
+        Ok(None) => {
+            let _ = child.kill();
+            let _ = child.wait();
+            None
+        }
+        Err(e) => return ChildEnd::Failed(format!("waiting for the run: {e}")),
+    };
+    let out = out_reader.join().unwrap_or_default();
+    let err = String::from_utf8_lossy(&err_reader.join().unwrap_or_default()).into_owned();
+    match status {
+        None => ChildEnd::Failed(format!("timed out after {} s", timeout_s.unwrap_or(0.0))),
+        Some(status) => interpret(job, status, &out, &err),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::time::Instant;
+
+    fn job(check_only: bool) -> Job {
+        Job {
+            scene_file: "s.toml".into(),
+            engine: "mujoco".into(),
+            robot: None,
+            packages: vec![],
+            set: vec![],
+            perturb: vec![],
+            seed: 0,
+            params: None,
+            check_only,
+        }
+    }
+
+    fn sh(script: &str) -> Launcher {
+        Launcher {
+            program: Some("sh".into()),
+            args: vec!["-c".into(), script.into()],
+        }
+    }
+
+    fn failed(end: ChildEnd) -> String {
+        match end {
+            ChildEnd::Failed(m) => m,
+            ChildEnd::Done(r) => panic!("expected a failure, got {r:?}"),
+        }
+    }
+
+    #[test]
+    fn a_result_on_standard_output_is_read() {
+        let r = ChildResult {
+            engine_steps: 42,
+            ..ChildResult::default()
+        };
+        let text = serde_json::to_string(&r).unwrap();
+        let end = run_child(
+            &sh(&format!("cat >/dev/null; echo '{text}'")),
+            &job(false),
+            None,
+        );
+        match end {
+            ChildEnd::Done(back) => assert_eq!(*back, r),
+            ChildEnd::Failed(m) => panic!("{m}"),
+        }
+        assert!(matches!(
+            run_child(&sh("cat >/dev/null"), &job(true), None),
+            ChildEnd::Done(_)
+        ));
+    }
+
+    #[test]
+    fn a_failing_child_gives_its_last_words() {
+        let m = failed(run_child(
+            &sh("cat >/dev/null; echo one >&2; echo 'error: two' >&2; exit 3"),
+            &job(false),
+            None,
+        ));
+        assert_eq!(m, "exited with code 3: one | two");
+        let m = failed(run_child(&sh("exit 1"), &job(false), None));
+        assert_eq!(m, "exited with code 1: no message");
+        let m = failed(run_child(&sh("kill -SEGV $$"), &job(false), None));
+        assert_eq!(
+            m,
+            "killed by signal 11 (SIGSEGV, invalid memory access): no message"
+        );
+        let m = failed(run_child(
+            &sh("echo garbage; echo why >&2"),
+            &job(false),
+            None,
+        ));
+        assert!(
+            m.starts_with("the run's output could not be read") && m.ends_with("stderr: why"),
+            "{m}"
+        );
+    }
+
+    #[test]
+    fn a_slow_child_times_out_promptly() {
+        let start = Instant::now();
+        let m = failed(run_child(&sh("exec sleep 30"), &job(false), Some(0.3)));
+        assert_eq!(m, "timed out after 0.3 s");
+        assert!(start.elapsed().as_secs_f64() < 10.0);
+    }
+
+    #[test]
+    fn a_missing_program_is_named() {
+        let launcher = Launcher {
+            program: Some("/does/not/exist".into()),
+            args: vec![],
+        };
+        let m = failed(run_child(&launcher, &job(false), None));
+        assert!(m.starts_with("cannot start a child process"), "{m}");
+        assert_eq!(last_lines("a\n\n b\nc\n", 2), " b | c");
+    }
+}

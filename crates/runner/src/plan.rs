@@ -1,0 +1,361 @@
+//! Batch planning and resume: one results directory per (scene, engine),
+//! opened (or created) and checked before anything runs, with the repeats
+//! still to run. A rerun of the same batch finds its finished runs and
+//! keeps them.
+
+use crate::prepare::{engine_names, parse_perturbation, prepare, resolver, robot_override};
+use crate::prepare::{Prepared, RunSource};
+use crate::protocol::Job;
+use crate::Registry;
+use anyhow::{bail, Context, Result};
+use realitygap_core::controller::{repeat_seed, Perturbation};
+use realitygap_core::engine::SettingValue;
+use realitygap_data::runstore::{EngineInfo, RunStore, SourceKind};
+use std::path::PathBuf;
+
+/// A batch as the command line gives it (`realitygap run`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct BatchSpec {
+    /// Scene files (TOML).
+    pub scenes: Vec<PathBuf>,
+    /// Engines to run; empty: every engine of the registry.
+    pub engines: Vec<String>,
+    /// Runs per scene and engine.
+    pub repeats: u32,
+    /// Results directory.
+    pub out: PathBuf,
+    /// Robot instead of the scene's: `mico2`, `official` or a URDF file.
+    pub robot: Option<String>,
+    /// `NAME=DIR` ROS package locations.
+    pub packages: Vec<String>,
+    /// Runs at a time; `None`: the number of cores.
+    pub jobs: Option<usize>,
+    /// Seed of the per-repeat perturbations.
+    pub seed: u64,
+    /// Perturbation specs, `KEY=VALUE,...`.
+    pub perturb: Vec<String>,
+    /// Engine settings, `[ENGINE.]KEY=VALUE`.
+    pub set: Vec<String>,
+    /// Give up on a run after this many seconds.
+    pub timeout_s: Option<f64>,
+    /// Physical parameters file.
+    pub params: Option<PathBuf>,
+}
+
+/// Runs of one results directory that ended each way in this batch.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Done {
+    /// Completed (simulated or copied).
+    pub ok: usize,
+    /// Diverged.
+    pub diverged: usize,
+    /// Failed.
+    pub failed: usize,
+}
+
+impl Done {
+    /// Every run of the batch in this directory.
+    pub fn total(&self) -> usize {
+        self.ok + self.diverged + self.failed
+    }
+}
+
+/// One (scene, engine) results directory of the batch.
+pub struct Group {
+    /// The scene file.
+    pub scene_file: PathBuf,
+    /// The scene's name.
+    pub scene_name: String,
+    /// The engine's name.
+    pub engine: String,
+    /// The source's name: the engine's, or `<engine>-<robot label>`.
+    pub source: String,
+    /// The results directory.
+    pub store: RunStore,
+    /// Repeats still to run, in order.
+    pub pending: Vec<u32>,
+    /// Why the engine could not load the model, if it could not.
+    pub load_error: Option<String>,
+    /// How this batch's runs ended.
+    pub done: Done,
+}
+
+/// A planned batch: its groups and what its jobs are made of.
+pub struct Plan {
+    /// The batch as given.
+    pub spec: BatchSpec,
+    /// The results directories, scene by scene, engine by engine.
+    pub groups: Vec<Group>,
+    /// Runs at a time.
+    pub jobs: usize,
+    /// The parameters file, absolute.
+    pub params_file: Option<PathBuf>,
+    /// The repeats' perturbation (none: a deterministic batch).
+    pub perturbation: Perturbation,
+}
+
+/// The id of a repeat's run: `run000`, `run001`, ...
+pub fn run_id(repeat: u32) -> String {
+    format!("run{repeat:03}")
+}
+
+fn setting_json(v: &SettingValue) -> serde_json::Value {
+    match v {
+        SettingValue::Bool(b) => serde_json::json!(b),
+        SettingValue::Integer(i) => serde_json::json!(i),
+        SettingValue::Float(f) => serde_json::json!(f),
+        SettingValue::Text(s) => serde_json::json!(s),
+    }
+}
+
+/// The engines to run: the requested ones (repeats next to each other
+/// dropped), else every engine of the registry.
+pub fn engines_to_run(registry: Registry, requested: &[String]) -> Result<Vec<String>> {
+    if requested.is_empty() {
+        let all = engine_names(registry);
+        if all.is_empty() {
+            bail!("no physics engine is compiled into this binary (build it with `--features mujoco`)");
+        }
+        return Ok(all);
+    }
+    let mut v = requested.to_vec();
+    v.dedup();
+    Ok(v)
+}
+
+/// What a results directory's runs were made with; a rerun must match it.
+fn config_json(
+    p: &Prepared,
+    spec: &BatchSpec,
+    robot_label: Option<&str>,
+    params_file: Option<&PathBuf>,
+    perturbation: &Perturbation,
+) -> Result<serde_json::Value> {
+    Ok(serde_json::json!({
+        "scene_file": p.scene.source.display().to_string(),
+        "robot": {
+            "urdf": p.scene.robot.urdf.display().to_string(),
+            "mjcf": p.scene.robot.mjcf.as_ref().map(|m| m.display().to_string()),
+            "label": robot_label.unwrap_or("scene"),
+            "name": p.robot.name,
+        },
+        "engine_settings": p.settings.iter().map(|(k, v)| (k.clone(), setting_json(v))).collect::<serde_json::Map<_, _>>(),
+        "timestep_s": p.timestep_s,
+        "steps_per_control_period": p.steps_per_period,
+        "controller": {
+            "gain_per_s": p.scene.controller.gain_per_s,
+            "max_speed_deg_s": p.scene.controller.max_speed_deg_s,
+            "period_s": p.scene.controller.period_s,
+        },
+        "duration_s": p.scene.duration_s,
+        "samples_per_run": p.scene.sample_count(),
+        "seed": spec.seed,
+        "params_file": params_file.map(|p| p.display().to_string()),
+        "params": serde_json::to_value(&p.params)?,
+        "perturbation": perturbation.describe(),
+        "deterministic": perturbation.is_none(),
+    }))
+}
+
+/// Opens (or creates) a group's results directory, checks that its runs
+/// were made with `config`, and records the engine, config and repeats.
+fn open_store(
+    dir: &std::path::Path,
+    source: &str,
+    p: &Prepared,
+    config: serde_json::Value,
+    repeats: u32,
+) -> Result<RunStore> {
+    let mut store =
+        RunStore::create_or_open(dir, source, SourceKind::Simulated, Some(&p.scene.name))?;
+    let existing = store.manifest().settings.get("config").cloned();
+    if let Some(old) = existing.filter(|_| !store.runs().is_empty()) {
+        if old != config {
+            bail!(
+                "{} holds runs made with other settings (scene, robot, engine settings, seed or perturbation differ); use another --out directory or remove it",
+                dir.display()
+            );
+        }
+    }
+    store.set_engine(EngineInfo {
+        name: p.engine.name().to_string(),
+        version: p.engine.version(),
+    })?;
+    let mut settings = store.manifest().settings.clone();
+    if !settings.is_object() {
+        settings = serde_json::json!({});
+    }
+    settings["config"] = config;
+    settings["repeats"] =
+        serde_json::json!(repeats.max(settings["repeats"].as_u64().unwrap_or(0) as u32));
+    store.set_settings(settings)?;
+    Ok(store)
+}
+
+impl Plan {
+    /// Checks everything and opens the results directories before
+    /// running: every scene with every engine is prepared, so that a
+    /// mistake is one error before any simulation.
+    pub fn new(registry: Registry, spec: BatchSpec) -> Result<Plan> {
+        let engines = engines_to_run(registry, &spec.engines)?;
+        let perturbation = parse_perturbation(&spec.perturb)?;
+        let params_file = match &spec.params {
+            Some(p) => {
+                Some(std::path::absolute(p).with_context(|| format!("--params {}", p.display()))?)
+            }
+            None => None,
+        };
+        let resolver = resolver(&spec.packages)?;
+        // Resolve the robot once, for its label and early errors.
+        let robot_label =
+            robot_override(spec.robot.as_deref(), &resolver)?.map(|(_, _, label)| label);
+        let jobs = spec
+            .jobs
+            .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+            .max(1);
+        let mut plan = Plan {
+            spec,
+            groups: Vec::new(),
+            jobs,
+            params_file,
+            perturbation,
+        };
+        for scene_file in plan.spec.scenes.clone() {
+            for engine in &engines {
+                let group = plan.group(registry, &scene_file, engine, robot_label.as_deref())?;
+                plan.groups.push(group);
+            }
+        }
+        Ok(plan)
+    }
+
+    /// Prepares one scene with one engine and opens its results directory.
+    fn group(
+        &self,
+        registry: Registry,
+        scene_file: &std::path::Path,
+        engine: &str,
+        robot_label: Option<&str>,
+    ) -> Result<Group> {
+        let spec = &self.spec;
+        let p = prepare(
+            registry,
+            &RunSource {
+                scene_file,
+                engine,
+                robot: spec.robot.as_deref(),
+                packages: &spec.packages,
+                set: &spec.set,
+                params_file: self.params_file.as_deref(),
+            },
+        )?;
+        let source = match robot_label {
+            Some(label) => format!("{engine}-{label}"),
+            None => engine.to_string(),
+        };
+        if self
+            .groups
+            .iter()
+            .any(|g| g.scene_name == p.scene.name && g.source == source)
+        {
+            bail!(
+                "scene \"{}\" is given twice (scene names must be unique in a batch)",
+                p.scene.name
+            );
+        }
+        let dir = spec.out.join(&p.scene.name).join(&source);
+        let config = config_json(
+            &p,
+            spec,
+            robot_label,
+            self.params_file.as_ref(),
+            &self.perturbation,
+        )?;
+        let store = open_store(&dir, &source, &p, config, spec.repeats)?;
+        let pending: Vec<u32> = (0..spec.repeats)
+            .filter(|&r| !store.has_finished_run(&run_id(r)))
+            .collect();
+        Ok(Group {
+            scene_file: scene_file.to_path_buf(),
+            scene_name: p.scene.name.clone(),
+            engine: engine.to_string(),
+            source,
+            store,
+            pending,
+            load_error: None,
+            done: Done::default(),
+        })
+    }
+
+    /// The job of repeat `repeat` of group `g`.
+    pub fn job(&self, g: &Group, repeat: u32, check_only: bool) -> Job {
+        let spec = &self.spec;
+        Job {
+            scene_file: g.scene_file.clone(),
+            engine: g.engine.clone(),
+            robot: spec.robot.clone(),
+            packages: spec.packages.clone(),
+            set: spec.set.clone(),
+            perturb: spec.perturb.clone(),
+            seed: repeat_seed(spec.seed, repeat as u64),
+            params: self.params_file.clone(),
+            check_only,
+        }
+    }
+
+    /// Whether every repeat is the same simulation (no perturbation).
+    pub fn deterministic(&self) -> bool {
+        self.perturbation.is_none()
+    }
+
+    /// Runs kept from an earlier batch.
+    pub fn kept(&self, g: &Group) -> usize {
+        self.spec.repeats as usize - g.pending.len()
+    }
+
+    /// Runs kept from an earlier batch, in every group.
+    pub fn skipped(&self) -> usize {
+        self.groups.iter().map(|g| self.kept(g)).sum()
+    }
+
+    /// Runs to do now: the pending runs of groups whose model loads.
+    pub fn total(&self) -> usize {
+        self.groups
+            .iter()
+            .filter(|g| g.load_error.is_none())
+            .map(|g| g.pending.len())
+            .sum()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use realitygap_core::engine::Engine;
+
+    #[test]
+    fn run_ids_sort_as_numbers_up_to_a_thousand() {
+        assert_eq!(run_id(0), "run000");
+        assert_eq!(run_id(42), "run042");
+        assert_eq!(run_id(1234), "run1234");
+    }
+
+    #[test]
+    fn engines_default_to_the_registry_and_lose_adjacent_repeats() {
+        fn none() -> Vec<Box<dyn Engine>> {
+            Vec::new()
+        }
+        assert!(engines_to_run(none, &[]).is_err());
+        let asked = ["a".to_string(), "a".into(), "b".into()];
+        assert_eq!(engines_to_run(none, &asked).unwrap(), ["a", "b"]);
+        assert_eq!(
+            Done {
+                ok: 1,
+                diverged: 2,
+                failed: 3
+            }
+            .total(),
+            6
+        );
+    }
+}

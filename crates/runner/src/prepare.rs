@@ -1,0 +1,288 @@
+//! From a job's strings to a checked, loadable run: the scene, the robot
+//! (`--robot`), the engine and its settings (`[engine.NAME]`, `--params`,
+//! `--set`), the perturbation.
+
+use crate::Registry;
+use anyhow::{anyhow, bail, Context, Result};
+use realitygap_core::controller::Perturbation;
+use realitygap_core::engine::{Engine, EngineSettings, SettingValue};
+use realitygap_core::params::PhysicalParams;
+use realitygap_core::robot::{PackageResolver, RobotModel};
+use realitygap_core::scene::Scene;
+use std::path::{Path, PathBuf};
+
+/// The project's Mico2 description, built in for `--robot mico2`.
+const MICO2_URDF: &str = include_str!(concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../../assets/robots/mico2/mico2.urdf"
+));
+
+/// A scene, robot, engine and settings, checked and ready to load.
+pub struct Prepared {
+    /// The scene, with `--params` applied.
+    pub scene: Scene,
+    /// The robot, with `--params` applied.
+    pub robot: RobotModel,
+    /// The engine.
+    pub engine: Box<dyn Engine>,
+    /// The engine settings: the scene's, then `--params`, then `--set`.
+    pub settings: EngineSettings,
+    /// The physical parameters (none without `--params`).
+    pub params: PhysicalParams,
+    /// The engine's timestep, seconds.
+    pub timestep_s: f64,
+    /// Engine steps per control period.
+    pub steps_per_period: u64,
+}
+
+/// The compiled-in engine called `name`.
+pub fn find_engine(registry: Registry, name: &str) -> Result<Box<dyn Engine>> {
+    let engines = registry();
+    let names: Vec<&str> = engines.iter().map(|e| e.name()).collect();
+    if names.is_empty() {
+        bail!("no physics engine is compiled into this binary (build it with a feature such as `--features mujoco`)");
+    }
+    let list = names.join(", ");
+    match engines.into_iter().find(|e| e.name() == name) {
+        Some(e) => Ok(e),
+        None => bail!("unknown engine \"{name}\" (compiled in: {list})"),
+    }
+}
+
+/// The names of the engines in `registry`, in its order.
+pub fn engine_names(registry: Registry) -> Vec<String> {
+    registry().iter().map(|e| e.name().to_string()).collect()
+}
+
+/// A package resolver: `ROS_PACKAGE_PATH`, then the `NAME=DIR` arguments.
+pub fn resolver(packages: &[String]) -> Result<PackageResolver> {
+    let mut r = PackageResolver::from_env();
+    for p in packages {
+        r.insert_arg(p)?;
+    }
+    Ok(r)
+}
+
+/// A file stem made safe for a directory name.
+fn label_of(path: &Path) -> String {
+    let label = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "robot".into());
+    label
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || "_-.".contains(c) {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+/// The robot a `--robot` value names, with its path and a short label for
+/// directory names; `None` keeps the scene's robot.
+pub fn robot_override(
+    choice: Option<&str>,
+    resolver: &PackageResolver,
+) -> Result<Option<(RobotModel, PathBuf, String)>> {
+    let Some(choice) = choice else {
+        return Ok(None);
+    };
+    match choice {
+        "mico2" => {
+            let source = PathBuf::from("mico2.urdf (built in)");
+            let robot = RobotModel::from_urdf_str(MICO2_URDF, &source, resolver)
+                .map_err(|e| anyhow!("the built-in Mico2 description: {e}"))?;
+            Ok(Some((robot, source, "mico2".to_string())))
+        }
+        "official" => {
+            let dir = resolver.find("kinova_description").map_err(|searched| {
+                anyhow!(
+                    "--robot official needs the kinova_description package (looked in: {}); pass --package kinova_description=DIR, e.g. a copy of the study data's kinova_description, or set ROS_PACKAGE_PATH",
+                    if searched.is_empty() { "nowhere".to_string() } else { searched.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ") }
+                )
+            })?;
+            let path = dir.join("urdf/m1n6s300.urdf");
+            let robot = RobotModel::from_urdf_file(&path, resolver)?;
+            Ok(Some((robot, path, "official".to_string())))
+        }
+        path => {
+            let path = PathBuf::from(path);
+            let robot = RobotModel::from_urdf_file(&path, resolver)?;
+            let label = label_of(&path);
+            Ok(Some((robot, path, label)))
+        }
+    }
+}
+
+/// The `--set` values that apply to `engine`, checked for form and for
+/// engine prefixes that name no engine of `known`.
+pub fn overrides_for(set: &[String], engine: &str, known: &[String]) -> Result<EngineSettings> {
+    let mut out = EngineSettings::new();
+    for s in set {
+        let (key, value) = s
+            .split_once('=')
+            .ok_or_else(|| anyhow!("--set \"{s}\": expected KEY=VALUE or ENGINE.KEY=VALUE"))?;
+        let key = key.trim();
+        let (target, key) = match key.split_once('.') {
+            Some((e, k)) => {
+                if !known.iter().any(|n| n == e) {
+                    bail!(
+                        "--set \"{s}\": \"{e}\" is not a compiled-in engine (compiled in: {})",
+                        known.join(", ")
+                    );
+                }
+                (Some(e), k)
+            }
+            None => (None, key),
+        };
+        if key.is_empty() {
+            bail!("--set \"{s}\": the key is empty");
+        }
+        if target.is_none_or(|e| e == engine) {
+            out.insert(key.to_string(), SettingValue::parse(value));
+        }
+    }
+    Ok(out)
+}
+
+/// The perturbation of `KEY=VALUE,...` specs (none when empty).
+pub fn parse_perturbation(specs: &[String]) -> Result<Perturbation> {
+    let mut p = Perturbation::default();
+    for s in specs {
+        p.parse_into(s)?;
+    }
+    Ok(p)
+}
+
+/// Reads a parameters file, or none.
+pub fn read_params(path: Option<&Path>) -> Result<PhysicalParams> {
+    match path {
+        Some(p) => Ok(PhysicalParams::from_file(p)?),
+        None => Ok(PhysicalParams::none()),
+    }
+}
+
+/// What a run is made of, as the command line gives it.
+#[derive(Debug, Clone, Copy)]
+pub struct RunSource<'a> {
+    /// The scene file.
+    pub scene_file: &'a Path,
+    /// The engine's name.
+    pub engine: &'a str,
+    /// The `--robot` value.
+    pub robot: Option<&'a str>,
+    /// `NAME=DIR` package locations.
+    pub packages: &'a [String],
+    /// `[ENGINE.]KEY=VALUE` settings.
+    pub set: &'a [String],
+    /// The parameters file.
+    pub params_file: Option<&'a Path>,
+}
+
+/// The scene of `src` with its robot (the scene's, or `--robot`), checked.
+fn scene_and_robot(src: &RunSource<'_>) -> Result<(Scene, RobotModel)> {
+    let mut scene = Scene::from_file(src.scene_file)?;
+    let resolver = resolver(src.packages)?;
+    let robot = match robot_override(src.robot, &resolver)? {
+        Some((robot, path, _)) => {
+            scene.set_robot_urdf(path);
+            robot
+        }
+        None => RobotModel::from_urdf_file(&scene.robot.urdf, &resolver)
+            .with_context(|| format!("the robot of scene {}", src.scene_file.display()))?,
+    };
+    scene.validate(&robot)?;
+    Ok((scene, robot))
+}
+
+/// Checks a run and makes it ready to load: every error a run can find
+/// before simulating.
+pub fn prepare(registry: Registry, src: &RunSource<'_>) -> Result<Prepared> {
+    let engine = find_engine(registry, src.engine)?;
+    let (scene, robot) = scene_and_robot(src)?;
+    let scene_file = src.scene_file;
+    let params = read_params(src.params_file)?;
+    let (scene, robot) =
+        realitygap_core::controller::prepare(engine.as_ref(), &scene, &robot, &params)
+            .map_err(|e| anyhow!("{e}"))
+            .with_context(|| format!("scene {} with --params", scene_file.display()))?;
+    let mut settings = params.settings_over(engine.name(), &scene.settings_for(engine.name()));
+    settings.extend(overrides_for(
+        src.set,
+        engine.name(),
+        &engine_names(registry),
+    )?);
+    let timestep_s = engine.check_settings(&settings).with_context(|| {
+        format!(
+            "scene {} ([engine.{}], --params and --set)",
+            scene_file.display(),
+            engine.name()
+        )
+    })?;
+    let steps_per_period = scene.steps_per_period(timestep_s)?;
+    Ok(Prepared {
+        scene,
+        robot,
+        engine,
+        settings,
+        params,
+        timestep_s,
+        steps_per_period,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn known() -> Vec<String> {
+        vec!["mujoco".into(), "ode".into()]
+    }
+
+    #[test]
+    fn set_overrides_apply_per_engine() {
+        let all = overrides_for(&["timestep_s=0.001".into()], "mujoco", &known()).unwrap();
+        assert_eq!(all.get("timestep_s"), Some(&SettingValue::Float(0.001)));
+        let other = overrides_for(&["ode.timestep_s=0.001".into()], "mujoco", &known()).unwrap();
+        assert!(other.is_empty());
+        assert!(overrides_for(&["nokey".into()], "mujoco", &known()).is_err());
+        assert!(overrides_for(&["=3".into()], "mujoco", &known()).is_err());
+        let e = overrides_for(&["nosuchengine.timestep_s=1".into()], "mujoco", &known())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("compiled in: mujoco, ode"), "{e}");
+    }
+
+    #[test]
+    fn robot_labels_are_safe_directory_names() {
+        assert_eq!(label_of(Path::new("/a/my robot+1.urdf")), "my_robot_1");
+        assert_eq!(label_of(Path::new("x/m1n6s300.urdf")), "m1n6s300");
+    }
+
+    #[test]
+    fn the_built_in_mico2_loads() {
+        let (robot, path, label) = robot_override(Some("mico2"), &PackageResolver::new())
+            .unwrap()
+            .unwrap();
+        assert_eq!(label, "mico2");
+        assert_eq!(path, PathBuf::from("mico2.urdf (built in)"));
+        assert!(!robot.joints.is_empty());
+        assert!(robot_override(None, &PackageResolver::new())
+            .unwrap()
+            .is_none());
+    }
+
+    #[test]
+    fn an_empty_registry_says_so() {
+        fn none() -> Vec<Box<dyn Engine>> {
+            Vec::new()
+        }
+        let e = find_engine(none, "mujoco").err().unwrap().to_string();
+        assert!(e.contains("no physics engine"), "{e}");
+        assert!(parse_perturbation(&[]).unwrap().is_none());
+        assert!(read_params(None).is_ok());
+    }
+}

@@ -1,0 +1,219 @@
+//! The study `realitygap reproduce` compares: the reference study
+//! (built in) with this tool's engines added to every scene, or, without
+//! recordings, the engines compared with each other.
+
+use crate::data_source::{assets_dir, DataSource};
+use crate::load::Roots;
+use crate::study::{SourceFormat, SourceSpec, Study, StudyScene};
+use anyhow::{bail, Context, Result};
+use realitygap_analysis::compare::CubeSpec;
+use realitygap_core::robot::{PackageResolver, RobotModel};
+use realitygap_core::scene::{Scene, TrackTarget};
+use realitygap_core::trajectory::WRIST;
+use realitygap_data::RunStore;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// The study definition, built in.
+const COLLINS2019: &str = include_str!(concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../../assets/studies/collins2019.toml"
+));
+
+/// The names of the study's scenes, in order (files
+/// `assets/scenes/<name>.toml`).
+pub const STUDY_SCENES: [&str; 3] = [
+    "scene1_single_joint",
+    "scene2_two_joints",
+    "scene3_cube_push",
+];
+
+/// The study's scene files in the assets folder.
+pub fn study_scene_files() -> Vec<PathBuf> {
+    let dir = assets_dir().join("scenes");
+    STUDY_SCENES
+        .iter()
+        .map(|s| dir.join(format!("{s}.toml")))
+        .collect()
+}
+
+/// The folder of the study's recordings `data` names (`None` for `none`),
+/// checked to hold them.
+pub fn study_recordings(data: &DataSource) -> Result<Option<PathBuf>> {
+    let data = data.resolve()?;
+    if let Some(d) = &data {
+        if !d.join("MotionCapture").is_dir() || !d.join("Simulation").is_dir() {
+            bail!("--data {}: expected the study's recordings there (folders MotionCapture/ and Simulation/)", d.display());
+        }
+    }
+    Ok(data)
+}
+
+/// A reproduction's study, its path (for the report) and roots: with
+/// recordings (`data`), the reference study restricted to the scenes of
+/// `scene_files`, this tool's engines (results in `runs_dir`) added to
+/// each; without, the engines compared with the first one (the study
+/// "file" in `out`).
+pub fn reproduction_study(
+    scene_files: &[PathBuf],
+    data: Option<&Path>,
+    out: &Path,
+    runs_dir: &Path,
+    engines: &[String],
+) -> Result<(Study, PathBuf, Roots)> {
+    let loaded: Vec<Scene> = scene_files
+        .iter()
+        .map(|p| Scene::from_file(p).map_err(anyhow::Error::from))
+        .collect::<Result<_>>()?;
+    let roots = |data: &Path| Roots {
+        data: data.to_path_buf(),
+        results: runs_dir.to_path_buf(),
+    };
+    let (study, study_path, roots) = match data {
+        Some(data) => {
+            let path = assets_dir().join("studies/collins2019.toml");
+            let mut study = Study::from_toml_str(COLLINS2019, &path)?;
+            study
+                .scenes
+                .retain(|s| loaded.iter().any(|l| l.name == s.name));
+            for s in &mut study.scenes {
+                s.sources
+                    .extend(engine_sources(runs_dir, &s.name, engines)?);
+            }
+            (study, path, roots(data))
+        }
+        None => {
+            let study = cross_engine_study(&loaded, runs_dir, engines)?;
+            (study, out.join("study.toml"), roots(out))
+        }
+    };
+    if study.scenes.is_empty() {
+        bail!(
+            "none of the scenes is part of the study (expected scene names {:?})",
+            STUDY_SCENES
+        );
+    }
+    Ok((study, study_path, roots))
+}
+
+/// One `store` source per engine results directory of a scene, named after
+/// the engine and version in its manifest, e.g. `MuJoCo 3.17.0 (this tool)`.
+pub fn engine_sources(runs_dir: &Path, scene: &str, engines: &[String]) -> Result<Vec<SourceSpec>> {
+    let mut out = Vec::new();
+    for engine in engines {
+        let dir = runs_dir.join(scene).join(engine);
+        if !dir.join("manifest.json").is_file() {
+            continue;
+        }
+        let store = RunStore::open(&dir)?;
+        let m = store.manifest();
+        // "MuJoCo 3.17.0 (mujoco-rs 7.0.0)" -> "MuJoCo 3.17.0 (this tool)".
+        let version = m
+            .engine
+            .as_ref()
+            .map(|e| e.version.clone())
+            .unwrap_or_default();
+        let label = version.split(" (").next().unwrap_or_default().trim();
+        out.push(SourceSpec {
+            name: format!(
+                "{} (this tool)",
+                if label.is_empty() {
+                    engine.as_str()
+                } else {
+                    label
+                }
+            ),
+            about: Some(format!("simulated by this tool: {version}")),
+            format: SourceFormat::Store,
+            files: None,
+            dir: Some(format!("{scene}/{engine}")),
+            quat_order: None,
+            alignment: None,
+            frequency_hz: None,
+            bodies: None,
+            roles: None,
+        });
+    }
+    Ok(out)
+}
+
+/// Without recordings: a study comparing the engines with the first one.
+/// Each scene's goal is the wrist at the final targets, by forward
+/// kinematics of the scene's robot.
+fn cross_engine_study(scenes: &[Scene], runs_dir: &Path, engines: &[String]) -> Result<Study> {
+    let mut out = Vec::new();
+    for scene in scenes {
+        let mut sources = engine_sources(runs_dir, &scene.name, engines)?;
+        if sources.is_empty() {
+            continue;
+        }
+        let reference = sources.remove(0);
+        let robot = RobotModel::from_urdf_file(&scene.robot.urdf, &PackageResolver::from_env())
+            .with_context(|| format!("scene {}", scene.name))?;
+        let goal = final_wrist(scene, &robot);
+        let cube = scene.objects.first().map(|o| CubeSpec {
+            nominal_start_m: Some(o.pose.position_m.to_array()),
+            contact_threshold_m: 0.005,
+        });
+        let mut phases: Vec<f64> = scene.schedule.iter().map(|e| e.t_s).collect();
+        if phases.first() != Some(&0.0) {
+            phases.insert(0, 0.0);
+        }
+        out.push(StudyScene {
+            name: scene.name.clone(),
+            steps: scene.sample_count(),
+            goal_m: goal,
+            goal_tolerance_m: 0.01,
+            phases_s: phases,
+            cube: if scene
+                .tracked
+                .iter()
+                .any(|t| matches!(t.target, TrackTarget::Object(_)))
+            {
+                cube
+            } else {
+                None
+            },
+            scene: None,
+            vars: BTreeMap::new(),
+            reference,
+            sources,
+        });
+    }
+    Ok(Study {
+        name: "cross-engine".into(),
+        title: Some("The engines compared with each other (no real recordings given)".into()),
+        control_period_s: scenes.first().map_or(0.05, |s| s.controller.period_s),
+        sources: vec![],
+        scenes: out,
+        runs: None,
+        holdout: None,
+        folder: PathBuf::new(),
+    })
+}
+
+/// The wrist's world position at the scene's final targets.
+fn final_wrist(scene: &Scene, robot: &RobotModel) -> Option<[f64; 3]> {
+    let link = scene
+        .tracked
+        .iter()
+        .find(|t| t.role == WRIST)
+        .and_then(|t| match &t.target {
+            TrackTarget::Link(l) => robot.link_by_name(l),
+            TrackTarget::Object(_) => None,
+        })?;
+    let last_tick = scene.sample_count().saturating_sub(1);
+    let targets = scene.targets_deg_at_tick(last_tick);
+    let mut q = vec![0.0; robot.joints.len()];
+    for (name, deg) in scene.controlled_joints().iter().zip(targets) {
+        q[robot.joint_by_name(name)?] = deg.to_radians();
+    }
+    for (name, rad) in &scene.robot.held_joints_rad {
+        if let Some(j) = robot.joint_by_name(name) {
+            q[j] = *rad;
+        }
+    }
+    robot
+        .link_pose(&scene.robot.base, &q, link)
+        .map(|p| p.position_m.to_array())
+}
