@@ -44,8 +44,6 @@
 
 use crate::cmd_engines;
 use anyhow::{anyhow, bail, Context, Result};
-use realitygap::data_source::{assets_dir, DataSource};
-use realitygap::study::{Roots, Study};
 use realitygap_analysis::bootstrap::BootstrapOptions;
 use realitygap_analysis::compare::{CompareOptions, RunInput, SourceRuns};
 use realitygap_core::controller::{
@@ -58,6 +56,8 @@ use realitygap_core::scene::Scene;
 use realitygap_core::trajectory::Trajectory;
 use realitygap_data::runstore::{EngineInfo, RunEntry, RunStore, SourceKind};
 use realitygap_report::frontier::{FrontierFigure, FrontierPoint};
+use realitygap_study::data_source::{assets_dir, DataSource};
+use realitygap_study::{Roots, Study};
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -334,46 +334,27 @@ fn label(point: &Overlay) -> (String, String) {
     (format!("{group}{ts}"), group)
 }
 
-/// Seconds of CPU time this thread has used.
-#[cfg(all(target_os = "linux", target_pointer_width = "64"))]
-fn thread_cpu_s() -> f64 {
-    #[repr(C)]
-    struct Timespec {
-        tv_sec: i64,
-        tv_nsec: i64,
-    }
-    extern "C" {
-        fn clock_gettime(clock: i32, tp: *mut Timespec) -> i32;
-    }
-    const CLOCK_THREAD_CPUTIME_ID: i32 = 3;
-    let mut ts = Timespec {
-        tv_sec: 0,
-        tv_nsec: 0,
-    };
-    // SAFETY: `ts` is a valid, writable timespec for the call's duration.
-    let rc = unsafe { clock_gettime(CLOCK_THREAD_CPUTIME_ID, &mut ts) };
-    if rc != 0 {
-        return f64::NAN;
-    }
-    ts.tv_sec as f64 + ts.tv_nsec as f64 * 1e-9
-}
-
-/// Elsewhere: wall time since the first call (stated in the output).
-#[cfg(not(all(target_os = "linux", target_pointer_width = "64")))]
+/// Seconds on the clock the timings use: the thread's CPU time where the
+/// platform has one, else wall time since the first call (the output says
+/// which, [`clock_name`]).
 fn thread_cpu_s() -> f64 {
     static START: std::sync::OnceLock<std::time::Instant> = std::sync::OnceLock::new();
-    START
-        .get_or_init(std::time::Instant::now)
-        .elapsed()
-        .as_secs_f64()
+    realitygap_runner::cpu_clock::thread_cpu_s().unwrap_or_else(|| {
+        START
+            .get_or_init(std::time::Instant::now)
+            .elapsed()
+            .as_secs_f64()
+    })
 }
 
 /// The clock [`thread_cpu_s`] reads, for the output.
-const CLOCK: &str = if cfg!(all(target_os = "linux", target_pointer_width = "64")) {
-    "thread CPU time (CLOCK_THREAD_CPUTIME_ID)"
-} else {
-    "wall time (no thread CPU clock on this platform)"
-};
+fn clock_name() -> &'static str {
+    if realitygap_runner::cpu_clock::thread_cpu_s().is_some() {
+        "thread CPU time (CLOCK_THREAD_CPUTIME_ID)"
+    } else {
+        "wall time (no thread CPU clock on this platform)"
+    }
+}
 
 /// One scene at one setting.
 #[derive(Debug, Clone, Serialize)]
@@ -977,7 +958,8 @@ pub fn run(args: Args) -> Result<()> {
     }
     let tolerance_m = args.tolerance_mm * 1e-3;
     cmd_engines::install_native_handlers();
-    let engine = cmd_engines::find(&args.engine).context("--engine")?;
+    let engine = realitygap_runner::prepare::find_engine(cmd_engines::compiled, &args.engine)
+        .context("--engine")?;
     let engine = engine.as_ref();
     let cases = load_scenes(&args.scenes, engine)?;
     let mut overlays = grid(&args, engine, &cases)?;
@@ -1082,7 +1064,7 @@ fn write_outputs(
         "scenes": r.scenes.iter().map(|s| s.scene.clone()).collect::<Vec<_>>(),
         "tolerance_m": tolerance_m,
         "repeats": args.repeats,
-        "clock": CLOCK,
+        "clock": clock_name(),
         "data": data.map(|d| d.display().to_string()),
         "reference": {
             "settings": r.settings,
