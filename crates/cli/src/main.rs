@@ -9,6 +9,7 @@ use std::process::ExitCode;
 
 mod cmd_compare;
 mod cmd_engines;
+mod cmd_frontier;
 mod cmd_import;
 mod cmd_report;
 mod cmd_reproduce;
@@ -44,6 +45,10 @@ enum Command {
     /// comparison against the real arm (the study's recordings, built in),
     /// the table, the figures and the report.
     Reproduce(cmd_reproduce::Args),
+    /// The speed-accuracy frontier of an engine: sweep its settings, measure
+    /// CPU time and deviation from the converged reference, recommend the
+    /// fastest setting within a tolerance.
+    Frontier(cmd_frontier::Args),
     /// Internal: run one simulation (a job as JSON on standard input) and
     /// print its trajectory; `run` starts one such process per run.
     #[command(name = realitygap_runner::child::RUN_ONE, hide = true)]
@@ -59,6 +64,7 @@ fn main() -> ExitCode {
         Command::Engines(args) => cmd_engines::run(args),
         Command::Report(args) => cmd_report::run(args),
         Command::Reproduce(args) => cmd_reproduce::run(args),
+        Command::Frontier(args) => cmd_frontier::run(args),
         Command::RunOne => cmd_run::run_one(),
     };
     match result {

@@ -21,6 +21,7 @@
 
 pub mod batch;
 pub mod child;
+pub mod cpu_clock;
 pub mod plan;
 pub mod prepare;
 pub mod protocol;
