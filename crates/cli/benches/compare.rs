@@ -40,7 +40,8 @@ fn main() {
         .skip(1)
         .find(|a| !a.starts_with('-'))
         .map(PathBuf::from)
-        .unwrap_or_else(|| root.join("../shared/paper-data"));
+        .or_else(realitygap_core::testing::paper_data)
+        .expect("the study's recordings (pass their path as an argument)");
     if !data.join("MotionCapture").is_dir() {
         eprintln!(
             "paper-data not found at {}; pass its path as an argument",

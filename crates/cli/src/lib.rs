@@ -6,24 +6,12 @@
 
 #![forbid(unsafe_code)]
 
-/// The study's recordings beside the project (`../shared/paper-data`), for
-/// tests and benchmarks. When absent: `None` after a message, unless the
-/// environment variable `REALITYGAP_REQUIRE_PAPER_DATA` is set (as CI sets
-/// it), in which case this panics so that the tests cannot pass silently.
+/// The study's recordings (with `kinova_description`), for tests and
+/// benchmarks: `realitygap_core::testing::paper_data`, which finds
+/// `../shared/paper-data` or the built-in study data unpacked in the cache
+/// and otherwise panics (in CI always), so that no test passes without them.
 pub fn paper_data_for_tests() -> Option<std::path::PathBuf> {
-    let dir =
-        std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/paper-data");
-    if dir.join("MotionCapture").is_dir() {
-        return Some(dir);
-    }
-    if std::env::var_os("REALITYGAP_REQUIRE_PAPER_DATA").is_some() {
-        panic!(
-            "paper-data not found at {} but REALITYGAP_REQUIRE_PAPER_DATA is set",
-            dir.display()
-        );
-    }
-    eprintln!("SKIPPED: paper-data not found at {}", dir.display());
-    None
+    realitygap_core::testing::paper_data()
 }
 
 #[cfg(test)]

@@ -16,23 +16,7 @@ fn scene(name: &str) -> PathBuf {
         .join(format!("{name}.toml"))
 }
 
-fn paper_data() -> Option<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/paper-data");
-    if dir.join("kinova_description").is_dir() {
-        Some(dir)
-    } else if std::env::var_os("REALITYGAP_REQUIRE_PAPER_DATA").is_some() {
-        panic!(
-            "paper data not found at {} and REALITYGAP_REQUIRE_PAPER_DATA is set",
-            dir.display()
-        );
-    } else {
-        eprintln!(
-            "paper data not found at {}: skipping this test",
-            dir.display()
-        );
-        None
-    }
-}
+use realitygap_core::testing::paper_data;
 
 /// The last row of a run CSV, by column name.
 fn last_row(csv: &Path) -> std::collections::HashMap<String, f64> {

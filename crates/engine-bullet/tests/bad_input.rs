@@ -331,18 +331,24 @@ fn is_harness_line(line: &str) -> bool {
 
 const CHILD_ENV: &str = "REALITYGAP_BULLET_STDOUT_CHILD";
 
-/// Runs `stdout_child` in a child process (this test binary) and checks
-/// that its standard output holds nothing but the test harness's lines,
-/// although Bullet complained about the official URDF's massless root
-/// link, an unreadable mesh and a malformed URDF (its warnings and errors
-/// must have been routed away from standard output).
+/// Runs itself again in a child process (this test binary, this test
+/// only, with `REALITYGAP_BULLET_STDOUT_CHILD` set), where it makes Bullet
+/// complain about the official URDF's massless root link, an unreadable
+/// mesh and a malformed URDF; then checks that the child's standard output
+/// holds nothing but the test harness's lines (Bullet's warnings and errors
+/// must have been routed away from standard output). A single test, so
+/// that no part of it can pass without checking anything.
 #[test]
 fn bullet_writes_nothing_to_stdout() {
+    if std::env::var_os(CHILD_ENV).is_some() {
+        make_bullet_complain();
+        return;
+    }
     let exe = std::env::current_exe().unwrap();
     let out = std::process::Command::new(exe)
         .args([
             "--exact",
-            "stdout_child",
+            "bullet_writes_nothing_to_stdout",
             "--nocapture",
             "--test-threads=1",
             "-q",
@@ -364,12 +370,9 @@ fn bullet_writes_nothing_to_stdout() {
     );
 }
 
-/// The child of `bullet_writes_nothing_to_stdout` (does nothing otherwise).
-#[test]
-fn stdout_child() {
-    if std::env::var_os(CHILD_ENV).is_none() {
-        return;
-    }
+/// The child's work in `bullet_writes_nothing_to_stdout`: loads that make
+/// Bullet print warnings and errors.
+fn make_bullet_complain() {
     let dir = temp_dir("stdout");
     // Errors (the assertions on them are in the tests above; here they only
     // have to make Bullet complain).
