@@ -3,6 +3,8 @@
 //! look at the same recordings). Not for production code: these panic on
 //! error, as tests want.
 
+pub mod bench;
+
 use crate::controller::RunOutcome;
 use crate::robot::{PackageResolver, RobotModel};
 use crate::scene::Scene;
