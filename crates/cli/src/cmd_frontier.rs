@@ -1028,6 +1028,8 @@ pub fn run(args: Args) -> Result<()> {
     write_outputs(&args, engine, &reference, &points, data.as_deref(), notes)
 }
 
+/// Writes `frontier.json`, the reference runs, the figures and the
+/// recommended parameters file into `--out`, and prints the outcome.
 fn write_outputs(
     args: &Args,
     engine: &dyn Engine,
@@ -1036,10 +1038,43 @@ fn write_outputs(
     data: Option<&Path>,
     notes: Vec<String>,
 ) -> Result<()> {
-    let tolerance_m = args.tolerance_mm * 1e-3;
     let recommended = recommend(points);
+    let json = frontier_json(args, engine, reference, points, data, notes, recommended);
+    let out = &args.out;
+    write_file(
+        out,
+        "frontier.json",
+        serde_json::to_string_pretty(&json)? + "\n",
+    )?;
+    write_reference(out, engine, reference)?;
+    write_figures(args, engine, points, data.is_some(), recommended)?;
+    report_recommended(args, engine, reference, points, recommended)?;
+    println!("frontier: {}", out.join("frontier.json").display());
+    Ok(())
+}
+
+/// Writes `text` to `dir/name`.
+fn write_file(dir: &Path, name: &str, text: String) -> Result<()> {
+    std::fs::write(dir.join(name), text)
+        .with_context(|| format!("cannot write {}", dir.join(name).display()))
+}
+
+/// CPU time of `over` divided by that of `p`.
+fn speedup(over: &Point, p: &Point) -> f64 {
+    over.cpu_s / p.cpu_s
+}
+
+/// The content of `frontier.json`.
+fn frontier_json(
+    args: &Args,
+    engine: &dyn Engine,
+    reference: &Reference,
+    points: &[Point],
+    data: Option<&Path>,
+    notes: Vec<String>,
+    recommended: Option<usize>,
+) -> serde_json::Value {
     let scene_setting = points.iter().position(|p| p.scene_setting);
-    let speedup = |over: &Point, p: &Point| over.cpu_s / p.cpu_s;
     let rec_json = recommended.map(|i| {
         let p = &points[i];
         serde_json::json!({
@@ -1058,11 +1093,11 @@ fn write_outputs(
         })
     });
     let r = &reference.point;
-    let json = serde_json::json!({
+    serde_json::json!({
         "engine": engine.name(),
         "engine_version": engine.version(),
         "scenes": r.scenes.iter().map(|s| s.scene.clone()).collect::<Vec<_>>(),
-        "tolerance_m": tolerance_m,
+        "tolerance_m": args.tolerance_mm * 1e-3,
         "repeats": args.repeats,
         "clock": clock_name(),
         "data": data.map(|d| d.display().to_string()),
@@ -1083,14 +1118,17 @@ fn write_outputs(
         "points": points,
         "recommended": rec_json,
         "notes": notes,
-    });
-    let out = &args.out;
-    let write = |name: &str, text: String| {
-        std::fs::write(out.join(name), text)
-            .with_context(|| format!("cannot write {}", out.join(name).display()))
-    };
-    write("frontier.json", serde_json::to_string_pretty(&json)? + "\n")?;
-    write_reference(out, engine, reference)?;
+    })
+}
+
+/// The deviation figure, and the gap figure when there is real data.
+fn write_figures(
+    args: &Args,
+    engine: &dyn Engine,
+    points: &[Point],
+    with_gap: bool,
+    recommended: Option<usize>,
+) -> Result<()> {
     let title = |what: &str| format!("{}: {what}", engine.name());
     figure(
         "frontier_deviation",
@@ -1098,11 +1136,11 @@ fn write_outputs(
         "max deviation (m)",
         points,
         |p| p.max_deviation_m,
-        Some(tolerance_m),
+        Some(args.tolerance_mm * 1e-3),
         recommended,
     )
-    .write(out)?;
-    if data.is_some() {
+    .write(&args.out)?;
+    if with_gap {
         figure(
             "frontier_gap",
             title("gap to the real arm"),
@@ -1112,34 +1150,46 @@ fn write_outputs(
             None,
             recommended,
         )
-        .write(out)?;
+        .write(&args.out)?;
     }
-    match recommended {
-        Some(i) => {
-            let p = &points[i];
-            write(
-                "recommended.toml",
-                params_file(engine.name(), p, args.tolerance_mm),
-            )?;
-            println!(
-                "recommended: {} ({}), max deviation {:.3} mm, {:.1}x faster than the reference{}",
-                p.label,
-                p.set.join(" "),
-                p.max_deviation_m.unwrap_or(f64::NAN) * 1e3,
-                speedup(r, p),
-                scene_setting
-                    .map(|s| format!(
-                        ", {:.1}x faster than the scene's own setting",
-                        speedup(&points[s], p)
-                    ))
-                    .unwrap_or_default()
-            );
-        }
-        None => println!(
+    Ok(())
+}
+
+/// Writes `recommended.toml` and prints the recommendation, or says that
+/// no setting is within the tolerance.
+fn report_recommended(
+    args: &Args,
+    engine: &dyn Engine,
+    reference: &Reference,
+    points: &[Point],
+    recommended: Option<usize>,
+) -> Result<()> {
+    let Some(i) = recommended else {
+        println!(
             "no setting stays within {} mm of the reference; nothing recommended",
             args.tolerance_mm
-        ),
-    }
-    println!("frontier: {}", out.join("frontier.json").display());
+        );
+        return Ok(());
+    };
+    let p = &points[i];
+    write_file(
+        &args.out,
+        "recommended.toml",
+        params_file(engine.name(), p, args.tolerance_mm),
+    )?;
+    let scene_setting = points.iter().position(|p| p.scene_setting);
+    println!(
+        "recommended: {} ({}), max deviation {:.3} mm, {:.1}x faster than the reference{}",
+        p.label,
+        p.set.join(" "),
+        p.max_deviation_m.unwrap_or(f64::NAN) * 1e3,
+        speedup(&reference.point, p),
+        scene_setting
+            .map(|s| format!(
+                ", {:.1}x faster than the scene's own setting",
+                speedup(&points[s], p)
+            ))
+            .unwrap_or_default()
+    );
     Ok(())
 }
