@@ -313,6 +313,10 @@ pub enum RunError {
     /// The engine failed.
     #[error(transparent)]
     Engine(#[from] EngineError),
+    /// A parameters file names a joint, link or object the robot or scene
+    /// lacks.
+    #[error(transparent)]
+    Params(#[from] crate::params::ParamsError),
 }
 
 /// Checks the state read at one tick; the reason when it is unusable.
@@ -497,24 +501,25 @@ impl ControllerLoop {
         Ok(())
     }
 
-    /// The targets of the schedule entry in force at time `t_s`, degrees.
-    fn targets_deg(&self, t_s: f64) -> &[f64] {
-        let entry = self.schedule_times_s.iter().rposition(|&e| e <= t_s + 1e-9);
-        match entry {
-            Some(i) => &self.scene_targets[i],
-            None => &self.scene_targets[0],
-        }
+    /// The schedule entry in force at time `t_s` (its targets are
+    /// `scene_targets[entry]`, degrees).
+    fn entry_at(&self, t_s: f64) -> usize {
+        self.schedule_times_s
+            .iter()
+            .rposition(|&e| e <= t_s + 1e-9)
+            .unwrap_or(0)
     }
 
     /// The controller's command at one tick from the joint angles read, rad/s.
     fn command(&mut self, t_s: f64, angles: &[f64]) -> Vec<f64> {
+        let entry = self.entry_at(t_s);
         let mut command = Vec::with_capacity(self.joints);
         for (j, &angle) in angles.iter().enumerate() {
             let mut reading = angle - self.offsets_rad[j];
             if self.noise_std_rad > 0.0 {
                 reading += self.noise_std_rad * self.noise.normal();
             }
-            let error_deg = self.targets_deg(t_s)[j] - reading.to_degrees();
+            let error_deg = self.scene_targets[entry][j] - reading.to_degrees();
             command.push(
                 (self.gain_per_s * error_deg)
                     .clamp(-self.max_speed_deg_s, self.max_speed_deg_s)
@@ -732,13 +737,7 @@ pub fn prepare(
     params: &PhysicalParams,
 ) -> Result<(Scene, RobotModel), RunError> {
     params.check_support(engine.name(), &engine.param_support())?;
-    params.apply(scene, robot).map_err(|e| {
-        RunError::Engine(EngineError::Param {
-            engine: engine.name().to_string(),
-            key: "(names)".to_string(),
-            message: e.to_string(),
-        })
-    })
+    Ok(params.apply(scene, robot)?)
 }
 
 /// Loads a scene prepared by [`prepare`] with the perturbation's mass and

@@ -47,7 +47,7 @@
 
 use crate::engine::{EngineError, EngineSettings, SettingValue};
 use crate::robot::RobotModel;
-use crate::scene::Scene;
+use crate::scene::{line_col, setting_value, Scene};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::fmt;
@@ -374,14 +374,6 @@ struct FileController {
     max_speed_deg_s: Num,
 }
 
-fn line_col(text: &str, offset: usize) -> (usize, usize) {
-    let offset = offset.min(text.len());
-    let before = &text[..offset];
-    let line = before.matches('\n').count() + 1;
-    let line_start = before.rfind('\n').map_or(0, |i| i + 1);
-    (line, before[line_start..].chars().count() + 1)
-}
-
 /// The allowed range of a value.
 #[derive(Clone, Copy)]
 enum Range {
@@ -543,7 +535,7 @@ impl PhysicalParams {
         for (engine, table) in &file.engine {
             let mut settings = EngineSettings::new();
             for (key, value) in table {
-                let v = toml_setting(value.get_ref()).ok_or_else(|| {
+                let v = setting_value(value.get_ref()).ok_or_else(|| {
                     r.error_at(
                         Some(value.span().start),
                         format!("engine.{engine}.{key}: expected a number, true/false or text"),
@@ -911,16 +903,6 @@ fn quote_key(k: &str) -> String {
         k.to_string()
     } else {
         format!("{k:?}")
-    }
-}
-
-fn toml_setting(v: &toml::Value) -> Option<SettingValue> {
-    match v {
-        toml::Value::Boolean(b) => Some(SettingValue::Bool(*b)),
-        toml::Value::Integer(i) => Some(SettingValue::Integer(*i)),
-        toml::Value::Float(f) => Some(SettingValue::Float(*f)),
-        toml::Value::String(s) => Some(SettingValue::Text(s.clone())),
-        _ => None,
     }
 }
 

@@ -386,7 +386,7 @@ struct FileTrack {
 }
 
 /// Byte offset -> 1-based (line, column), column in characters.
-fn line_col(text: &str, offset: usize) -> (usize, usize) {
+pub(crate) fn line_col(text: &str, offset: usize) -> (usize, usize) {
     let offset = offset.min(text.len());
     let before = &text[..offset];
     let line = before.matches('\n').count() + 1;
@@ -511,7 +511,8 @@ impl Builder<'_> {
     }
 }
 
-fn setting_value(v: &toml::Value) -> Option<SettingValue> {
+/// A TOML value as an engine setting; `None` for arrays and tables.
+pub(crate) fn setting_value(v: &toml::Value) -> Option<SettingValue> {
     match v {
         toml::Value::Boolean(b) => Some(SettingValue::Bool(*b)),
         toml::Value::Integer(i) => Some(SettingValue::Integer(*i)),
