@@ -362,6 +362,9 @@ pub struct ControllerLoop {
     offsets_rad: Vec<f64>,
     initial_offsets_rad: Vec<f64>,
     delay_s: f64,
+    /// Largest change of a servo target per control period, rad/s
+    /// (infinite: unlimited).
+    max_step_rad_s: f64,
     /// Commands waiting to reach the servos: (due time s, rad/s).
     pending: VecDeque<(f64, Vec<f64>)>,
     /// The servo targets in force, rad/s.
@@ -384,6 +387,8 @@ pub struct ControlParams {
     pub offsets_rad: Vec<f64>,
     /// Actuation latency, s, added to the perturbation's whole periods.
     pub delay_s: f64,
+    /// Acceleration limit of the velocity loop, rad/s^2 (`None`: none).
+    pub max_accel_rad_s2: Option<f64>,
 }
 
 impl ControlParams {
@@ -392,6 +397,7 @@ impl ControlParams {
         ControlParams {
             offsets_rad: params.offsets_rad(scene),
             delay_s: params.delay_s(),
+            max_accel_rad_s2: Some(params.max_accel_rad_s2()).filter(|a| a.is_finite()),
         }
     }
 }
@@ -432,6 +438,9 @@ impl ControllerLoop {
             },
             initial_offsets_rad: initial,
             delay_s: periods as f64 * period_s + control.delay_s,
+            max_step_rad_s: control
+                .max_accel_rad_s2
+                .map_or(f64::INFINITY, |a| a * period_s),
             pending: VecDeque::new(),
             in_force: vec![0.0; joints],
             tick: 0,
@@ -538,7 +547,17 @@ impl ControllerLoop {
                 break;
             }
             if let Some((_, c)) = self.pending.pop_front() {
-                self.in_force = c;
+                let step = self.max_step_rad_s;
+                for (now, new) in self.in_force.iter_mut().zip(c) {
+                    // The velocity loop's acceleration limit: the target
+                    // moves toward the command by at most one period's
+                    // worth of acceleration per release.
+                    *now = if step.is_finite() {
+                        *now + (new - *now).clamp(-step, step)
+                    } else {
+                        new
+                    };
+                }
                 changed = true;
             }
         }
@@ -933,6 +952,7 @@ link = "l2"
         let control = ControlParams {
             offsets_rad: Vec::new(),
             delay_s: 0.025,
+            ..Default::default()
         };
         let out =
             run_scene_with(&mut ideal(0.01), &scene, &RunOptions::default(), &control).unwrap();
@@ -963,10 +983,41 @@ link = "l2"
             &ControlParams {
                 offsets_rad: Vec::new(),
                 delay_s: 0.1,
+                ..Default::default()
             },
         )
         .unwrap();
         assert_eq!(a.trajectory.joint_angles_rad, b.trajectory.joint_angles_rad);
+    }
+
+    #[test]
+    fn an_acceleration_limit_ramps_the_servo_targets() {
+        let scene = scene();
+        let free = run_scene(&mut ideal(0.01), &scene, &RunOptions::default()).unwrap();
+        // 100 deg/s^2 at a 0.05 s period: at most 5 deg/s more per period.
+        let control = ControlParams {
+            max_accel_rad_s2: Some(100f64.to_radians()),
+            ..Default::default()
+        };
+        let out =
+            run_scene_with(&mut ideal(0.01), &scene, &RunOptions::default(), &control).unwrap();
+        let limited = out.trajectory.joint_velocity_commands_rad_s.unwrap();
+        let unlimited = free.trajectory.joint_velocity_commands_rad_s.unwrap();
+        // Unlimited, the first command is the clamp (-30 deg/s) at once.
+        assert!((unlimited[0][0].to_degrees() + 30.0).abs() < 1e-9);
+        for (k, row) in limited.iter().enumerate().take(6) {
+            let want = -(5.0 * (k + 1) as f64).min(30.0);
+            assert!(
+                (row[0].to_degrees() - want).abs() < 1e-9,
+                "tick {k}: {} deg/s, want {want}",
+                row[0].to_degrees()
+            );
+        }
+        for pair in limited.windows(2) {
+            for (a, b) in pair[0].iter().zip(&pair[1]) {
+                assert!((b - a).abs().to_degrees() <= 5.0 + 1e-9);
+            }
+        }
     }
 
     #[test]
@@ -975,6 +1026,7 @@ link = "l2"
         let control = ControlParams {
             offsets_rad: vec![0.0, 1f64.to_radians()],
             delay_s: 0.0,
+            ..Default::default()
         };
         let out =
             run_scene_with(&mut ideal(0.01), &scene, &RunOptions::default(), &control).unwrap();

@@ -26,6 +26,7 @@
 //! delay_s = 0.05              # actuation latency of the arm
 //! gain_per_s = 10.0
 //! max_speed_deg_s = 30.0
+//! max_accel_deg_s2 = 120.0    # acceleration limit of the velocity loop
 //!
 //! [engine.mujoco]             # engine settings, as in a scene's [engine.NAME]
 //! timestep_s = 0.002
@@ -130,6 +131,11 @@ pub struct ControllerParams {
     /// Command clamp, degrees/s (replaces the scene's).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub max_speed_deg_s: Option<f64>,
+    /// Acceleration limit of the arm's velocity loop, degrees/s^2: the
+    /// velocity target reaching a servo changes by at most this much per
+    /// second (unlimited when absent).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_accel_deg_s2: Option<f64>,
 }
 
 /// The typed physical parameters of a run (see the module documentation).
@@ -198,11 +204,13 @@ pub enum ParamKey {
     ControllerGain,
     /// `controller.max_speed_deg_s`
     ControllerMaxSpeed,
+    /// `controller.max_accel_deg_s2`
+    ControllerMaxAccel,
 }
 
 impl ParamKey {
     /// Every key, in the file's order.
-    pub const ALL: [ParamKey; 15] = [
+    pub const ALL: [ParamKey; 16] = [
         ParamKey::JointDamping,
         ParamKey::JointArmature,
         ParamKey::JointFrictionloss,
@@ -218,6 +226,7 @@ impl ParamKey {
         ParamKey::ControllerDelay,
         ParamKey::ControllerGain,
         ParamKey::ControllerMaxSpeed,
+        ParamKey::ControllerMaxAccel,
     ];
 
     /// The key as written in a file, with `<joint>`, `<link>`, `<object>`
@@ -239,6 +248,7 @@ impl ParamKey {
             ParamKey::ControllerDelay => "controller.delay_s",
             ParamKey::ControllerGain => "controller.gain_per_s",
             ParamKey::ControllerMaxSpeed => "controller.max_speed_deg_s",
+            ParamKey::ControllerMaxAccel => "controller.max_accel_deg_s2",
         }
     }
 
@@ -251,6 +261,7 @@ impl ParamKey {
                 | ParamKey::ControllerDelay
                 | ParamKey::ControllerGain
                 | ParamKey::ControllerMaxSpeed
+                | ParamKey::ControllerMaxAccel
         )
     }
 
@@ -265,6 +276,9 @@ impl ParamKey {
             }
             ParamKey::ControllerGain => Some("replaces the scene's controller gain"),
             ParamKey::ControllerMaxSpeed => Some("replaces the scene's command clamp"),
+            ParamKey::ControllerMaxAccel => Some(
+                "the velocity target in force moves toward each new command by at most max_accel x the control period",
+            ),
             _ => None,
         }
     }
@@ -372,6 +386,7 @@ struct FileController {
     delay_s: Num,
     gain_per_s: Num,
     max_speed_deg_s: Num,
+    max_accel_deg_s2: Num,
 }
 
 /// The allowed range of a value.
@@ -530,6 +545,11 @@ impl PhysicalParams {
                     &c.max_speed_deg_s,
                     Range::Positive,
                 )?,
+                max_accel_deg_s2: r.value(
+                    "controller.max_accel_deg_s2",
+                    &c.max_accel_deg_s2,
+                    Range::Positive,
+                )?,
             };
         }
         for (engine, table) in &file.engine {
@@ -613,6 +633,7 @@ impl PhysicalParams {
                     ("delay_s", self.controller.delay_s),
                     ("gain_per_s", self.controller.gain_per_s),
                     ("max_speed_deg_s", self.controller.max_speed_deg_s),
+                    ("max_accel_deg_s2", self.controller.max_accel_deg_s2),
                 ],
             ),
         ];
@@ -686,6 +707,10 @@ impl PhysicalParams {
             (
                 ParamKey::ControllerMaxSpeed,
                 self.controller.max_speed_deg_s,
+            ),
+            (
+                ParamKey::ControllerMaxAccel,
+                self.controller.max_accel_deg_s2,
             ),
         ] {
             if v.is_some() {
@@ -854,6 +879,14 @@ impl PhysicalParams {
                     .to_radians()
             })
             .collect()
+    }
+
+    /// The acceleration limit of the velocity loop, rad/s^2 (infinite when
+    /// none is set).
+    pub fn max_accel_rad_s2(&self) -> f64 {
+        self.controller
+            .max_accel_deg_s2
+            .map_or(f64::INFINITY, f64::to_radians)
     }
 
     /// The actuation latency, s (0 when none is set).
