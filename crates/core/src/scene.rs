@@ -512,7 +512,7 @@ impl Builder<'_> {
 }
 
 /// A TOML value as an engine setting; `None` for arrays and tables.
-pub(crate) fn setting_value(v: &toml::Value) -> Option<SettingValue> {
+pub fn setting_value(v: &toml::Value) -> Option<SettingValue> {
     match v {
         toml::Value::Boolean(b) => Some(SettingValue::Bool(*b)),
         toml::Value::Integer(i) => Some(SettingValue::Integer(*i)),

@@ -23,7 +23,7 @@ pub const WIDTH_PX: u32 = 720;
 pub const HEIGHT_PX: u32 = 450;
 /// Width of the legend column, pixels.
 const LEGEND_W: u32 = 170;
-const FAMILY: &str = "sans-serif";
+pub(crate) const FAMILY: &str = "sans-serif";
 /// The font embedded for PNG text (see `build.rs`).
 static FONT: &[u8] = include_bytes!(env!("REALITYGAP_FONT_PATH"));
 /// Okabe-Ito colours, as in the study figures.
@@ -37,7 +37,7 @@ const PALETTE: [(u8, u8, u8); 7] = [
     (0xC8, 0xB4, 0x00),
 ];
 
-fn ensure_font() -> Result<(), String> {
+pub(crate) fn ensure_font() -> Result<(), String> {
     static REGISTERED: OnceLock<Result<(), String>> = OnceLock::new();
     REGISTERED
         .get_or_init(|| {
@@ -49,6 +49,20 @@ fn ensure_font() -> Result<(), String> {
             })
         })
         .clone()
+}
+
+/// RGB pixels as PNG file bytes.
+pub(crate) fn encode_png(rgb: &[u8], width: u32, height: u32) -> Result<Vec<u8>, String> {
+    let mut out = Vec::new();
+    {
+        let mut enc = png::Encoder::new(&mut out, width, height);
+        enc.set_color(png::ColorType::Rgb);
+        enc.set_depth(png::BitDepth::Eight);
+        let mut w = enc.write_header().map_err(|e| e.to_string())?;
+        w.write_image_data(rgb).map_err(|e| e.to_string())?;
+        w.finish().map_err(|e| e.to_string())?;
+    }
+    Ok(out)
 }
 
 /// One swept setting as plotted.
@@ -181,17 +195,7 @@ impl FrontierFigure {
             self.draw(&root).map_err(|m| self.error(m))?;
             root.present().map_err(|e| self.error(e.to_string()))?;
         }
-        let mut out = Vec::new();
-        {
-            let mut enc = png::Encoder::new(&mut out, WIDTH_PX, HEIGHT_PX);
-            enc.set_color(png::ColorType::Rgb);
-            enc.set_depth(png::BitDepth::Eight);
-            let mut w = enc.write_header().map_err(|e| self.error(e.to_string()))?;
-            w.write_image_data(&rgb)
-                .map_err(|e| self.error(e.to_string()))?;
-            w.finish().map_err(|e| self.error(e.to_string()))?;
-        }
-        Ok(out)
+        encode_png(&rgb, WIDTH_PX, HEIGHT_PX).map_err(|m| self.error(m))
     }
 
     /// Writes `DIR/<stem>.svg` and `DIR/<stem>.png`; the two paths.

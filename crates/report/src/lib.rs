@@ -24,6 +24,7 @@
 #![forbid(unsafe_code)]
 
 pub mod figures;
+pub mod convergence;
 pub mod frontier;
 pub mod html;
 pub mod provenance;

@@ -3,13 +3,14 @@
 //! native code therefore fails only that run, with the engine's last words
 //! as its message.
 
-use crate::prepare::{parse_perturbation, prepare, RunSource};
+use crate::prepare::{parse_perturbation, prepare, prepare_with, RunSource};
 use crate::protocol::{ChildResult, Job};
 use crate::Registry;
 use anyhow::{Context, Result};
 use realitygap_core::controller::{load_prepared, run_scene_with, ControlParams, RunOptions};
 use std::io::{Read, Write};
-use std::path::PathBuf;
+use realitygap_core::params::PhysicalParams;
+use std::path::{Path, PathBuf};
 use std::process::{Command, ExitStatus, Stdio};
 use std::time::Duration;
 use wait_timeout::ChildExt;
@@ -73,17 +74,22 @@ pub fn run_one(registry: Registry, setup: fn()) -> Result<()> {
 /// Runs `job` in this process; `None` for a check-only job whose model
 /// loaded.
 pub fn simulate(registry: Registry, job: &Job) -> Result<Option<ChildResult>> {
-    let p = prepare(
-        registry,
-        &RunSource {
-            scene_file: &job.scene_file,
-            engine: &job.engine,
-            robot: job.robot.as_deref(),
-            packages: &job.packages,
-            set: &job.set,
-            params_file: job.params.as_deref(),
-        },
-    )?;
+    let src = RunSource {
+        scene_file: &job.scene_file,
+        engine: &job.engine,
+        robot: job.robot.as_deref(),
+        packages: &job.packages,
+        set: &job.set,
+        params_file: job.params.as_deref(),
+    };
+    let p = match &job.params_text {
+        Some(text) => prepare_with(
+            registry,
+            &src,
+            PhysicalParams::from_toml_str(text, Path::new("<job parameters>"))?,
+        )?,
+        None => prepare(registry, &src)?,
+    };
     let perturbation = parse_perturbation(&job.perturb)?;
     let sample =
         (!perturbation.is_none()).then(|| perturbation.sample(job.seed, p.scene.actuators.len()));
@@ -265,6 +271,7 @@ mod tests {
             perturb: vec![],
             seed: 0,
             params: None,
+            params_text: None,
             check_only,
         }
     }

@@ -299,6 +299,7 @@ impl Plan {
             perturb: spec.perturb.clone(),
             seed: repeat_seed(spec.seed, repeat as u64),
             params: self.params_file.clone(),
+            params_text: None,
             check_only,
         }
     }

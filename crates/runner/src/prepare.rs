@@ -201,10 +201,19 @@ fn scene_and_robot(src: &RunSource<'_>) -> Result<(Scene, RobotModel)> {
 /// Checks a run and makes it ready to load: every error a run can find
 /// before simulating.
 pub fn prepare(registry: Registry, src: &RunSource<'_>) -> Result<Prepared> {
+    prepare_with(registry, src, read_params(src.params_file)?)
+}
+
+/// [`prepare`] with the physical parameters given instead of read from
+/// `src.params_file`.
+pub fn prepare_with(
+    registry: Registry,
+    src: &RunSource<'_>,
+    params: PhysicalParams,
+) -> Result<Prepared> {
     let engine = find_engine(registry, src.engine)?;
     let (scene, robot) = scene_and_robot(src)?;
     let scene_file = src.scene_file;
-    let params = read_params(src.params_file)?;
     let (scene, robot) =
         realitygap_core::controller::prepare(engine.as_ref(), &scene, &robot, &params)
             .map_err(|e| anyhow!("{e}"))

@@ -30,6 +30,10 @@ pub struct Job {
     /// The parameters file, absolute.
     #[serde(default)]
     pub params: Option<PathBuf>,
+    /// Parameters as the text of a parameters file, used instead of
+    /// `params` (a tune's candidates travel this way, without a file).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub params_text: Option<String>,
     /// Only load the model and report success.
     pub check_only: bool,
 }

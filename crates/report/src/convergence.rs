@@ -1,0 +1,214 @@
+//! The convergence figure of a tune: every evaluation's objective against
+//! its number, with the best so far drawn as a line; failed evaluations
+//! are crosses at the top. SVG and PNG.
+
+use crate::frontier::{ensure_font, FAMILY};
+use plotters::prelude::*;
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+
+/// Width of the figure, pixels.
+pub const WIDTH_PX: u32 = 720;
+/// Height of the figure, pixels.
+pub const HEIGHT_PX: u32 = 420;
+
+/// One evaluation.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct ConvergencePoint {
+    /// Its number (0-based).
+    pub evaluation: usize,
+    /// Its objective, metres.
+    pub objective_m: f64,
+    /// It failed (diverged or crashed).
+    pub failed: bool,
+}
+
+/// A convergence figure.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ConvergenceFigure {
+    /// File stem.
+    pub stem: String,
+    /// Title.
+    pub title: String,
+    /// The evaluations, in order.
+    pub points: Vec<ConvergencePoint>,
+}
+
+/// A figure that cannot be drawn or written.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("figure {stem}: {message}")]
+pub struct ConvergenceError {
+    /// The figure's stem.
+    pub stem: String,
+    /// What went wrong.
+    pub message: String,
+}
+
+impl ConvergenceFigure {
+    fn error(&self, message: impl Into<String>) -> ConvergenceError {
+        ConvergenceError {
+            stem: self.stem.clone(),
+            message: message.into(),
+        }
+    }
+
+    /// The best objective so far after each evaluation (failed ones
+    /// skipped); `None` before the first finished one.
+    pub fn best_so_far(&self) -> Vec<Option<f64>> {
+        let mut best: Option<f64> = None;
+        self.points
+            .iter()
+            .map(|p| {
+                if !p.failed && p.objective_m.is_finite() {
+                    best = Some(best.map_or(p.objective_m, |b: f64| b.min(p.objective_m)));
+                }
+                best
+            })
+            .collect()
+    }
+
+    fn draw<DB: DrawingBackend>(
+        &self,
+        root: &DrawingArea<DB, plotters::coord::Shift>,
+    ) -> Result<(), String> {
+        let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+        root.fill(&WHITE).map_err(e)?;
+        let ok: Vec<&ConvergencePoint> = self
+            .points
+            .iter()
+            .filter(|p| !p.failed && p.objective_m.is_finite() && p.objective_m > 0.0)
+            .collect();
+        let (Some(lo), Some(hi)) = (
+            ok.iter().map(|p| p.objective_m).reduce(f64::min),
+            ok.iter().map(|p| p.objective_m).reduce(f64::max),
+        ) else {
+            return Err("no finished evaluation to draw".into());
+        };
+        let n = self.points.len().max(2);
+        let (y0, y1) = (lo / 1.2, hi * 1.2);
+        let mut chart = ChartBuilder::on(root)
+            .caption(self.title.as_str(), (FAMILY, 16))
+            .margin(10)
+            .x_label_area_size(36)
+            .y_label_area_size(64)
+            .build_cartesian_2d(0f64..n as f64, (y0..y1).log_scale())
+            .map_err(e)?;
+        chart
+            .configure_mesh()
+            .x_desc("evaluation")
+            .y_desc("objective (m, log scale)")
+            .label_style((FAMILY, 12))
+            .draw()
+            .map_err(e)?;
+        let grey = RGBColor(0x99, 0x99, 0x99);
+        chart
+            .draw_series(
+                ok.iter()
+                    .map(|p| Circle::new((p.evaluation as f64, p.objective_m), 2, grey.filled())),
+            )
+            .map_err(e)?
+            .label("an evaluation")
+            .legend(move |(x, y)| Circle::new((x + 10, y), 3, grey.filled()));
+        let red = RGBColor(0xD5, 0x5E, 0x00);
+        let failed: Vec<f64> = self
+            .points
+            .iter()
+            .filter(|p| p.failed || !p.objective_m.is_finite())
+            .map(|p| p.evaluation as f64)
+            .collect();
+        if !failed.is_empty() {
+            chart
+                .draw_series(failed.iter().map(|&x| Cross::new((x, y1 / 1.05), 4, red.stroke_width(2))))
+                .map_err(e)?
+                .label("failed (diverged or crashed)")
+                .legend(move |(x, y)| Cross::new((x + 10, y), 4, red.stroke_width(2)));
+        }
+        let blue = RGBColor(0x00, 0x72, 0xB2);
+        let line: Vec<(f64, f64)> = self
+            .best_so_far()
+            .iter()
+            .zip(&self.points)
+            .filter_map(|(b, p)| b.map(|b| (p.evaluation as f64, b)))
+            .collect();
+        chart
+            .draw_series(LineSeries::new(line, blue.stroke_width(2)))
+            .map_err(e)?
+            .label("best so far")
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], blue.stroke_width(2)));
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .label_font((FAMILY, 12))
+            .position(SeriesLabelPosition::UpperRight)
+            .draw()
+            .map_err(e)?;
+        Ok(())
+    }
+
+    /// The figure as an SVG document.
+    pub fn to_svg(&self) -> Result<String, ConvergenceError> {
+        ensure_font().map_err(|m| self.error(m))?;
+        let mut svg = String::new();
+        {
+            let root = SVGBackend::with_string(&mut svg, (WIDTH_PX, HEIGHT_PX)).into_drawing_area();
+            self.draw(&root).map_err(|m| self.error(m))?;
+            root.present().map_err(|e| self.error(e.to_string()))?;
+        }
+        Ok(svg)
+    }
+
+    /// The figure as PNG bytes (RGB).
+    pub fn to_png(&self) -> Result<Vec<u8>, ConvergenceError> {
+        ensure_font().map_err(|m| self.error(m))?;
+        let mut rgb = vec![255u8; (WIDTH_PX * HEIGHT_PX * 3) as usize];
+        {
+            let root =
+                BitMapBackend::with_buffer(&mut rgb, (WIDTH_PX, HEIGHT_PX)).into_drawing_area();
+            self.draw(&root).map_err(|m| self.error(m))?;
+            root.present().map_err(|e| self.error(e.to_string()))?;
+        }
+        crate::frontier::encode_png(&rgb, WIDTH_PX, HEIGHT_PX).map_err(|m| self.error(m))
+    }
+
+    /// Writes `DIR/<stem>.svg` and `DIR/<stem>.png`.
+    pub fn write(&self, dir: &Path) -> Result<Vec<PathBuf>, ConvergenceError> {
+        let svg = dir.join(format!("{}.svg", self.stem));
+        let png = dir.join(format!("{}.png", self.stem));
+        let io = |p: &Path, e: std::io::Error| self.error(format!("writing {}: {e}", p.display()));
+        std::fs::write(&svg, self.to_svg()?).map_err(|e| io(&svg, e))?;
+        std::fs::write(&png, self.to_png()?).map_err(|e| io(&png, e))?;
+        Ok(vec![svg, png])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn best_so_far_skips_failures_and_the_figure_draws() {
+        let f = ConvergenceFigure {
+            stem: "c".into(),
+            title: "t".into(),
+            points: [(5.0, false), (1e6, true), (3.0, false), (4.0, false)]
+                .iter()
+                .enumerate()
+                .map(|(i, &(o, failed))| ConvergencePoint {
+                    evaluation: i,
+                    objective_m: o,
+                    failed,
+                })
+                .collect(),
+        };
+        assert_eq!(f.best_so_far(), vec![Some(5.0), Some(5.0), Some(3.0), Some(3.0)]);
+        let svg = f.to_svg().unwrap();
+        assert!(svg.contains("best so far") && svg.contains("failed"));
+        assert!(f.to_png().unwrap().starts_with(b"\x89PNG"));
+        let empty = ConvergenceFigure {
+            points: vec![],
+            ..f
+        };
+        assert!(empty.to_svg().unwrap_err().to_string().contains("no finished evaluation"));
+    }
+}

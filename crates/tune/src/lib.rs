@@ -1,0 +1,285 @@
+//! `realitygap tune`: fits an engine's physical parameters (and by default
+//! the capture frame's registration) to the real arm's training runs, then
+//! scores the untuned and the tuned engine on the training and the
+//! held-out runs.
+//!
+//! - [`space`]: what is fitted ([`space::Space`], `assets/tuning/<engine>.toml`);
+//! - [`objective`]: what is minimised and how a candidate is simulated;
+//! - [`search`]: CMA-ES with parallel, isolated, resumable evaluations;
+//! - [`outputs`]: sensitivity, the final scores and the files written.
+
+#![forbid(unsafe_code)]
+
+pub mod objective;
+pub mod outputs;
+pub mod search;
+pub mod space;
+
+use anyhow::{bail, Context, Result};
+use objective::{offset_registration, Score, Simulator, Target};
+use realitygap_analysis::registration::Registration;
+use realitygap_core::engine::EngineSettings;
+use realitygap_core::params::PhysicalParams;
+use search::{search, History, Outcome, Progress, SearchEnd, SearchOptions};
+use serde::Serialize;
+use space::Space;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// The tuning folder of the assets: `<assets>/tuning/<engine>.toml`.
+pub fn default_space_file(assets: &Path, engine: &str) -> PathBuf {
+    assets.join("tuning").join(format!("{engine}.toml"))
+}
+
+/// Everything a tune is asked to do.
+pub struct TuneSpec {
+    /// The engine.
+    pub engine: String,
+    /// The space.
+    pub space: Space,
+    /// Fit the registration too (the space's bounds), or keep the
+    /// measurement's estimate.
+    pub fit_registration: bool,
+    /// Engine settings given on the command line, over the space's.
+    pub set: EngineSettings,
+    /// Search settings.
+    pub search: SearchOptions,
+    /// The output folder.
+    pub out: PathBuf,
+}
+
+/// What the command prints and the files hold.
+pub struct TuneResult {
+    /// The search.
+    pub end: SearchEnd,
+    /// The summary written to `summary.json`.
+    pub summary: outputs::Summary,
+    /// Files written.
+    pub files: Vec<PathBuf>,
+}
+
+/// The state a tune keeps in `OUT/tune.json`, which a rerun must match to
+/// resume.
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
+struct Resume {
+    engine: String,
+    space: serde_json::Value,
+    settings: Vec<(String, String)>,
+    fit_registration: bool,
+    seed: u64,
+    train: Option<String>,
+    holdout: Option<String>,
+}
+
+/// A tune: the candidates' parameters and registrations, and their
+/// evaluation.
+pub struct Tuner<'a> {
+    /// The real arm.
+    pub target: &'a Target,
+    /// How candidates are simulated.
+    pub simulator: &'a Simulator,
+    /// What is asked.
+    pub spec: &'a TuneSpec,
+}
+
+impl Tuner<'_> {
+    /// The physical parameters (with the engine settings) at normalised
+    /// coordinates `u`.
+    pub fn params(&self, u: &[f64]) -> Result<PhysicalParams, String> {
+        let values = self.spec.space.values(u);
+        self.spec
+            .space
+            .params(&values, &self.spec.engine, &self.spec.set)
+    }
+
+    /// The registration at normalised coordinates `u`.
+    pub fn registration(&self, u: &[f64]) -> Registration {
+        match self
+            .spec
+            .space
+            .registration_offset(u)
+            .filter(|_| self.spec.fit_registration)
+        {
+            Some((r, t)) => offset_registration(&self.target.base_registration, r, t),
+            None => self.target.base_registration,
+        }
+    }
+
+    /// Simulates and scores parameters `params` with `registration`.
+    pub fn score(&self, params: &PhysicalParams, registration: &Registration) -> Score {
+        match self.simulator.simulate(&self.target.scenes, params) {
+            Ok(trajs) => self.target.score(&trajs, registration),
+            Err(m) => Score::failed(m),
+        }
+    }
+
+    /// The search's evaluation of normalised coordinates `u`.
+    pub fn evaluate(&self, u: &[f64]) -> Outcome {
+        let score = match self.params(u) {
+            Ok(p) => self.score(&p, &self.registration(u)),
+            Err(m) => Score::failed(m),
+        };
+        Outcome {
+            objective: score.objective,
+            parts: self.parts(&score),
+            failed: score.failed,
+        }
+    }
+
+    /// Names of the per-scene history columns.
+    pub fn part_names(&self) -> Vec<String> {
+        let mut n = Vec::new();
+        for s in &self.target.scenes {
+            n.push(format!("{}_accumulated_m", s.name));
+            if s.cube {
+                n.push(format!("{}_cube_final_m", s.name));
+            }
+        }
+        n
+    }
+
+    fn parts(&self, score: &Score) -> Vec<f64> {
+        let mut p = Vec::new();
+        for s in &self.target.scenes {
+            let sc = score.scenes.iter().find(|x| x.scene == s.name);
+            p.push(sc.map_or(f64::NAN, |x| x.accumulated_m));
+            if s.cube {
+                p.push(sc.and_then(|x| x.cube_final_m).unwrap_or(f64::NAN));
+            }
+        }
+        p
+    }
+
+    /// Names of the recorded values: the parameters, then the
+    /// registration offset when fitted.
+    pub fn value_names(&self) -> Vec<String> {
+        let mut n: Vec<String> = self.spec.space.dims.iter().map(|d| d.key.clone()).collect();
+        if self.fits_registration() {
+            n.extend(
+                [
+                    "registration.rx_deg",
+                    "registration.ry_deg",
+                    "registration.rz_deg",
+                    "registration.tx_mm",
+                    "registration.ty_mm",
+                    "registration.tz_mm",
+                ]
+                .map(String::from),
+            );
+        }
+        n
+    }
+
+    /// The values recorded for normalised coordinates `u`.
+    pub fn values(&self, u: &[f64]) -> Vec<f64> {
+        let mut v = self.spec.space.values(u);
+        if self.fits_registration() {
+            if let Some((r, t)) = self.spec.space.registration_offset(u) {
+                v.extend(r);
+                v.extend(t.map(|m| m * 1000.0));
+            }
+        }
+        v
+    }
+
+    fn fits_registration(&self) -> bool {
+        self.spec.fit_registration && self.spec.space.registration.is_some()
+    }
+
+    /// The search coordinates: the parameters, and the registration's six
+    /// when fitted.
+    pub fn dims(&self) -> usize {
+        self.spec.space.dims.len() + if self.fits_registration() { 6 } else { 0 }
+    }
+}
+
+fn resume_state(spec: &TuneSpec, target: &Target) -> Resume {
+    Resume {
+        engine: spec.engine.clone(),
+        space: serde_json::to_value(&spec.space).unwrap_or_default(),
+        settings: spec
+            .set
+            .iter()
+            .map(|(k, v)| (k.clone(), v.to_string()))
+            .collect(),
+        fit_registration: spec.fit_registration,
+        seed: spec.search.seed,
+        train: target.train.runs.as_ref().map(|r| r.text.clone()),
+        holdout: target.holdout.as_ref().map(|r| r.text.clone()),
+    }
+}
+
+/// Checks `OUT/tune.json` against this tune (writing it when new): a
+/// folder made by a different tune is an error, never mixed in.
+fn check_resume(spec: &TuneSpec, target: &Target) -> Result<()> {
+    std::fs::create_dir_all(&spec.out)
+        .with_context(|| format!("creating {}", spec.out.display()))?;
+    let path = spec.out.join("tune.json");
+    let now = resume_state(spec, target);
+    if path.exists() {
+        let text = std::fs::read_to_string(&path)
+            .with_context(|| format!("reading {}", path.display()))?;
+        let before: Resume = serde_json::from_str(&text)
+            .with_context(|| format!("{}: not a tune's state file", path.display()))?;
+        if before != now {
+            bail!(
+                "{} holds a different tune (engine, space, settings, seed or runs differ): use another --out, or remove the folder to start again",
+                spec.out.display()
+            );
+        }
+        return Ok(());
+    }
+    std::fs::write(&path, serde_json::to_string_pretty(&now)? + "\n")
+        .with_context(|| format!("writing {}", path.display()))
+}
+
+/// Runs a whole tune: checks, search (resuming from `OUT/history.csv`),
+/// sensitivity, final scores and every output file.
+pub fn tune(
+    target: &Target,
+    simulator: &Simulator,
+    spec: &TuneSpec,
+    progress: &(dyn Fn(Progress) + Sync),
+) -> Result<TuneResult> {
+    let started = Instant::now();
+    let tuner = Tuner {
+        target,
+        simulator,
+        spec,
+    };
+    let start = tuner
+        .params(&spec.space.start_unit())
+        .map_err(|m| anyhow::anyhow!("{}: {m}", spec.space.source.display()))?;
+    simulator
+        .check(&target.scenes, &start)
+        .with_context(|| format!("parameter space {}", spec.space.source.display()))?;
+    check_resume(spec, target)?;
+    let mut history = History::open(
+        &spec.out.join("history.csv"),
+        &tuner.part_names(),
+        &tuner.value_names(),
+        tuner.dims(),
+    )?;
+    let space = if tuner.fits_registration() {
+        spec.space.clone()
+    } else {
+        Space {
+            registration: None,
+            ..spec.space.clone()
+        }
+    };
+    let end = search(
+        &space,
+        &mut history,
+        spec.search,
+        &|u| tuner.evaluate(u),
+        &|u| tuner.values(u),
+        progress,
+    )?;
+    let (summary, files) = outputs::finish(&tuner, &end, started)?;
+    Ok(TuneResult {
+        end,
+        summary,
+        files,
+    })
+}

@@ -1,0 +1,399 @@
+//! What a tune minimises, and how a candidate is simulated.
+//!
+//! **Objective** (metres): the accumulated wrist error of every scene of
+//! the study against the real arm's mean over the training runs (the
+//! measure `compare` reports), summed over the scenes, plus, in every
+//! scene with a cube, the distance between the simulated and the real
+//! cube's final positions times the scene's compared steps
+//! ([`CUBE_WEIGHT_PER_STEP`] = 1 per step, so a 0.05 m miss of the cube
+//! counts like a 0.05 m wrist error held through the whole scene). The
+//! real runs are aligned and registered exactly as `compare` does; the
+//! registration of a candidate is its own (the measurement's estimate,
+//! moved by the candidate's registration offset when the space fits it).
+//!
+//! **Simulation**: each scene of a candidate runs in a child process
+//! (`realitygap __run-one`), as `run` isolates its runs: a candidate that
+//! diverges, crashes or times out scores [`FAILED_OBJECTIVE`] and the
+//! search goes on.
+
+use anyhow::{anyhow, bail, Context, Result};
+use realitygap_analysis::bootstrap::BootstrapOptions;
+use realitygap_analysis::compare::{
+    CompareOptions, RegistrationChoice, RunInput, SceneReport, SourceRuns,
+};
+use realitygap_analysis::registration::Registration;
+use realitygap_analysis::selection::{RunRange, RunSelection};
+use realitygap_core::params::PhysicalParams;
+use realitygap_core::{Quat, Trajectory, Vec3};
+use realitygap_runner::{run_child, ChildEnd, Job, Launcher};
+use realitygap_study::{LoadedScene, Roots, Study};
+use serde::Serialize;
+use std::path::PathBuf;
+
+/// The weight of a cube's final position error, per compared step of its
+/// scene.
+pub const CUBE_WEIGHT_PER_STEP: f64 = 1.0;
+
+/// The objective of a candidate that diverged, crashed or could not be
+/// measured, metres: far above any finished candidate's.
+pub const FAILED_OBJECTIVE: f64 = 1.0e6;
+
+/// A child process running one scene is killed after this many seconds.
+pub const SCENE_TIMEOUT_S: f64 = 300.0;
+
+/// One scene of the study as a tune sees it.
+#[derive(Debug, Clone, Serialize)]
+pub struct TargetScene {
+    /// The scene's name.
+    pub name: String,
+    /// The scene file simulated.
+    pub scene_file: PathBuf,
+    /// Control steps compared.
+    pub steps: usize,
+    /// True when the scene has a cube (its final position counts).
+    pub cube: bool,
+}
+
+/// The real arm a tune fits: the study's scenes with their real runs.
+pub struct Target {
+    /// The scenes, in study order.
+    pub scenes: Vec<TargetScene>,
+    loaded: Vec<LoadedScene>,
+    /// The training runs (fit and scored on).
+    pub train: RunSelection,
+    /// The held-out runs (never fitted on), if any.
+    pub holdout: Option<RunRange>,
+    /// The measurement's own registration, estimated from the training
+    /// runs against the kinematic reference (no simulator is read).
+    pub base_registration: Registration,
+    /// The control period, s.
+    pub period_s: f64,
+}
+
+/// One scene's share of an objective.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SceneScore {
+    /// Scene name.
+    pub scene: String,
+    /// Accumulated wrist error, metres.
+    pub accumulated_m: f64,
+    /// Distance between the simulated and the real cube's final
+    /// positions, metres (scenes with a cube).
+    pub cube_final_m: Option<f64>,
+}
+
+/// A candidate's objective.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Score {
+    /// The objective, metres ([`FAILED_OBJECTIVE`] when failed).
+    pub objective: f64,
+    /// Per scene (empty when failed).
+    pub scenes: Vec<SceneScore>,
+    /// Why the candidate failed, if it did.
+    pub failed: Option<String>,
+}
+
+impl Score {
+    /// The score of a failed candidate.
+    pub fn failed(message: String) -> Score {
+        Score {
+            objective: FAILED_OBJECTIVE,
+            scenes: Vec::new(),
+            failed: Some(message),
+        }
+    }
+}
+
+/// `base` moved by a rotation vector (degrees) and a translation (metres)
+/// applied after it.
+pub fn offset_registration(base: &Registration, rot_deg: [f64; 3], trans_m: [f64; 3]) -> Registration {
+    let v = Vec3::from_array(rot_deg.map(f64::to_radians));
+    let angle = v.norm();
+    let d = if angle > 0.0 {
+        Quat::from_axis_angle(v.scale(1.0 / angle), angle)
+    } else {
+        Quat::IDENTITY
+    };
+    Registration {
+        rotation: (d * base.rotation).normalized().unwrap_or(Quat::IDENTITY),
+        translation_m: d.rotate(base.translation_m) + Vec3::from_array(trans_m),
+    }
+}
+
+impl Target {
+    /// The study's scenes with their real runs (study sources are
+    /// dropped), the training and held-out runs, and the measurement's
+    /// registration estimated from the training runs.
+    pub fn new(
+        study: &Study,
+        roots: &Roots,
+        runs: Option<RunRange>,
+        holdout: Option<RunRange>,
+    ) -> Result<Target> {
+        let mut study = study.clone();
+        study.sources.clear();
+        let mut scenes = Vec::new();
+        for s in &mut study.scenes {
+            s.sources.clear();
+            let Some(file) = &s.scene else {
+                bail!(
+                    "study scene '{}' has no `scene` file: a tune needs the scene to simulate",
+                    s.name
+                );
+            };
+            let scene_file = study.folder.join(file);
+            if !scene_file.is_file() {
+                bail!(
+                    "study scene '{}': scene file {} not found",
+                    s.name,
+                    scene_file.display()
+                );
+            }
+            scenes.push(TargetScene {
+                name: s.name.clone(),
+                scene_file,
+                steps: s.steps,
+                cube: s.cube.is_some(),
+            });
+        }
+        let loaded = study.load(roots)?;
+        let train = RunSelection {
+            runs: runs.clone(),
+            holdout: None,
+        };
+        // Every selection must pick runs in every scene, before anything
+        // runs.
+        for l in &loaded {
+            let n = l.reference.runs.len();
+            train.select(&l.spec.name, n)?;
+            if holdout.is_some() {
+                RunSelection {
+                    runs: runs.clone(),
+                    holdout: holdout.clone(),
+                }
+                .select(&l.spec.name, n)?;
+            }
+        }
+        let mut target = Target {
+            scenes,
+            loaded,
+            train,
+            holdout,
+            base_registration: Registration::IDENTITY,
+            period_s: study.control_period_s,
+        };
+        let reports = target.evaluate(
+            &vec![Vec::new(); target.scenes.len()],
+            RegistrationChoice::Estimate,
+            &target.train.clone(),
+            None,
+        )?;
+        target.base_registration = reports
+            .iter()
+            .find_map(|r| r.registration.as_ref().map(|x| x.registration()))
+            .unwrap_or(Registration::IDENTITY);
+        Ok(target)
+    }
+
+    /// The held-out selection (`--runs` fitted, `--holdout` scored).
+    pub fn holdout_selection(&self) -> Option<RunSelection> {
+        self.holdout.as_ref().map(|h| RunSelection {
+            runs: self.train.runs.clone(),
+            holdout: Some(h.clone()),
+        })
+    }
+
+    /// Runs the analysis on `sources` (per scene) with `registration`,
+    /// `selection`, and `bootstrap` resamples (`None`: no intervals).
+    pub fn evaluate(
+        &self,
+        sources: &[Vec<SourceRuns>],
+        registration: RegistrationChoice,
+        selection: &RunSelection,
+        bootstrap: Option<usize>,
+    ) -> Result<Vec<SceneReport>> {
+        let opts = CompareOptions {
+            registration,
+            runs: selection.clone(),
+            bootstrap: Some(BootstrapOptions {
+                resamples: bootstrap.unwrap_or(0),
+                ..BootstrapOptions::default()
+            }),
+            ..CompareOptions::default()
+        };
+        let inputs: Vec<_> = self
+            .loaded
+            .iter()
+            .zip(sources)
+            .map(|(l, s)| realitygap_analysis::SceneInput {
+                spec: &l.spec,
+                reference: &l.reference,
+                sources: s,
+            })
+            .collect();
+        Ok(realitygap_analysis::evaluate_study(&inputs, &opts)?)
+    }
+
+    /// One source per scene named `name` from one trajectory per scene.
+    pub fn sources(&self, name: &str, trajectories: &[Trajectory]) -> Vec<Vec<SourceRuns>> {
+        trajectories
+            .iter()
+            .map(|t| {
+                vec![SourceRuns {
+                    name: name.to_string(),
+                    kind: "simulated".into(),
+                    rate_hz: 1.0 / self.period_s,
+                    alignment: None,
+                    runs: vec![RunInput {
+                        id: "run000".into(),
+                        trajectory: t.clone(),
+                        failed: None,
+                    }],
+                }]
+            })
+            .collect()
+    }
+
+    /// The objective of one simulated trajectory per scene, registered by
+    /// `registration`, on the training runs.
+    pub fn score(&self, trajectories: &[Trajectory], registration: &Registration) -> Score {
+        let sources = self.sources("candidate", trajectories);
+        let choice = RegistrationChoice::Given {
+            registration: *registration,
+            origin: "tune candidate".into(),
+        };
+        match self.evaluate(&sources, choice, &self.train, None) {
+            Ok(reports) => score_of(&reports, &self.scenes),
+            Err(e) => Score::failed(format!("{e:#}")),
+        }
+    }
+}
+
+/// The objective from the reports of one source per scene.
+pub fn score_of(reports: &[SceneReport], scenes: &[TargetScene]) -> Score {
+    let mut out = Vec::new();
+    let mut total = 0.0;
+    for (r, s) in reports.iter().zip(scenes) {
+        let Some(src) = r.sources.first() else {
+            return Score::failed(format!("scene {}: nothing was measured", s.name));
+        };
+        let Some(acc) = src.accumulated_error_m.filter(|a| a.is_finite()) else {
+            let why = src
+                .runs_flagged
+                .iter()
+                .flat_map(|f| f.flags.iter().map(|x| format!("{x:?}")))
+                .collect::<Vec<_>>()
+                .join("; ");
+            return Score::failed(format!(
+                "scene {}: no accumulated error ({})",
+                s.name,
+                if why.is_empty() { "no run compared" } else { &why }
+            ));
+        };
+        total += acc;
+        let cube_final_m = if s.cube {
+            match (&src.cube, &r.reference.cube) {
+                (Some(c), Some(rc)) => {
+                    let d = Vec3::from_array(c.final_position_m)
+                        .distance(Vec3::from_array(rc.final_position_m));
+                    total += CUBE_WEIGHT_PER_STEP * r.steps as f64 * d;
+                    Some(d)
+                }
+                _ => {
+                    return Score::failed(format!("scene {}: the cube was not measured", s.name))
+                }
+            }
+        } else {
+            None
+        };
+        out.push(SceneScore {
+            scene: s.name.clone(),
+            accumulated_m: acc,
+            cube_final_m,
+        });
+    }
+    Score {
+        objective: total,
+        scenes: out,
+        failed: None,
+    }
+}
+
+/// Runs candidates' scenes in child processes.
+#[derive(Debug, Clone)]
+pub struct Simulator {
+    /// How to start a child.
+    pub launcher: Launcher,
+    /// The engine.
+    pub engine: String,
+    /// The `--robot` value, if any.
+    pub robot: Option<String>,
+    /// `NAME=DIR` package locations.
+    pub packages: Vec<String>,
+}
+
+impl Simulator {
+    /// Simulates every scene with `params`; the trajectories, or why the
+    /// candidate failed (the first scene that diverged or failed).
+    pub fn simulate(
+        &self,
+        scenes: &[TargetScene],
+        params: &PhysicalParams,
+    ) -> std::result::Result<Vec<Trajectory>, String> {
+        let text = params.to_toml_string();
+        scenes
+            .iter()
+            .map(|s| self.simulate_scene(s, &text))
+            .collect()
+    }
+
+    fn simulate_scene(
+        &self,
+        scene: &TargetScene,
+        params_text: &str,
+    ) -> std::result::Result<Trajectory, String> {
+        let job = self.job_for(scene, params_text);
+        match run_child(&self.launcher, &job, Some(SCENE_TIMEOUT_S)) {
+            ChildEnd::Failed(m) => Err(format!("scene {}: failed: {m}", scene.name)),
+            ChildEnd::Done(r) => {
+                if let Some((t, why)) = &r.diverged {
+                    return Err(format!("scene {}: diverged at {t:.2} s: {why}", scene.name));
+                }
+                r.trajectory()
+                    .map_err(|e| format!("scene {}: {e:#}", scene.name))
+            }
+        }
+    }
+
+    /// Checks, before anything runs, that every scene loads with `params`
+    /// (names exist, the engine honours every key and setting).
+    pub fn check(&self, scenes: &[TargetScene], params: &PhysicalParams) -> Result<()> {
+        let text = params.to_toml_string();
+        for s in scenes {
+            let job = Job {
+                check_only: true,
+                ..self.job_for(s, &text)
+            };
+            if let ChildEnd::Failed(m) = run_child(&self.launcher, &job, Some(SCENE_TIMEOUT_S)) {
+                return Err(anyhow!("{m}"))
+                    .with_context(|| format!("scene {} in {}", s.name, self.engine));
+            }
+        }
+        Ok(())
+    }
+
+    fn job_for(&self, scene: &TargetScene, params_text: &str) -> Job {
+        Job {
+            scene_file: scene.scene_file.clone(),
+            engine: self.engine.clone(),
+            robot: self.robot.clone(),
+            packages: self.packages.clone(),
+            set: Vec::new(),
+            perturb: Vec::new(),
+            seed: 0,
+            params: None,
+            params_text: Some(params_text.to_string()),
+            check_only: false,
+        }
+    }
+}

@@ -1,0 +1,393 @@
+//! The search: CMA-ES over the normalised space, each generation's
+//! candidates evaluated in parallel, every evaluation appended to
+//! `history.csv` once its generation has finished.
+//!
+//! - **Bounds**: CMA-ES searches all of R^n; a coordinate is folded into
+//!   [0, 1] by reflection at the bounds ([`reflect`]), so every candidate
+//!   lies in the space and the search can still move along a bound.
+//! - **Determinism**: the candidates come from CMA-ES's own seeded
+//!   generator and an evaluation depends only on its candidate, so a seed
+//!   gives the same search whatever the number of jobs.
+//! - **Resume**: a rerun reads `history.csv`, replays the finished
+//!   generations from it without simulating (the same seed proposes the
+//!   same candidates, bit for bit), and goes on from there. A generation
+//!   cut short by a kill is evaluated again.
+
+use crate::space::Space;
+use anyhow::{bail, Context, Result};
+use cmaes::{CMAESOptions, DVector, TerminationReason};
+use std::collections::HashMap;
+use std::fs::OpenOptions;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
+
+/// The initial step size of the search, in normalised units (the space
+/// is [0, 1] per coordinate).
+pub const SIGMA0: f64 = 0.25;
+
+/// Folds a CMA-ES coordinate into [0, 1] by reflection at 0 and 1.
+pub fn reflect(x: f64) -> f64 {
+    if !x.is_finite() {
+        return 0.5;
+    }
+    let y = x.rem_euclid(2.0);
+    if y <= 1.0 {
+        y
+    } else {
+        2.0 - y
+    }
+}
+
+/// One evaluated candidate, as written in `history.csv`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Evaluation {
+    /// 0-based evaluation number.
+    pub index: usize,
+    /// 0-based generation.
+    pub generation: usize,
+    /// The objective, metres.
+    pub objective: f64,
+    /// The per-scene columns (accumulated errors, cube errors), metres;
+    /// NaN where not measured.
+    pub parts: Vec<f64>,
+    /// Why it failed, if it did.
+    pub failed: Option<String>,
+    /// The parameter values, in the space's order, then the registration
+    /// offset (3 rotations in degrees, 3 translations in mm) if fitted.
+    pub values: Vec<f64>,
+    /// The CMA-ES coordinates it was proposed at.
+    pub x: Vec<f64>,
+}
+
+/// What one evaluation returns to the search.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Outcome {
+    /// The objective.
+    pub objective: f64,
+    /// Per-scene columns (see [`Evaluation::parts`]).
+    pub parts: Vec<f64>,
+    /// Why it failed.
+    pub failed: Option<String>,
+}
+
+/// Search settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SearchOptions {
+    /// Evaluations at most (the last generation is finished).
+    pub budget: usize,
+    /// The seed of CMA-ES's generator.
+    pub seed: u64,
+    /// Parallel evaluations.
+    pub jobs: usize,
+}
+
+/// Progress of a search, reported after every evaluation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Progress {
+    /// Evaluations done (replayed ones included).
+    pub done: usize,
+    /// Evaluations replayed from `history.csv`.
+    pub replayed: usize,
+    /// The budget.
+    pub budget: usize,
+    /// The best objective so far.
+    pub best: f64,
+}
+
+/// How the search ended.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SearchEnd {
+    /// Every evaluation, in order.
+    pub history: Vec<Evaluation>,
+    /// Evaluations replayed from an earlier run.
+    pub replayed: usize,
+    /// Why it stopped: the budget, or CMA-ES's own criterion.
+    pub reason: String,
+}
+
+impl SearchEnd {
+    /// The best finished evaluation.
+    pub fn best(&self) -> Option<&Evaluation> {
+        self.history
+            .iter()
+            .filter(|e| e.failed.is_none())
+            .min_by(|a, b| a.objective.total_cmp(&b.objective))
+    }
+}
+
+/// `history.csv`: its header and rows.
+pub struct History {
+    path: PathBuf,
+    header: Vec<String>,
+    rows: Vec<Evaluation>,
+}
+
+fn csv_field(s: &str) -> String {
+    if s.contains([',', '"', '\n']) {
+        format!("\"{}\"", s.replace('"', "\"\"").replace('\n', " "))
+    } else {
+        s.to_string()
+    }
+}
+
+/// Splits one CSV line (fields may be quoted with doubled quotes).
+fn split_csv(line: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut cur = String::new();
+    let mut quoted = false;
+    let mut chars = line.chars().peekable();
+    while let Some(c) = chars.next() {
+        match (c, quoted) {
+            ('"', true) if chars.peek() == Some(&'"') => {
+                cur.push('"');
+                chars.next();
+            }
+            ('"', _) => quoted = !quoted,
+            (',', false) => out.push(std::mem::take(&mut cur)),
+            _ => cur.push(c),
+        }
+    }
+    out.push(cur);
+    out
+}
+
+impl History {
+    /// The history at `path` with columns `part_names` (per-scene parts)
+    /// and `value_names` (parameters), for `dims` CMA-ES coordinates: read
+    /// back when the file exists (an error naming the line when it does
+    /// not match), empty otherwise.
+    pub fn open(
+        path: &Path,
+        part_names: &[String],
+        value_names: &[String],
+        dims: usize,
+    ) -> Result<History> {
+        let mut header: Vec<String> = ["evaluation", "generation", "objective_m", "failed"]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
+        header.extend(part_names.iter().cloned());
+        header.extend(value_names.iter().cloned());
+        header.extend((0..dims).map(|i| format!("x{i}")));
+        let mut h = History {
+            path: path.to_path_buf(),
+            header,
+            rows: Vec::new(),
+        };
+        if path.exists() {
+            h.read(part_names.len(), value_names.len(), dims)?;
+        }
+        Ok(h)
+    }
+
+    fn read(&mut self, parts: usize, values: usize, dims: usize) -> Result<()> {
+        let text = std::fs::read_to_string(&self.path)
+            .with_context(|| format!("reading {}", self.path.display()))?;
+        let mut lines = text.lines();
+        let head = lines.next().unwrap_or_default();
+        if split_csv(head) != self.header {
+            bail!(
+                "{}:1: the columns differ from this tune's (another space or study?); use another --out or remove the file",
+                self.path.display()
+            );
+        }
+        for (i, line) in lines.enumerate() {
+            if line.trim().is_empty() {
+                continue;
+            }
+            let at = || format!("{}:{}", self.path.display(), i + 2);
+            let f = split_csv(line);
+            if f.len() != self.header.len() {
+                bail!("{}: {} fields, expected {}", at(), f.len(), self.header.len());
+            }
+            let num = |k: usize| -> Result<f64> {
+                f[k].parse::<f64>()
+                    .with_context(|| format!("{}: column {}: `{}` is not a number", at(), self.header[k], f[k]))
+            };
+            let int = |k: usize| -> Result<usize> {
+                f[k].parse::<usize>()
+                    .with_context(|| format!("{}: column {}: `{}` is not a count", at(), self.header[k], f[k]))
+            };
+            let base = 4;
+            self.rows.push(Evaluation {
+                index: int(0)?,
+                generation: int(1)?,
+                objective: num(2)?,
+                failed: (!f[3].is_empty()).then(|| f[3].clone()),
+                parts: (base..base + parts).map(num).collect::<Result<_>>()?,
+                values: (base + parts..base + parts + values)
+                    .map(num)
+                    .collect::<Result<_>>()?,
+                x: (base + parts + values..base + parts + values + dims)
+                    .map(num)
+                    .collect::<Result<_>>()?,
+            });
+        }
+        Ok(())
+    }
+
+    /// The rows read or appended.
+    pub fn rows(&self) -> &[Evaluation] {
+        &self.rows
+    }
+
+    /// Appends `rows` to the file (writing the header first if new).
+    pub fn append(&mut self, rows: Vec<Evaluation>) -> Result<()> {
+        let new = !self.path.exists();
+        let mut file = OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&self.path)
+            .with_context(|| format!("writing {}", self.path.display()))?;
+        let mut text = String::new();
+        if new {
+            text.push_str(&self.header.join(","));
+            text.push('\n');
+        }
+        let num = |v: f64| format!("{v:?}");
+        for r in &rows {
+            let mut f = vec![
+                r.index.to_string(),
+                r.generation.to_string(),
+                num(r.objective),
+                csv_field(r.failed.as_deref().unwrap_or("")),
+            ];
+            f.extend(r.parts.iter().map(|v| num(*v)));
+            f.extend(r.values.iter().map(|v| num(*v)));
+            f.extend(r.x.iter().map(|v| num(*v)));
+            text.push_str(&f.join(","));
+            text.push('\n');
+        }
+        file.write_all(text.as_bytes())
+            .and_then(|_| file.sync_data())
+            .with_context(|| format!("writing {}", self.path.display()))?;
+        self.rows.extend(rows);
+        Ok(())
+    }
+}
+
+fn key(x: &[f64]) -> Vec<u64> {
+    x.iter().map(|v| v.to_bits()).collect()
+}
+
+/// Runs CMA-ES over `space` with `evaluate` (the candidate's normalised
+/// coordinates in, its outcome out), appending to `history` and replaying
+/// what it already holds. `value_of` turns normalised coordinates into the
+/// values recorded in the history.
+pub fn search(
+    space: &Space,
+    history: &mut History,
+    options: SearchOptions,
+    evaluate: &(dyn Fn(&[f64]) -> Outcome + Sync),
+    value_of: &(dyn Fn(&[f64]) -> Vec<f64> + Sync),
+    progress: &(dyn Fn(Progress) + Sync),
+) -> Result<SearchEnd> {
+    let cache: HashMap<Vec<u64>, Evaluation> = history
+        .rows()
+        .iter()
+        .map(|e| (key(&e.x), e.clone()))
+        .collect();
+    let generation = AtomicUsize::new(0);
+    let done = AtomicUsize::new(0);
+    let replayed = AtomicUsize::new(0);
+    let best = Mutex::new(f64::INFINITY);
+    let fresh: Mutex<Vec<Evaluation>> = Mutex::new(Vec::new());
+    let objective = |x: &DVector<f64>| -> f64 {
+        let x: Vec<f64> = x.iter().copied().collect();
+        let (objective, was_cached) = match cache.get(&key(&x)) {
+            Some(e) => (e.objective, true),
+            None => {
+                let u: Vec<f64> = x.iter().map(|v| reflect(*v)).collect();
+                let out = evaluate(&u);
+                let e = Evaluation {
+                    index: 0,
+                    generation: generation.load(Ordering::SeqCst),
+                    objective: out.objective,
+                    parts: out.parts,
+                    failed: out.failed,
+                    values: value_of(&u),
+                    x,
+                };
+                fresh.lock().unwrap_or_else(|p| p.into_inner()).push(e);
+                (out.objective, false)
+            }
+        };
+        if was_cached {
+            replayed.fetch_add(1, Ordering::SeqCst);
+        }
+        let n = done.fetch_add(1, Ordering::SeqCst) + 1;
+        let b = {
+            let mut b = best.lock().unwrap_or_else(|p| p.into_inner());
+            *b = b.min(objective);
+            *b
+        };
+        progress(Progress {
+            done: n,
+            replayed: replayed.load(Ordering::SeqCst),
+            budget: options.budget,
+            best: b,
+        });
+        objective
+    };
+    let mut cma = CMAESOptions::new(space.start_unit(), SIGMA0)
+        .seed(options.seed)
+        .max_function_evals(options.budget.max(1))
+        .build(objective)
+        .map_err(|e| anyhow::anyhow!("CMA-ES rejected its options: {e:?}"))?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(options.jobs.max(1))
+        .build()
+        .context("starting the evaluation threads")?;
+    let mut all: Vec<Evaluation> = Vec::new();
+    let reason = loop {
+        generation.store(cma.generation(), Ordering::SeqCst);
+        let end = pool.install(|| cma.next_parallel());
+        let gen = generation.load(Ordering::SeqCst);
+        // This generation's rows: replayed ones from the history, fresh
+        // ones sorted by coordinates (their order of completion varies).
+        let mut new: Vec<Evaluation> = std::mem::take(&mut *fresh.lock().unwrap_or_else(|p| p.into_inner()));
+        new.sort_by(|a, b| {
+            a.x.iter()
+                .zip(&b.x)
+                .map(|(p, q)| p.total_cmp(q))
+                .find(|o| o.is_ne())
+                .unwrap_or(std::cmp::Ordering::Equal)
+        });
+        let mut old: Vec<Evaluation> = history
+            .rows()
+            .iter()
+            .filter(|e| e.generation == gen)
+            .cloned()
+            .collect();
+        all.append(&mut old);
+        let start = history.rows().len();
+        for (i, e) in new.iter_mut().enumerate() {
+            e.index = start + i;
+        }
+        all.extend(new.iter().cloned());
+        if !new.is_empty() {
+            history.append(new)?;
+        }
+        if let Some(t) = end {
+            let why: Vec<String> = t
+                .reasons
+                .iter()
+                .map(|r| match r {
+                    TerminationReason::MaxFunctionEvals => {
+                        format!("the budget of {} evaluations", options.budget)
+                    }
+                    other => format!("CMA-ES stopped: {other:?}"),
+                })
+                .collect();
+            break why.join("; ");
+        }
+    };
+    all.sort_by_key(|e| e.index);
+    Ok(SearchEnd {
+        history: all,
+        replayed: replayed.load(Ordering::SeqCst),
+        reason,
+    })
+}

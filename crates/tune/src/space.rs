@@ -1,0 +1,414 @@
+//! Parameter spaces: which physical parameters a tune fits, their bounds
+//! and scales, the engine settings it runs at, and the capture-frame
+//! registration's bounds.
+//!
+//! ```toml
+//! # assets/tuning/mujoco.toml
+//! [engine.mujoco]                 # settings every evaluation runs at
+//! integrator = "implicitfast"
+//! timestep_s = 0.005
+//!
+//! [registration]                  # fit the capture frame too (optional)
+//! rotation_deg = 2.0              # each angle within +-2 deg of the estimate
+//! translation_mm = 15.0           # each axis within +-15 mm
+//!
+//! [params]                        # keys as in a parameters file
+//! "joints.m1n6s300_joint_2.damping" = { low = 0.0, high = 20.0 }
+//! "controller.max_accel_deg_s2" = { low = 20.0, high = 2000.0, scale = "log", start = 2000.0 }
+//! ```
+//!
+//! `start` is where the search begins (default: the middle of the range in
+//! its scale). A key that a parameters file would reject, a bound that is
+//! not a finite number, a lower bound not below the upper one, a log scale
+//! that reaches zero, or a start outside the bounds is an error naming the
+//! file, line and key.
+
+use realitygap_core::engine::EngineSettings;
+use realitygap_core::params::PhysicalParams;
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use std::fmt;
+use std::path::{Path, PathBuf};
+use toml::Spanned;
+
+/// How a parameter's range is searched.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Scale {
+    /// Uniformly between the bounds.
+    Linear,
+    /// Uniformly in the logarithm (both bounds > 0).
+    Log,
+}
+
+/// One parameter of the space.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Dim {
+    /// The key as in a parameters file, e.g. `joints.J.damping`.
+    pub key: String,
+    /// Lower bound.
+    pub low: f64,
+    /// Upper bound.
+    pub high: f64,
+    /// Scale.
+    pub scale: Scale,
+    /// Where the search starts.
+    pub start: f64,
+}
+
+impl Dim {
+    /// The value at normalised coordinate `u` in [0, 1].
+    pub fn value(&self, u: f64) -> f64 {
+        let u = u.clamp(0.0, 1.0);
+        match self.scale {
+            Scale::Linear => self.low + u * (self.high - self.low),
+            Scale::Log => (self.low.ln() + u * (self.high.ln() - self.low.ln())).exp(),
+        }
+    }
+
+    /// The normalised coordinate of `value` (clamped to [0, 1]).
+    pub fn unit(&self, value: f64) -> f64 {
+        let u = match self.scale {
+            Scale::Linear => (value - self.low) / (self.high - self.low),
+            Scale::Log => (value.ln() - self.low.ln()) / (self.high.ln() - self.low.ln()),
+        };
+        u.clamp(0.0, 1.0)
+    }
+}
+
+/// Bounds of the capture-frame registration fitted with the parameters:
+/// each rotation angle and translation axis around the measurement's own
+/// estimate (from the training runs against the kinematic reference).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct RegistrationBounds {
+    /// Largest rotation about each axis, degrees.
+    pub rotation_deg: f64,
+    /// Largest translation along each axis, millimetres.
+    pub translation_mm: f64,
+}
+
+/// A parameter space.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Space {
+    /// The file it was read from.
+    pub source: PathBuf,
+    /// The parameters, in file order.
+    pub dims: Vec<Dim>,
+    /// Engine settings by engine (`[engine.NAME]`).
+    #[serde(skip)]
+    pub settings: BTreeMap<String, EngineSettings>,
+    /// The registration's bounds, when the registration is fitted too.
+    pub registration: Option<RegistrationBounds>,
+}
+
+/// A space file that cannot be used: file, line and column, and what is
+/// wrong.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub struct SpaceError {
+    /// The file.
+    pub path: PathBuf,
+    /// 1-based line, when known.
+    pub line: Option<usize>,
+    /// 1-based column, when known.
+    pub column: Option<usize>,
+    /// What is wrong, naming the key.
+    pub message: String,
+}
+
+impl fmt::Display for SpaceError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "parameter space {}", self.path.display())?;
+        if let Some(l) = self.line {
+            write!(f, ":{l}")?;
+            if let Some(c) = self.column {
+                write!(f, ":{c}")?;
+            }
+        }
+        write!(f, ": {}", self.message)
+    }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SpaceFile {
+    #[serde(default)]
+    engine: BTreeMap<String, toml::Table>,
+    #[serde(default)]
+    registration: Option<Spanned<RegistrationFile>>,
+    #[serde(default)]
+    params: BTreeMap<Spanned<String>, Spanned<DimFile>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RegistrationFile {
+    rotation_deg: f64,
+    translation_mm: f64,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct DimFile {
+    low: f64,
+    high: f64,
+    #[serde(default)]
+    scale: Option<Scale>,
+    #[serde(default)]
+    start: Option<f64>,
+}
+
+/// 1-based line and column of byte `offset` in `text`.
+fn line_col(text: &str, offset: usize) -> (usize, usize) {
+    let before = &text[..offset.min(text.len())];
+    let line = before.matches('\n').count() + 1;
+    let col = before.rfind('\n').map_or(before.len(), |i| before.len() - i - 1) + 1;
+    (line, col)
+}
+
+impl Space {
+    /// Reads a space file.
+    pub fn from_file(path: &Path) -> Result<Space, SpaceError> {
+        let text = std::fs::read_to_string(path).map_err(|e| SpaceError {
+            path: path.to_path_buf(),
+            line: None,
+            column: None,
+            message: format!("cannot read it: {e}"),
+        })?;
+        Space::from_toml_str(&text, path)
+    }
+
+    /// Parses a space from `text` (`path` names it in errors).
+    pub fn from_toml_str(text: &str, path: &Path) -> Result<Space, SpaceError> {
+        let at = |offset: Option<usize>, message: String| {
+            let (line, column) = match offset {
+                Some(o) => {
+                    let (l, c) = line_col(text, o);
+                    (Some(l), Some(c))
+                }
+                None => (None, None),
+            };
+            SpaceError {
+                path: path.to_path_buf(),
+                line,
+                column,
+                message,
+            }
+        };
+        let file: SpaceFile = toml::from_str(text).map_err(|e| {
+            at(
+                e.span().map(|s| s.start),
+                e.message().trim_end().to_string(),
+            )
+        })?;
+        let mut dims = Vec::new();
+        let mut entries: Vec<_> = file.params.into_iter().collect();
+        entries.sort_by_key(|(k, _)| k.span().start);
+        for (key, dim) in entries {
+            let offset = Some(key.span().start);
+            let key = key.into_inner();
+            let d = dim.into_inner();
+            let d = check_dim(&key, d).map_err(|m| at(offset, format!("params.\"{key}\": {m}")))?;
+            check_key(&key, d.start).map_err(|m| at(offset, format!("params.\"{key}\": {m}")))?;
+            dims.push(d);
+        }
+        let registration = match file.registration {
+            None => None,
+            Some(r) => {
+                let offset = Some(r.span().start);
+                let r = r.into_inner();
+                for (name, v) in [
+                    ("rotation_deg", r.rotation_deg),
+                    ("translation_mm", r.translation_mm),
+                ] {
+                    if !v.is_finite() || v < 0.0 {
+                        return Err(at(
+                            offset,
+                            format!("registration.{name} = {v}: expected a finite number >= 0"),
+                        ));
+                    }
+                }
+                Some(RegistrationBounds {
+                    rotation_deg: r.rotation_deg,
+                    translation_mm: r.translation_mm,
+                })
+            }
+        };
+        let mut settings = BTreeMap::new();
+        for (engine, table) in file.engine {
+            let mut s = EngineSettings::new();
+            for (k, v) in table {
+                let value = realitygap_core::scene::setting_value(&v).ok_or_else(|| {
+                    at(
+                        None,
+                        format!("engine.{engine}.{k}: expected a number, a boolean or a string"),
+                    )
+                })?;
+                s.insert(k, value);
+            }
+            settings.insert(engine, s);
+        }
+        if dims.is_empty() && registration.is_none() {
+            return Err(at(
+                None,
+                "nothing to fit: no [params] entry and no [registration]".into(),
+            ));
+        }
+        Ok(Space {
+            source: path.to_path_buf(),
+            dims,
+            settings,
+            registration,
+        })
+    }
+
+    /// Number of search coordinates: the parameters, then six for the
+    /// registration when it is fitted.
+    pub fn len(&self) -> usize {
+        self.dims.len() + if self.registration.is_some() { 6 } else { 0 }
+    }
+
+    /// True when there is nothing to search.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The normalised start point.
+    pub fn start_unit(&self) -> Vec<f64> {
+        let mut u: Vec<f64> = self.dims.iter().map(|d| d.unit(d.start)).collect();
+        if self.registration.is_some() {
+            u.extend([0.5; 6]);
+        }
+        u
+    }
+
+    /// The parameter values (in file order) at normalised coordinates `u`.
+    pub fn values(&self, u: &[f64]) -> Vec<f64> {
+        self.dims.iter().zip(u).map(|(d, &x)| d.value(x)).collect()
+    }
+
+    /// The registration offset at normalised coordinates `u`: rotation
+    /// vector (degrees) and translation (metres), or `None` when the
+    /// registration is not fitted.
+    pub fn registration_offset(&self, u: &[f64]) -> Option<([f64; 3], [f64; 3])> {
+        let b = self.registration?;
+        let r = u.get(self.dims.len()..self.dims.len() + 6)?;
+        let s = |x: f64| 2.0 * x.clamp(0.0, 1.0) - 1.0;
+        Some((
+            [0, 1, 2].map(|i| s(r[i]) * b.rotation_deg),
+            [3, 4, 5].map(|i| s(r[i]) * b.translation_mm / 1000.0),
+        ))
+    }
+
+    /// The physical parameters at `values` (in file order), with the
+    /// engine settings of `engine` from the space (and `extra`, which
+    /// overrides them).
+    pub fn params(
+        &self,
+        values: &[f64],
+        engine: &str,
+        extra: &EngineSettings,
+    ) -> Result<PhysicalParams, String> {
+        let mut p = params_of(self.dims.iter().map(|d| d.key.as_str()).zip(values.iter().copied()))?;
+        let mut s = self.settings.get(engine).cloned().unwrap_or_default();
+        s.extend(extra.iter().map(|(k, v)| (k.clone(), v.clone())));
+        if !s.is_empty() {
+            p.engine_settings.insert(engine.to_string(), s);
+        }
+        Ok(p)
+    }
+}
+
+fn check_dim(key: &str, d: DimFile) -> Result<Dim, String> {
+    let _ = key;
+    for (name, v) in [("low", Some(d.low)), ("high", Some(d.high)), ("start", d.start)] {
+        if let Some(v) = v {
+            if !v.is_finite() {
+                return Err(format!("{name} = {v}: expected a finite number"));
+            }
+        }
+    }
+    if d.low >= d.high {
+        return Err(format!(
+            "low = {} is not below high = {}",
+            d.low, d.high
+        ));
+    }
+    let scale = d.scale.unwrap_or(Scale::Linear);
+    if scale == Scale::Log && d.low <= 0.0 {
+        return Err(format!(
+            "scale = \"log\" needs low > 0 (low = {})",
+            d.low
+        ));
+    }
+    let mut dim = Dim {
+        key: String::new(),
+        low: d.low,
+        high: d.high,
+        scale,
+        start: 0.0,
+    };
+    dim.start = match d.start {
+        Some(s) if s < d.low || s > d.high => {
+            return Err(format!(
+                "start = {s} is outside [{}, {}]",
+                d.low, d.high
+            ))
+        }
+        Some(s) => s,
+        None => dim.value(0.5),
+    };
+    dim.key = key.to_string();
+    Ok(dim)
+}
+
+/// Checks that `key` is a parameter a parameters file accepts, with
+/// `value` as its value.
+fn check_key(key: &str, value: f64) -> Result<(), String> {
+    params_of(std::iter::once((key, value))).map(|_| ())
+}
+
+/// A parameters file's text for `key = value` pairs (`joints.J.damping`,
+/// `controller.delay_s`, ...), parsed as one: every error a parameters file
+/// gives.
+pub fn params_of<'a>(
+    pairs: impl IntoIterator<Item = (&'a str, f64)>,
+) -> Result<PhysicalParams, String> {
+    let mut tables: BTreeMap<String, Vec<(String, f64)>> = BTreeMap::new();
+    for (key, value) in pairs {
+        let parts: Vec<&str> = key.split('.').collect();
+        let (table, field) = match parts.as_slice() {
+            [section @ ("joints" | "links" | "objects"), name, field] if !name.is_empty() => {
+                (format!("{section}.{}", quote(name)), *field)
+            }
+            [section @ ("contact" | "controller"), field] => (section.to_string(), *field),
+            _ => {
+                return Err(format!(
+                    "`{key}` is not a parameter key: expected joints.<joint>.<field>, links.<link>.<field>, objects.<object>.<field>, contact.<field> or controller.<field>"
+                ))
+            }
+        };
+        if field.is_empty() || !field.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
+            return Err(format!("`{key}`: `{field}` is not a field name"));
+        }
+        tables
+            .entry(table)
+            .or_default()
+            .push((field.to_string(), value));
+    }
+    let mut text = String::new();
+    for (table, fields) in &tables {
+        text.push_str(&format!("[{table}]\n"));
+        for (f, v) in fields {
+            text.push_str(&format!("{f} = {v:?}\n"));
+        }
+    }
+    PhysicalParams::from_toml_str(&text, Path::new("<space>")).map_err(|e| e.message)
+}
+
+fn quote(name: &str) -> String {
+    if name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-') {
+        name.to_string()
+    } else {
+        format!("{name:?}")
+    }
+}
