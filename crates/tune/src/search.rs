@@ -391,3 +391,134 @@ pub fn search(
         reason,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::space::{Dim, Scale};
+
+    fn space(n: usize) -> Space {
+        Space {
+            source: PathBuf::from("test.toml"),
+            dims: (0..n)
+                .map(|i| Dim {
+                    key: format!("controller.k{i}"),
+                    low: 0.0,
+                    high: 10.0,
+                    scale: Scale::Linear,
+                    start: 5.0,
+                })
+                .collect(),
+            settings: Default::default(),
+            registration: None,
+        }
+    }
+
+    /// A bowl with its minimum at values 2, 7, 4 (of [0, 10]); fails
+    /// (like a diverging engine) where the first value exceeds 6.
+    fn bowl(u: &[f64]) -> Outcome {
+        let want = [0.2, 0.7, 0.4];
+        if u[0] > 0.6 {
+            return Outcome {
+                objective: crate::objective::FAILED_OBJECTIVE,
+                parts: vec![f64::NAN],
+                failed: Some("diverged".into()),
+            };
+        }
+        let o: f64 = u.iter().zip(want).map(|(a, b)| (a - b) * (a - b)).sum();
+        Outcome {
+            objective: o,
+            parts: vec![o],
+            failed: None,
+        }
+    }
+
+    /// Equal histories (NaN parts of failed rows compare equal).
+    fn same(a: &[Evaluation], b: &[Evaluation]) -> bool {
+        format!("{a:?}") == format!("{b:?}")
+    }
+
+    fn values(u: &[f64]) -> Vec<f64> {
+        u.iter().map(|x| x * 10.0).collect()
+    }
+
+    fn run(dir: &Path, budget: usize, jobs: usize) -> SearchEnd {
+        let mut h = History::open(
+            &dir.join("history.csv"),
+            &["part_m".into()],
+            &["a".into(), "b".into(), "c".into()],
+            3,
+        )
+        .unwrap();
+        search(
+            &space(3),
+            &mut h,
+            SearchOptions {
+                budget,
+                seed: 7,
+                jobs,
+            },
+            &bowl,
+            &values,
+            &|_| {},
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn reflect_folds_into_the_unit_interval() {
+        for (x, want) in [(0.3, 0.3), (1.2, 0.8), (-0.25, 0.25), (2.5, 0.5), (-1.5, 0.5)] {
+            assert!((reflect(x) - want).abs() < 1e-12, "{x}");
+        }
+        assert_eq!(reflect(f64::NAN), 0.5);
+    }
+
+    #[test]
+    fn finds_a_bowl_survives_failures_and_is_deterministic_across_jobs() {
+        let a = tempfile::tempdir().unwrap();
+        let b = tempfile::tempdir().unwrap();
+        let one = run(a.path(), 600, 1);
+        let two = run(b.path(), 600, 2);
+        let best = one.best().unwrap();
+        for (v, want) in best.values.iter().zip([2.0, 7.0, 4.0]) {
+            assert!((v - want).abs() < 0.05, "{:?}", best.values);
+        }
+        assert!(one.history.iter().any(|e| e.failed.is_some()), "no failed candidate was tried");
+        assert!(same(&one.history, &two.history), "jobs 1 and 2 differ");
+        assert_eq!(
+            std::fs::read_to_string(a.path().join("history.csv")).unwrap(),
+            std::fs::read_to_string(b.path().join("history.csv")).unwrap()
+        );
+    }
+
+    #[test]
+    fn a_killed_search_resumes_where_it_stopped() {
+        let whole = tempfile::tempdir().unwrap();
+        let cut = tempfile::tempdir().unwrap();
+        let full = run(whole.path(), 120, 2);
+        // A kill after some generations leaves whole generations in the
+        // file (each is appended at once); keep the first 5 of them.
+        let text = std::fs::read_to_string(whole.path().join("history.csv")).unwrap();
+        let kept: Vec<&str> = text
+            .lines()
+            .filter(|l| {
+                l.split(',')
+                    .nth(1)
+                    .and_then(|g| g.parse::<usize>().ok())
+                    .is_none_or(|g| g < 5)
+            })
+            .collect();
+        std::fs::write(cut.path().join("history.csv"), kept.join("\n") + "\n").unwrap();
+        let resumed = run(cut.path(), 120, 1);
+        assert_eq!(resumed.replayed, kept.len() - 1);
+        assert!(resumed.replayed > 0);
+        assert!(same(&resumed.history, &full.history), "the resumed search differs");
+        assert_eq!(
+            std::fs::read_to_string(cut.path().join("history.csv")).unwrap(),
+            text
+        );
+        // A history of another space is refused, not mixed in.
+        let mut h = History::open(&cut.path().join("history.csv"), &[], &["a".into()], 1);
+        assert!(h.as_mut().err().unwrap().to_string().contains("history.csv:1"));
+    }
+}

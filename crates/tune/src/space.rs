@@ -208,7 +208,9 @@ impl Space {
             let key = key.into_inner();
             let d = dim.into_inner();
             let d = check_dim(&key, d).map_err(|m| at(offset, format!("params.\"{key}\": {m}")))?;
-            check_key(&key, d.start).map_err(|m| at(offset, format!("params.\"{key}\": {m}")))?;
+            for v in [d.low, d.high, d.start] {
+                check_key(&key, v).map_err(|m| at(offset, format!("params.\"{key}\": {m}")))?;
+            }
             dims.push(d);
         }
         let registration = match file.registration {
@@ -410,5 +412,80 @@ fn quote(name: &str) -> String {
         name.to_string()
     } else {
         format!("{name:?}")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<Space, SpaceError> {
+        Space::from_toml_str(text, Path::new("space.toml"))
+    }
+
+    #[test]
+    fn a_space_parses_with_scales_starts_and_settings() {
+        let s = parse(
+            "[engine.mujoco]\ntimestep_s = 0.005\n[registration]\nrotation_deg = 1.0\ntranslation_mm = 10.0\n[params]\n\"joints.j2.damping\" = { low = 0.0, high = 4.0 }\n\"controller.max_accel_deg_s2\" = { low = 10.0, high = 1000.0, scale = \"log\", start = 1000.0 }\n",
+        )
+        .unwrap();
+        assert_eq!(s.dims.len(), 2);
+        assert_eq!(s.len(), 8);
+        assert_eq!(s.dims[0].start, 2.0);
+        assert_eq!(s.dims[1].scale, Scale::Log);
+        assert!((s.dims[1].value(0.5) - 100.0).abs() < 1e-9);
+        assert!((s.dims[1].unit(1000.0) - 1.0).abs() < 1e-12);
+        let u = s.start_unit();
+        assert_eq!(u, vec![0.5, 1.0, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5]);
+        let (r, t) = s.registration_offset(&[0.0, 0.0, 1.0, 0.5, 0.5, 0.0, 0.5, 1.0]).unwrap();
+        assert_eq!(r, [1.0, 0.0, 0.0]);
+        assert_eq!(t, [-0.01, 0.0, 0.01]);
+        let p = s
+            .params(&[1.5, 50.0], "mujoco", &EngineSettings::new())
+            .unwrap();
+        assert_eq!(p.joints["j2"].damping, Some(1.5));
+        assert_eq!(p.controller.max_accel_deg_s2, Some(50.0));
+        assert!(p.engine_settings.contains_key("mujoco"));
+    }
+
+    #[test]
+    fn bad_spaces_name_the_file_line_and_key() {
+        let cases = [
+            ("[params]\n\"joints.j.nosuch\" = { low = 0.0, high = 1.0 }\n", 2, "nosuch"),
+            ("[params]\n\"wheels.j.damping\" = { low = 0.0, high = 1.0 }\n", 2, "not a parameter key"),
+            ("[params]\n\"joints.j.damping\" = { low = 2.0, high = 1.0 }\n", 2, "low = 2 is not below high = 1"),
+            ("[params]\n\"joints.j.damping\" = { low = nan, high = 1.0 }\n", 2, "low = NaN: expected a finite number"),
+            ("[params]\n\"joints.j.damping\" = { low = 0.0, high = 1.0, scale = \"log\" }\n", 2, "needs low > 0"),
+            ("[params]\n\n\"joints.j.damping\" = { low = 0.0, high = 1.0, start = 3.0 }\n", 3, "outside [0, 1]"),
+            ("[params]\n\"joints.j.damping\" = { low = 0.0, high = 1.0, stepsize = 3.0 }\n", 2, "stepsize"),
+            ("[params]\n\"joints.j.damping\" = { low = -1.0, high = 1.0 }\n", 2, "damping"),
+        ];
+        for (text, line, want) in cases {
+            let e = parse(text).unwrap_err();
+            let shown = e.to_string();
+            assert_eq!(e.line, Some(line), "{shown}");
+            assert!(shown.starts_with("parameter space space.toml:"), "{shown}");
+            assert!(shown.contains(want), "{text}: {shown}");
+        }
+        let e = parse("").unwrap_err().to_string();
+        assert!(e.contains("nothing to fit"), "{e}");
+        let e = parse("[registration]\nrotation_deg = -1.0\ntranslation_mm = 1.0\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("registration.rotation_deg"), "{e}");
+    }
+
+    #[test]
+    fn the_shipped_spaces_parse() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/tuning");
+        for engine in ["mujoco", "bullet", "ode", "rapier"] {
+            let s = Space::from_file(&dir.join(format!("{engine}.toml"))).unwrap();
+            assert!(s.dims.len() >= 10, "{engine}");
+            assert!(s.settings.contains_key(engine), "{engine}");
+            assert!(s.registration.is_some());
+            for d in &s.dims {
+                assert!((d.low..=d.high).contains(&d.start), "{engine} {}", d.key);
+            }
+        }
     }
 }
