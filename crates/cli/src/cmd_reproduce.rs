@@ -20,7 +20,9 @@ use anyhow::{bail, Context, Result};
 use realitygap_analysis::compare::{AnalysisMode, CompareOptions, SceneReport};
 use realitygap_analysis::table::{self, Format};
 use realitygap_study::provenance::provenance_for_study;
-use realitygap_study::reproduce::{reproduction_study, study_recordings, study_scene_files};
+use realitygap_study::reproduce::{
+    reproduction_study, study_recordings, study_scene_files, TunedEngine,
+};
 use realitygap_study::{evaluate, DataSource, Roots, Study};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -58,6 +60,11 @@ pub struct Args {
     /// Physical parameters for every engine's runs (see `run --params`).
     #[arg(long, value_name = "FILE")]
     pub params: Option<PathBuf>,
+    /// The output folder of a `realitygap tune` (repeatable): its engine
+    /// runs again with tuned.toml and shows as "<engine> (tuned)" next to
+    /// the untuned rows.
+    #[arg(long, value_name = "DIR")]
+    pub tuned: Vec<PathBuf>,
 }
 
 /// Stage timings, seconds, in order.
@@ -88,14 +95,33 @@ pub fn run(args: Args) -> Result<()> {
     let runs_dir = args.out.join("runs");
     let mut timings: Timings = Vec::new();
 
+    let tuned: Vec<TunedEngine> = args
+        .tuned
+        .iter()
+        .map(|d| TunedEngine::from_dir(d))
+        .collect::<Result<_>>()?;
     let t = Instant::now();
-    let problems = simulate(&args, &scenes, &engines, &runs_dir);
+    let mut problems = simulate(&args, &scenes, &engines, &runs_dir, None);
+    for te in &tuned {
+        problems.extend(simulate(
+            &args,
+            &scenes,
+            std::slice::from_ref(&te.engine),
+            &runs_dir.join(&te.runs_subdir),
+            Some(&te.params),
+        ));
+    }
     timings.push(("simulate".into(), t.elapsed().as_secs_f64()));
 
     eprintln!("[2/3] comparing");
     let t = Instant::now();
-    let (study, study_path, roots) =
+    let (mut study, study_path, roots) =
         reproduction_study(&scenes, data.as_deref(), &args.out, &runs_dir, &engines)?;
+    for s in &mut study.scenes {
+        for te in &tuned {
+            s.sources.extend(te.source(&runs_dir, &s.name)?);
+        }
+    }
     let opts = CompareOptions {
         mode: args.mode,
         ..CompareOptions::default()
@@ -125,7 +151,13 @@ pub fn run(args: Args) -> Result<()> {
 /// `runs_dir`, exactly as `realitygap run` does. Failed runs are listed in
 /// the report and the comparison goes on with the runs that finished, so
 /// a failure is a problem to report at the end, not an error now.
-fn simulate(args: &Args, scenes: &[PathBuf], engines: &[String], runs_dir: &Path) -> Vec<String> {
+fn simulate(
+    args: &Args,
+    scenes: &[PathBuf],
+    engines: &[String],
+    runs_dir: &Path,
+    params: Option<&Path>,
+) -> Vec<String> {
     eprintln!(
         "[1/3] simulating {} scenes x {} engines ({}) x {} repeats -> {}",
         scenes.len(),
@@ -146,7 +178,7 @@ fn simulate(args: &Args, scenes: &[PathBuf], engines: &[String], runs_dir: &Path
         perturb: vec![],
         set: vec![],
         timeout_s: args.timeout_s,
-        params: args.params.clone(),
+        params: params.map(Path::to_path_buf).or_else(|| args.params.clone()),
     };
     match cmd_run::run(run_args) {
         Ok(()) => Vec::new(),

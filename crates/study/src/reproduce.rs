@@ -96,6 +96,65 @@ pub fn reproduction_study(
     Ok((study, study_path, roots))
 }
 
+/// A tune's outputs for `reproduce --tuned`: the engine (from
+/// `summary.json`) and the parameters file `tuned.toml`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TunedEngine {
+    /// The engine tuned.
+    pub engine: String,
+    /// Its `tuned.toml`.
+    pub params: PathBuf,
+    /// The folder the tuned runs go to, relative to the runs folder.
+    pub runs_subdir: String,
+}
+
+impl TunedEngine {
+    /// Reads a tune's output folder.
+    pub fn from_dir(dir: &Path) -> Result<TunedEngine> {
+        let summary = dir.join("summary.json");
+        let text = std::fs::read_to_string(&summary).with_context(|| {
+            format!(
+                "--tuned {}: no {} (is it the --out folder of a finished `realitygap tune`?)",
+                dir.display(),
+                summary.display()
+            )
+        })?;
+        let v: serde_json::Value = serde_json::from_str(&text)
+            .with_context(|| format!("{}: not valid JSON", summary.display()))?;
+        let Some(engine) = v.get("engine").and_then(|e| e.as_str()) else {
+            bail!("{}: field `engine` missing", summary.display());
+        };
+        let params = dir.join("tuned.toml");
+        if !params.is_file() {
+            bail!("--tuned {}: no tuned.toml", dir.display());
+        }
+        Ok(TunedEngine {
+            engine: engine.to_string(),
+            params,
+            runs_subdir: format!("tuned-{engine}"),
+        })
+    }
+
+    /// The scene's source of the tuned runs under `runs_dir`, named like
+    /// the engine's own with "(tuned)", e.g. `MuJoCo 3.17.0 (tuned)`.
+    pub fn source(&self, runs_dir: &Path, scene: &str) -> Result<Option<SourceSpec>> {
+        let dir = runs_dir.join(&self.runs_subdir);
+        Ok(engine_sources(&dir, scene, std::slice::from_ref(&self.engine))?
+            .into_iter()
+            .next()
+            .map(|mut s| {
+                s.name = s.name.replace("(this tool)", "(tuned)");
+                s.about = Some(format!(
+                    "{}, with the parameters and settings of {}",
+                    s.about.unwrap_or_default(),
+                    self.params.display()
+                ));
+                s.dir = s.dir.map(|d| format!("{}/{d}", self.runs_subdir));
+                s
+            }))
+    }
+}
+
 /// One `store` source per engine results directory of a scene, named after
 /// the engine and version in its manifest, e.g. `MuJoCo 3.17.0 (this tool)`.
 pub fn engine_sources(runs_dir: &Path, scene: &str, engines: &[String]) -> Result<Vec<SourceSpec>> {
