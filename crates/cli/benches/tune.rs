@@ -41,10 +41,19 @@ fn raw_seconds(engine: &str, dir: &Path) -> f64 {
     }
     let params = dir.join("settings.toml");
     std::fs::write(&params, p.to_toml_string()).unwrap();
-    let scenes: Vec<String> = ["scene1_single_joint", "scene2_two_joints", "scene3_cube_push"]
-        .iter()
-        .map(|s| root().join(format!("assets/scenes/{s}.toml")).display().to_string())
-        .collect();
+    let scenes: Vec<String> = [
+        "scene1_single_joint",
+        "scene2_two_joints",
+        "scene3_cube_push",
+    ]
+    .iter()
+    .map(|s| {
+        root()
+            .join(format!("assets/scenes/{s}.toml"))
+            .display()
+            .to_string()
+    })
+    .collect();
     let out = dir.join("raw");
     let mut args: Vec<&str> = vec!["run"];
     args.extend(scenes.iter().map(String::as_str));
@@ -62,7 +71,9 @@ fn main() {
     let budget = std::env::var("BUDGET").unwrap_or_else(|_| "600".into());
     let engines = std::env::var("ENGINES").unwrap_or_else(|_| "mujoco,rapier,ode,bullet".into());
     let study = root().join("assets/studies/collins2019.toml");
-    println!("tune benchmark: budget {budget} evaluations, runs 1-15 fitted, 16-20 held out, 2 jobs");
+    println!(
+        "tune benchmark: budget {budget} evaluations, runs 1-15 fitted, 16-20 held out, 2 jobs"
+    );
     println!(
         "| engine | evaluations/s | core-seconds per evaluation | raw 3-scene run, s | evaluation / raw | evaluations to 5 % | wall to 5 %, s | wall, s | held-out total untuned -> tuned (m) |"
     );

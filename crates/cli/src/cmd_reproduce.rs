@@ -178,7 +178,9 @@ fn simulate(
         perturb: vec![],
         set: vec![],
         timeout_s: args.timeout_s,
-        params: params.map(Path::to_path_buf).or_else(|| args.params.clone()),
+        params: params
+            .map(Path::to_path_buf)
+            .or_else(|| args.params.clone()),
     };
     match cmd_run::run(run_args) {
         Ok(()) => Vec::new(),

@@ -140,7 +140,10 @@ fn recovers_known_parameters_and_the_tuned_file_reproduces_the_objective() {
     assert!((delay - KNOWN_DELAY_S).abs() <= 0.005, "delay {delay}");
     let best = s["best_objective_m"].as_f64().unwrap();
     let untuned = s["training"]["objective_m"][0].as_f64().unwrap();
-    assert!(best < 0.05 * untuned, "best {best} against untuned {untuned}");
+    assert!(
+        best < 0.05 * untuned,
+        "best {best} against untuned {untuned}"
+    );
     // Every output is there.
     for f in [
         "tuned.toml",
@@ -178,9 +181,14 @@ fn recovers_known_parameters_and_the_tuned_file_reproduces_the_objective() {
     ]));
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     let text = v.to_string();
-    let tuned = s["training"]["scenes"][0]["tuned"]["value_m"].as_f64().unwrap();
+    let tuned = s["training"]["scenes"][0]["tuned"]["value_m"]
+        .as_f64()
+        .unwrap();
     let acc = find_number(&v, "accumulated_error_m").unwrap_or_else(|| panic!("{text}"));
-    assert!((acc - tuned).abs() < 1e-9, "rerun {acc} against tune {tuned}");
+    assert!(
+        (acc - tuned).abs() < 1e-9,
+        "rerun {acc} against tune {tuned}"
+    );
     assert!((acc - best).abs() < 1e-9, "rerun {acc} against best {best}");
 }
 
@@ -240,7 +248,10 @@ fn a_killed_tune_resumes_to_the_same_history() {
     }
     child.kill().unwrap();
     child.wait().unwrap();
-    assert!(!cut.join("summary.json").exists(), "the tune finished before the kill");
+    assert!(
+        !cut.join("summary.json").exists(),
+        "the tune finished before the kill"
+    );
     let s = tune(d, cut.to_str().unwrap(), "60");
     assert!(s["replayed"].as_u64().unwrap() >= 12, "{}", s["replayed"]);
     assert_eq!(
@@ -280,7 +291,10 @@ fn a_diverging_candidate_is_scored_as_failed_and_the_search_goes_on() {
     let history = std::fs::read_to_string(out.join("history.csv")).unwrap();
     assert!(history.contains("diverged"), "{history}");
     let kv = param(&s, "joints.m1n6s300_joint_2.kv");
-    assert!(kv < 1000.0, "the best candidate {kv} should be a stable one");
+    assert!(
+        kv < 1000.0,
+        "the best candidate {kv} should be a stable one"
+    );
     assert!(s["best_objective_m"].as_f64().unwrap() < 1e3);
 }
 

@@ -118,7 +118,11 @@ impl ConvergenceFigure {
             .collect();
         if !failed.is_empty() {
             chart
-                .draw_series(failed.iter().map(|&x| Cross::new((x, y1 / 1.05), 4, red.stroke_width(2))))
+                .draw_series(
+                    failed
+                        .iter()
+                        .map(|&x| Cross::new((x, y1 / 1.05), 4, red.stroke_width(2))),
+                )
                 .map_err(e)?
                 .label("failed (diverged or crashed)")
                 .legend(move |(x, y)| Cross::new((x + 10, y), 4, red.stroke_width(2)));
@@ -134,7 +138,9 @@ impl ConvergenceFigure {
             .draw_series(LineSeries::new(line, blue.stroke_width(2)))
             .map_err(e)?
             .label("best so far")
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], blue.stroke_width(2)));
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], blue.stroke_width(2))
+            });
         chart
             .configure_series_labels()
             .background_style(WHITE.mix(0.8))
@@ -201,7 +207,10 @@ mod tests {
                 })
                 .collect(),
         };
-        assert_eq!(f.best_so_far(), vec![Some(5.0), Some(5.0), Some(3.0), Some(3.0)]);
+        assert_eq!(
+            f.best_so_far(),
+            vec![Some(5.0), Some(5.0), Some(3.0), Some(3.0)]
+        );
         let svg = f.to_svg().unwrap();
         assert!(svg.contains("best so far") && svg.contains("failed"));
         assert!(f.to_png().unwrap().starts_with(b"\x89PNG"));
@@ -209,6 +218,10 @@ mod tests {
             points: vec![],
             ..f
         };
-        assert!(empty.to_svg().unwrap_err().to_string().contains("no finished evaluation"));
+        assert!(empty
+            .to_svg()
+            .unwrap_err()
+            .to_string()
+            .contains("no finished evaluation"));
     }
 }

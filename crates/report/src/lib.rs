@@ -23,8 +23,8 @@
 
 #![forbid(unsafe_code)]
 
-pub mod figures;
 pub mod convergence;
+pub mod figures;
 pub mod frontier;
 pub mod html;
 pub mod provenance;

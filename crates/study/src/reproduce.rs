@@ -139,19 +139,21 @@ impl TunedEngine {
     /// the engine's own with "(tuned)", e.g. `MuJoCo 3.17.0 (tuned)`.
     pub fn source(&self, runs_dir: &Path, scene: &str) -> Result<Option<SourceSpec>> {
         let dir = runs_dir.join(&self.runs_subdir);
-        Ok(engine_sources(&dir, scene, std::slice::from_ref(&self.engine))?
-            .into_iter()
-            .next()
-            .map(|mut s| {
-                s.name = s.name.replace("(this tool)", "(tuned)");
-                s.about = Some(format!(
-                    "{}, with the parameters and settings of {}",
-                    s.about.unwrap_or_default(),
-                    self.params.display()
-                ));
-                s.dir = s.dir.map(|d| format!("{}/{d}", self.runs_subdir));
-                s
-            }))
+        Ok(
+            engine_sources(&dir, scene, std::slice::from_ref(&self.engine))?
+                .into_iter()
+                .next()
+                .map(|mut s| {
+                    s.name = s.name.replace("(this tool)", "(tuned)");
+                    s.about = Some(format!(
+                        "{}, with the parameters and settings of {}",
+                        s.about.unwrap_or_default(),
+                        self.params.display()
+                    ));
+                    s.dir = s.dir.map(|d| format!("{}/{d}", self.runs_subdir));
+                    s
+                }),
+        )
     }
 }
 

@@ -106,7 +106,11 @@ impl Score {
 
 /// `base` moved by a rotation vector (degrees) and a translation (metres)
 /// applied after it.
-pub fn offset_registration(base: &Registration, rot_deg: [f64; 3], trans_m: [f64; 3]) -> Registration {
+pub fn offset_registration(
+    base: &Registration,
+    rot_deg: [f64; 3],
+    trans_m: [f64; 3],
+) -> Registration {
     let v = Vec3::from_array(rot_deg.map(f64::to_radians));
     let angle = v.norm();
     let d = if angle > 0.0 {
@@ -287,7 +291,11 @@ pub fn score_of(reports: &[SceneReport], scenes: &[TargetScene]) -> Score {
             return Score::failed(format!(
                 "scene {}: no accumulated error ({})",
                 s.name,
-                if why.is_empty() { "no run compared" } else { &why }
+                if why.is_empty() {
+                    "no run compared"
+                } else {
+                    &why
+                }
             ));
         };
         total += acc;
@@ -299,9 +307,7 @@ pub fn score_of(reports: &[SceneReport], scenes: &[TargetScene]) -> Score {
                     total += CUBE_WEIGHT_PER_STEP * r.steps as f64 * d;
                     Some(d)
                 }
-                _ => {
-                    return Score::failed(format!("scene {}: the cube was not measured", s.name))
-                }
+                _ => return Score::failed(format!("scene {}: the cube was not measured", s.name)),
             }
         } else {
             None

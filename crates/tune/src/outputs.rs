@@ -168,7 +168,11 @@ pub struct RegistrationSummary {
     pub moved_mm: f64,
 }
 
-fn registration_summary(fitted: bool, base: &Registration, tuned: &Registration) -> RegistrationSummary {
+fn registration_summary(
+    fitted: bool,
+    base: &Registration,
+    tuned: &Registration,
+) -> RegistrationSummary {
     let q = |r: &Registration| [r.rotation.w, r.rotation.x, r.rotation.y, r.rotation.z];
     RegistrationSummary {
         fitted,
@@ -196,7 +200,10 @@ fn sensitivity(tuner: &Tuner<'_>, u: &[f64], best: f64) -> Vec<Sensitivity> {
             } else {
                 SENSITIVITY_STEP * (d.high - d.low)
             };
-            [(i, 0, (v - step).clamp(d.low, d.high)), (i, 1, (v + step).clamp(d.low, d.high))]
+            [
+                (i, 0, (v - step).clamp(d.low, d.high)),
+                (i, 1, (v + step).clamp(d.low, d.high)),
+            ]
         })
         .collect();
     let pool = rayon::ThreadPoolBuilder::new()
@@ -287,12 +294,7 @@ fn cube_push(r: &SceneReport) -> Option<[f64; 2]> {
     Some([c.final_displacement_m, rot])
 }
 
-fn comparison(
-    tuner: &Tuner<'_>,
-    untuned: &Reports,
-    tuned: &Reports,
-    runs: String,
-) -> Comparison {
+fn comparison(tuner: &Tuner<'_>, untuned: &Reports, tuned: &Reports, runs: String) -> Comparison {
     let scenes = tuner.target.scenes.iter().enumerate().map(|(i, s)| {
         let u = &untuned.reports[i];
         let t = &tuned.reports[i];
@@ -410,9 +412,12 @@ pub fn finish(
     started: Instant,
 ) -> Result<(Summary, Vec<PathBuf>)> {
     let spec = tuner.spec;
-    let best = end
-        .best()
-        .ok_or_else(|| anyhow!("every candidate failed; see {}", spec.out.join("history.csv").display()))?;
+    let best = end.best().ok_or_else(|| {
+        anyhow!(
+            "every candidate failed; see {}",
+            spec.out.join("history.csv").display()
+        )
+    })?;
     let u: Vec<f64> = best.x.iter().map(|x| crate::search::reflect(*x)).collect();
     let params = tuner.params(&u).map_err(|m| anyhow!(m))?;
     let registration = tuner.registration(&u);
@@ -482,9 +487,16 @@ fn objective_text(tuner: &Tuner<'_>) -> String {
         .scenes
         .iter()
         .filter(|s| s.cube)
-        .map(|s| format!("{} x the cube's final position error in {}", CUBE_WEIGHT_PER_STEP * s.steps as f64, s.name))
+        .map(|s| {
+            format!(
+                "{} x the cube's final position error in {}",
+                CUBE_WEIGHT_PER_STEP * s.steps as f64,
+                s.name
+            )
+        })
         .collect();
-    let mut t = "the accumulated wrist error (m) summed over the scenes, on the training runs".to_string();
+    let mut t =
+        "the accumulated wrist error (m) summed over the scenes, on the training runs".to_string();
     if !cubes.is_empty() {
         t.push_str(&format!(", plus {}", cubes.join(" and ")));
     }
@@ -548,9 +560,8 @@ fn fmt_scored(s: &Option<Scored>) -> String {
 }
 
 fn comparison_md(c: &Comparison) -> String {
-    let mut t = format!(
-        "| scene | untuned (m, 95 % interval) | tuned (m, 95 % interval) |\n|---|---|---|\n"
-    );
+    let mut t = "| scene | untuned (m, 95 % interval) | tuned (m, 95 % interval) |\n|---|---|---|\n"
+        .to_string();
     for s in &c.scenes {
         t.push_str(&format!(
             "| {} | {} | {} |\n",
@@ -613,7 +624,9 @@ pub fn markdown(s: &Summary) -> String {
         m.push_str(&format!("\n## Held-out runs ({})\n\n", h.runs));
         m.push_str(&comparison_md(h));
     }
-    m.push_str("\n## Parameters\n\n| key | value | bounds | scale | start |\n|---|---|---|---|---|\n");
+    m.push_str(
+        "\n## Parameters\n\n| key | value | bounds | scale | start |\n|---|---|---|---|---|\n",
+    );
     for p in &s.parameters {
         m.push_str(&format!(
             "| {} | {:.6}{} | [{}, {}] | {:?} | {} |\n",
@@ -629,7 +642,11 @@ pub fn markdown(s: &Summary) -> String {
     let r = &s.registration;
     m.push_str(&format!(
         "\nRegistration ({}): moved {:.2} deg and {:.1} mm from the measurement's estimate.\n",
-        if r.fitted { "fitted with the parameters" } else { "the measurement's estimate" },
+        if r.fitted {
+            "fitted with the parameters"
+        } else {
+            "the measurement's estimate"
+        },
         r.moved_deg,
         r.moved_mm
     ));

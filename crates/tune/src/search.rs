@@ -200,15 +200,32 @@ impl History {
             let at = || format!("{}:{}", self.path.display(), i + 2);
             let f = split_csv(line);
             if f.len() != self.header.len() {
-                bail!("{}: {} fields, expected {}", at(), f.len(), self.header.len());
+                bail!(
+                    "{}: {} fields, expected {}",
+                    at(),
+                    f.len(),
+                    self.header.len()
+                );
             }
             let num = |k: usize| -> Result<f64> {
-                f[k].parse::<f64>()
-                    .with_context(|| format!("{}: column {}: `{}` is not a number", at(), self.header[k], f[k]))
+                f[k].parse::<f64>().with_context(|| {
+                    format!(
+                        "{}: column {}: `{}` is not a number",
+                        at(),
+                        self.header[k],
+                        f[k]
+                    )
+                })
             };
             let int = |k: usize| -> Result<usize> {
-                f[k].parse::<usize>()
-                    .with_context(|| format!("{}: column {}: `{}` is not a count", at(), self.header[k], f[k]))
+                f[k].parse::<usize>().with_context(|| {
+                    format!(
+                        "{}: column {}: `{}` is not a count",
+                        at(),
+                        self.header[k],
+                        f[k]
+                    )
+                })
             };
             let base = 4;
             self.rows.push(Evaluation {
@@ -347,7 +364,8 @@ pub fn search(
         let gen = generation.load(Ordering::SeqCst);
         // This generation's rows: replayed ones from the history, fresh
         // ones sorted by coordinates (their order of completion varies).
-        let mut new: Vec<Evaluation> = std::mem::take(&mut *fresh.lock().unwrap_or_else(|p| p.into_inner()));
+        let mut new: Vec<Evaluation> =
+            std::mem::take(&mut *fresh.lock().unwrap_or_else(|p| p.into_inner()));
         new.sort_by(|a, b| {
             a.x.iter()
                 .zip(&b.x)
@@ -467,7 +485,13 @@ mod tests {
 
     #[test]
     fn reflect_folds_into_the_unit_interval() {
-        for (x, want) in [(0.3, 0.3), (1.2, 0.8), (-0.25, 0.25), (2.5, 0.5), (-1.5, 0.5)] {
+        for (x, want) in [
+            (0.3, 0.3),
+            (1.2, 0.8),
+            (-0.25, 0.25),
+            (2.5, 0.5),
+            (-1.5, 0.5),
+        ] {
             assert!((reflect(x) - want).abs() < 1e-12, "{x}");
         }
         assert_eq!(reflect(f64::NAN), 0.5);
@@ -483,7 +507,10 @@ mod tests {
         for (v, want) in best.values.iter().zip([2.0, 7.0, 4.0]) {
             assert!((v - want).abs() < 0.05, "{:?}", best.values);
         }
-        assert!(one.history.iter().any(|e| e.failed.is_some()), "no failed candidate was tried");
+        assert!(
+            one.history.iter().any(|e| e.failed.is_some()),
+            "no failed candidate was tried"
+        );
         assert!(same(&one.history, &two.history), "jobs 1 and 2 differ");
         assert_eq!(
             std::fs::read_to_string(a.path().join("history.csv")).unwrap(),
@@ -512,13 +539,21 @@ mod tests {
         let resumed = run(cut.path(), 120, 1);
         assert_eq!(resumed.replayed, kept.len() - 1);
         assert!(resumed.replayed > 0);
-        assert!(same(&resumed.history, &full.history), "the resumed search differs");
+        assert!(
+            same(&resumed.history, &full.history),
+            "the resumed search differs"
+        );
         assert_eq!(
             std::fs::read_to_string(cut.path().join("history.csv")).unwrap(),
             text
         );
         // A history of another space is refused, not mixed in.
         let mut h = History::open(&cut.path().join("history.csv"), &[], &["a".into()], 1);
-        assert!(h.as_mut().err().unwrap().to_string().contains("history.csv:1"));
+        assert!(h
+            .as_mut()
+            .err()
+            .unwrap()
+            .to_string()
+            .contains("history.csv:1"));
     }
 }

@@ -161,7 +161,10 @@ struct DimFile {
 fn line_col(text: &str, offset: usize) -> (usize, usize) {
     let before = &text[..offset.min(text.len())];
     let line = before.matches('\n').count() + 1;
-    let col = before.rfind('\n').map_or(before.len(), |i| before.len() - i - 1) + 1;
+    let col = before
+        .rfind('\n')
+        .map_or(before.len(), |i| before.len() - i - 1)
+        + 1;
     (line, col)
 }
 
@@ -310,7 +313,12 @@ impl Space {
         engine: &str,
         extra: &EngineSettings,
     ) -> Result<PhysicalParams, String> {
-        let mut p = params_of(self.dims.iter().map(|d| d.key.as_str()).zip(values.iter().copied()))?;
+        let mut p = params_of(
+            self.dims
+                .iter()
+                .map(|d| d.key.as_str())
+                .zip(values.iter().copied()),
+        )?;
         let mut s = self.settings.get(engine).cloned().unwrap_or_default();
         s.extend(extra.iter().map(|(k, v)| (k.clone(), v.clone())));
         if !s.is_empty() {
@@ -322,7 +330,11 @@ impl Space {
 
 fn check_dim(key: &str, d: DimFile) -> Result<Dim, String> {
     let _ = key;
-    for (name, v) in [("low", Some(d.low)), ("high", Some(d.high)), ("start", d.start)] {
+    for (name, v) in [
+        ("low", Some(d.low)),
+        ("high", Some(d.high)),
+        ("start", d.start),
+    ] {
         if let Some(v) = v {
             if !v.is_finite() {
                 return Err(format!("{name} = {v}: expected a finite number"));
@@ -330,17 +342,11 @@ fn check_dim(key: &str, d: DimFile) -> Result<Dim, String> {
         }
     }
     if d.low >= d.high {
-        return Err(format!(
-            "low = {} is not below high = {}",
-            d.low, d.high
-        ));
+        return Err(format!("low = {} is not below high = {}", d.low, d.high));
     }
     let scale = d.scale.unwrap_or(Scale::Linear);
     if scale == Scale::Log && d.low <= 0.0 {
-        return Err(format!(
-            "scale = \"log\" needs low > 0 (low = {})",
-            d.low
-        ));
+        return Err(format!("scale = \"log\" needs low > 0 (low = {})", d.low));
     }
     let mut dim = Dim {
         key: String::new(),
@@ -351,10 +357,7 @@ fn check_dim(key: &str, d: DimFile) -> Result<Dim, String> {
     };
     dim.start = match d.start {
         Some(s) if s < d.low || s > d.high => {
-            return Err(format!(
-                "start = {s} is outside [{}, {}]",
-                d.low, d.high
-            ))
+            return Err(format!("start = {s} is outside [{}, {}]", d.low, d.high))
         }
         Some(s) => s,
         None => dim.value(0.5),
@@ -408,7 +411,10 @@ pub fn params_of<'a>(
 }
 
 fn quote(name: &str) -> String {
-    if name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-') {
+    if name
+        .chars()
+        .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+    {
         name.to_string()
     } else {
         format!("{name:?}")
@@ -437,7 +443,9 @@ mod tests {
         assert!((s.dims[1].unit(1000.0) - 1.0).abs() < 1e-12);
         let u = s.start_unit();
         assert_eq!(u, vec![0.5, 1.0, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5]);
-        let (r, t) = s.registration_offset(&[0.0, 0.0, 1.0, 0.5, 0.5, 0.0, 0.5, 1.0]).unwrap();
+        let (r, t) = s
+            .registration_offset(&[0.0, 0.0, 1.0, 0.5, 0.5, 0.0, 0.5, 1.0])
+            .unwrap();
         assert_eq!(r, [1.0, 0.0, 0.0]);
         assert_eq!(t, [-0.01, 0.0, 0.01]);
         let p = s
@@ -451,14 +459,46 @@ mod tests {
     #[test]
     fn bad_spaces_name_the_file_line_and_key() {
         let cases = [
-            ("[params]\n\"joints.j.nosuch\" = { low = 0.0, high = 1.0 }\n", 2, "nosuch"),
-            ("[params]\n\"wheels.j.damping\" = { low = 0.0, high = 1.0 }\n", 2, "not a parameter key"),
-            ("[params]\n\"joints.j.damping\" = { low = 2.0, high = 1.0 }\n", 2, "low = 2 is not below high = 1"),
-            ("[params]\n\"joints.j.damping\" = { low = nan, high = 1.0 }\n", 2, "low = NaN: expected a finite number"),
-            ("[params]\n\"joints.j.damping\" = { low = 0.0, high = 1.0, scale = \"log\" }\n", 2, "needs low > 0"),
-            ("[params]\n\n\"joints.j.damping\" = { low = 0.0, high = 1.0, start = 3.0 }\n", 3, "outside [0, 1]"),
-            ("[params]\n\"joints.j.damping\" = { low = 0.0, high = 1.0, stepsize = 3.0 }\n", 2, "stepsize"),
-            ("[params]\n\"joints.j.damping\" = { low = -1.0, high = 1.0 }\n", 2, "damping"),
+            (
+                "[params]\n\"joints.j.nosuch\" = { low = 0.0, high = 1.0 }\n",
+                2,
+                "nosuch",
+            ),
+            (
+                "[params]\n\"wheels.j.damping\" = { low = 0.0, high = 1.0 }\n",
+                2,
+                "not a parameter key",
+            ),
+            (
+                "[params]\n\"joints.j.damping\" = { low = 2.0, high = 1.0 }\n",
+                2,
+                "low = 2 is not below high = 1",
+            ),
+            (
+                "[params]\n\"joints.j.damping\" = { low = nan, high = 1.0 }\n",
+                2,
+                "low = NaN: expected a finite number",
+            ),
+            (
+                "[params]\n\"joints.j.damping\" = { low = 0.0, high = 1.0, scale = \"log\" }\n",
+                2,
+                "needs low > 0",
+            ),
+            (
+                "[params]\n\n\"joints.j.damping\" = { low = 0.0, high = 1.0, start = 3.0 }\n",
+                3,
+                "outside [0, 1]",
+            ),
+            (
+                "[params]\n\"joints.j.damping\" = { low = 0.0, high = 1.0, stepsize = 3.0 }\n",
+                2,
+                "stepsize",
+            ),
+            (
+                "[params]\n\"joints.j.damping\" = { low = -1.0, high = 1.0 }\n",
+                2,
+                "damping",
+            ),
         ];
         for (text, line, want) in cases {
             let e = parse(text).unwrap_err();
