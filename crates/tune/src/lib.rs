@@ -5,7 +5,7 @@
 //!
 //! - [`space`]: what is fitted ([`space::Space`], `assets/tuning/<engine>.toml`);
 //! - [`objective`]: what is minimised and how a candidate is simulated;
-//! - [`search`]: CMA-ES with parallel, isolated, resumable evaluations;
+//! - [`mod@search`]: CMA-ES with parallel, isolated, resumable evaluations;
 //! - [`outputs`]: sensitivity, the final scores and the files written.
 
 #![forbid(unsafe_code)]
