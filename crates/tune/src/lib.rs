@@ -69,6 +69,7 @@ struct Resume {
     seed: u64,
     train: Option<String>,
     holdout: Option<String>,
+    cube_weight_per_step: f64,
 }
 
 /// A tune: the candidates' parameters and registrations, and their
@@ -206,6 +207,7 @@ fn resume_state(spec: &TuneSpec, target: &Target) -> Resume {
         seed: spec.search.seed,
         train: target.train.runs.as_ref().map(|r| r.text.clone()),
         holdout: target.holdout.as_ref().map(|r| r.text.clone()),
+        cube_weight_per_step: target.cube_weight_per_step,
     }
 }
 

@@ -5,8 +5,9 @@
 //! measure `compare` reports), summed over the scenes, plus, in every
 //! scene with a cube, the distance between the simulated and the real
 //! cube's final positions times the scene's compared steps
-//! ([`CUBE_WEIGHT_PER_STEP`] = 1 per step, so a 0.05 m miss of the cube
-//! counts like a 0.05 m wrist error held through the whole scene). The
+//! ([`CUBE_WEIGHT_PER_STEP`] = 1 per step by default, so a 0.05 m miss of
+//! the cube counts like a 0.05 m wrist error held through the whole scene;
+//! `tune --cube-weight` changes it). The
 //! real runs are aligned and registered exactly as `compare` does; the
 //! registration of a candidate is its own (the measurement's estimate,
 //! moved by the candidate's registration offset when the space fits it).
@@ -30,8 +31,8 @@ use realitygap_study::{LoadedScene, Roots, Study};
 use serde::Serialize;
 use std::path::PathBuf;
 
-/// The weight of a cube's final position error, per compared step of its
-/// scene.
+/// The default weight of a cube's final position error, per compared step
+/// of its scene.
 pub const CUBE_WEIGHT_PER_STEP: f64 = 1.0;
 
 /// The objective of a candidate that diverged, crashed or could not be
@@ -50,8 +51,11 @@ pub struct TargetScene {
     pub scene_file: PathBuf,
     /// Control steps compared.
     pub steps: usize,
-    /// True when the scene has a cube (its final position counts).
+    /// True when the scene has a cube (its final position is measured).
     pub cube: bool,
+    /// The weight of the cube's final position error in the objective
+    /// (m per m; 0 without a cube).
+    pub cube_weight: f64,
 }
 
 /// The real arm a tune fits: the study's scenes with their real runs.
@@ -68,6 +72,8 @@ pub struct Target {
     pub base_registration: Registration,
     /// The control period, s.
     pub period_s: f64,
+    /// The weight of a cube's final position error per compared step.
+    pub cube_weight_per_step: f64,
 }
 
 /// One scene's share of an objective.
@@ -133,7 +139,11 @@ impl Target {
         roots: &Roots,
         runs: Option<RunRange>,
         holdout: Option<RunRange>,
+        cube_weight_per_step: f64,
     ) -> Result<Target> {
+        if !cube_weight_per_step.is_finite() || cube_weight_per_step < 0.0 {
+            bail!("--cube-weight {cube_weight_per_step}: expected a finite number >= 0");
+        }
         let mut study = study.clone();
         study.sources.clear();
         let mut scenes = Vec::new();
@@ -158,6 +168,11 @@ impl Target {
                 scene_file,
                 steps: s.steps,
                 cube: s.cube.is_some(),
+                cube_weight: if s.cube.is_some() {
+                    cube_weight_per_step * s.steps as f64
+                } else {
+                    0.0
+                },
             });
         }
         let loaded = study.load(roots)?;
@@ -185,6 +200,7 @@ impl Target {
             holdout,
             base_registration: Registration::IDENTITY,
             period_s: study.control_period_s,
+            cube_weight_per_step,
         };
         let reports = target.evaluate(
             &vec![Vec::new(); target.scenes.len()],
@@ -304,7 +320,7 @@ pub fn score_of(reports: &[SceneReport], scenes: &[TargetScene]) -> Score {
                 (Some(c), Some(rc)) => {
                     let d = Vec3::from_array(c.final_position_m)
                         .distance(Vec3::from_array(rc.final_position_m));
-                    total += CUBE_WEIGHT_PER_STEP * r.steps as f64 * d;
+                    total += s.cube_weight * d;
                     Some(d)
                 }
                 _ => return Score::failed(format!("scene {}: the cube was not measured", s.name)),

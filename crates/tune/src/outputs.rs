@@ -4,7 +4,7 @@
 //! `tuned.toml`, `registration.json`, `summary.json`, `summary.md` and
 //! `convergence.svg`/`.png` (`history.csv` is written by the search).
 
-use crate::objective::{score_of, CUBE_WEIGHT_PER_STEP, FAILED_OBJECTIVE};
+use crate::objective::{score_of, FAILED_OBJECTIVE};
 use crate::search::SearchEnd;
 use crate::space::{Dim, Scale};
 use crate::Tuner;
@@ -490,8 +490,7 @@ fn objective_text(tuner: &Tuner<'_>) -> String {
         .map(|s| {
             format!(
                 "{} x the cube's final position error in {}",
-                CUBE_WEIGHT_PER_STEP * s.steps as f64,
-                s.name
+                s.cube_weight, s.name
             )
         })
         .collect();
@@ -560,8 +559,9 @@ fn fmt_scored(s: &Option<Scored>) -> String {
 }
 
 fn comparison_md(c: &Comparison) -> String {
-    let mut t = "| scene | untuned (m, 95 % interval) | tuned (m, 95 % interval) |\n|---|---|---|\n"
-        .to_string();
+    let mut t =
+        "| scene | untuned (m, 95 % interval) | tuned (m, 95 % interval) |\n|---|---|---|\n"
+            .to_string();
     for s in &c.scenes {
         t.push_str(&format!(
             "| {} | {} | {} |\n",
