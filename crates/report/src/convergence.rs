@@ -32,6 +32,9 @@ pub struct ConvergenceFigure {
     pub title: String,
     /// The evaluations, in order.
     pub points: Vec<ConvergencePoint>,
+    /// A horizontal line to compare with, e.g. the untuned engine's
+    /// objective: its label and value, metres.
+    pub reference: Option<(String, f64)>,
 }
 
 /// A figure that cannot be drawn or written.
@@ -85,6 +88,15 @@ impl ConvergenceFigure {
             return Err("no finished evaluation to draw".into());
         };
         let n = self.points.len().max(2);
+        let r = self
+            .reference
+            .as_ref()
+            .map(|r| r.1)
+            .filter(|v| v.is_finite() && *v > 0.0);
+        let (lo, hi) = match r {
+            Some(v) => (lo.min(v), hi.max(v)),
+            None => (lo, hi),
+        };
         let (y0, y1) = (lo / 1.2, hi * 1.2);
         let mut chart = ChartBuilder::on(root)
             .caption(self.title.as_str(), (FAMILY, 16))
@@ -97,6 +109,8 @@ impl ConvergenceFigure {
             .configure_mesh()
             .x_desc("evaluation")
             .y_desc("objective (m, log scale)")
+            .y_labels(12)
+            .y_label_formatter(&|v| format!("{v:.0}"))
             .label_style((FAMILY, 12))
             .draw()
             .map_err(e)?;
@@ -126,6 +140,21 @@ impl ConvergenceFigure {
                 .map_err(e)?
                 .label("failed (diverged or crashed)")
                 .legend(move |(x, y)| Cross::new((x + 10, y), 4, red.stroke_width(2)));
+        }
+        if let (Some((label, _)), Some(v)) = (&self.reference, r) {
+            let green = RGBColor(0x00, 0x9E, 0x73);
+            chart
+                .draw_series(std::iter::once(plotters::element::DashedPathElement::new(
+                    vec![(0.0, v), (n as f64, v)],
+                    6,
+                    4,
+                    green.stroke_width(2),
+                )))
+                .map_err(e)?
+                .label(label.as_str())
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], green.stroke_width(2))
+                });
         }
         let blue = RGBColor(0x00, 0x72, 0xB2);
         let line: Vec<(f64, f64)> = self
@@ -206,13 +235,14 @@ mod tests {
                     failed,
                 })
                 .collect(),
+            reference: Some(("untuned".into(), 6.0)),
         };
         assert_eq!(
             f.best_so_far(),
             vec![Some(5.0), Some(5.0), Some(3.0), Some(3.0)]
         );
         let svg = f.to_svg().unwrap();
-        assert!(svg.contains("best so far") && svg.contains("failed"));
+        assert!(svg.contains("best so far") && svg.contains("failed") && svg.contains("untuned"));
         assert!(f.to_png().unwrap().starts_with(b"\x89PNG"));
         let empty = ConvergenceFigure {
             points: vec![],

@@ -542,6 +542,10 @@ fn write_files(
                 failed: e.failed.is_some(),
             })
             .collect(),
+        reference: Some((
+            format!("untuned, {:.2} m", summary.training.objective_m[0]),
+            summary.training.objective_m[0],
+        )),
     };
     files.extend(fig.write(out).map_err(|e| anyhow!("{e}"))?);
     Ok(files)
