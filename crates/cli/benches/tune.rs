@@ -104,7 +104,7 @@ fn main() {
         let s: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap())
                 .unwrap();
-        let rate = s["evaluations_per_s"].as_f64().unwrap();
+        let rate = s["evaluations_per_s"].as_f64().expect("a fresh tune");
         let to5 = s["evaluations_to_5pct"].as_u64();
         let raw = raw_seconds(engine, tmp.path());
         let per_eval = 2.0 / rate;

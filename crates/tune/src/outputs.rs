@@ -130,8 +130,9 @@ pub struct Summary {
     pub stop: String,
     /// Wall time of this command, seconds.
     pub wall_time_s: f64,
-    /// Evaluations made in this command per wall second.
-    pub evaluations_per_s: f64,
+    /// Evaluations made (not replayed) in this command per wall second;
+    /// `None` when every evaluation was replayed.
+    pub evaluations_per_s: Option<f64>,
     /// Evaluations until the best objective was within 5 % of the final
     /// best.
     pub evaluations_to_5pct: Option<usize>,
@@ -464,7 +465,7 @@ pub fn finish(
         failed: end.history.iter().filter(|e| e.failed.is_some()).count(),
         stop: end.reason.clone(),
         wall_time_s: wall,
-        evaluations_per_s: fresh as f64 / wall.max(1e-9),
+        evaluations_per_s: (fresh > 0).then(|| fresh as f64 / wall.max(1e-9)),
         evaluations_to_5pct: to_within_5pct(end, best.objective),
         best_objective_m: best.objective,
         parameters: param_results(&spec.space.dims, &spec.space.values(&u)),
@@ -602,7 +603,7 @@ fn comparison_md(c: &Comparison) -> String {
 pub fn markdown(s: &Summary) -> String {
     let mut m = format!("# Tune of {}\n\n", s.engine);
     m.push_str(&format!(
-        "- Objective: {}.\n- Space: `{}`; engine settings: {}.\n- Search: CMA-ES, seed {}, {} evaluations ({} replayed, {} failed) of a budget of {}, {} jobs; stopped by {}.\n- Wall time {:.1} s, {:.2} evaluations/s; within 5 % of the final best after {} evaluations.\n- Best objective {:.4} m on the training runs.\n\n",
+        "- Objective: {}.\n- Space: `{}`; engine settings: {}.\n- Search: CMA-ES, seed {}, {} evaluations ({} replayed, {} failed) of a budget of {}, {} jobs; stopped by {}.\n- Wall time {:.1} s, {} evaluations/s; within 5 % of the final best after {} evaluations.\n- Best objective {:.4} m on the training runs.\n\n",
         s.objective,
         s.space,
         if s.settings.is_empty() {
@@ -618,7 +619,8 @@ pub fn markdown(s: &Summary) -> String {
         s.jobs,
         s.stop,
         s.wall_time_s,
-        s.evaluations_per_s,
+        s.evaluations_per_s
+            .map_or("n/a (all replayed)".into(), |r| format!("{r:.2}")),
         s.evaluations_to_5pct.map_or("n/a".into(), |n| n.to_string()),
         s.best_objective_m,
     ));
