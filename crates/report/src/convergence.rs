@@ -79,7 +79,7 @@ impl ConvergenceFigure {
         let ok: Vec<&ConvergencePoint> = self
             .points
             .iter()
-            .filter(|p| !p.failed && p.objective_m.is_finite() && p.objective_m > 0.0)
+            .filter(|p| !p.failed && p.objective_m.is_finite() && p.objective_m >= 0.0)
             .collect();
         let (Some(lo), Some(hi)) = (
             ok.iter().map(|p| p.objective_m).reduce(f64::min),
@@ -93,32 +93,30 @@ impl ConvergenceFigure {
             .as_ref()
             .map(|r| r.1)
             .filter(|v| v.is_finite() && *v > 0.0);
-        let (lo, hi) = match r {
-            Some(v) => (lo.min(v), hi.max(v)),
-            None => (lo, hi),
-        };
-        let (y0, y1) = (lo / 1.2, hi * 1.2);
+        // A linear axis from 0 up to 1.5 x the reference (or the largest
+        // objective): the early, far-off candidates sit at the top edge.
+        let y1 = r.map_or(hi * 1.05, |v| (v * 1.5).max(lo * 1.2));
+        let clip = |v: f64| v.min(y1);
         let mut chart = ChartBuilder::on(root)
             .caption(self.title.as_str(), (FAMILY, 16))
             .margin(10)
             .x_label_area_size(36)
             .y_label_area_size(64)
-            .build_cartesian_2d(0f64..n as f64, (y0..y1).log_scale())
+            .build_cartesian_2d(0f64..n as f64, 0f64..y1 * 1.02)
             .map_err(e)?;
         chart
             .configure_mesh()
             .x_desc("evaluation")
-            .y_desc("objective (m, log scale)")
-            .y_labels(12)
-            .y_label_formatter(&|v| format!("{v:.0}"))
+            .y_desc("objective (m; above the top edge: at it)")
             .label_style((FAMILY, 12))
             .draw()
             .map_err(e)?;
         let grey = RGBColor(0x99, 0x99, 0x99);
         chart
             .draw_series(
-                ok.iter()
-                    .map(|p| Circle::new((p.evaluation as f64, p.objective_m), 2, grey.filled())),
+                ok.iter().map(|p| {
+                    Circle::new((p.evaluation as f64, clip(p.objective_m)), 2, grey.filled())
+                }),
             )
             .map_err(e)?
             .label("an evaluation")
@@ -135,7 +133,7 @@ impl ConvergenceFigure {
                 .draw_series(
                     failed
                         .iter()
-                        .map(|&x| Cross::new((x, y1 / 1.05), 4, red.stroke_width(2))),
+                        .map(|&x| Cross::new((x, y1), 4, red.stroke_width(2))),
                 )
                 .map_err(e)?
                 .label("failed (diverged or crashed)")
@@ -161,7 +159,7 @@ impl ConvergenceFigure {
             .best_so_far()
             .iter()
             .zip(&self.points)
-            .filter_map(|(b, p)| b.map(|b| (p.evaluation as f64, b)))
+            .filter_map(|(b, p)| b.map(|b| (p.evaluation as f64, clip(b))))
             .collect();
         chart
             .draw_series(LineSeries::new(line, blue.stroke_width(2)))
