@@ -147,6 +147,7 @@ fn simulate(args: &Args, scenes: &[PathBuf], engines: &[String], runs_dir: &Path
         set: vec![],
         timeout_s: args.timeout_s,
         params: args.params.clone(),
+        stitch: None,
     };
     match cmd_run::run(run_args) {
         Ok(()) => Vec::new(),
