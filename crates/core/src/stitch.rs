@@ -444,7 +444,10 @@ mod tests {
         assert!((c[0].lift_m - 1e-4).abs() < 1e-12, "{}", c[0].lift_m);
         assert!((c[0].removed_down_velocity_m_s - 0.02).abs() < 1e-15);
         assert!((state.objects[0].pose.position_m.z - 0.0375).abs() < 1e-12);
-        assert_eq!(state.objects[0].linear_velocity_m_s, Vec3::new(0.1, 0.0, 0.0));
+        assert_eq!(
+            state.objects[0].linear_velocity_m_s,
+            Vec3::new(0.1, 0.0, 0.0)
+        );
         // On its edge, the lowest point is half the face diagonal down.
         let edge = 0.075 * std::f64::consts::SQRT_2 / 2.0;
         state.objects[0] = cube(edge - 2e-3, tilted, 0.0);
