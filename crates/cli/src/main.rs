@@ -14,6 +14,7 @@ mod cmd_import;
 mod cmd_report;
 mod cmd_reproduce;
 mod cmd_run;
+mod cmd_stitch;
 
 /// Measure the reality gap: how far physics engines stray from a real robot
 /// on the same scripted task.
@@ -49,6 +50,10 @@ enum Command {
     /// CPU time and deviation from the converged reference, recommend the
     /// fastest setting within a tolerance.
     Frontier(cmd_frontier::Args),
+    /// Stitch engines per phase: choose per schedule phase the engine
+    /// closest to the real arm on training runs, run the stitched scenes
+    /// and score them against every single engine, with intervals.
+    Stitch(cmd_stitch::Args),
     /// Internal: run one simulation (a job as JSON on standard input) and
     /// print its trajectory; `run` starts one such process per run.
     #[command(name = realitygap_runner::child::RUN_ONE, hide = true)]
@@ -65,6 +70,7 @@ fn main() -> ExitCode {
         Command::Report(args) => cmd_report::run(args),
         Command::Reproduce(args) => cmd_reproduce::run(args),
         Command::Frontier(args) => cmd_frontier::run(args),
+        Command::Stitch(args) => cmd_stitch::run(args),
         Command::RunOne => cmd_run::run_one(),
     };
     match result {
