@@ -35,6 +35,10 @@ pub struct Args {
     /// Runs at a time (default: the number of cores).
     #[arg(long, short = 'j', value_name = "N")]
     pub jobs: Option<usize>,
+    /// Another plan to run and score, E1,E2,... (repeatable); used in the
+    /// scenes with at least as many phases as engines named.
+    #[arg(long = "plan", value_name = "E1,E2,...")]
+    pub plans: Vec<String>,
     /// How the gap is measured (`--runs` choose the plans, `--holdout`
     /// scores them).
     #[command(flatten)]
@@ -52,6 +56,7 @@ pub fn run(args: Args) -> Result<()> {
         stiff_engine: args.stiff,
         contact_engine: args.contact,
         jobs: args.jobs,
+        plans: args.plans,
     };
     let runner = Runner {
         registry: cmd_engines::compiled,

@@ -19,6 +19,8 @@
 //!    held-out runs (`--holdout`), with bootstrap intervals and, for each
 //!    plan, a paired comparison with the best single engine.
 //!
+//! Plans given with `--plan` are run and scored the same way.
+//!
 //! Outputs: `OUT/stitch.md` and `OUT/stitch.json` ([`StitchStudy`]).
 
 use crate::data_source::DataSource;
@@ -57,6 +59,9 @@ pub struct StitchOptions {
     pub contact_engine: String,
     /// Runs at a time (default: the number of cores).
     pub jobs: Option<usize>,
+    /// More plans to score, `E1,E2,...` (in each scene with at least as
+    /// many phases as engines named).
+    pub plans: Vec<String>,
 }
 
 /// How the runs are made: the engines and the child process.
@@ -87,7 +92,8 @@ pub struct Score {
 pub struct Row {
     /// The source's name in the comparison.
     pub source: String,
-    /// `engine`, `automatic` or `proposed`.
+    /// `engine`, `automatic`, `proposed` or `given` (`--plan`); a plan
+    /// that is also an earlier role's is listed once, under that role.
     pub role: String,
     /// The engine of every phase (a single engine: the same throughout).
     pub plan: Vec<String>,
@@ -185,21 +191,39 @@ pub fn stitch_study(opts: &StitchOptions, runner: &Runner) -> Result<StitchStudy
             .iter()
             .find(|r| r.scene == s.name)
             .with_context(|| format!("scene {} was not evaluated", s.name))?;
-        let automatic = automatic_plan(report, &with_engines, &s.name, &engines)?;
-        let proposed = proposed_plan(&s.scene, report, opts);
-        for plan in [&automatic, &proposed] {
+        let phases = phase_ticks(&s.scene).len();
+        let mut roles = vec![
+            (
+                "automatic".to_string(),
+                automatic_plan(report, &with_engines, &s.name, &engines)?,
+            ),
+            (
+                "proposed".to_string(),
+                proposed_plan(&s.scene, report, opts),
+            ),
+        ];
+        for given in &opts.plans {
+            // A plan longer than the scene's phases does not apply to it.
+            if let Ok(p) = StitchPlan::parse(given, &engine_names(runner.registry))
+                .with_context(|| "--plan")?
+                .per_phase(phases)
+            {
+                roles.push(("given".to_string(), p));
+            }
+        }
+        for (_, plan) in &roles {
             simulate(runner, opts, std::slice::from_ref(&s.file), &[], Some(plan))?;
         }
-        plans.push((
-            s.name.clone(),
-            automatic,
-            proposed,
-            report.reference.cube.clone(),
-        ));
+        let onset = report
+            .reference
+            .cube
+            .as_ref()
+            .and_then(|c| c.contact_onset_s);
+        plans.push((s.name.clone(), roles, onset));
     }
     let stitched: Vec<(String, Vec<String>)> = plans
         .iter()
-        .flat_map(|(scene, a, p, _)| [(scene.clone(), a.clone()), (scene.clone(), p.clone())])
+        .flat_map(|(scene, roles, _)| roles.iter().map(|(_, p)| (scene.clone(), p.clone())))
         .collect();
     let full = with_sources(&study, &runs_dir, &engines, &stitched)?;
     let train_reports = evaluate(&without_holdout(&full), &roots, &training)?;
@@ -208,7 +232,7 @@ pub fn stitch_study(opts: &StitchOptions, runner: &Runner) -> Result<StitchStudy
         None => None,
     };
     let mut out = Vec::new();
-    for (scene, automatic, proposed, cube) in plans {
+    for (scene, roles, onset) in plans {
         let find = |reports: &[SceneReport]| reports.iter().find(|r| r.scene == scene).cloned();
         let train = find(&train_reports).context("training report")?;
         let held = held_reports.as_deref().and_then(find);
@@ -216,8 +240,8 @@ pub fn stitch_study(opts: &StitchOptions, runner: &Runner) -> Result<StitchStudy
             &full,
             &engines,
             (&train, held.as_ref()),
-            (automatic, proposed),
-            cube.and_then(|c| c.contact_onset_s),
+            &roles,
+            onset,
         )?);
     }
     let result = StitchStudy {
@@ -456,9 +480,17 @@ fn scene_outcome(
     study: &Study,
     engines: &[String],
     (train, held): (&SceneReport, Option<&SceneReport>),
-    (automatic, proposed): (Vec<String>, Vec<String>),
+    roles: &[(String, Vec<String>)],
     contact_onset_s: Option<f64>,
 ) -> Result<SceneStitch> {
+    let plan_of = |role: &str| {
+        roles
+            .iter()
+            .find(|(r, _)| r == role)
+            .map(|(_, p)| p.clone())
+            .unwrap_or_default()
+    };
+    let (automatic, proposed) = (plan_of("automatic"), plan_of("proposed"));
     let scene = train.scene.clone();
     let summary =
         |r: &SceneReport, name: &str| r.sources.iter().find(|s| s.source == name).cloned();
@@ -469,11 +501,14 @@ fn scene_outcome(
             entries.push((name, "engine".into(), vec![e.clone(); automatic.len()]));
         }
     }
-    for (role, plan) in [("automatic", &automatic), ("proposed", &proposed)] {
+    for (role, plan) in roles {
         let p = StitchPlan {
             engines: plan.clone(),
         };
-        entries.push((p.display_name(plan.len())?, role.into(), plan.clone()));
+        let name = p.display_name(plan.len())?;
+        if !entries.iter().any(|(n, _, _)| *n == name) {
+            entries.push((name, role.clone(), plan.clone()));
+        }
     }
     for (source, role, plan) in entries {
         let Some(t) = summary(train, &source) else {
