@@ -363,3 +363,108 @@ fn bad_plans_are_clear_errors() {
         "nothing was created"
     );
 }
+
+/// `realitygap stitch` on the study's recordings: plans chosen on runs
+/// 1-15, scored on 1-15 and 16-20. The automatic plan is, per phase, the
+/// engine with the smallest training error in that phase; a plan of one
+/// engine throughout scores exactly as that engine (stitching to the
+/// same engine loses nothing, through the whole pipeline); the proposed
+/// plan of scene 3 is Bullet until the real cube moves (14.2 s, in the
+/// third phase), MuJoCo after.
+#[test]
+fn the_stitch_command_chooses_runs_and_scores_plans() {
+    let Some(data) = realitygap::paper_data_for_tests() else {
+        return;
+    };
+    if engine("bullet").is_none() || engine("mujoco").is_none() {
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let study = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/studies/collins2019.toml");
+    let o = Command::new(env!("CARGO_BIN_EXE_realitygap"))
+        .arg("stitch")
+        .arg(&study)
+        .arg("--data")
+        .arg(&data)
+        .args(["--runs", "1-15", "--holdout", "16-20", "--bootstrap", "200"])
+        .args(["--plan", "ode,ode,mujoco"])
+        .arg("--out")
+        .arg(tmp.path())
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let md = std::fs::read_to_string(tmp.path().join("stitch.md")).unwrap();
+    assert_eq!(md, String::from_utf8_lossy(&o.stdout));
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(tmp.path().join("stitch.json")).unwrap())
+            .unwrap();
+    let scenes = v["scenes"].as_array().unwrap();
+    assert_eq!(scenes.len(), 3);
+    for s in scenes {
+        let rows = s["rows"].as_array().unwrap();
+        let engines: Vec<&serde_json::Value> =
+            rows.iter().filter(|r| r["role"] == "engine").collect();
+        assert_eq!(engines.len(), self::engines().len());
+        let phases = s["phases_s"].as_array().unwrap().len();
+        let automatic: Vec<&str> = s["automatic"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|e| e.as_str().unwrap())
+            .collect();
+        assert_eq!(automatic.len(), phases);
+        for (i, chosen) in automatic.iter().enumerate() {
+            let best = engines
+                .iter()
+                .min_by(|a, b| {
+                    let e = |r: &serde_json::Value| {
+                        r["training"]["phase_errors_m"][i].as_f64().unwrap()
+                    };
+                    e(a).total_cmp(&e(b))
+                })
+                .unwrap();
+            assert_eq!(
+                best["plan"][0].as_str(),
+                Some(*chosen),
+                "{} phase {i}",
+                s["scene"]
+            );
+        }
+        for r in rows.iter().filter(|r| r["role"] != "engine") {
+            let plan = r["plan"].as_array().unwrap();
+            assert!(r["held_out"]["error_m"].as_f64().unwrap().is_finite());
+            assert!(r["training"]["interval_m"]["low_m"].as_f64().is_some());
+            if plan.iter().all(|e| *e == plan[0]) {
+                let single = engines.iter().find(|e| e["plan"][0] == plan[0]).unwrap();
+                for set in ["training", "held_out"] {
+                    assert_eq!(r[set]["error_m"], single[set]["error_m"], "{}", r["source"]);
+                }
+            }
+        }
+        assert!(s["held_out_versus"].as_array().unwrap().len() >= 2);
+    }
+    let scene3 = &scenes[2];
+    assert_eq!(scene3["scene"], "scene3_cube_push");
+    assert_eq!(
+        scene3["proposed"],
+        serde_json::json!(["bullet", "bullet", "mujoco"])
+    );
+    let onset = scene3["contact_onset_s"].as_f64().unwrap();
+    assert!((14.0..20.0).contains(&onset), "{onset}");
+    assert_eq!(scenes[0]["proposed"], serde_json::json!(["bullet"]));
+    // The three-engine plan applies to scenes 2 (the last repeated) and
+    // 3, not to scene 1 (one phase).
+    let given = |k: usize| -> Vec<String> {
+        scenes[k]["rows"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|r| r["role"] == "given")
+            .map(|r| r["source"].as_str().unwrap().to_string())
+            .collect()
+    };
+    assert!(given(0).is_empty());
+    assert_eq!(given(1), ["stitched ode>ode>mujoco>mujoco"]);
+    assert_eq!(given(2), ["stitched ode>ode>mujoco"]);
+    assert!(md.contains("## scene3_cube_push"), "{md}");
+}
