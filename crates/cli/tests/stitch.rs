@@ -293,6 +293,7 @@ fn the_command_runs_stores_and_compares_a_stitched_source() {
 name = "scene3_cube_push"
 steps = 400
 phases_s = [0.0, 8.0, 14.0]
+cube = { nominal_start_m = [0.5, 0.0, 0.0375], contact_threshold_m = 0.005 }
 [scenes.reference]
 name = "Bullet"
 format = "store"
@@ -317,6 +318,35 @@ dir = "scene3_cube_push/stitched-bullet-bullet-mujoco"
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(text.contains("stitched bullet>bullet>mujoco"), "{text}");
+    // `report` draws the handovers (from the manifest) in the figures.
+    let report = tmp.path().join("report");
+    let o = realitygap(&[
+        "report",
+        study.to_str().unwrap(),
+        "--data",
+        "none",
+        "--results",
+        out.to_str().unwrap(),
+        "--out",
+        report.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let svg =
+        std::fs::read_to_string(report.join("figures/scene3_cube_push_cube_displacement.svg"))
+            .unwrap();
+    let ticks = svg
+        .split("<polyline")
+        .filter(|p| p.contains("stroke-width=\"3\""))
+        .count();
+    assert_eq!(ticks, 2, "one tick per handover (8 s, 14 s)");
+    let prov = std::fs::read_to_string(report.join("provenance.json")).unwrap();
+    let prov: serde_json::Value = serde_json::from_str(&prov).unwrap();
+    assert_eq!(
+        prov["handovers"][0]["times_s"],
+        serde_json::json!([8.0, 14.0])
+    );
+    let html = std::fs::read_to_string(report.join("index.html")).unwrap();
+    assert!(html.contains("its handovers from one engine to the next (stitched bullet&gt;bullet&gt;mujoco at 8 s, 14 s)"));
 }
 
 /// Bad plans are errors naming the plan before anything runs.

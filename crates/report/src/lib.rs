@@ -29,7 +29,7 @@ pub mod html;
 pub mod provenance;
 
 pub use figures::{Figure, FigureKind, SourceStyles};
-pub use provenance::{Provenance, SourceProvenance};
+pub use provenance::{HandoverMarks, Provenance, SourceProvenance};
 
 use realitygap_analysis::table::{self, Format};
 use realitygap_analysis::SceneReport;
@@ -101,10 +101,13 @@ pub fn write_report(
     let mut files = ReportFiles::default();
 
     let styles = SourceStyles::for_reports(reports);
-    let figures: Vec<Figure> = reports
+    let mut figures: Vec<Figure> = reports
         .iter()
         .flat_map(|r| figures::scene_figures(r, &styles))
         .collect();
+    for f in &mut figures {
+        f.add_handovers(&provenance.handovers);
+    }
     let mut svgs = Vec::with_capacity(figures.len());
     let mut rel = Vec::with_capacity(figures.len());
     for f in &figures {

@@ -21,12 +21,16 @@
 //!
 //! Plans given with `--plan` are run and scored the same way.
 //!
-//! Outputs: `OUT/stitch.md` and `OUT/stitch.json` ([`StitchStudy`]).
+//! Outputs: `OUT/stitch.md` and `OUT/stitch.json` ([`StitchStudy`]), and
+//! `OUT/report/` (the report of every source on the held-out runs, else
+//! the training runs; the stitched sources' handovers drawn as vertical
+//! lines in their colour).
 
 use crate::data_source::DataSource;
 use crate::evaluate::evaluate_scenes;
 use crate::load::Roots;
 use crate::measure::Measure;
+use crate::provenance::{measure_details, provenance_for_study};
 use crate::reproduce::engine_sources;
 use crate::study::{SourceFormat, SourceSpec, Study};
 use anyhow::{bail, Context, Result};
@@ -258,6 +262,13 @@ pub fn stitch_study(opts: &StitchOptions, runner: &Runner) -> Result<StitchStudy
         scenes: out,
     };
     write_outputs(&opts.out, &result)?;
+    let mut provenance = provenance_for_study(&full, &opts.study, &roots, opts.measure.mode);
+    provenance.details.extend(opts.data.provenance());
+    provenance.details.extend(measure_details(&opts.measure));
+    let scored = held_reports.as_ref().unwrap_or(&train_reports);
+    let report_dir = opts.out.join("report");
+    realitygap_report::write_report(scored, &provenance, &report_dir)
+        .with_context(|| format!("writing the report into {}", report_dir.display()))?;
     Ok(result)
 }
 
