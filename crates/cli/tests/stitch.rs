@@ -318,8 +318,15 @@ dir = "scene3_cube_push/stitched-bullet-bullet-mujoco"
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(text.contains("stitched bullet>bullet>mujoco"), "{text}");
+    report_draws_the_handovers(&study, &out, tmp.path());
+}
+
+/// `report` on `study` (results in `results`) draws the stitched source's
+/// handovers (from its manifest) in its figures.
+fn report_draws_the_handovers(study: &Path, out: &Path, tmp: &Path) {
+    let study = study.to_path_buf();
     // `report` draws the handovers (from the manifest) in the figures.
-    let report = tmp.path().join("report");
+    let report = tmp.join("report");
     let o = realitygap(&[
         "report",
         study.to_str().unwrap(),

@@ -1002,8 +1002,30 @@ impl Figure {
                 )))
                 .map_err(e)?;
         }
-        // Each stitched source's handovers: a solid tick in its colour
-        // hanging from the top, one below the other per source.
+        self.draw_handovers(&mut chart)?;
+        self.draw_lines(&mut chart)?;
+        let omitted: Vec<String> = self.omitted.iter().map(|o| o.source.clone()).collect();
+        let clipped: Vec<String> = self.off_scale.iter().map(|o| o.source.clone()).collect();
+        draw_legend(
+            &legend,
+            &self.lines,
+            self.band.as_ref(),
+            band_color,
+            &omitted,
+            &clipped,
+        )
+        .map_err(e)?;
+        Ok(())
+    }
+
+    /// Draws each stitched source's handovers: a solid tick in its colour
+    /// hanging from the top, one below the other per source.
+    fn draw_handovers<DB: DrawingBackend>(
+        &self,
+        chart: &mut ChartContext<'_, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    ) -> Result<(), String> {
+        let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+        let (y0, y1) = self.y_range;
         let mut sources: Vec<&str> = Vec::new();
         for h in &self.handovers {
             let k = match sources.iter().position(|s| *s == h.source) {
@@ -1023,18 +1045,6 @@ impl Figure {
                 )))
                 .map_err(e)?;
         }
-        self.draw_lines(&mut chart)?;
-        let omitted: Vec<String> = self.omitted.iter().map(|o| o.source.clone()).collect();
-        let clipped: Vec<String> = self.off_scale.iter().map(|o| o.source.clone()).collect();
-        draw_legend(
-            &legend,
-            &self.lines,
-            self.band.as_ref(),
-            band_color,
-            &omitted,
-            &clipped,
-        )
-        .map_err(e)?;
         Ok(())
     }
 

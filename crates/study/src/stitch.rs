@@ -191,39 +191,13 @@ pub fn stitch_study(opts: &StitchOptions, runner: &Runner) -> Result<StitchStudy
     let fit = evaluate(&with_engines, &roots, &training)?;
     let mut plans = Vec::new();
     for s in &scenes {
-        let report = fit
-            .iter()
-            .find(|r| r.scene == s.name)
-            .with_context(|| format!("scene {} was not evaluated", s.name))?;
-        let phases = phase_ticks(&s.scene).len();
-        let mut roles = vec![
-            (
-                "automatic".to_string(),
-                automatic_plan(report, &with_engines, &s.name, &engines)?,
-            ),
-            (
-                "proposed".to_string(),
-                proposed_plan(&s.scene, report, opts),
-            ),
-        ];
-        for given in &opts.plans {
-            // A plan longer than the scene's phases does not apply to it.
-            if let Ok(p) = StitchPlan::parse(given, &engine_names(runner.registry))
-                .with_context(|| "--plan")?
-                .per_phase(phases)
-            {
-                roles.push(("given".to_string(), p));
-            }
-        }
-        for (_, plan) in &roles {
-            simulate(runner, opts, std::slice::from_ref(&s.file), &[], Some(plan))?;
-        }
-        let onset = report
-            .reference
-            .cube
-            .as_ref()
-            .and_then(|c| c.contact_onset_s);
-        plans.push((s.name.clone(), roles, onset));
+        plans.push(plan_scene(
+            opts,
+            runner,
+            s,
+            (&fit, &with_engines),
+            &engines,
+        )?);
     }
     let stitched: Vec<(String, Vec<String>)> = plans
         .iter()
@@ -270,6 +244,54 @@ pub fn stitch_study(opts: &StitchOptions, runner: &Runner) -> Result<StitchStudy
     realitygap_report::write_report(scored, &provenance, &report_dir)
         .with_context(|| format!("writing the report into {}", report_dir.display()))?;
     Ok(result)
+}
+
+/// A scene's plans (role, engine per phase), all run, and when the real
+/// cube starts to move.
+type ScenePlans = (String, Vec<(String, Vec<String>)>, Option<f64>);
+
+/// Chooses and runs the plans of one scene from its training report
+/// (`fit`, evaluated on `study`).
+fn plan_scene(
+    opts: &StitchOptions,
+    runner: &Runner,
+    s: &StudySceneFile,
+    (fit, study): (&[SceneReport], &Study),
+    engines: &[String],
+) -> Result<ScenePlans> {
+    let report = fit
+        .iter()
+        .find(|r| r.scene == s.name)
+        .with_context(|| format!("scene {} was not evaluated", s.name))?;
+    let phases = phase_ticks(&s.scene).len();
+    let mut roles = vec![
+        (
+            "automatic".to_string(),
+            automatic_plan(report, study, &s.name, engines)?,
+        ),
+        (
+            "proposed".to_string(),
+            proposed_plan(&s.scene, report, opts),
+        ),
+    ];
+    for given in &opts.plans {
+        // A plan longer than the scene's phases does not apply to it.
+        if let Ok(p) = StitchPlan::parse(given, &engine_names(runner.registry))
+            .with_context(|| "--plan")?
+            .per_phase(phases)
+        {
+            roles.push(("given".to_string(), p));
+        }
+    }
+    for (_, plan) in &roles {
+        simulate(runner, opts, std::slice::from_ref(&s.file), &[], Some(plan))?;
+    }
+    let onset = report
+        .reference
+        .cube
+        .as_ref()
+        .and_then(|c| c.contact_onset_s);
+    Ok((s.name.clone(), roles, onset))
 }
 
 /// The study's scenes with their scene files (relative to the study file).
