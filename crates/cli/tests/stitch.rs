@@ -504,4 +504,15 @@ fn the_stitch_command_chooses_runs_and_scores_plans() {
     assert_eq!(given(1), ["stitched ode>ode>mujoco>mujoco"]);
     assert_eq!(given(2), ["stitched ode>ode>mujoco"]);
     assert!(md.contains("## scene3_cube_push"), "{md}");
+    // The report has the stitching section, with one answer per scene.
+    let html = std::fs::read_to_string(tmp.path().join("report/index.html")).unwrap();
+    assert!(html.contains("<section id=\"stitching\">"));
+    for s in scenes {
+        let scene = s["scene"].as_str().unwrap();
+        assert!(
+            md.contains(&format!("- {scene}: the automatic plan is ")),
+            "{md}"
+        );
+        assert!(html.contains(&format!("<p>{scene}: the automatic plan is ")));
+    }
 }

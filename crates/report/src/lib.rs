@@ -89,6 +89,17 @@ pub fn write_report(
     provenance: &Provenance,
     out_dir: &Path,
 ) -> Result<ReportFiles, ReportError> {
+    write_report_with(reports, provenance, out_dir, &[])
+}
+
+/// [`write_report`] with `extra` sections in `index.html`, after the
+/// summary.
+pub fn write_report_with(
+    reports: &[SceneReport],
+    provenance: &Provenance,
+    out_dir: &Path,
+    extra: &[html::ExtraSection],
+) -> Result<ReportFiles, ReportError> {
     if reports.is_empty() {
         return Err(ReportError::Empty);
     }
@@ -180,7 +191,7 @@ pub fn write_report(
             "capture-frame registration (JSON)".into(),
         ));
     }
-    let page = html::render_index(reports, &entries, provenance, &downloads);
+    let page = html::render_index_with(reports, &entries, provenance, &downloads, extra);
     files.index_html = write(&out_dir.join("index.html"), page)?;
     Ok(files)
 }

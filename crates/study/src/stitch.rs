@@ -38,6 +38,7 @@ use realitygap_analysis::bootstrap::{paired, Interval, PairedComparison};
 use realitygap_analysis::compare::{fmt_interval, SceneReport, SourceSummary};
 use realitygap_core::scene::Scene;
 use realitygap_core::stitch::{phase_ticks, StitchPlan};
+use realitygap_report::html::ExtraSection;
 use realitygap_runner::prepare::engine_names;
 use realitygap_runner::{BatchSpec, Launcher, Plan, Registry};
 use serde::Serialize;
@@ -241,8 +242,13 @@ pub fn stitch_study(opts: &StitchOptions, runner: &Runner) -> Result<StitchStudy
     provenance.details.extend(measure_details(&opts.measure));
     let scored = held_reports.as_ref().unwrap_or(&train_reports);
     let report_dir = opts.out.join("report");
-    realitygap_report::write_report(scored, &provenance, &report_dir)
-        .with_context(|| format!("writing the report into {}", report_dir.display()))?;
+    realitygap_report::write_report_with(
+        scored,
+        &provenance,
+        &report_dir,
+        &[report_section(&result)],
+    )
+    .with_context(|| format!("writing the report into {}", report_dir.display()))?;
     Ok(result)
 }
 
@@ -629,6 +635,107 @@ fn fmt_phases(s: &Score) -> String {
         .join(" / ")
 }
 
+/// The plain answer in one scene: does a plan beat the best single
+/// engine on the held-out runs (else the training runs)?
+pub fn answer(s: &SceneStitch) -> String {
+    let (versus, runs) = if s.held_out_versus.is_empty() {
+        (&s.training_versus, "training")
+    } else {
+        (&s.held_out_versus, "held-out")
+    };
+    let single = s
+        .automatic
+        .first()
+        .filter(|e| s.automatic.iter().all(|x| x == *e));
+    let prefix = match single {
+        Some(e) => format!(
+            "{}: the automatic plan is {e} in every phase (no phase is closer in another engine on the training runs)",
+            s.scene
+        ),
+        None => format!("{}: the automatic plan is {}", s.scene, s.automatic.join(">")),
+    };
+    // The plans that hand over between different engines.
+    let mixes = |v: &&Versus| {
+        s.rows
+            .iter()
+            .find(|r| r.source == v.plan)
+            .is_some_and(|r| r.plan.iter().any(|e| *e != r.plan[0]))
+    };
+    let best = versus
+        .iter()
+        .filter(mixes)
+        .filter(|v| v.gain_m.is_finite())
+        .max_by(|a, b| a.gain_m.total_cmp(&b.gain_m));
+    match best {
+        Some(v) if v.gain_interval_m.is_some_and(|i| i.low_m > 0.0) => format!(
+            "{prefix}; stitching beats the best single engine ({}) on the {runs} runs: {} is closer by {:.3} m {} (probability {:.3}).",
+            v.best_single, v.plan, v.gain_m, fmt_interval(v.gain_interval_m), v.probability_better
+        ),
+        Some(v) => format!(
+            "{prefix}; no plan mixing engines beats the best single engine ({}) on the {runs} runs: the best, {}, gains {:.3} m {} (probability {:.3} that it is closer).",
+            v.best_single, v.plan, v.gain_m, fmt_interval(v.gain_interval_m), v.probability_better
+        ),
+        None => format!("{prefix}; no plan mixing engines was scored."),
+    }
+}
+
+/// The report's section on stitching: the answer per scene and the table
+/// of every engine and plan.
+pub fn report_section(result: &StitchStudy) -> ExtraSection {
+    let mut rows = Vec::new();
+    for s in &result.scenes {
+        for r in &s.rows {
+            let gain = s
+                .held_out_versus
+                .iter()
+                .chain(&s.training_versus)
+                .find(|v| v.plan == r.source)
+                .map_or(String::new(), |v| {
+                    format!(
+                        "{:.3} {} (p {:.3})",
+                        v.gain_m,
+                        fmt_interval(v.gain_interval_m),
+                        v.probability_better
+                    )
+                });
+            rows.push(vec![
+                s.scene.clone(),
+                r.source.clone(),
+                r.role.clone(),
+                fmt_score(Some(&r.training)),
+                fmt_score(r.held_out.as_ref()),
+                gain,
+                r.training
+                    .cube_displacement_m
+                    .map_or("-".into(), |d| format!("{d:.3}")),
+            ]);
+        }
+    }
+    let mut paragraphs = vec![format!(
+        "Each phase of a scene simulated in the engine closest to the real arm in that phase on the training runs ({}), the state handed over at the phase boundaries; the study's proposed plan (stiff motors for free motion, MuJoCo from the phase the real cube starts to move) and any plan given with --plan beside it. Scored on the training runs and on the held-out runs ({}): accumulated wrist error, metres, 95 % bootstrap intervals; gain: best single engine's error minus the plan's on the held-out runs (positive: the plan is closer), with the probability that the plan is closer.",
+        result.training_runs,
+        result.held_out_runs.as_deref().unwrap_or("none")
+    )];
+    paragraphs.extend(result.scenes.iter().map(answer));
+    ExtraSection {
+        id: "stitching".into(),
+        title: "Stitching engines per phase".into(),
+        paragraphs,
+        header: [
+            "Scene",
+            "Source",
+            "Role",
+            "Training",
+            "Held out",
+            "Gain (held out)",
+            "Cube moved (m)",
+        ]
+        .map(String::from)
+        .to_vec(),
+        rows,
+    }
+}
+
 /// The Markdown table of the outcome.
 pub fn markdown(result: &StitchStudy) -> String {
     let mut md = format!(
@@ -637,6 +744,10 @@ pub fn markdown(result: &StitchStudy) -> String {
         result.training_runs,
         result.held_out_runs.as_deref().unwrap_or("none")
     );
+    md += "\n";
+    for s in &result.scenes {
+        md += &format!("- {}\n", answer(s));
+    }
     for s in &result.scenes {
         md += &format!(
             "\n## {}\n\nPhases start at {:?} s; the real cube moves from {} ({} in all). Automatic plan: {}; proposed plan: {}.\n\n| Source | Role | Training | Per phase (training) | Held out | Cube moved (m) |\n|---|---|---:|---:|---:|---:|\n",
