@@ -179,8 +179,13 @@ pub struct Correction {
 /// across it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Handover {
-    /// Simulated time of the handover, s.
+    /// Time of the handover on the controller's clock (the tick times the
+    /// control period), s.
     pub t_s: f64,
+    /// The time the engine handing over reported, s (its own sum of
+    /// timesteps: MuJoCo's is 13.999999999986 s at 14 s).
+    #[serde(default)]
+    pub engine_time_s: f64,
     /// The control tick the receiving engine starts at.
     pub tick: usize,
     /// The engine that ran the phase before.
@@ -298,7 +303,8 @@ pub fn hand_over(
     a.tracked_poses(&mut pa);
     b.tracked_poses(&mut pb);
     Ok(Handover {
-        t_s: before.time_s,
+        t_s: tick as f64 * scene.controller.period_s,
+        engine_time_s: before.time_s,
         tick,
         from: from.to_string(),
         to: to.to_string(),
@@ -419,6 +425,175 @@ mod tests {
         assert_eq!(phase_ticks(&scene), [(0, 160), (160, 280), (280, 400)]);
         let scene = crate::testing::scene("scene1_single_joint");
         assert_eq!(phase_ticks(&scene), [(0, 120)]);
+    }
+
+    /// A perfect velocity servo in 6 joints; the wrist is at (q1, q2, 0),
+    /// the cube rests `sunk_m` inside the table; NaN from `blow_up_s` on.
+    struct Toy {
+        name: &'static str,
+        t: f64,
+        q: Vec<f64>,
+        v: Vec<f64>,
+        cube: Pose,
+        blow_up_s: Option<f64>,
+    }
+
+    impl Toy {
+        fn new(name: &'static str, sunk_m: f64) -> Toy {
+            Toy {
+                name,
+                t: 0.0,
+                q: vec![0.0; 6],
+                v: vec![0.0; 6],
+                cube: Pose::new(Vec3::new(0.5, 0.0, 0.0375 - sunk_m), Quat::IDENTITY),
+                blow_up_s: None,
+            }
+        }
+    }
+
+    impl Simulation for Toy {
+        fn timestep_s(&self) -> f64 {
+            0.01
+        }
+        fn time_s(&self) -> f64 {
+            self.t
+        }
+        fn joint_count(&self) -> usize {
+            6
+        }
+        fn tracked_count(&self) -> usize {
+            2
+        }
+        fn set_joint_angles_rad(&mut self, rad: &[f64]) -> Result<(), EngineError> {
+            self.q.copy_from_slice(rad);
+            Ok(())
+        }
+        fn set_joint_velocity_targets(&mut self, rad_s: &[f64]) {
+            self.v.copy_from_slice(rad_s);
+        }
+        fn step(&mut self) -> Result<(), EngineError> {
+            for (q, v) in self.q.iter_mut().zip(&self.v) {
+                *q += v * 0.01;
+            }
+            self.t += 0.01;
+            if self.blow_up_s.is_some_and(|t| self.t >= t) {
+                self.q[0] = f64::NAN;
+            }
+            Ok(())
+        }
+        fn joint_angles_rad(&self, out: &mut [f64]) {
+            out.copy_from_slice(&self.q);
+        }
+        fn tracked_poses(&self, out: &mut [Pose]) {
+            out[0] = Pose::new(Vec3::new(self.q[0], self.q[1], 0.0), Quat::IDENTITY);
+            out[1] = self.cube;
+        }
+        fn state(&self) -> Result<SimState, EngineError> {
+            Ok(SimState {
+                time_s: self.t,
+                joint_angles_rad: self.q.clone(),
+                joint_velocities_rad_s: self.v.clone(),
+                joint_velocity_targets_rad_s: self.v.clone(),
+                objects: vec![ObjectState {
+                    name: "cube".into(),
+                    pose: self.cube,
+                    linear_velocity_m_s: Vec3::new(0.0, 0.0, 0.0),
+                    angular_velocity_rad_s: Vec3::new(0.0, 0.0, 0.0),
+                }],
+                native: Some(crate::engine::NativeState {
+                    engine: self.name.into(),
+                    data: vec![],
+                }),
+            })
+        }
+        fn set_state(&mut self, state: &SimState) -> Result<(), EngineError> {
+            self.t = state.time_s;
+            self.q.copy_from_slice(&state.joint_angles_rad);
+            self.v.copy_from_slice(&state.joint_velocity_targets_rad_s);
+            self.cube = state.objects[0].pose;
+            Ok(())
+        }
+    }
+
+    fn plan(names: &[&str]) -> Vec<String> {
+        names.iter().map(|s| s.to_string()).collect()
+    }
+
+    fn run(scene: &Scene, names: &[&str], blow_up_s: Option<f64>) -> StitchedRun {
+        let mut load = |name: &str| -> Result<Box<dyn Simulation>, RunError> {
+            let mut toy = Toy::new(if name == "a" { "a" } else { "b" }, 1e-4);
+            toy.blow_up_s = blow_up_s;
+            Ok(Box::new(toy))
+        };
+        let options = RunOptions::default();
+        run_stitched(
+            scene,
+            &plan(names),
+            &options,
+            &ControlParams::default(),
+            &mut load,
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn a_stitched_run_is_one_controller_run_with_a_handover_per_boundary() {
+        let scene = crate::testing::scene("scene3_cube_push");
+        let mut whole = Toy::new("a", 1e-4);
+        let plain =
+            crate::controller::run_scene(&mut whole, &scene, &RunOptions::default()).unwrap();
+        let same = run(&scene, &["a", "a", "a"], None);
+        assert_eq!(same.outcome.trajectory, plain.trajectory);
+        assert_eq!(same.outcome.engine_steps, plain.engine_steps);
+        let ticks: Vec<(usize, f64, bool)> = same
+            .handovers
+            .iter()
+            .map(|h| (h.tick, h.t_s, h.native))
+            .collect();
+        assert_eq!(ticks, [(160, 8.0, true), (280, 14.0, true)]);
+        assert!(same.handovers.iter().all(|h| h.corrections.is_empty()));
+        // To another engine: the same arm, the sunk cube lifted by 1e-4 m.
+        let mixed = run(&scene, &["a", "b", "b"], None);
+        let h = &mixed.handovers[0];
+        assert_eq!(
+            (h.from.as_str(), h.to.as_str(), h.native),
+            ("a", "b", false)
+        );
+        assert_eq!(h.joint_angle_diff_rad, 0.0);
+        assert!((h.corrections[0].lift_m - 1e-4).abs() < 1e-12, "{h:?}");
+        assert!((h.object_position_diff_m - 1e-4).abs() < 1e-12, "{h:?}");
+        let q = |o: &RunOutcome| o.trajectory.joint_angles_rad.clone();
+        assert_eq!(q(&mixed.outcome), q(&plain));
+        let cube = mixed.outcome.trajectory.positions("cube");
+        assert!((cube[200].unwrap().z - 0.0375).abs() < 1e-12);
+        assert!(mixed.handovers[1].native);
+        assert_eq!(mixed.engines, ["a", "b", "b"]);
+    }
+
+    #[test]
+    fn a_run_that_diverges_hands_nothing_over() {
+        let scene = crate::testing::scene("scene3_cube_push");
+        let out = run(&scene, &["a", "b", "b"], Some(5.0));
+        assert!(matches!(
+            out.outcome.status,
+            crate::controller::RunStatus::Diverged { .. }
+        ));
+        assert!(out.handovers.is_empty());
+        // Stopped at about 5 s, before the first boundary (8 s).
+        let rows = out.outcome.trajectory.len();
+        assert!((99..=101).contains(&rows), "{rows}");
+        let e = run_stitched(
+            &scene,
+            &plan(&["a", "b"]),
+            &RunOptions::default(),
+            &ControlParams::default(),
+            &mut |_: &str| -> Result<Box<dyn Simulation>, RunError> {
+                Ok(Box::new(Toy::new("a", 0.0)))
+            },
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("2 engines given for the 3 phases"), "{e}");
     }
 
     #[test]
