@@ -924,4 +924,22 @@ mod tests {
         assert!(html.contains("<dt>Command line</dt>"));
         assert!(html.contains(&format!("realitygap {}", realitygap_core::TOOL_VERSION)));
     }
+
+    #[test]
+    fn extra_sections_follow_the_summary_escaped_and_in_the_contents() {
+        let reports = [testdata::scene()];
+        let extra = ExtraSection {
+            id: "stitching".into(),
+            title: "Stitching <engines>".into(),
+            paragraphs: vec!["a>b & c".into()],
+            header: vec!["Source".into(), "Error".into()],
+            rows: vec![vec!["stitched ode>mujoco".into(), "1.0".into()]],
+        };
+        let html = render_index_with(&reports, &[], &Provenance::new("t"), &[], &[extra]);
+        assert!(html.contains("<li><a href=\"#stitching\">Stitching &lt;engines&gt;</a></li>"));
+        assert!(html.contains("<h2>Stitching &lt;engines&gt;</h2>\n<p>a&gt;b &amp; c</p>"));
+        assert!(html.contains("<tr><td>stitched ode&gt;mujoco</td><td>1.0</td></tr>"));
+        let (summary, section) = (html.find("id=\"summary\""), html.find("id=\"stitching\""));
+        assert!(summary < section, "the section follows the summary");
+    }
 }
