@@ -39,6 +39,11 @@ pub struct Args {
     /// scenes with at least as many phases as engines named.
     #[arg(long = "plan", value_name = "E1,E2,...")]
     pub plans: Vec<String>,
+    /// An engine with a parameters file of its own (e.g. a tune's
+    /// tuned.toml) taking part beside the engines at their defaults,
+    /// ENGINE=FILE (repeatable); a plan names it ENGINE@FILE.
+    #[arg(long = "tuned", value_name = "ENGINE=FILE")]
+    pub tuned: Vec<String>,
     /// How the gap is measured (`--runs` choose the plans, `--holdout`
     /// scores them).
     #[command(flatten)]
@@ -57,6 +62,7 @@ pub fn run(args: Args) -> Result<()> {
         contact_engine: args.contact,
         jobs: args.jobs,
         plans: args.plans,
+        tuned: args.tuned,
     };
     let runner = Runner {
         registry: cmd_engines::compiled,

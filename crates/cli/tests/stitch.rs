@@ -366,7 +366,7 @@ fn bad_plans_are_clear_errors() {
     let scene1 = scene_file("scene1_single_joint");
     let first = engines().first().map(|e| e.name()).unwrap_or("mujoco");
     let two = format!("{first},{first}");
-    let cases: [(&[&str], &str); 5] = [
+    let cases: [(&[&str], &str); 7] = [
         (
             &["--stitch", "mujoco,vortex"],
             "unknown engine \"vortex\" (compiled in:",
@@ -383,6 +383,14 @@ fn bad_plans_are_clear_errors() {
         (
             &["--stitch", &two],
             "it names 2 engines but the scene has 1 phase",
+        ),
+        (
+            &["--stitch", "ode,mujoco@"],
+            "engine 2 of the plan has an empty parameters file",
+        ),
+        (
+            &["--stitch", "ode,ode@/no/such/params.toml"],
+            "/no/such/params.toml",
         ),
     ];
     for (i, (args, expected)) in cases.iter().enumerate() {
@@ -417,7 +425,10 @@ fn the_stitch_command_chooses_runs_and_scores_plans() {
         return;
     }
     let tmp = tempfile::tempdir().unwrap();
-    let study = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/studies/collins2019.toml");
+    let study = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/studies/collins2019.toml"); // A parameters file of its own for ODE (as a tune's tuned.toml would be).
+    let damped = tmp.path().join("damped.toml");
+    std::fs::write(&damped, "[joints.m1n6s300_joint_2]\ndamping = 0.5\n").unwrap();
+
     let o = Command::new(env!("CARGO_BIN_EXE_realitygap"))
         .arg("stitch")
         .arg(&study)
@@ -425,6 +436,8 @@ fn the_stitch_command_chooses_runs_and_scores_plans() {
         .arg(&data)
         .args(["--runs", "1-15", "--holdout", "16-20", "--bootstrap", "200"])
         .args(["--plan", "ode,ode,mujoco"])
+        .arg("--tuned")
+        .arg(format!("ode={}", damped.display()))
         .arg("--out")
         .arg(tmp.path())
         .output()
@@ -441,7 +454,16 @@ fn the_stitch_command_chooses_runs_and_scores_plans() {
         let rows = s["rows"].as_array().unwrap();
         let engines: Vec<&serde_json::Value> =
             rows.iter().filter(|r| r["role"] == "engine").collect();
-        assert_eq!(engines.len(), self::engines().len());
+        // Every engine at its defaults, and ODE with its own parameters.
+        assert_eq!(engines.len(), self::engines().len() + 1);
+        let tuned = engines
+            .iter()
+            .find(|r| r["source"] == "ODE 0.16.2 (this tool, damped)")
+            .expect("the --tuned candidate");
+        let entry = format!("ode@{}", damped.display());
+        assert_eq!(tuned["plan"][0].as_str(), Some(entry.as_str()));
+        let plain = engines.iter().find(|r| r["plan"][0] == "ode").unwrap();
+        assert_ne!(tuned["training"]["error_m"], plain["training"]["error_m"]);
         let phases = s["phases_s"].as_array().unwrap().len();
         let automatic: Vec<&str> = s["automatic"]
             .as_array()

@@ -64,16 +64,59 @@ pub struct PlanError {
 }
 
 /// One engine per phase of a scene's schedule.
+///
+/// An entry is an engine's name (`mujoco`) or an engine with a physical
+/// parameters file of its own (`mujoco@tuned/mujoco.toml`, e.g. the
+/// output of a tune), which then replaces the run's parameters file in
+/// that engine's phases.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct StitchPlan {
-    /// The engines as given (at least one, at most one per phase).
+    /// The entries as given (at least one, at most one per phase).
     pub engines: Vec<String>,
 }
 
+/// The engine of a plan entry (`ENGINE` or `ENGINE@PARAMS`) and its
+/// parameters file, if it names one.
+pub fn split_entry(entry: &str) -> (&str, Option<&str>) {
+    match entry.split_once('@') {
+        Some((engine, params)) => (engine.trim(), Some(params.trim())),
+        None => (entry.trim(), None),
+    }
+}
+
+/// A short label of a plan entry for names: `mujoco`, or for an entry
+/// with a parameters file `mujoco+<file stem>` (`mujoco+tuned`), made
+/// safe for a directory name.
+pub fn entry_label(entry: &str) -> String {
+    let (engine, params) = split_entry(entry);
+    let label = match params {
+        Some(p) => {
+            let stem = std::path::Path::new(p)
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "params".into());
+            format!("{engine}+{stem}")
+        }
+        None => engine.to_string(),
+    };
+    label
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || "_-.+".contains(c) {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
 impl StitchPlan {
-    /// Parses `E1,E2,...` (names of `known` engines; spaces around the
-    /// names are ignored). An empty plan, an empty name or an engine not
-    /// in `known` is an error naming the plan and the engines known.
+    /// Parses `E1,E2,...`: names of `known` engines, each optionally
+    /// followed by `@PARAMS` (a parameters file for its phases); spaces
+    /// around them are ignored. An empty plan, an empty entry, an engine
+    /// not in `known` or an empty file after `@` is an error naming the
+    /// plan.
     pub fn parse(spec: &str, known: &[String]) -> Result<StitchPlan, PlanError> {
         let err = |message: String| PlanError {
             spec: spec.to_string(),
@@ -85,7 +128,8 @@ impl StitchPlan {
             ));
         }
         let mut engines = Vec::new();
-        for (i, name) in spec.split(',').map(str::trim).enumerate() {
+        for (i, entry) in spec.split(',').map(str::trim).enumerate() {
+            let (name, params) = split_entry(entry);
             if name.is_empty() {
                 return Err(err(format!("engine {} of the plan is empty", i + 1)));
             }
@@ -95,7 +139,16 @@ impl StitchPlan {
                     known.join(", ")
                 )));
             }
-            engines.push(name.to_string());
+            if params.is_some_and(str::is_empty) {
+                return Err(err(format!(
+                    "engine {} of the plan has an empty parameters file after @ (expected ENGINE@FILE)",
+                    i + 1
+                )));
+            }
+            engines.push(match params {
+                Some(p) => format!("{name}@{p}"),
+                None => name.to_string(),
+            });
         }
         Ok(StitchPlan { engines })
     }
@@ -127,14 +180,25 @@ impl StitchPlan {
     }
 
     /// The display name of the source for a scene of `phases` phases, e.g.
-    /// `stitched ode>ode>mujoco` (the plan expanded to every phase).
+    /// `stitched ode>ode>mujoco` (the plan expanded to every phase; an
+    /// entry with a parameters file by its [`entry_label`]).
     pub fn display_name(&self, phases: usize) -> Result<String, PlanError> {
-        Ok(format!("{STITCHED} {}", self.per_phase(phases)?.join(">")))
+        let labels: Vec<String> = self
+            .per_phase(phases)?
+            .iter()
+            .map(|e| entry_label(e))
+            .collect();
+        Ok(format!("{STITCHED} {}", labels.join(">")))
     }
 
     /// A directory name for the source: `stitched-ode-ode-mujoco`.
     pub fn dir_name(&self, phases: usize) -> Result<String, PlanError> {
-        Ok(format!("{STITCHED}-{}", self.per_phase(phases)?.join("-")))
+        let labels: Vec<String> = self
+            .per_phase(phases)?
+            .iter()
+            .map(|e| entry_label(e))
+            .collect();
+        Ok(format!("{STITCHED}-{}", labels.join("-")))
     }
 }
 
@@ -410,6 +474,27 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("engine 2 of the plan is empty"), "{e}");
+        let tuned = StitchPlan::parse("ode, mujoco@ out/tuned mujoco.toml", &known()).unwrap();
+        assert_eq!(tuned.engines, ["ode", "mujoco@out/tuned mujoco.toml"]);
+        assert_eq!(
+            split_entry(&tuned.engines[1]),
+            ("mujoco", Some("out/tuned mujoco.toml"))
+        );
+        assert_eq!(
+            tuned.display_name(3).unwrap(),
+            "stitched ode>mujoco+tuned_mujoco>mujoco+tuned_mujoco"
+        );
+        assert_eq!(
+            tuned.dir_name(2).unwrap(),
+            "stitched-ode-mujoco+tuned_mujoco"
+        );
+        let e = StitchPlan::parse("ode,mujoco@", &known())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("engine 2 of the plan has an empty parameters file"),
+            "{e}"
+        );
         let e = StitchPlan::parse("ode,vortex", &known())
             .unwrap_err()
             .to_string();

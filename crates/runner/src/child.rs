@@ -11,9 +11,9 @@ use realitygap_core::controller::{
     load_prepared, run_scene_with, ControlParams, RunError, RunOptions,
 };
 use realitygap_core::engine::Simulation;
-use realitygap_core::stitch::{phase_ticks, run_stitched, StitchPlan};
+use realitygap_core::stitch::{phase_ticks, run_stitched, split_entry, StitchPlan};
 use std::io::{Read, Write};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::{Command, ExitStatus, Stdio};
 use std::time::Duration;
 use wait_timeout::ChildExt;
@@ -74,8 +74,11 @@ pub fn run_one(registry: Registry, setup: fn()) -> Result<()> {
     Ok(())
 }
 
-/// The run of `job` in `engine`, checked and ready to load.
-fn prepare_for(registry: Registry, job: &Job, engine: &str) -> Result<Prepared> {
+/// The run of `job` in `entry` (an engine, or `ENGINE@PARAMS` with a
+/// parameters file of its own instead of the job's), checked and ready to
+/// load.
+fn prepare_for(registry: Registry, job: &Job, entry: &str) -> Result<Prepared> {
+    let (engine, params) = split_entry(entry);
     prepare(
         registry,
         &RunSource {
@@ -84,7 +87,7 @@ fn prepare_for(registry: Registry, job: &Job, engine: &str) -> Result<Prepared> 
             robot: job.robot.as_deref(),
             packages: &job.packages,
             set: &job.set,
-            params_file: job.params.as_deref(),
+            params_file: params.map(Path::new).or(job.params.as_deref()),
         },
     )
 }
@@ -124,7 +127,9 @@ pub fn simulate(registry: Registry, job: &Job) -> Result<Option<ChildResult>> {
 }
 
 /// Runs a stitched job: the scene prepared in every engine of the plan,
-/// then [`run_stitched`] loading a fresh simulation at every phase.
+/// then [`run_stitched`] loading a fresh simulation at every phase. The
+/// controller's share of the parameters (encoder offsets, latency) is the
+/// first phase's.
 fn simulate_stitched(
     registry: Registry,
     job: &Job,

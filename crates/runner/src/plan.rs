@@ -10,7 +10,7 @@ use crate::Registry;
 use anyhow::{bail, Context, Result};
 use realitygap_core::controller::{repeat_seed, Perturbation};
 use realitygap_core::engine::SettingValue;
-use realitygap_core::stitch::{phase_ticks, StitchPlan};
+use realitygap_core::stitch::{phase_ticks, split_entry, StitchPlan};
 use realitygap_data::runstore::{EngineInfo, RunStore, SourceKind};
 use std::path::PathBuf;
 
@@ -113,6 +113,19 @@ struct Stitched {
     config: serde_json::Value,
     /// The engine of every phase.
     engines: Vec<String>,
+}
+
+/// A plan entry with its parameters file (if any) made absolute, as the
+/// child process needs it.
+fn absolute_entry(entry: &str) -> Result<String> {
+    Ok(match split_entry(entry) {
+        (engine, Some(params)) => {
+            let path = std::path::absolute(params)
+                .with_context(|| format!("--stitch: the parameters file {params}"))?;
+            format!("{engine}@{}", path.display())
+        }
+        (engine, None) => engine.to_string(),
+    })
 }
 
 /// The id of a repeat's run: `run000`, `run001`, ...
@@ -223,7 +236,14 @@ impl Plan {
                 if !spec.engines.is_empty() {
                     bail!("--stitch and --engine cannot be given together (the plan names the engines)");
                 }
-                Some(StitchPlan::parse(text, &engine_names(registry)).context("--stitch")?)
+                let plan = StitchPlan::parse(text, &engine_names(registry)).context("--stitch")?;
+                Some(StitchPlan {
+                    engines: plan
+                        .engines
+                        .iter()
+                        .map(|e| absolute_entry(e))
+                        .collect::<Result<_>>()?,
+                })
             }
             None => None,
         };
@@ -268,7 +288,8 @@ impl Plan {
         Ok(plan)
     }
 
-    /// Prepares one scene in `engine`.
+    /// Prepares one scene in `engine` (or a stitch plan's entry
+    /// `ENGINE@PARAMS`, whose parameters file replaces `--params`).
     fn prepare(
         &self,
         registry: Registry,
@@ -276,6 +297,7 @@ impl Plan {
         engine: &str,
     ) -> Result<Prepared> {
         let spec = &self.spec;
+        let (engine, params) = split_entry(engine);
         prepare(
             registry,
             &RunSource {
@@ -284,7 +306,9 @@ impl Plan {
                 robot: spec.robot.as_deref(),
                 packages: &spec.packages,
                 set: &spec.set,
-                params_file: self.params_file.as_deref(),
+                params_file: params
+                    .map(std::path::Path::new)
+                    .or(self.params_file.as_deref()),
             },
         )
     }
@@ -388,6 +412,8 @@ impl Plan {
                 engine.clone(),
                 serde_json::json!({
                     "version": p.engine.version(),
+                    "params_file": split_entry(engine).1,
+                    "params": c["params"],
                     "engine_settings": c["engine_settings"],
                     "timestep_s": c["timestep_s"],
                     "steps_per_control_period": c["steps_per_control_period"],

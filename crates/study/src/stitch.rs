@@ -19,7 +19,11 @@
 //!    held-out runs (`--holdout`), with bootstrap intervals and, for each
 //!    plan, a paired comparison with the best single engine.
 //!
-//! Plans given with `--plan` are run and scored the same way.
+//! Plans given with `--plan` are run and scored the same way. Engines
+//! given with a parameters file of their own (`--tuned ENGINE=FILE`, e.g.
+//! a tune's `tuned.toml`) take part as candidates beside the engines at
+//! their defaults: their single runs go to `OUT/runs/tuned-<label>/`, and
+//! a plan names them `ENGINE@FILE`.
 //!
 //! Outputs: `OUT/stitch.md` and `OUT/stitch.json` ([`StitchStudy`]), and
 //! `OUT/report/` (the report of every source on the held-out runs, else
@@ -37,7 +41,7 @@ use anyhow::{bail, Context, Result};
 use realitygap_analysis::bootstrap::{paired, Interval, PairedComparison};
 use realitygap_analysis::compare::{fmt_interval, SceneReport, SourceSummary};
 use realitygap_core::scene::Scene;
-use realitygap_core::stitch::{phase_ticks, StitchPlan};
+use realitygap_core::stitch::{entry_label, phase_ticks, split_entry, StitchPlan};
 use realitygap_report::html::ExtraSection;
 use realitygap_runner::prepare::engine_names;
 use realitygap_runner::{BatchSpec, Launcher, Plan, Registry};
@@ -67,6 +71,10 @@ pub struct StitchOptions {
     /// More plans to score, `E1,E2,...` (in each scene with at least as
     /// many phases as engines named).
     pub plans: Vec<String>,
+    /// Engines with a parameters file of their own (e.g. a tune's
+    /// `tuned.toml`), `ENGINE=FILE`: candidates for the automatic plan
+    /// beside the engines at their defaults.
+    pub tuned: Vec<String>,
 }
 
 /// How the runs are made: the engines and the child process.
@@ -345,11 +353,39 @@ fn engines_taking_part(registry: Registry, opts: &StitchOptions) -> Result<Vec<S
     if engines.is_empty() {
         bail!("no physics engine is compiled into this binary");
     }
-    Ok(engines)
+    let mut entries = engines;
+    for t in &opts.tuned {
+        let Some((engine, file)) = t.split_once('=') else {
+            bail!("--tuned \"{t}\": expected ENGINE=FILE (a parameters file, e.g. a tune's tuned.toml)");
+        };
+        let engine = engine.trim();
+        if !known.iter().any(|k| k == engine) {
+            bail!(
+                "--tuned \"{t}\": unknown engine \"{engine}\" (compiled in: {})",
+                known.join(", ")
+            );
+        }
+        let path = std::path::absolute(file.trim()).with_context(|| format!("--tuned \"{t}\""))?;
+        if !path.is_file() {
+            bail!("--tuned \"{t}\": no parameters file {}", path.display());
+        }
+        entries.push(format!("{engine}@{}", path.display()));
+    }
+    Ok(entries)
 }
 
-/// Runs `scenes` in `engines`, or as the stitched `plan`, into
-/// `OUT/runs` (one deterministic run each; finished runs are kept).
+/// Where the single-engine runs of a candidate are, relative to
+/// `OUT/runs`: `<scene>/<engine>`, or for an engine with a parameters
+/// file `tuned-<label>/<scene>/<engine>`.
+fn candidate_dir(scene: &str, entry: &str) -> String {
+    match split_entry(entry) {
+        (engine, Some(_)) => format!("tuned-{}/{scene}/{engine}", entry_label(entry)),
+        (engine, None) => format!("{scene}/{engine}"),
+    }
+}
+
+/// Runs `scenes` in the candidates `engines` (see [`candidate_dir`]), or
+/// as the stitched `plan`.
 fn simulate(
     runner: &Runner,
     opts: &StitchOptions,
@@ -357,11 +393,52 @@ fn simulate(
     engines: &[String],
     plan: Option<&Vec<String>>,
 ) -> Result<()> {
+    let plain: Vec<String> = engines
+        .iter()
+        .filter(|e| split_entry(e).1.is_none())
+        .cloned()
+        .collect();
+    if !plain.is_empty() || plan.is_some() {
+        simulate_batch(runner, opts, scenes, &plain, plan, None)?;
+    }
+    for entry in engines.iter().filter(|e| split_entry(e).1.is_some()) {
+        let (engine, params) = split_entry(entry);
+        let tuned = (
+            params.map(PathBuf::from),
+            format!("tuned-{}", entry_label(entry)),
+        );
+        simulate_batch(
+            runner,
+            opts,
+            scenes,
+            &[engine.to_string()],
+            None,
+            Some(tuned),
+        )?;
+    }
+    Ok(())
+}
+
+/// One batch into `OUT/runs` (or `OUT/runs/<subfolder>` with a
+/// parameters file: `tuned`), one deterministic run each; finished runs
+/// are kept.
+fn simulate_batch(
+    runner: &Runner,
+    opts: &StitchOptions,
+    scenes: &[PathBuf],
+    engines: &[String],
+    plan: Option<&Vec<String>>,
+    tuned: Option<(Option<PathBuf>, String)>,
+) -> Result<()> {
+    let (params, out) = match tuned {
+        Some((params, folder)) => (params, opts.out.join("runs").join(folder)),
+        None => (None, opts.out.join("runs")),
+    };
     let spec = BatchSpec {
         scenes: scenes.to_vec(),
         engines: engines.to_vec(),
         repeats: 1,
-        out: opts.out.join("runs"),
+        out,
         robot: None,
         packages: vec![],
         jobs: opts.jobs,
@@ -369,7 +446,7 @@ fn simulate(
         perturb: vec![],
         set: vec![],
         timeout_s: None,
-        params: None,
+        params,
         stitch: plan.map(|p| p.join(",")),
     };
     let mut batch = Plan::new(runner.registry, spec)?;
@@ -404,8 +481,31 @@ fn with_sources(
 ) -> Result<Study> {
     let mut study = study.clone();
     for s in &mut study.scenes {
-        s.sources
-            .extend(engine_sources(runs_dir, &s.name, engines)?);
+        for entry in engines {
+            let (engine, params) = split_entry(entry);
+            let dir = candidate_dir(&s.name, entry);
+            let folder = runs_dir.join(&dir);
+            let Some(root) = folder.parent().and_then(Path::parent) else {
+                continue;
+            };
+            for mut source in engine_sources(root, &s.name, &[engine.to_string()])? {
+                if let Some(p) = params {
+                    let stem = Path::new(p)
+                        .file_stem()
+                        .unwrap_or_default()
+                        .to_string_lossy();
+                    source.name = source
+                        .name
+                        .replace("(this tool)", &format!("(this tool, {stem})"));
+                    source.about = Some(format!(
+                        "{}, with the parameters file {p}",
+                        source.about.unwrap_or_default()
+                    ));
+                }
+                source.dir = Some(dir.clone());
+                s.sources.push(source);
+            }
+        }
         for (_, plan) in stitched.iter().filter(|(scene, _)| *scene == s.name) {
             let p = StitchPlan {
                 engines: plan.clone(),
@@ -444,9 +544,9 @@ fn evaluate(study: &Study, roots: &Roots, measure: &Measure) -> Result<Vec<Scene
     evaluate_scenes(&study.load(roots)?, &opts)
 }
 
-/// The name the comparison gives engine `engine`'s source in `scene`.
+/// The name the comparison gives candidate `engine`'s source in `scene`.
 fn engine_source_name(study: &Study, scene: &str, engine: &str) -> Option<String> {
-    let dir = format!("{scene}/{engine}");
+    let dir = candidate_dir(scene, engine);
     study
         .scenes
         .iter()
