@@ -20,7 +20,8 @@ pub struct Args {
     /// The real arm's recordings: `builtin` (the default) or a folder.
     #[arg(long, value_name = "builtin|DIR", default_value = "builtin")]
     pub data: DataSource,
-    /// Output folder: the runs (`runs/`), `stitch.md` and `stitch.json`.
+    /// Output folder: the runs (`runs/`), `stitch.md`, `stitch.json` and
+    /// the report (`report/`).
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
     /// Engines taking part (repeatable); default: every engine compiled in.
