@@ -181,6 +181,7 @@ fn simulate(
         params: params
             .map(Path::to_path_buf)
             .or_else(|| args.params.clone()),
+        stitch: None,
     };
     match cmd_run::run(run_args) {
         Ok(()) => Vec::new(),

@@ -3,7 +3,10 @@
 //!
 //! Layout: `OUT/<scene name>/<source>/` with `manifest.json` and
 //! `runs/run000.csv ...`, where `<source>` is the engine's name, or
-//! `<engine>-<robot>` when `--robot` replaces the scene's robot.
+//! `<engine>-<robot>` when `--robot` replaces the scene's robot, or
+//! `stitched-<E1>-<E2>-...` for a stitched run (`--stitch`), whose
+//! manifest holds the plan (`settings.config.stitch`) and each run's
+//! handovers (`runs[].extra.handovers`).
 //!
 //! Every run executes in a child process (this binary, re-invoked with the
 //! hidden subcommand `__run-one`, reading its job as JSON on standard input
@@ -71,6 +74,12 @@ pub struct Args {
     /// README). `--set` still overrides its engine settings.
     #[arg(long, value_name = "FILE")]
     pub params: Option<PathBuf>,
+    /// A stitched run: phase i of each scene's schedule in engine Ei,
+    /// the state handed over at each phase boundary; fewer engines than
+    /// phases repeat the last. Stored as the source `stitched E1>E2>...`
+    /// in `OUT/<scene>/stitched-E1-E2-.../`. Not with --engine.
+    #[arg(long, value_name = "E1,E2,...")]
+    pub stitch: Option<String>,
 }
 
 impl Args {
@@ -89,6 +98,7 @@ impl Args {
             set: self.set,
             timeout_s: self.timeout_s,
             params: self.params,
+            stitch: self.stitch,
         }
     }
 }

@@ -14,6 +14,7 @@ mod cmd_import;
 mod cmd_report;
 mod cmd_reproduce;
 mod cmd_run;
+mod cmd_stitch;
 mod cmd_tune;
 
 /// Measure the reality gap: how far physics engines stray from a real robot
@@ -54,6 +55,10 @@ enum Command {
     /// parameters (and the capture frame) on training runs with CMA-ES,
     /// then score untuned against tuned on held-out runs.
     Tune(cmd_tune::Args),
+    /// Stitch engines per phase: choose per schedule phase the engine
+    /// closest to the real arm on training runs, run the stitched scenes
+    /// and score them against every single engine, with intervals.
+    Stitch(cmd_stitch::Args),
     /// Internal: run one simulation (a job as JSON on standard input) and
     /// print its trajectory; `run` starts one such process per run.
     #[command(name = realitygap_runner::child::RUN_ONE, hide = true)]
@@ -71,6 +76,7 @@ fn main() -> ExitCode {
         Command::Reproduce(args) => cmd_reproduce::run(args),
         Command::Frontier(args) => cmd_frontier::run(args),
         Command::Tune(args) => cmd_tune::run(args),
+        Command::Stitch(args) => cmd_stitch::run(args),
         Command::RunOne => cmd_run::run_one(),
     };
     match result {

@@ -17,6 +17,8 @@
 //!   trip, handover, parameter effects, gravity, divergence).
 //! - [`controller`]: the controller loop shared by every engine
 //!   ([`controller::run_scene`]) and the seeded per-run perturbations.
+//! - [`stitch`]: stitched runs, one engine per schedule phase, the state
+//!   handed over at each phase boundary.
 //!
 //! Units everywhere: metres, radians, seconds, kilograms, unless a name says
 //! otherwise (`_deg`, `_mm`).
@@ -30,6 +32,7 @@ pub mod params;
 pub mod pose;
 pub mod robot;
 pub mod scene;
+pub mod stitch;
 pub mod testing;
 pub mod trajectory;
 

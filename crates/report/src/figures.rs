@@ -357,12 +357,71 @@ pub struct Figure {
     pub lines: Vec<Line>,
     /// Phase start times after the first, seconds (thin vertical lines).
     pub phase_boundaries_s: Vec<f64>,
+    /// Handovers of stitched sources drawn (solid vertical ticks in the
+    /// source's colour hanging from the top, one row per source).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub handovers: Vec<HandoverMark>,
     /// Sources not drawn (no usable runs or no values of this kind).
     pub omitted: Vec<Omitted>,
     /// Sources drawn but clipped at the edge of the y range.
     pub off_scale: Vec<OffScale>,
     /// Caption: what is shown, and which sources are missing or clipped.
     pub caption: String,
+}
+
+/// One handover of a stitched source, as a figure draws it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct HandoverMark {
+    /// The source's name.
+    pub source: String,
+    /// Time, seconds.
+    pub t_s: f64,
+    /// The source's line style (its colour is used).
+    pub style: LineStyle,
+}
+
+impl Figure {
+    /// Adds the handovers of the stitched sources drawn in this figure
+    /// (the marks of this scene whose source is one of its lines) and
+    /// names them in the caption.
+    pub fn add_handovers(&mut self, marks: &[crate::provenance::HandoverMarks]) {
+        let mut named = Vec::new();
+        for m in marks.iter().filter(|m| m.scene == self.scene) {
+            let Some(line) = self.lines.iter().find(|l| l.name == m.source) else {
+                continue;
+            };
+            let times: Vec<f64> = m
+                .times_s
+                .iter()
+                .copied()
+                .filter(|t| *t > self.x_range.0 && *t < self.x_range.1)
+                .collect();
+            if times.is_empty() {
+                continue;
+            }
+            named.push(format!(
+                "{} at {}",
+                m.source,
+                times
+                    .iter()
+                    .map(|t| format!("{t} s"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ));
+            self.handovers
+                .extend(times.into_iter().map(|t_s| HandoverMark {
+                    source: m.source.clone(),
+                    t_s,
+                    style: line.style,
+                }));
+        }
+        if !named.is_empty() {
+            self.caption.push_str(&format!(
+                " Solid vertical ticks at the top in a source's colour: its handovers from one engine to the next ({}).",
+                named.join("; ")
+            ));
+        }
+    }
 }
 
 /// Errors of drawing a figure.
@@ -592,6 +651,7 @@ pub fn build_figure(report: &SceneReport, kind: FigureKind, styles: &SourceStyle
         band,
         lines,
         phase_boundaries_s,
+        handovers: Vec::new(),
         omitted,
         off_scale,
         caption,
@@ -942,6 +1002,7 @@ impl Figure {
                 )))
                 .map_err(e)?;
         }
+        self.draw_handovers(&mut chart)?;
         self.draw_lines(&mut chart)?;
         let omitted: Vec<String> = self.omitted.iter().map(|o| o.source.clone()).collect();
         let clipped: Vec<String> = self.off_scale.iter().map(|o| o.source.clone()).collect();
@@ -954,6 +1015,36 @@ impl Figure {
             &clipped,
         )
         .map_err(e)?;
+        Ok(())
+    }
+
+    /// Draws each stitched source's handovers: a solid tick in its colour
+    /// hanging from the top, one below the other per source.
+    fn draw_handovers<DB: DrawingBackend>(
+        &self,
+        chart: &mut ChartContext<'_, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    ) -> Result<(), String> {
+        let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+        let (y0, y1) = self.y_range;
+        let mut sources: Vec<&str> = Vec::new();
+        for h in &self.handovers {
+            let k = match sources.iter().position(|s| *s == h.source) {
+                Some(k) => k,
+                None => {
+                    sources.push(&h.source);
+                    sources.len() - 1
+                }
+            };
+            let tick = (y1 - y0) * 0.08;
+            let top = y1 - k as f64 * tick;
+            let style = h.style.color().stroke_width(3);
+            chart
+                .draw_series(std::iter::once(PathElement::new(
+                    vec![(h.t_s, top), (h.t_s, top - tick)],
+                    style,
+                )))
+                .map_err(e)?;
+        }
         Ok(())
     }
 
@@ -1447,5 +1538,39 @@ mod tests {
         assert_eq!(tick_decimals(0.8), 1);
         assert_eq!(tick_decimals(0.05), 3);
         assert_eq!(tick_decimals(90.0), 0);
+    }
+
+    #[test]
+    fn handovers_of_a_drawn_source_become_ticks_in_its_colour() {
+        let report = testdata::scene();
+        let styles = SourceStyles::for_reports(std::slice::from_ref(&report));
+        let mut fig = build_figure(&report, FigureKind::GoalDistance, &styles);
+        let mark = |scene: &str, source: &str, times_s: Vec<f64>| crate::HandoverMarks {
+            scene: scene.into(),
+            source: source.into(),
+            times_s,
+        };
+        fig.add_handovers(&[
+            mark(&report.scene, "Beta", vec![2.5, 99.0]),
+            mark("another scene", "Beta", vec![1.0]),
+            mark(&report.scene, "not drawn", vec![1.0]),
+        ]);
+        assert_eq!(fig.handovers.len(), 1, "{:?}", fig.handovers);
+        assert_eq!(fig.handovers[0].t_s, 2.5);
+        assert!(
+            fig.caption
+                .contains("handovers from one engine to the next (Beta at 2.5 s)"),
+            "{}",
+            fig.caption
+        );
+        let svg = fig.to_svg().unwrap();
+        let beta = styles.get("Beta").hex();
+        let ticks = svg
+            .split("<polyline")
+            .filter(|p| {
+                p.contains(&format!("stroke=\"{beta}\"")) && p.contains("stroke-width=\"3\"")
+            })
+            .count();
+        assert_eq!(ticks, 1, "{svg}");
     }
 }

@@ -102,6 +102,61 @@ pub fn render_index(
     provenance: &Provenance,
     downloads: &[(String, String)],
 ) -> String {
+    render_index_with(reports, figures, provenance, downloads, &[])
+}
+
+/// A section of the report besides the scenes, placed after the summary:
+/// a title, paragraphs (plain text) and a table (plain-text cells).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct ExtraSection {
+    /// The section's anchor (`id`), e.g. `stitching`.
+    pub id: String,
+    /// Its heading.
+    pub title: String,
+    /// Paragraphs before the table.
+    pub paragraphs: Vec<String>,
+    /// The table's column headings (no table when empty).
+    pub header: Vec<String>,
+    /// The table's rows.
+    pub rows: Vec<Vec<String>>,
+}
+
+fn extra_section(h: &mut String, s: &ExtraSection) {
+    let _ = writeln!(
+        h,
+        "<section id=\"{}\">\n<h2>{}</h2>",
+        escape(&s.id),
+        escape(&s.title)
+    );
+    for p in &s.paragraphs {
+        let _ = writeln!(h, "<p>{}</p>", escape(p));
+    }
+    if !s.header.is_empty() {
+        h.push_str("<table>\n<thead><tr>");
+        for c in &s.header {
+            let _ = write!(h, "<th>{}</th>", escape(c));
+        }
+        h.push_str("</tr></thead>\n<tbody>\n");
+        for row in &s.rows {
+            h.push_str("<tr>");
+            for c in row {
+                let _ = write!(h, "<td>{}</td>", escape(c));
+            }
+            h.push_str("</tr>\n");
+        }
+        h.push_str("</tbody></table>\n");
+    }
+    h.push_str("</section>\n");
+}
+
+/// [`render_index`] with `extra` sections after the summary.
+pub fn render_index_with(
+    reports: &[SceneReport],
+    figures: &[FigureEntry<'_>],
+    provenance: &Provenance,
+    downloads: &[(String, String)],
+    extra: &[ExtraSection],
+) -> String {
     let mut h = String::new();
     let title = if provenance.title.is_empty() {
         "Reality-gap report"
@@ -124,6 +179,14 @@ pub fn render_index(
     );
     // Contents.
     h.push_str("<nav><ul>\n<li><a href=\"#summary\">Accumulated error</a></li>\n");
+    for x in extra {
+        let _ = writeln!(
+            h,
+            "<li><a href=\"#{}\">{}</a></li>",
+            escape(&x.id),
+            escape(&x.title)
+        );
+    }
     for r in reports {
         let _ = writeln!(
             h,
@@ -135,6 +198,9 @@ pub fn render_index(
     h.push_str("<li><a href=\"#provenance\">Provenance</a></li>\n</ul></nav>\n");
 
     summary(&mut h, reports, downloads);
+    for x in extra {
+        extra_section(&mut h, x);
+    }
     for r in reports {
         let figs: Vec<&FigureEntry<'_>> = figures
             .iter()
@@ -857,5 +923,23 @@ mod tests {
         assert!(html.contains("Start frames 39\u{2013}39; onset minus start 93\u{2013}93 frames."));
         assert!(html.contains("<dt>Command line</dt>"));
         assert!(html.contains(&format!("realitygap {}", realitygap_core::TOOL_VERSION)));
+    }
+
+    #[test]
+    fn extra_sections_follow_the_summary_escaped_and_in_the_contents() {
+        let reports = [testdata::scene()];
+        let extra = ExtraSection {
+            id: "stitching".into(),
+            title: "Stitching <engines>".into(),
+            paragraphs: vec!["a>b & c".into()],
+            header: vec!["Source".into(), "Error".into()],
+            rows: vec![vec!["stitched ode>mujoco".into(), "1.0".into()]],
+        };
+        let html = render_index_with(&reports, &[], &Provenance::new("t"), &[], &[extra]);
+        assert!(html.contains("<li><a href=\"#stitching\">Stitching &lt;engines&gt;</a></li>"));
+        assert!(html.contains("<h2>Stitching &lt;engines&gt;</h2>\n<p>a&gt;b &amp; c</p>"));
+        assert!(html.contains("<tr><td>stitched ode&gt;mujoco</td><td>1.0</td></tr>"));
+        let (summary, section) = (html.find("id=\"summary\""), html.find("id=\"stitching\""));
+        assert!(summary < section, "the section follows the summary");
     }
 }

@@ -30,7 +30,7 @@ pub mod html;
 pub mod provenance;
 
 pub use figures::{Figure, FigureKind, SourceStyles};
-pub use provenance::{Provenance, SourceProvenance};
+pub use provenance::{HandoverMarks, Provenance, SourceProvenance};
 
 use realitygap_analysis::table::{self, Format};
 use realitygap_analysis::SceneReport;
@@ -90,6 +90,17 @@ pub fn write_report(
     provenance: &Provenance,
     out_dir: &Path,
 ) -> Result<ReportFiles, ReportError> {
+    write_report_with(reports, provenance, out_dir, &[])
+}
+
+/// [`write_report`] with `extra` sections in `index.html`, after the
+/// summary.
+pub fn write_report_with(
+    reports: &[SceneReport],
+    provenance: &Provenance,
+    out_dir: &Path,
+    extra: &[html::ExtraSection],
+) -> Result<ReportFiles, ReportError> {
     if reports.is_empty() {
         return Err(ReportError::Empty);
     }
@@ -102,10 +113,13 @@ pub fn write_report(
     let mut files = ReportFiles::default();
 
     let styles = SourceStyles::for_reports(reports);
-    let figures: Vec<Figure> = reports
+    let mut figures: Vec<Figure> = reports
         .iter()
         .flat_map(|r| figures::scene_figures(r, &styles))
         .collect();
+    for f in &mut figures {
+        f.add_handovers(&provenance.handovers);
+    }
     let mut svgs = Vec::with_capacity(figures.len());
     let mut rel = Vec::with_capacity(figures.len());
     for f in &figures {
@@ -178,7 +192,7 @@ pub fn write_report(
             "capture-frame registration (JSON)".into(),
         ));
     }
-    let page = html::render_index(reports, &entries, provenance, &downloads);
+    let page = html::render_index_with(reports, &entries, provenance, &downloads, extra);
     files.index_html = write(&out_dir.join("index.html"), page)?;
     Ok(files)
 }

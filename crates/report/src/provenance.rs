@@ -27,6 +27,21 @@ pub struct Provenance {
     pub details: Vec<(String, String)>,
     /// Per source: engine and version, parameters, seeds, files, ...
     pub sources: Vec<SourceProvenance>,
+    /// The handovers of stitched sources, drawn in their figures.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub handovers: Vec<HandoverMarks>,
+}
+
+/// When a stitched source handed its run from one engine to the next in
+/// one scene (from its results directory's manifest).
+#[derive(Debug, Clone, PartialEq, Serialize, Default)]
+pub struct HandoverMarks {
+    /// The scene.
+    pub scene: String,
+    /// The source's name, as in the reports.
+    pub source: String,
+    /// Handover times, seconds.
+    pub times_s: Vec<f64>,
 }
 
 /// Free-form facts about one source, as (key, value) pairs in display
@@ -72,6 +87,7 @@ impl Provenance {
             mode: AnalysisMode::Default,
             details: Vec::new(),
             sources: Vec::new(),
+            handovers: Vec::new(),
         }
     }
 }

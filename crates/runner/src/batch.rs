@@ -270,6 +270,10 @@ impl Batch<'_> {
         ] {
             entry.extra.insert(k.into(), v);
         }
+        if !result.handovers.is_empty() {
+            let handovers = serde_json::to_value(&result.handovers).unwrap_or_default();
+            entry.extra.insert("handovers".into(), handovers);
+        }
         self.stats.steps_total += result.engine_steps;
         self.stats.loop_time_total += result.wall_time_s;
         let g = &mut self.plan.groups[gi];

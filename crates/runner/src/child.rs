@@ -3,12 +3,18 @@
 //! native code therefore fails only that run, with the engine's last words
 //! as its message.
 
-use crate::prepare::{parse_perturbation, prepare, prepare_with, RunSource};
+use crate::prepare::{
+    engine_names, parse_perturbation, prepare, prepare_with, Prepared, RunSource,
+};
 use crate::protocol::{ChildResult, Job};
 use crate::Registry;
 use anyhow::{Context, Result};
-use realitygap_core::controller::{load_prepared, run_scene_with, ControlParams, RunOptions};
+use realitygap_core::controller::{
+    load_prepared, run_scene_with, ControlParams, RunError, RunOptions,
+};
+use realitygap_core::engine::Simulation;
 use realitygap_core::params::PhysicalParams;
+use realitygap_core::stitch::{phase_ticks, run_stitched, split_entry, StitchPlan};
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitStatus, Stdio};
@@ -71,32 +77,47 @@ pub fn run_one(registry: Registry, setup: fn()) -> Result<()> {
     Ok(())
 }
 
-/// Runs `job` in this process; `None` for a check-only job whose model
-/// loaded.
-pub fn simulate(registry: Registry, job: &Job) -> Result<Option<ChildResult>> {
+/// The run of `job` in `entry` (an engine, or `ENGINE@PARAMS` with a
+/// parameters file of its own instead of the job's), checked and ready to
+/// load. The job's parameters text, when it has one, stands for its file.
+fn prepare_for(registry: Registry, job: &Job, entry: &str) -> Result<Prepared> {
+    let (engine, params) = split_entry(entry);
     let src = RunSource {
         scene_file: &job.scene_file,
-        engine: &job.engine,
+        engine,
         robot: job.robot.as_deref(),
         packages: &job.packages,
         set: &job.set,
-        params_file: job.params.as_deref(),
+        params_file: params.map(Path::new).or(job.params.as_deref()),
     };
-    let p = match &job.params_text {
-        Some(text) => prepare_with(
+    match (&job.params_text, params) {
+        (Some(text), None) => prepare_with(
             registry,
             &src,
             PhysicalParams::from_toml_str(text, Path::new("<job parameters>"))?,
-        )?,
-        None => prepare(registry, &src)?,
-    };
+        ),
+        _ => prepare(registry, &src),
+    }
+}
+
+/// The run options of `job` for a scene with `joints` controlled joints.
+fn run_options(job: &Job, joints: usize) -> Result<RunOptions> {
     let perturbation = parse_perturbation(&job.perturb)?;
-    let sample =
-        (!perturbation.is_none()).then(|| perturbation.sample(job.seed, p.scene.actuators.len()));
-    let options = RunOptions {
+    let sample = (!perturbation.is_none()).then(|| perturbation.sample(job.seed, joints));
+    Ok(RunOptions {
         perturbation: sample,
         ..RunOptions::default()
-    };
+    })
+}
+
+/// Runs `job` in this process; `None` for a check-only job whose model
+/// loaded.
+pub fn simulate(registry: Registry, job: &Job) -> Result<Option<ChildResult>> {
+    if let Some(plan) = &job.stitch {
+        return simulate_stitched(registry, job, plan);
+    }
+    let p = prepare_for(registry, job, &job.engine)?;
+    let options = run_options(job, p.scene.actuators.len())?;
     let mut sim = load_prepared(
         p.engine.as_ref(),
         &p.scene,
@@ -111,6 +132,55 @@ pub fn simulate(registry: Registry, job: &Job) -> Result<Option<ChildResult>> {
     let control = ControlParams::from_params(&p.params, &p.scene);
     let outcome = run_scene_with(sim.as_mut(), &p.scene, &options, &control)?;
     Ok(Some(ChildResult::from_outcome(&outcome)))
+}
+
+/// Runs a stitched job: the scene prepared in every engine of the plan,
+/// then [`run_stitched`] loading a fresh simulation at every phase. The
+/// controller's share of the parameters (encoder offsets, latency) is the
+/// first phase's.
+fn simulate_stitched(
+    registry: Registry,
+    job: &Job,
+    plan: &[String],
+) -> Result<Option<ChildResult>> {
+    let plan = StitchPlan::parse(&plan.join(","), &engine_names(registry))?;
+    let mut prepared: Vec<(String, Prepared)> = Vec::new();
+    for engine in &plan.engines {
+        if !prepared.iter().any(|(e, _)| e == engine) {
+            prepared.push((engine.clone(), prepare_for(registry, job, engine)?));
+        }
+    }
+    let first = &prepared[0].1;
+    let scene = first.scene.clone();
+    let engines = plan
+        .per_phase(phase_ticks(&scene).len())
+        .with_context(|| format!("scene {}", job.scene_file.display()))?;
+    let options = run_options(job, scene.actuators.len())?;
+    let control = ControlParams::from_params(&first.params, &scene);
+    let mut load = |engine: &str| -> Result<Box<dyn Simulation>, RunError> {
+        let (_, p) = prepared
+            .iter()
+            .find(|(e, _)| e == engine)
+            .expect("every engine of the plan is prepared");
+        load_prepared(
+            p.engine.as_ref(),
+            &p.scene,
+            &p.robot,
+            &p.settings,
+            &p.params,
+            &options,
+        )
+    };
+    if job.check_only {
+        for engine in &plan.engines {
+            load(engine)?;
+        }
+        return Ok(None);
+    }
+    let run = run_stitched(&scene, &engines, &options, &control, &mut load)?;
+    let mut result = ChildResult::from_outcome(&run.outcome);
+    result.handovers = run.handovers;
+    Ok(Some(result))
 }
 
 /// Ends this child process when the parent dies (Linux), so that killing a
@@ -273,6 +343,7 @@ mod tests {
             params: None,
             params_text: None,
             check_only,
+            stitch: None,
         }
     }
 

@@ -10,6 +10,7 @@ use crate::Registry;
 use anyhow::{bail, Context, Result};
 use realitygap_core::controller::{repeat_seed, Perturbation};
 use realitygap_core::engine::SettingValue;
+use realitygap_core::stitch::{phase_ticks, split_entry, StitchPlan};
 use realitygap_data::runstore::{EngineInfo, RunStore, SourceKind};
 use std::path::PathBuf;
 
@@ -40,6 +41,10 @@ pub struct BatchSpec {
     pub timeout_s: Option<f64>,
     /// Physical parameters file.
     pub params: Option<PathBuf>,
+    /// A stitched run instead of single engines: `E1,E2,...`, one engine
+    /// per schedule phase (see `realitygap_core::stitch`); `engines` must
+    /// then be empty.
+    pub stitch: Option<String>,
 }
 
 /// Runs of one results directory that ended each way in this batch.
@@ -78,6 +83,8 @@ pub struct Group {
     pub load_error: Option<String>,
     /// How this batch's runs ended.
     pub done: Done,
+    /// The engine of every phase, for a stitched source.
+    pub stitch: Option<Vec<String>>,
 }
 
 /// A planned batch: its groups and what its jobs are made of.
@@ -92,6 +99,33 @@ pub struct Plan {
     pub params_file: Option<PathBuf>,
     /// The repeats' perturbation (none: a deterministic batch).
     pub perturbation: Perturbation,
+}
+
+/// The names and configuration of a stitched group.
+struct Stitched {
+    /// Display name, `stitched ode>ode>mujoco`.
+    name: String,
+    /// Directory name, `stitched-ode-ode-mujoco`.
+    dir: String,
+    /// The manifest's engine: `stitched`, the versions joined by `>`.
+    engine: EngineInfo,
+    /// The manifest's `config.stitch`.
+    config: serde_json::Value,
+    /// The engine of every phase.
+    engines: Vec<String>,
+}
+
+/// A plan entry with its parameters file (if any) made absolute, as the
+/// child process needs it.
+fn absolute_entry(entry: &str) -> Result<String> {
+    Ok(match split_entry(entry) {
+        (engine, Some(params)) => {
+            let path = std::path::absolute(params)
+                .with_context(|| format!("--stitch: the parameters file {params}"))?;
+            format!("{engine}@{}", path.display())
+        }
+        (engine, None) => engine.to_string(),
+    })
 }
 
 /// The id of a repeat's run: `run000`, `run001`, ...
@@ -197,7 +231,26 @@ impl Plan {
     /// running: every scene with every engine is prepared, so that a
     /// mistake is one error before any simulation.
     pub fn new(registry: Registry, spec: BatchSpec) -> Result<Plan> {
-        let engines = engines_to_run(registry, &spec.engines)?;
+        let stitch = match &spec.stitch {
+            Some(text) => {
+                if !spec.engines.is_empty() {
+                    bail!("--stitch and --engine cannot be given together (the plan names the engines)");
+                }
+                let plan = StitchPlan::parse(text, &engine_names(registry)).context("--stitch")?;
+                Some(StitchPlan {
+                    engines: plan
+                        .engines
+                        .iter()
+                        .map(|e| absolute_entry(e))
+                        .collect::<Result<_>>()?,
+                })
+            }
+            None => None,
+        };
+        let engines = match &stitch {
+            Some(plan) => vec![plan.engines[0].clone()],
+            None => engines_to_run(registry, &spec.engines)?,
+        };
         let perturbation = parse_perturbation(&spec.perturb)?;
         let params_file = match &spec.params {
             Some(p) => {
@@ -222,23 +275,30 @@ impl Plan {
         };
         for scene_file in plan.spec.scenes.clone() {
             for engine in &engines {
-                let group = plan.group(registry, &scene_file, engine, robot_label.as_deref())?;
+                let group = plan.group(
+                    registry,
+                    &scene_file,
+                    engine,
+                    robot_label.as_deref(),
+                    stitch.as_ref(),
+                )?;
                 plan.groups.push(group);
             }
         }
         Ok(plan)
     }
 
-    /// Prepares one scene with one engine and opens its results directory.
-    fn group(
+    /// Prepares one scene in `engine` (or a stitch plan's entry
+    /// `ENGINE@PARAMS`, whose parameters file replaces `--params`).
+    fn prepare(
         &self,
         registry: Registry,
         scene_file: &std::path::Path,
         engine: &str,
-        robot_label: Option<&str>,
-    ) -> Result<Group> {
+    ) -> Result<Prepared> {
         let spec = &self.spec;
-        let p = prepare(
+        let (engine, params) = split_entry(engine);
+        prepare(
             registry,
             &RunSource {
                 scene_file,
@@ -246,12 +306,36 @@ impl Plan {
                 robot: spec.robot.as_deref(),
                 packages: &spec.packages,
                 set: &spec.set,
-                params_file: self.params_file.as_deref(),
+                params_file: params
+                    .map(std::path::Path::new)
+                    .or(self.params_file.as_deref()),
             },
-        )?;
-        let source = match robot_label {
-            Some(label) => format!("{engine}-{label}"),
+        )
+    }
+
+    /// Prepares one scene with one engine (or every engine of a stitch
+    /// plan) and opens its results directory.
+    fn group(
+        &self,
+        registry: Registry,
+        scene_file: &std::path::Path,
+        engine: &str,
+        robot_label: Option<&str>,
+        stitch: Option<&StitchPlan>,
+    ) -> Result<Group> {
+        let spec = &self.spec;
+        let p = self.prepare(registry, scene_file, engine)?;
+        let stitched = match stitch {
+            Some(plan) => Some(self.stitched(registry, scene_file, &p, plan)?),
+            None => None,
+        };
+        let base = match &stitched {
+            Some(s) => s.dir.clone(),
             None => engine.to_string(),
+        };
+        let source = match robot_label {
+            Some(label) => format!("{base}-{label}"),
+            None => base,
         };
         if self
             .groups
@@ -264,14 +348,28 @@ impl Plan {
             );
         }
         let dir = spec.out.join(&p.scene.name).join(&source);
-        let config = config_json(
+        let mut config = config_json(
             &p,
             spec,
             robot_label,
             self.params_file.as_ref(),
             &self.perturbation,
         )?;
-        let store = open_store(&dir, &source, &p, config, spec.repeats)?;
+        if let Some(s) = &stitched {
+            config["stitch"] = s.config.clone();
+        }
+        let display = stitched.as_ref().map(|s| s.name.clone());
+        let store = open_store(
+            &dir,
+            display.as_deref().unwrap_or(&source),
+            &p,
+            config,
+            spec.repeats,
+        )?;
+        let mut store = store;
+        if let Some(s) = &stitched {
+            store.set_engine(s.engine.clone())?;
+        }
         let pending: Vec<u32> = (0..spec.repeats)
             .filter(|&r| !store.has_finished_run(&run_id(r)))
             .collect();
@@ -284,6 +382,60 @@ impl Plan {
             pending,
             load_error: None,
             done: Done::default(),
+            stitch: stitched.map(|s| s.engines),
+        })
+    }
+
+    /// A stitched group's names and configuration: every engine of the
+    /// plan prepared (so that a mistake is an error before any run), the
+    /// plan expanded to the scene's phases.
+    fn stitched(
+        &self,
+        registry: Registry,
+        scene_file: &std::path::Path,
+        first: &Prepared,
+        plan: &StitchPlan,
+    ) -> Result<Stitched> {
+        let phases = phase_ticks(&first.scene);
+        let context = || format!("--stitch for scene {}", scene_file.display());
+        let engines = plan.per_phase(phases.len()).with_context(context)?;
+        let mut versions = Vec::new();
+        let mut configs = serde_json::Map::new();
+        for engine in &plan.engines {
+            if configs.contains_key(engine) {
+                continue;
+            }
+            let p = self.prepare(registry, scene_file, engine)?;
+            versions.push(p.engine.version());
+            let c = config_json(&p, &self.spec, None, None, &self.perturbation)?;
+            configs.insert(
+                engine.clone(),
+                serde_json::json!({
+                    "version": p.engine.version(),
+                    "params_file": split_entry(engine).1,
+                    "params": c["params"],
+                    "engine_settings": c["engine_settings"],
+                    "timestep_s": c["timestep_s"],
+                    "steps_per_control_period": c["steps_per_control_period"],
+                }),
+            );
+        }
+        let period = first.scene.controller.period_s;
+        Ok(Stitched {
+            name: plan.display_name(phases.len()).with_context(context)?,
+            dir: plan.dir_name(phases.len()).with_context(context)?,
+            engine: EngineInfo {
+                name: realitygap_core::stitch::STITCHED.to_string(),
+                version: versions.join(" > "),
+            },
+            config: serde_json::json!({
+                "plan": plan.engines,
+                "engines_per_phase": engines,
+                "phases_start_s": phases.iter().map(|(s, _)| *s as f64 * period).collect::<Vec<_>>(),
+                "handover_ticks": phases.iter().skip(1).map(|(s, _)| *s).collect::<Vec<_>>(),
+                "engines": configs,
+            }),
+            engines,
         })
     }
 
@@ -301,6 +453,7 @@ impl Plan {
             params: self.params_file.clone(),
             params_text: None,
             check_only,
+            stitch: g.stitch.clone(),
         }
     }
 

@@ -6,6 +6,7 @@
 use anyhow::{anyhow, Result};
 use realitygap_core::controller::{RunOutcome, RunStatus};
 use realitygap_core::pose::{Pose, Quat, Vec3};
+use realitygap_core::stitch::Handover;
 use realitygap_core::trajectory::{BodyTrack, Trajectory};
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
@@ -36,6 +37,10 @@ pub struct Job {
     pub params_text: Option<String>,
     /// Only load the model and report success.
     pub check_only: bool,
+    /// A stitched run: the engines of the phases (`engine` is the first);
+    /// `None` for a run in `engine` alone.
+    #[serde(default)]
+    pub stitch: Option<Vec<String>>,
 }
 
 /// What the child process sends back.
@@ -57,6 +62,9 @@ pub struct ChildResult {
     pub joint_angles_rad: Vec<Vec<u64>>,
     /// `[sample][joint]` velocity commands (rad/s), as IEEE bits.
     pub commands_rad_s: Vec<Vec<u64>>,
+    /// The handovers of a stitched run (empty otherwise).
+    #[serde(default)]
+    pub handovers: Vec<Handover>,
 }
 
 fn bits(v: &[f64]) -> Vec<u64> {
@@ -111,6 +119,7 @@ impl ChildResult {
                 .flatten()
                 .map(|r| bits(r))
                 .collect(),
+            handovers: Vec::new(),
         }
     }
 
@@ -193,6 +202,6 @@ mod tests {
     fn jobs_without_params_still_parse() {
         let text = r#"{"scene_file":"s.toml","engine":"mujoco","robot":null,"packages":[],"set":[],"perturb":[],"seed":7,"check_only":false}"#;
         let job: Job = serde_json::from_str(text).unwrap();
-        assert_eq!((job.seed, job.params), (7, None));
+        assert_eq!((job.seed, job.params, job.stitch), (7, None, None));
     }
 }

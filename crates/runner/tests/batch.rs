@@ -24,6 +24,7 @@ fn spec(out: &Path, repeats: u32) -> BatchSpec {
         set: vec![],
         timeout_s: Some(30.0),
         params: None,
+        stitch: None,
     }
 }
 
@@ -40,6 +41,7 @@ fn group(dir: &Path, name: &str, pending: Vec<u32>) -> Group {
         pending,
         load_error: None,
         done: Done::default(),
+        stitch: None,
     }
 }
 

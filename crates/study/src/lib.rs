@@ -12,7 +12,9 @@
 //!   registration, run selection, intervals);
 //! - [`evaluate`](mod@evaluate): the evaluation itself;
 //! - [`provenance`]: what a report says its runs came from;
-//! - [`reproduce`]: the study `realitygap reproduce` compares.
+//! - [`reproduce`]: the study `realitygap reproduce` compares;
+//! - [`stitch`]: `realitygap stitch`, stitched plans (one engine per
+//!   phase) chosen on training runs and scored against single engines.
 
 #![warn(missing_docs)]
 #![forbid(unsafe_code)]
@@ -24,6 +26,7 @@ pub mod load;
 pub mod measure;
 pub mod provenance;
 pub mod reproduce;
+pub mod stitch;
 pub mod study;
 
 pub use data_source::DataSource;

@@ -8,7 +8,7 @@ use crate::measure::Measure;
 use crate::study::{expand, SourceFormat, SourceSpec, Study};
 use realitygap_analysis::compare::AnalysisMode;
 use realitygap_data::RunStore;
-use realitygap_report::{Provenance, SourceProvenance};
+use realitygap_report::{HandoverMarks, Provenance, SourceProvenance};
 use std::path::Path;
 
 /// Provenance of a report of `study`: the study's title, file and folders,
@@ -48,6 +48,13 @@ pub fn provenance_for_study(
                     p.sources.len() - 1
                 }
             };
+            if let Some(times_s) = handover_times(spec, &scene.vars, roots) {
+                p.handovers.push(HandoverMarks {
+                    scene: scene.name.clone(),
+                    source: spec.name.clone(),
+                    times_s,
+                });
+            }
             let details = scene_details(spec, &scene.vars, roots);
             for (k, v) in details {
                 p.sources[entry]
@@ -153,6 +160,31 @@ fn scene_details(
         }
     }
     out
+}
+
+/// The handover times of a stitched results directory (its runs'
+/// `handovers`, from the manifest); `None` for any other source.
+fn handover_times(
+    spec: &SourceSpec,
+    vars: &std::collections::BTreeMap<String, String>,
+    roots: &Roots,
+) -> Option<Vec<f64>> {
+    if spec.format != SourceFormat::Store {
+        return None;
+    }
+    let dir = spec.dir.as_deref().and_then(|d| expand(d, vars).ok())?;
+    let store = RunStore::open(&roots.results.join(dir)).ok()?;
+    let mut times: Vec<f64> = store
+        .manifest()
+        .runs
+        .iter()
+        .filter_map(|r| r.extra.get("handovers")?.as_array())
+        .flatten()
+        .filter_map(|h| h.get("t_s")?.as_f64())
+        .collect();
+    times.sort_by(f64::total_cmp);
+    times.dedup();
+    (!times.is_empty()).then_some(times)
 }
 
 /// Sorted distinct numbers as ranges: `0-19, 25, 30-31`.

@@ -416,6 +416,7 @@ impl Simulator {
             params: None,
             params_text: Some(params_text.to_string()),
             check_only: false,
+            stitch: None,
         }
     }
 }

@@ -1,0 +1,193 @@
+//! `realitygap tune`: calibrate an engine against the real arm (the work
+//! is in `realitygap-tune`; this file parses arguments and draws the
+//! progress bar).
+
+use crate::cmd_engines;
+use anyhow::{Context, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+use realitygap_analysis::selection::RunRange;
+use realitygap_core::params::PhysicalParams;
+use realitygap_runner::prepare::{engine_names, find_engine, overrides_for};
+use realitygap_runner::Launcher;
+use realitygap_study::data_source::assets_dir;
+use realitygap_study::{load_study, DataSource};
+use realitygap_tune::objective::{Simulator, Target};
+use realitygap_tune::search::{Progress, SearchOptions};
+use realitygap_tune::space::Space;
+use realitygap_tune::{default_space_file, tune, TuneSpec};
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// Arguments of `realitygap tune`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// The study file (TOML), e.g. assets/studies/collins2019.toml: its
+    /// scenes are simulated and compared with its real runs.
+    pub study: PathBuf,
+    /// Folder of the study's recordings: `builtin` (default) or a folder.
+    #[arg(long, value_name = "builtin|DIR", default_value = "builtin")]
+    pub data: DataSource,
+    /// The engine to tune.
+    #[arg(long, short = 'e', value_name = "NAME")]
+    pub engine: String,
+    /// Output folder (created; a rerun of the same command resumes in it).
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// Parameter space (TOML); default assets/tuning/<engine>.toml.
+    #[arg(long, value_name = "FILE")]
+    pub space: Option<PathBuf>,
+    /// Real runs to fit on, e.g. 1-15 (default: all).
+    #[arg(long, value_name = "RANGE")]
+    pub runs: Option<String>,
+    /// Real runs to score on and never fit on, e.g. 16-20.
+    #[arg(long, value_name = "RANGE")]
+    pub holdout: Option<String>,
+    /// Evaluations (each simulates every scene of the study).
+    #[arg(long, default_value_t = 600, value_name = "EVALUATIONS")]
+    pub budget: usize,
+    /// Seed of the search.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Parallel evaluations (default: the number of cores).
+    #[arg(long, short = 'j', value_name = "N")]
+    pub jobs: Option<usize>,
+    /// Weight of the cube's final position error in the objective, per
+    /// compared step of its scene (1: a miss counts like a wrist error of
+    /// the same size held through the scene; 0: the wrist alone).
+    #[arg(long, default_value_t = realitygap_tune::objective::CUBE_WEIGHT_PER_STEP, value_name = "W")]
+    pub cube_weight: f64,
+    /// Keep the measurement's registration estimate instead of fitting the
+    /// capture frame with the parameters.
+    #[arg(long)]
+    pub keep_registration: bool,
+    /// Engine settings over the space's: a parameters file's
+    /// `[engine.NAME]` table, such as the `recommended.toml` that
+    /// `realitygap frontier` writes.
+    #[arg(long, value_name = "FILE")]
+    pub settings: Option<PathBuf>,
+    /// Engine setting over the space's and --settings: KEY=VALUE
+    /// (repeatable).
+    #[arg(long = "set", value_name = "[ENGINE.]KEY=VALUE")]
+    pub set: Vec<String>,
+    /// Robot instead of the scenes' (as for `run`).
+    #[arg(long, value_name = "mico2|official|PATH")]
+    pub robot: Option<String>,
+    /// Where a ROS package is: NAME=DIR (repeatable).
+    #[arg(long = "package", value_name = "NAME=DIR")]
+    pub packages: Vec<String>,
+}
+
+/// Runs the command.
+pub fn run(args: Args) -> Result<()> {
+    let registry = cmd_engines::compiled;
+    let engine = find_engine(registry, &args.engine)?;
+    let space_file = args
+        .space
+        .clone()
+        .unwrap_or_else(|| default_space_file(&assets_dir(), engine.name()));
+    let space = Space::from_file(&space_file)?;
+    let mut set = match &args.settings {
+        Some(f) => PhysicalParams::from_file(f)?
+            .engine_settings
+            .remove(engine.name())
+            .with_context(|| {
+                format!(
+                    "--settings {}: no [engine.{}] table",
+                    f.display(),
+                    engine.name()
+                )
+            })?,
+        None => Default::default(),
+    };
+    set.extend(overrides_for(
+        &args.set,
+        engine.name(),
+        &engine_names(registry),
+    )?);
+    let (study, roots) = load_study(&args.study, &args.data, None)?;
+    let range = |v: &Option<String>, flag: &str| -> Result<Option<RunRange>> {
+        Ok(match v {
+            Some(v) => Some(RunRange::parse(v, flag)?),
+            None => None,
+        })
+    };
+    let target = Target::new(
+        &study,
+        &roots,
+        range(&args.runs, "--runs")?,
+        range(&args.holdout, "--holdout")?,
+        args.cube_weight,
+    )
+    .with_context(|| format!("study {}", args.study.display()))?;
+    let jobs = args
+        .jobs
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let spec = TuneSpec {
+        engine: engine.name().to_string(),
+        fit_registration: !args.keep_registration && space.registration.is_some(),
+        space,
+        set,
+        search: SearchOptions {
+            budget: args.budget,
+            seed: args.seed,
+            jobs,
+        },
+        out: args.out.clone(),
+    };
+    let mut in_force = spec
+        .space
+        .settings
+        .get(&spec.engine)
+        .cloned()
+        .unwrap_or_default();
+    in_force.extend(spec.set.clone());
+    let settings: Vec<String> = in_force.iter().map(|(k, v)| format!("{k}={v}")).collect();
+    eprintln!(
+        "tuning {} ({} parameters{}) at settings {} ({}; the space's are the speed-accuracy frontier's recommendation)",
+        spec.engine,
+        spec.space.dims.len(),
+        if spec.fit_registration { " + the registration's 6" } else { "" },
+        if settings.is_empty() { "of the scenes".to_string() } else { settings.join(" ") },
+        if spec.set.is_empty() {
+            format!("from {}", space_file.display())
+        } else {
+            format!("from {} with --settings/--set over it", space_file.display())
+        },
+    );
+    let simulator = Simulator {
+        launcher: Launcher::this_executable(),
+        engine: spec.engine.clone(),
+        robot: args.robot.clone(),
+        packages: args.packages.clone(),
+    };
+    let bar = ProgressBar::new(args.budget as u64);
+    bar.set_style(
+        ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} evaluations, {msg}")
+            .expect("a valid template")
+            .progress_chars("=> "),
+    );
+    let started = Instant::now();
+    let on_progress = |p: Progress| {
+        bar.set_position(p.done as u64);
+        let fresh = p.done.saturating_sub(p.replayed);
+        bar.set_message(format!(
+            "best {:.4} m, {:.2} evaluations/s{}",
+            p.best,
+            fresh as f64 / started.elapsed().as_secs_f64().max(1e-9),
+            if p.replayed > 0 {
+                format!(" ({} replayed)", p.replayed)
+            } else {
+                String::new()
+            }
+        ));
+    };
+    let result = tune(&target, &simulator, &spec, &on_progress)?;
+    bar.finish_and_clear();
+    print!("{}", realitygap_tune::outputs::markdown(&result.summary));
+    eprintln!("\nwrote:");
+    for f in &result.files {
+        eprintln!("  {}", f.display());
+    }
+    eprintln!("  {}", args.out.join("history.csv").display());
+    Ok(())
+}
