@@ -22,6 +22,7 @@
 pub mod data_source;
 pub mod evaluate;
 pub mod files;
+pub mod import;
 pub mod load;
 pub mod measure;
 pub mod provenance;
