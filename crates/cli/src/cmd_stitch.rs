@@ -40,10 +40,11 @@ pub struct Args {
     /// scenes with at least as many phases as engines named.
     #[arg(long = "plan", value_name = "E1,E2,...")]
     pub plans: Vec<String>,
-    /// An engine with a parameters file of its own (e.g. a tune's
-    /// tuned.toml) taking part beside the engines at their defaults,
-    /// ENGINE=FILE (repeatable); a plan names it ENGINE@FILE.
-    #[arg(long = "tuned", value_name = "ENGINE=FILE")]
+    /// An engine with a parameters file of its own taking part beside the
+    /// engines at their defaults: ENGINE=FILE, or the --out folder of a
+    /// `realitygap tune` (its engine and tuned.toml); repeatable. A plan
+    /// names it ENGINE@FILE.
+    #[arg(long = "tuned", value_name = "ENGINE=FILE|TUNE_DIR")]
     pub tuned: Vec<String>,
     /// How the gap is measured (`--runs` choose the plans, `--holdout`
     /// scores them).

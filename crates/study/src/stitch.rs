@@ -355,8 +355,15 @@ fn engines_taking_part(registry: Registry, opts: &StitchOptions) -> Result<Vec<S
     }
     let mut entries = engines;
     for t in &opts.tuned {
-        let Some((engine, file)) = t.split_once('=') else {
-            bail!("--tuned \"{t}\": expected ENGINE=FILE (a parameters file, e.g. a tune's tuned.toml)");
+        // A tune's output folder names its engine and holds tuned.toml.
+        let from_dir = std::path::Path::new(t.as_str())
+            .is_dir()
+            .then(|| crate::reproduce::TunedEngine::from_dir(std::path::Path::new(t.as_str())))
+            .transpose()?
+            .map(|te| format!("{}={}", te.engine, te.params.display()));
+        let spec = from_dir.as_deref().unwrap_or(t.as_str());
+        let Some((engine, file)) = spec.split_once('=') else {
+            bail!("--tuned \"{t}\": expected ENGINE=FILE (a parameters file, e.g. a tune's tuned.toml) or the --out folder of a `realitygap tune`");
         };
         let engine = engine.trim();
         if !known.iter().any(|k| k == engine) {
