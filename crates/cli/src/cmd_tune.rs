@@ -134,6 +134,29 @@ pub fn run(args: Args) -> Result<()> {
         },
         out: args.out.clone(),
     };
+    say_settings(&spec, &space_file);
+    let simulator = Simulator {
+        launcher: Launcher::this_executable(),
+        engine: spec.engine.clone(),
+        robot: args.robot.clone(),
+        packages: args.packages.clone(),
+    };
+    let bar = progress_bar(args.budget);
+    let started = Instant::now();
+    let on_progress = |p: Progress| show(&bar, started, p);
+    let result = tune(&target, &simulator, &spec, &on_progress)?;
+    bar.finish_and_clear();
+    print!("{}", realitygap_tune::outputs::markdown(&result.summary));
+    eprintln!("\nwrote:");
+    for f in &result.files {
+        eprintln!("  {}", f.display());
+    }
+    eprintln!("  {}", args.out.join("history.csv").display());
+    Ok(())
+}
+
+/// Says which settings the tune runs at, and where they come from.
+fn say_settings(spec: &TuneSpec, space_file: &std::path::Path) {
     let mut in_force = spec
         .space
         .settings
@@ -154,40 +177,31 @@ pub fn run(args: Args) -> Result<()> {
             format!("from {} with --settings/--set over it", space_file.display())
         },
     );
-    let simulator = Simulator {
-        launcher: Launcher::this_executable(),
-        engine: spec.engine.clone(),
-        robot: args.robot.clone(),
-        packages: args.packages.clone(),
-    };
-    let bar = ProgressBar::new(args.budget as u64);
+}
+
+fn progress_bar(budget: usize) -> ProgressBar {
+    let bar = ProgressBar::new(budget as u64);
     bar.set_style(
         ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} evaluations, {msg}")
             .expect("a valid template")
             .progress_chars("=> "),
     );
-    let started = Instant::now();
-    let on_progress = |p: Progress| {
-        bar.set_position(p.done as u64);
-        let fresh = p.done.saturating_sub(p.replayed);
-        bar.set_message(format!(
-            "best {:.4} m, {:.2} evaluations/s{}",
-            p.best,
-            fresh as f64 / started.elapsed().as_secs_f64().max(1e-9),
-            if p.replayed > 0 {
-                format!(" ({} replayed)", p.replayed)
-            } else {
-                String::new()
-            }
-        ));
-    };
-    let result = tune(&target, &simulator, &spec, &on_progress)?;
-    bar.finish_and_clear();
-    print!("{}", realitygap_tune::outputs::markdown(&result.summary));
-    eprintln!("\nwrote:");
-    for f in &result.files {
-        eprintln!("  {}", f.display());
-    }
-    eprintln!("  {}", args.out.join("history.csv").display());
-    Ok(())
+    bar
+}
+
+/// The bar's position and message: the best objective so far and the
+/// evaluations per second (replayed ones aside).
+fn show(bar: &ProgressBar, started: Instant, p: Progress) {
+    bar.set_position(p.done as u64);
+    let fresh = p.done.saturating_sub(p.replayed);
+    bar.set_message(format!(
+        "best {:.4} m, {:.2} evaluations/s{}",
+        p.best,
+        fresh as f64 / started.elapsed().as_secs_f64().max(1e-9),
+        if p.replayed > 0 {
+            format!(" ({} replayed)", p.replayed)
+        } else {
+            String::new()
+        }
+    ));
 }

@@ -70,32 +70,48 @@ impl ConvergenceFigure {
             .collect()
     }
 
-    fn draw<DB: DrawingBackend>(
-        &self,
-        root: &DrawingArea<DB, plotters::coord::Shift>,
-    ) -> Result<(), String> {
-        let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
-        root.fill(&WHITE).map_err(e)?;
-        let ok: Vec<&ConvergencePoint> = self
-            .points
+    /// The finished evaluations (drawn as dots).
+    fn finished(&self) -> Vec<&ConvergencePoint> {
+        self.points
             .iter()
             .filter(|p| !p.failed && p.objective_m.is_finite() && p.objective_m >= 0.0)
-            .collect();
+            .collect()
+    }
+
+    /// The reference line's value, when drawable.
+    fn reference_m(&self) -> Option<f64> {
+        self.reference
+            .as_ref()
+            .map(|r| r.1)
+            .filter(|v| v.is_finite() && *v > 0.0)
+    }
+
+    /// The top of the linear y axis: 1.5 x the reference (or just above the
+    /// largest objective), so that the early, far-off candidates sit at the
+    /// top edge.
+    fn top(&self) -> Result<f64, String> {
+        let ok = self.finished();
         let (Some(lo), Some(hi)) = (
             ok.iter().map(|p| p.objective_m).reduce(f64::min),
             ok.iter().map(|p| p.objective_m).reduce(f64::max),
         ) else {
             return Err("no finished evaluation to draw".into());
         };
+        Ok(self
+            .reference_m()
+            .map_or(hi * 1.05, |v| (v * 1.5).max(lo * 1.2)))
+    }
+
+    fn draw<DB: DrawingBackend>(
+        &self,
+        root: &DrawingArea<DB, plotters::coord::Shift>,
+    ) -> Result<(), String> {
+        let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+        root.fill(&WHITE).map_err(e)?;
+        let ok = self.finished();
+        let y1 = self.top()?;
+        let r = self.reference_m();
         let n = self.points.len().max(2);
-        let r = self
-            .reference
-            .as_ref()
-            .map(|r| r.1)
-            .filter(|v| v.is_finite() && *v > 0.0);
-        // A linear axis from 0 up to 1.5 x the reference (or the largest
-        // objective): the early, far-off candidates sit at the top edge.
-        let y1 = r.map_or(hi * 1.05, |v| (v * 1.5).max(lo * 1.2));
         let clip = |v: f64| v.min(y1);
         let mut chart = ChartBuilder::on(root)
             .caption(self.title.as_str(), (FAMILY, 16))

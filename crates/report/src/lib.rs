@@ -93,6 +93,26 @@ pub fn write_report(
     write_report_with(reports, provenance, out_dir, &[])
 }
 
+/// Writes the table in every format into `out_dir`.
+fn write_tables(
+    reports: &[SceneReport],
+    out_dir: &Path,
+    files: &mut ReportFiles,
+) -> Result<(), ReportError> {
+    let tables = [
+        ("table.md", Format::Markdown),
+        ("table.csv", Format::Csv),
+        ("table.json", Format::Json),
+        ("table.tex", Format::Latex),
+    ];
+    for (name, format) in tables {
+        files
+            .tables
+            .push(write(&out_dir.join(name), table::render(reports, format))?);
+    }
+    Ok(())
+}
+
 /// [`write_report`] with `extra` sections in `index.html`, after the
 /// summary.
 pub fn write_report_with(
@@ -138,17 +158,7 @@ pub fn write_report_with(
         svgs.push(svg);
     }
 
-    let tables = [
-        ("table.md", Format::Markdown),
-        ("table.csv", Format::Csv),
-        ("table.json", Format::Json),
-        ("table.tex", Format::Latex),
-    ];
-    for (name, format) in tables {
-        files
-            .tables
-            .push(write(&out_dir.join(name), table::render(reports, format))?);
-    }
+    write_tables(reports, out_dir, &mut files)?;
     let series = serde_json::to_string(&table::to_json(reports, true)).unwrap_or_default();
     files
         .data

@@ -285,6 +285,54 @@ impl History {
     }
 }
 
+/// Adds generation `gen` to `all`: the rows replayed from the history,
+/// then the fresh ones, sorted by coordinates (their order of completion
+/// varies with the threads), numbered and appended to the history.
+fn record_generation(
+    history: &mut History,
+    gen: usize,
+    mut new: Vec<Evaluation>,
+    all: &mut Vec<Evaluation>,
+) -> Result<()> {
+    new.sort_by(|a, b| {
+        a.x.iter()
+            .zip(&b.x)
+            .map(|(p, q)| p.total_cmp(q))
+            .find(|o| o.is_ne())
+            .unwrap_or(std::cmp::Ordering::Equal)
+    });
+    all.extend(
+        history
+            .rows()
+            .iter()
+            .filter(|e| e.generation == gen)
+            .cloned(),
+    );
+    let start = history.rows().len();
+    for (i, e) in new.iter_mut().enumerate() {
+        e.index = start + i;
+    }
+    all.extend(new.iter().cloned());
+    if !new.is_empty() {
+        history.append(new)?;
+    }
+    Ok(())
+}
+
+/// Why CMA-ES stopped, in words.
+fn stop_reason(reasons: &[TerminationReason], budget: usize) -> String {
+    reasons
+        .iter()
+        .map(|r| match r {
+            TerminationReason::MaxFunctionEvals => {
+                format!("the budget of {budget} evaluations")
+            }
+            other => format!("CMA-ES stopped: {other:?}"),
+        })
+        .collect::<Vec<_>>()
+        .join("; ")
+}
+
 fn key(x: &[f64]) -> Vec<u64> {
     x.iter().map(|v| v.to_bits()).collect()
 }
@@ -362,44 +410,10 @@ pub fn search(
         generation.store(cma.generation(), Ordering::SeqCst);
         let end = pool.install(|| cma.next_parallel());
         let gen = generation.load(Ordering::SeqCst);
-        // This generation's rows: replayed ones from the history, fresh
-        // ones sorted by coordinates (their order of completion varies).
-        let mut new: Vec<Evaluation> =
-            std::mem::take(&mut *fresh.lock().unwrap_or_else(|p| p.into_inner()));
-        new.sort_by(|a, b| {
-            a.x.iter()
-                .zip(&b.x)
-                .map(|(p, q)| p.total_cmp(q))
-                .find(|o| o.is_ne())
-                .unwrap_or(std::cmp::Ordering::Equal)
-        });
-        let mut old: Vec<Evaluation> = history
-            .rows()
-            .iter()
-            .filter(|e| e.generation == gen)
-            .cloned()
-            .collect();
-        all.append(&mut old);
-        let start = history.rows().len();
-        for (i, e) in new.iter_mut().enumerate() {
-            e.index = start + i;
-        }
-        all.extend(new.iter().cloned());
-        if !new.is_empty() {
-            history.append(new)?;
-        }
+        let new = std::mem::take(&mut *fresh.lock().unwrap_or_else(|p| p.into_inner()));
+        record_generation(history, gen, new, &mut all)?;
         if let Some(t) = end {
-            let why: Vec<String> = t
-                .reasons
-                .iter()
-                .map(|r| match r {
-                    TerminationReason::MaxFunctionEvals => {
-                        format!("the budget of {} evaluations", options.budget)
-                    }
-                    other => format!("CMA-ES stopped: {other:?}"),
-                })
-                .collect();
-            break why.join("; ");
+            break stop_reason(&t.reasons, options.budget);
         }
     };
     all.sort_by_key(|e| e.index);
