@@ -2,7 +2,7 @@
 //! its number, with the best so far drawn as a line; failed evaluations
 //! are crosses at the top. SVG and PNG.
 
-use crate::frontier::{ensure_font, FAMILY};
+use crate::render::FAMILY;
 use plotters::prelude::*;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -197,27 +197,12 @@ impl ConvergenceFigure {
 
     /// The figure as an SVG document.
     pub fn to_svg(&self) -> Result<String, ConvergenceError> {
-        ensure_font().map_err(|m| self.error(m))?;
-        let mut svg = String::new();
-        {
-            let root = SVGBackend::with_string(&mut svg, (WIDTH_PX, HEIGHT_PX)).into_drawing_area();
-            self.draw(&root).map_err(|m| self.error(m))?;
-            root.present().map_err(|e| self.error(e.to_string()))?;
-        }
-        Ok(svg)
+        crate::render::svg(self, WIDTH_PX, HEIGHT_PX).map_err(|m| self.error(m))
     }
 
     /// The figure as PNG bytes (RGB).
     pub fn to_png(&self) -> Result<Vec<u8>, ConvergenceError> {
-        ensure_font().map_err(|m| self.error(m))?;
-        let mut rgb = vec![255u8; (WIDTH_PX * HEIGHT_PX * 3) as usize];
-        {
-            let root =
-                BitMapBackend::with_buffer(&mut rgb, (WIDTH_PX, HEIGHT_PX)).into_drawing_area();
-            self.draw(&root).map_err(|m| self.error(m))?;
-            root.present().map_err(|e| self.error(e.to_string()))?;
-        }
-        crate::frontier::encode_png(&rgb, WIDTH_PX, HEIGHT_PX).map_err(|m| self.error(m))
+        crate::render::png(self, WIDTH_PX, HEIGHT_PX).map_err(|m| self.error(m))
     }
 
     /// Writes `DIR/<stem>.svg` and `DIR/<stem>.png`.
@@ -228,6 +213,15 @@ impl ConvergenceFigure {
         std::fs::write(&svg, self.to_svg()?).map_err(|e| io(&svg, e))?;
         std::fs::write(&png, self.to_png()?).map_err(|e| io(&png, e))?;
         Ok(vec![svg, png])
+    }
+}
+
+impl crate::render::Draw for ConvergenceFigure {
+    fn draw_on<DB: DrawingBackend>(
+        &self,
+        root: &DrawingArea<DB, plotters::coord::Shift>,
+    ) -> Result<(), String> {
+        self.draw(root)
     }
 }
 

@@ -13,6 +13,7 @@
 //! reference's mean when sources were compared with a reference, and the
 //! cube's displacement and pitch change when the scene has a cube.
 
+use crate::render::FAMILY;
 use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::element::{DashedPathElement, Drawable, PointCollection};
@@ -21,7 +22,6 @@ use plotters::style::text_anchor::{HPos, Pos, VPos};
 use plotters_backend::{BackendCoord, DrawingErrorKind};
 use realitygap_analysis::compare::{SceneReport, Series, SourceSummary};
 use serde::Serialize;
-use std::sync::OnceLock;
 
 /// Width of a figure, pixels (SVG user units and PNG pixels).
 pub const WIDTH_PX: u32 = 640;
@@ -29,30 +29,6 @@ pub const WIDTH_PX: u32 = 640;
 pub const HEIGHT_PX: u32 = 400;
 /// Width of the legend column at the right of a figure, pixels.
 const LEGEND_W: u32 = 158;
-/// Font family name used in the figures. SVG viewers use their own
-/// sans-serif font; PNGs use the font embedded at build time.
-const FAMILY: &str = "sans-serif";
-
-/// The TrueType font embedded for PNG text (DejaVu Sans from the Debian
-/// package `fonts-dejavu-core` unless `REALITYGAP_FONT` named another at
-/// build time; see `build.rs`).
-static FONT: &[u8] = include_bytes!(env!("REALITYGAP_FONT_PATH"));
-
-/// Registers the embedded font with plotters once.
-fn ensure_font() -> Result<(), String> {
-    static REGISTERED: OnceLock<Result<(), String>> = OnceLock::new();
-    REGISTERED
-        .get_or_init(|| {
-            plotters::style::register_font(FAMILY, FontStyle::Normal, FONT).map_err(|_| {
-                format!(
-                    "the font embedded at build time ({}) is not a valid TrueType font",
-                    env!("REALITYGAP_FONT_PATH")
-                )
-            })
-        })
-        .clone()
-}
-
 /// The Okabe-Ito colour-blind-safe palette without black (black is the
 /// reference's colour), as RGB. The yellow is darkened slightly so that a
 /// thin line stays visible on white.
@@ -887,40 +863,21 @@ fn tick_decimals(span: f64) -> usize {
     (-(step.log10().floor())).clamp(0.0, 6.0) as usize
 }
 
+impl crate::render::Draw for Figure {
+    fn draw_on<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
+        self.draw(root)
+    }
+}
+
 impl Figure {
     /// The figure as an SVG document (`WIDTH_PX` x `HEIGHT_PX`).
     pub fn to_svg(&self) -> Result<String, FigureError> {
-        ensure_font().map_err(|m| self.error(m))?;
-        let mut svg = String::new();
-        {
-            let root = SVGBackend::with_string(&mut svg, (WIDTH_PX, HEIGHT_PX)).into_drawing_area();
-            self.draw(&root).map_err(|m| self.error(m))?;
-            root.present().map_err(|e| self.error(e.to_string()))?;
-        }
-        Ok(svg)
+        crate::render::svg(self, WIDTH_PX, HEIGHT_PX).map_err(|m| self.error(m))
     }
 
     /// The figure as a PNG file's bytes (RGB, `WIDTH_PX` x `HEIGHT_PX`).
     pub fn to_png(&self) -> Result<Vec<u8>, FigureError> {
-        ensure_font().map_err(|m| self.error(m))?;
-        let mut rgb = vec![255u8; (WIDTH_PX * HEIGHT_PX * 3) as usize];
-        {
-            let root =
-                BitMapBackend::with_buffer(&mut rgb, (WIDTH_PX, HEIGHT_PX)).into_drawing_area();
-            self.draw(&root).map_err(|m| self.error(m))?;
-            root.present().map_err(|e| self.error(e.to_string()))?;
-        }
-        let mut out = Vec::new();
-        {
-            let mut enc = png::Encoder::new(&mut out, WIDTH_PX, HEIGHT_PX);
-            enc.set_color(png::ColorType::Rgb);
-            enc.set_depth(png::BitDepth::Eight);
-            let mut w = enc.write_header().map_err(|e| self.error(e.to_string()))?;
-            w.write_image_data(&rgb)
-                .map_err(|e| self.error(e.to_string()))?;
-            w.finish().map_err(|e| self.error(e.to_string()))?;
-        }
-        Ok(out)
+        crate::render::png(self, WIDTH_PX, HEIGHT_PX).map_err(|m| self.error(m))
     }
 
     fn error(&self, message: String) -> FigureError {

@@ -6,16 +6,15 @@
 //! front drawn as a black staircase and the recommended point named.
 //!
 //! The figure is plain data ([`FrontierFigure`]) rendered to SVG or PNG
-//! with the same plotters backends and embedded font as [`crate::figures`].
-//! The font is registered here on its own so that this module depends on
-//! nothing private of the study figures.
+//! with the same plotters backends and embedded font as [`crate::figures`]
+//! (the crate's one rendering module).
 
+use crate::render::FAMILY;
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
 
 /// Width of a frontier figure, pixels (SVG user units and PNG pixels).
 pub const WIDTH_PX: u32 = 720;
@@ -23,9 +22,6 @@ pub const WIDTH_PX: u32 = 720;
 pub const HEIGHT_PX: u32 = 450;
 /// Width of the legend column, pixels.
 const LEGEND_W: u32 = 170;
-pub(crate) const FAMILY: &str = "sans-serif";
-/// The font embedded for PNG text (see `build.rs`).
-static FONT: &[u8] = include_bytes!(env!("REALITYGAP_FONT_PATH"));
 /// Okabe-Ito colours, as in the study figures.
 const PALETTE: [(u8, u8, u8); 7] = [
     (0xE6, 0x9F, 0x00),
@@ -36,34 +32,6 @@ const PALETTE: [(u8, u8, u8); 7] = [
     (0xCC, 0x79, 0xA7),
     (0xC8, 0xB4, 0x00),
 ];
-
-pub(crate) fn ensure_font() -> Result<(), String> {
-    static REGISTERED: OnceLock<Result<(), String>> = OnceLock::new();
-    REGISTERED
-        .get_or_init(|| {
-            plotters::style::register_font(FAMILY, FontStyle::Normal, FONT).map_err(|_| {
-                format!(
-                    "the font embedded at build time ({}) is not a valid TrueType font",
-                    env!("REALITYGAP_FONT_PATH")
-                )
-            })
-        })
-        .clone()
-}
-
-/// RGB pixels as PNG file bytes.
-pub(crate) fn encode_png(rgb: &[u8], width: u32, height: u32) -> Result<Vec<u8>, String> {
-    let mut out = Vec::new();
-    {
-        let mut enc = png::Encoder::new(&mut out, width, height);
-        enc.set_color(png::ColorType::Rgb);
-        enc.set_depth(png::BitDepth::Eight);
-        let mut w = enc.write_header().map_err(|e| e.to_string())?;
-        w.write_image_data(rgb).map_err(|e| e.to_string())?;
-        w.finish().map_err(|e| e.to_string())?;
-    }
-    Ok(out)
-}
 
 /// One swept setting as plotted.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -175,27 +143,12 @@ impl FrontierFigure {
 
     /// The figure as an SVG document.
     pub fn to_svg(&self) -> Result<String, FrontierFigureError> {
-        ensure_font().map_err(|m| self.error(m))?;
-        let mut svg = String::new();
-        {
-            let root = SVGBackend::with_string(&mut svg, (WIDTH_PX, HEIGHT_PX)).into_drawing_area();
-            self.draw(&root).map_err(|m| self.error(m))?;
-            root.present().map_err(|e| self.error(e.to_string()))?;
-        }
-        Ok(svg)
+        crate::render::svg(self, WIDTH_PX, HEIGHT_PX).map_err(|m| self.error(m))
     }
 
     /// The figure as a PNG file's bytes (RGB).
     pub fn to_png(&self) -> Result<Vec<u8>, FrontierFigureError> {
-        ensure_font().map_err(|m| self.error(m))?;
-        let mut rgb = vec![255u8; (WIDTH_PX * HEIGHT_PX * 3) as usize];
-        {
-            let root =
-                BitMapBackend::with_buffer(&mut rgb, (WIDTH_PX, HEIGHT_PX)).into_drawing_area();
-            self.draw(&root).map_err(|m| self.error(m))?;
-            root.present().map_err(|e| self.error(e.to_string()))?;
-        }
-        encode_png(&rgb, WIDTH_PX, HEIGHT_PX).map_err(|m| self.error(m))
+        crate::render::png(self, WIDTH_PX, HEIGHT_PX).map_err(|m| self.error(m))
     }
 
     /// Writes `DIR/<stem>.svg` and `DIR/<stem>.png`; the two paths.
@@ -364,6 +317,15 @@ impl FrontierFigure {
             area.draw(&Text::new("tolerance", (24, y), style))?;
         }
         Ok(())
+    }
+}
+
+impl crate::render::Draw for FrontierFigure {
+    fn draw_on<DB: DrawingBackend>(
+        &self,
+        root: &DrawingArea<DB, plotters::coord::Shift>,
+    ) -> Result<(), String> {
+        self.draw(root)
     }
 }
 

@@ -28,6 +28,7 @@ pub mod figures;
 pub mod frontier;
 pub mod html;
 pub mod provenance;
+mod render;
 
 pub use figures::{Figure, FigureKind, SourceStyles};
 pub use provenance::{HandoverMarks, Provenance, SourceProvenance};
