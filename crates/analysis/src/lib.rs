@@ -39,4 +39,6 @@ pub mod testing;
 
 pub use compare::{AnalysisMode, SceneReport, SourceRuns, SourceSummary};
 pub use health::{HealthFlag, HealthOptions, RunHealth};
-pub use study::{evaluate_study, SceneInput};
+pub use study::{
+    align_references, evaluate_study, evaluate_study_aligned, AlignedReferences, SceneInput,
+};

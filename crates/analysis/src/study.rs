@@ -52,26 +52,60 @@ pub fn evaluate_study(
     scenes: &[SceneInput<'_>],
     opts: &CompareOptions,
 ) -> Result<Vec<SceneReport>, SelectionError> {
+    let aligned = align_references(scenes, opts)?;
+    Ok(evaluate_study_aligned(scenes, &aligned, opts))
+}
+
+/// The selected reference runs of every scene with their alignment (steps
+/// 1 and 2 of the module docs). It depends on the reference runs, the
+/// scenes and the options' mode, alignment and run selection only, not on
+/// the registration or the sources: a caller scoring many sources against
+/// the same real runs (a tune) computes it once.
+pub struct AlignedReferences {
+    selected: Vec<SelectedRuns>,
+    aligned: Vec<Aligned>,
+}
+
+/// The start of every run of a reference and the alignment report.
+type Aligned = (Vec<Option<RunStart>>, Option<AlignmentReport>);
+
+/// Selects and aligns the reference runs of every scene; an error naming
+/// the argument when the run selection selects no run of a scene.
+pub fn align_references(
+    scenes: &[SceneInput<'_>],
+    opts: &CompareOptions,
+) -> Result<AlignedReferences, SelectionError> {
     let selected = scenes
         .iter()
         .map(|s| opts.runs.select(&s.spec.name, s.reference.runs.len()))
         .collect::<Result<Vec<_>, _>>()?;
-    let prepared = prepare_references(scenes, &selected, opts);
-    Ok(scenes
+    let aligned = align_selected(scenes, &selected, opts);
+    Ok(AlignedReferences { selected, aligned })
+}
+
+/// [`evaluate_study`] with the reference runs already aligned by
+/// [`align_references`] for the same scenes, with options that differ at
+/// most in the registration and the bootstrap.
+pub fn evaluate_study_aligned(
+    scenes: &[SceneInput<'_>],
+    aligned: &AlignedReferences,
+    opts: &CompareOptions,
+) -> Vec<SceneReport> {
+    let prepared = prepare_aligned(scenes, &aligned.selected, aligned.aligned.clone(), opts);
+    scenes
         .iter()
         .zip(prepared)
         .map(|(s, p)| evaluate_prepared(s.spec, p, s.sources, opts))
-        .collect())
+        .collect()
 }
 
-/// Aligns, registers and selects the reference runs of every scene (steps
-/// 1-3 of the module docs); one prepared reference per scene, in order.
-pub(crate) fn prepare_references(
+/// Aligns the selected reference runs of every scene.
+fn align_selected(
     scenes: &[SceneInput<'_>],
     selected: &[SelectedRuns],
     opts: &CompareOptions,
-) -> Vec<PreparedReference> {
-    let aligned: Vec<(Vec<Option<RunStart>>, Option<AlignmentReport>)> = scenes
+) -> Vec<Aligned> {
+    scenes
         .iter()
         .zip(selected)
         .map(|(s, sel)| {
@@ -84,7 +118,28 @@ pub(crate) fn prepare_references(
                 .collect();
             align_runs(s.reference, s.spec, opts, &include, &fit)
         })
-        .collect();
+        .collect()
+}
+
+/// Aligns, registers and selects the reference runs of every scene (steps
+/// 1-3 of the module docs); one prepared reference per scene, in order.
+pub(crate) fn prepare_references(
+    scenes: &[SceneInput<'_>],
+    selected: &[SelectedRuns],
+    opts: &CompareOptions,
+) -> Vec<PreparedReference> {
+    let aligned = align_selected(scenes, selected, opts);
+    prepare_aligned(scenes, selected, aligned, opts)
+}
+
+/// Registers and selects the aligned reference runs of every scene (step
+/// 3 of the module docs).
+fn prepare_aligned(
+    scenes: &[SceneInput<'_>],
+    selected: &[SelectedRuns],
+    aligned: Vec<Aligned>,
+    opts: &CompareOptions,
+) -> Vec<PreparedReference> {
     let starts: Vec<&[Option<RunStart>]> = aligned.iter().map(|a| a.0.as_slice()).collect();
     let registration = resolve_registration(scenes, selected, &starts, opts);
     scenes

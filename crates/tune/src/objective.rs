@@ -24,6 +24,9 @@ use realitygap_analysis::compare::{
 };
 use realitygap_analysis::registration::Registration;
 use realitygap_analysis::selection::{RunRange, RunSelection};
+use realitygap_analysis::{
+    align_references, evaluate_study_aligned, AlignedReferences, SceneInput,
+};
 use realitygap_core::params::PhysicalParams;
 use realitygap_core::{Quat, Trajectory, Vec3};
 use realitygap_runner::{run_child, ChildEnd, Job, Launcher};
@@ -74,6 +77,9 @@ pub struct Target {
     pub period_s: f64,
     /// The weight of a cube's final position error per compared step.
     pub cube_weight_per_step: f64,
+    /// The training runs selected and aligned once: every candidate is
+    /// scored against the same real runs.
+    aligned_train: Option<AlignedReferences>,
 }
 
 /// One scene's share of an objective.
@@ -201,6 +207,7 @@ impl Target {
             base_registration: Registration::IDENTITY,
             period_s: study.control_period_s,
             cube_weight_per_step,
+            aligned_train: None,
         };
         let reports = target.evaluate(
             &vec![Vec::new(); target.scenes.len()],
@@ -212,6 +219,9 @@ impl Target {
             .iter()
             .find_map(|r| r.registration.as_ref().map(|x| x.registration()))
             .unwrap_or(Registration::IDENTITY);
+        let opts = target.options(RegistrationChoice::None, &target.train, None);
+        let no_sources = vec![Vec::new(); target.scenes.len()];
+        target.aligned_train = Some(align_references(&target.inputs(&no_sources), &opts)?);
         Ok(target)
     }
 
@@ -223,6 +233,38 @@ impl Target {
         })
     }
 
+    /// The analysis options for `registration`, `selection` and
+    /// `bootstrap` resamples (`None`: no intervals).
+    fn options(
+        &self,
+        registration: RegistrationChoice,
+        selection: &RunSelection,
+        bootstrap: Option<usize>,
+    ) -> CompareOptions {
+        CompareOptions {
+            registration,
+            runs: selection.clone(),
+            bootstrap: Some(BootstrapOptions {
+                resamples: bootstrap.unwrap_or(0),
+                ..BootstrapOptions::default()
+            }),
+            ..CompareOptions::default()
+        }
+    }
+
+    /// The scenes with `sources` (per scene) as analysis input.
+    fn inputs<'a>(&'a self, sources: &'a [Vec<SourceRuns>]) -> Vec<SceneInput<'a>> {
+        self.loaded
+            .iter()
+            .zip(sources)
+            .map(|(l, s)| SceneInput {
+                spec: &l.spec,
+                reference: &l.reference,
+                sources: s,
+            })
+            .collect()
+    }
+
     /// Runs the analysis on `sources` (per scene) with `registration`,
     /// `selection`, and `bootstrap` resamples (`None`: no intervals).
     pub fn evaluate(
@@ -232,26 +274,11 @@ impl Target {
         selection: &RunSelection,
         bootstrap: Option<usize>,
     ) -> Result<Vec<SceneReport>> {
-        let opts = CompareOptions {
-            registration,
-            runs: selection.clone(),
-            bootstrap: Some(BootstrapOptions {
-                resamples: bootstrap.unwrap_or(0),
-                ..BootstrapOptions::default()
-            }),
-            ..CompareOptions::default()
-        };
-        let inputs: Vec<_> = self
-            .loaded
-            .iter()
-            .zip(sources)
-            .map(|(l, s)| realitygap_analysis::SceneInput {
-                spec: &l.spec,
-                reference: &l.reference,
-                sources: s,
-            })
-            .collect();
-        Ok(realitygap_analysis::evaluate_study(&inputs, &opts)?)
+        let opts = self.options(registration, selection, bootstrap);
+        Ok(realitygap_analysis::evaluate_study(
+            &self.inputs(sources),
+            &opts,
+        )?)
     }
 
     /// One source per scene named `name` from one trajectory per scene.
@@ -282,10 +309,15 @@ impl Target {
             registration: *registration,
             origin: "tune candidate".into(),
         };
-        match self.evaluate(&sources, choice, &self.train, None) {
-            Ok(reports) => score_of(&reports, &self.scenes),
-            Err(e) => Score::failed(format!("{e:#}")),
-        }
+        let opts = self.options(choice, &self.train, None);
+        let reports = match &self.aligned_train {
+            Some(aligned) => evaluate_study_aligned(&self.inputs(&sources), aligned, &opts),
+            None => match realitygap_analysis::evaluate_study(&self.inputs(&sources), &opts) {
+                Ok(r) => r,
+                Err(e) => return Score::failed(e.to_string()),
+            },
+        };
+        score_of(&reports, &self.scenes)
     }
 }
 
