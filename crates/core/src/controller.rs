@@ -252,6 +252,11 @@ pub struct RunOptions {
     /// A tracked body farther than this from the world origin (any
     /// coordinate, m) means the run diverged.
     pub divergence_bound_m: f64,
+    /// Run even when the loaded simulation reports settings known to be
+    /// numerically unstable ([`Simulation::stability_issues`]); otherwise
+    /// [`load_prepared`] refuses them with
+    /// [`EngineError::UnstableSettings`].
+    pub allow_unstable: bool,
 }
 
 impl Default for RunOptions {
@@ -259,6 +264,7 @@ impl Default for RunOptions {
         RunOptions {
             perturbation: None,
             divergence_bound_m: 10.0,
+            allow_unstable: false,
         }
     }
 }
@@ -760,7 +766,9 @@ pub fn prepare(
 }
 
 /// Loads a scene prepared by [`prepare`] with the perturbation's mass and
-/// friction factors.
+/// friction factors, and refuses it with [`EngineError::UnstableSettings`]
+/// when the simulation reports settings known to be unstable for its
+/// model, unless `options` allow them.
 pub fn load_prepared(
     engine: &dyn Engine,
     scene: &Scene,
@@ -774,7 +782,27 @@ pub fn load_prepared(
         .as_ref()
         .map(|p| p.variation)
         .unwrap_or_default();
-    Ok(engine.load_with(scene, robot, settings, &variation, params)?)
+    let sim = engine.load_with(scene, robot, settings, &variation, params)?;
+    let issues = sim.stability_issues();
+    if !issues.is_empty() && !options.allow_unstable {
+        let mut message = issues[0].message.clone();
+        if issues.len() > 1 {
+            let others: Vec<String> = issues[1..]
+                .iter()
+                .map(|i| {
+                    let joint = i.joint.as_deref().unwrap_or("the model");
+                    format!("\"{joint}\" ({} = {:.3})", i.quantity, i.value)
+                })
+                .collect();
+            message.push_str(&format!("; also past the bound: {}", others.join(", ")));
+        }
+        return Err(EngineError::UnstableSettings {
+            engine: engine.name().to_string(),
+            message,
+        }
+        .into());
+    }
+    Ok(sim)
 }
 
 #[cfg(test)]

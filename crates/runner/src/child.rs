@@ -106,6 +106,7 @@ fn run_options(job: &Job, joints: usize) -> Result<RunOptions> {
     let sample = (!perturbation.is_none()).then(|| perturbation.sample(job.seed, joints));
     Ok(RunOptions {
         perturbation: sample,
+        allow_unstable: job.allow_unstable,
         ..RunOptions::default()
     })
 }
@@ -130,8 +131,11 @@ pub fn simulate(registry: Registry, job: &Job) -> Result<Option<ChildResult>> {
         return Ok(None);
     }
     let control = ControlParams::from_params(&p.params, &p.scene);
+    let issues = sim.stability_issues();
     let outcome = run_scene_with(sim.as_mut(), &p.scene, &options, &control)?;
-    Ok(Some(ChildResult::from_outcome(&outcome)))
+    let mut result = ChildResult::from_outcome(&outcome);
+    result.stability_issues = issues;
+    Ok(Some(result))
 }
 
 /// Runs a stitched job: the scene prepared in every engine of the plan,
@@ -344,6 +348,7 @@ mod tests {
             params_text: None,
             check_only,
             stitch: None,
+            allow_unstable: false,
         }
     }
 

@@ -45,6 +45,9 @@ pub struct BatchSpec {
     /// per schedule phase (see `realitygap_core::stitch`); `engines` must
     /// then be empty.
     pub stitch: Option<String>,
+    /// Run settings the engine knows to be unstable for the model instead
+    /// of refusing them (`--allow-unstable`); recorded in the manifest.
+    pub allow_unstable: bool,
 }
 
 /// Runs of one results directory that ended each way in this batch.
@@ -165,7 +168,7 @@ fn config_json(
     params_file: Option<&PathBuf>,
     perturbation: &Perturbation,
 ) -> Result<serde_json::Value> {
-    Ok(serde_json::json!({
+    let mut config = serde_json::json!({
         "scene_file": p.scene.source.display().to_string(),
         "robot": {
             "urdf": p.scene.robot.urdf.display().to_string(),
@@ -188,7 +191,13 @@ fn config_json(
         "params": serde_json::to_value(&p.params)?,
         "perturbation": perturbation.describe(),
         "deterministic": perturbation.is_none(),
-    }))
+    });
+    if spec.allow_unstable {
+        // Only when set, so that directories written before the option
+        // existed keep their configuration.
+        config["allow_unstable"] = serde_json::json!(true);
+    }
+    Ok(config)
 }
 
 /// Opens (or creates) a group's results directory, checks that its runs
@@ -454,6 +463,7 @@ impl Plan {
             params_text: None,
             check_only,
             stitch: g.stitch.clone(),
+            allow_unstable: spec.allow_unstable,
         }
     }
 

@@ -6,6 +6,7 @@
 use anyhow::{anyhow, Result};
 use realitygap_core::controller::{RunOutcome, RunStatus};
 use realitygap_core::pose::{Pose, Quat, Vec3};
+use realitygap_core::engine::StabilityIssue;
 use realitygap_core::stitch::Handover;
 use realitygap_core::trajectory::{BodyTrack, Trajectory};
 use serde::{Deserialize, Serialize};
@@ -41,6 +42,11 @@ pub struct Job {
     /// `None` for a run in `engine` alone.
     #[serde(default)]
     pub stitch: Option<Vec<String>>,
+    /// Run even with settings the engine knows to be unstable for the
+    /// model (`--allow-unstable`); the issues are then recorded in the run's
+    /// manifest entry.
+    #[serde(default)]
+    pub allow_unstable: bool,
 }
 
 /// What the child process sends back.
@@ -65,6 +71,10 @@ pub struct ChildResult {
     /// The handovers of a stitched run (empty otherwise).
     #[serde(default)]
     pub handovers: Vec<Handover>,
+    /// The unstable settings the run was allowed to run with
+    /// (`--allow-unstable`), empty otherwise.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub stability_issues: Vec<StabilityIssue>,
 }
 
 fn bits(v: &[f64]) -> Vec<u64> {
@@ -120,6 +130,7 @@ impl ChildResult {
                 .map(|r| bits(r))
                 .collect(),
             handovers: Vec::new(),
+            stability_issues: Vec::new(),
         }
     }
 

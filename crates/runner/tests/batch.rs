@@ -25,6 +25,7 @@ fn spec(out: &Path, repeats: u32) -> BatchSpec {
         timeout_s: Some(30.0),
         params: None,
         stitch: None,
+        allow_unstable: false,
     }
 }
 
