@@ -276,7 +276,9 @@ impl Batch<'_> {
         }
         if !result.stability_issues.is_empty() {
             let issues = serde_json::to_value(&result.stability_issues).unwrap_or_default();
-            entry.extra.insert("allowed_unstable_settings".into(), issues);
+            entry
+                .extra
+                .insert("allowed_unstable_settings".into(), issues);
         }
         self.stats.steps_total += result.engine_steps;
         self.stats.loop_time_total += result.wall_time_s;

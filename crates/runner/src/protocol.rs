@@ -5,8 +5,8 @@
 
 use anyhow::{anyhow, Result};
 use realitygap_core::controller::{RunOutcome, RunStatus};
-use realitygap_core::pose::{Pose, Quat, Vec3};
 use realitygap_core::engine::StabilityIssue;
+use realitygap_core::pose::{Pose, Quat, Vec3};
 use realitygap_core::stitch::Handover;
 use realitygap_core::trajectory::{BodyTrack, Trajectory};
 use serde::{Deserialize, Serialize};
