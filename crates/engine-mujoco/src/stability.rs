@@ -199,6 +199,118 @@ fn issue(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::MujocoEngine;
+    use realitygap_core::controller::{load_prepared, RunError, RunOptions};
+    use realitygap_core::engine::{EngineError, EngineSettings, SettingValue};
+    use realitygap_core::params::PhysicalParams;
+    use realitygap_core::robot::{PackageResolver, RobotModel};
+    use realitygap_core::scene::Scene;
+    use std::path::Path;
+
+    /// A heavy upper link on j1 and a light lower link on j2, both hinges
+    /// about y with the centres of mass on their axes: j2's inertia about
+    /// its axis is 1e-4 kg m^2 (plus nothing: no armature).
+    const ARM: &str = r#"<robot name="light">
+  <link name="world"/>
+  <link name="base"><inertial><mass value="1"/><inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial></link>
+  <link name="upper"><inertial><mass value="5"/><inertia ixx="0.05" ixy="0" ixz="0" iyy="0.05" iyz="0" izz="0.05"/></inertial></link>
+  <link name="lower"><inertial><mass value="0.1"/><inertia ixx="1e-4" ixy="0" ixz="0" iyy="1e-4" iyz="0" izz="1e-4"/></inertial></link>
+  <joint name="fix" type="fixed"><parent link="world"/><child link="base"/></joint>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="upper"/><origin xyz="0 0 0.1"/>
+    <axis xyz="0 1 0"/><limit lower="-3" upper="3" effort="100" velocity="5"/></joint>
+  <joint name="j2" type="revolute"><parent link="upper"/><child link="lower"/><origin xyz="0 0 0.3"/>
+    <axis xyz="0 1 0"/><limit lower="-3" upper="3" effort="100" velocity="5"/></joint>
+</robot>"#;
+
+    const SCENE: &str = r#"
+name = "light"
+duration_s = 1.0
+[robot]
+urdf = "light.urdf"
+base_position_m = [0, 0, 0]
+[controller]
+gain_per_s = 10.0
+max_speed_deg_s = 30.0
+period_s = 0.05
+[[actuator]]
+joint = "j1"
+kv = 10.0
+force_limit = 100.0
+[[actuator]]
+joint = "j2"
+kv = 1.0
+force_limit = 100.0
+[[schedule]]
+t_s = 0.0
+targets_deg = { j1 = 10.0 }
+"#;
+
+    fn load(pairs: &[(&str, SettingValue)], allow: bool) -> Result<Vec<StabilityIssue>, RunError> {
+        let robot =
+            RobotModel::from_urdf_str(ARM, Path::new("/tmp"), &PackageResolver::new()).unwrap();
+        let scene = Scene::from_toml_str(SCENE, Path::new("/tmp/light.toml")).unwrap();
+        scene.validate(&robot).unwrap();
+        let settings: EngineSettings = pairs
+            .iter()
+            .map(|(k, v)| (k.to_string(), v.clone()))
+            .collect();
+        let options = RunOptions {
+            allow_unstable: allow,
+            ..RunOptions::default()
+        };
+        let sim = load_prepared(
+            &MujocoEngine,
+            &scene,
+            &robot,
+            &settings,
+            &PhysicalParams::none(),
+            &options,
+        )?;
+        Ok(sim.stability_issues())
+    }
+
+    #[test]
+    fn a_light_link_is_refused_at_a_coarse_euler_step_and_accepted_when_safe() {
+        // j2: kv*dt/I = 1 * 1e-3 / 1e-4 = 10 under Euler.
+        let coarse = [
+            ("timestep_s", SettingValue::Float(1e-3)),
+            ("integrator", SettingValue::Text("euler".into())),
+        ];
+        let e = load(&coarse, false).unwrap_err().to_string();
+        assert!(e.contains("joint \"j2\""), "{e}");
+        assert!(e.contains("= 10.0"), "{e}");
+        assert!(e.contains("implicitfast"), "{e}");
+        assert!(e.contains("timestep_s below 9.98"), "{e}");
+        assert!(!e.contains("\"j1\""), "{e}");
+        assert!(matches!(
+            load(&coarse, false),
+            Err(RunError::Engine(EngineError::UnstableSettings { .. }))
+        ));
+        // Allowed: the issue is still reported, with the effective inertia
+        // of j2 (the heavy j1 moves little: I_eff is about 1e-4).
+        let issues = load(&coarse, true).unwrap();
+        assert_eq!(issues.len(), 1);
+        assert_eq!(issues[0].joint.as_deref(), Some("j2"));
+        assert!((issues[0].value - 10.0).abs() < 0.05, "{}", issues[0].value);
+        assert_eq!(issues[0].bound, EULER_BOUND);
+        // RK4 has a wider bound, still far exceeded.
+        let rk4 = [
+            ("timestep_s", SettingValue::Float(1e-3)),
+            ("integrator", SettingValue::Text("rk4".into())),
+        ];
+        assert_eq!(load(&rk4, true).unwrap()[0].bound, RK4_BOUND);
+        // Safe: a timestep with kv*dt/I = 1, or an implicit integrator.
+        let fine = [
+            ("timestep_s", SettingValue::Float(1e-4)),
+            ("integrator", SettingValue::Text("euler".into())),
+        ];
+        assert_eq!(load(&fine, false).unwrap(), vec![]);
+        let implicit = [
+            ("timestep_s", SettingValue::Float(1e-3)),
+            ("integrator", SettingValue::Text("implicitfast".into())),
+        ];
+        assert_eq!(load(&implicit, false).unwrap(), vec![]);
+    }
 
     #[test]
     fn cholesky_inverse_diagonal_matches_a_hand_inverse() {
