@@ -234,11 +234,14 @@ fn wrist_of(scene_file: &Path) -> (Scene, RobotModel, usize) {
     (scene, robot, link)
 }
 
-#[test]
-fn the_iiwa_reaches_its_targets_with_the_wrist_on_forward_kinematics() {
+/// Runs the iiwa scene `name` in every engine; checks each engine's final
+/// joint errors against `targets_deg` (below `tolerance_deg`) and its wrist
+/// against the robot model's forward kinematics at its final angles
+/// (below 1 mm), printing both.
+fn check_iiwa_final(name: &str, targets_deg: [f64; 7], tolerance_deg: f64) {
     require_iiwa();
     let tmp = tempfile::tempdir().unwrap();
-    let file = scene("iiwa_reach");
+    let file = scene(name);
     let out = run(&[
         file.to_str().unwrap(),
         "--out",
@@ -246,10 +249,8 @@ fn the_iiwa_reaches_its_targets_with_the_wrist_on_forward_kinematics() {
     ]);
     assert!(out.status.success(), "{}", text(&out));
     let (scene, robot, link) = wrist_of(&file);
-    let base = scene.robot.base;
-    let targets_deg = [0.0, 45.0, 0.0, -60.0, 0.0, 0.0, 0.0];
     for e in engines_compiled() {
-        let (_, traj) = the_run(&tmp.path().join("iiwa_reach").join(e));
+        let (_, traj) = the_run(&tmp.path().join(name).join(e));
         let q = traj
             .joint_angles_rad
             .as_ref()
@@ -257,21 +258,48 @@ fn the_iiwa_reaches_its_targets_with_the_wrist_on_forward_kinematics() {
             .last()
             .unwrap()
             .clone();
-        for (j, (got, want)) in q.iter().zip(targets_deg).enumerate() {
-            // The velocity servos under a P controller sag under gravity:
-            // up to 2.5 degrees on joint 2 (MuJoCo, Rapier).
-            let err = (got.to_degrees() - want).abs();
-            assert!(err < 3.0, "{e}: joint {} ends {err:.2} deg off", j + 1);
-        }
+        let errors: Vec<f64> = q
+            .iter()
+            .zip(targets_deg)
+            .map(|(got, want)| got.to_degrees() - want)
+            .collect();
         let mut positions = vec![0.0; robot.joints.len()];
         for (a, v) in scene.actuators.iter().zip(&q) {
             positions[robot.joint_by_name(&a.joint).unwrap()] = *v;
         }
-        let fk = robot.link_pose(&base, &positions, link).unwrap();
+        let fk = robot
+            .link_pose(&scene.robot.base, &positions, link)
+            .unwrap();
         let wrist = traj.bodies[0].poses.last().unwrap().unwrap();
         let d = wrist.position_m.distance(fk.position_m);
+        let shown: Vec<String> = errors.iter().map(|v| format!("{v:+.2}")).collect();
+        eprintln!(
+            "{name} {e}: final joint errors (deg) [{}], wrist {:.4?} m, {:.3e} m from forward kinematics",
+            shown.join(", "),
+            wrist.position_m.to_array(),
+            d
+        );
+        for (j, err) in errors.iter().enumerate() {
+            assert!(
+                err.abs() < tolerance_deg,
+                "{e}: joint {} ends {err:.2} deg off",
+                j + 1
+            );
+        }
         assert!(d < 1e-3, "{e}: wrist {d:.2e} m from forward kinematics");
     }
+}
+
+#[test]
+fn the_iiwa_reaches_its_targets_with_the_wrist_on_forward_kinematics() {
+    // The velocity servos under a P controller sag under gravity: up to
+    // 2.5 degrees on joint 2 (MuJoCo, Rapier).
+    check_iiwa_final("iiwa_reach", [0.0, 45.0, 0.0, -60.0, 0.0, 0.0, 0.0], 3.0);
+}
+
+#[test]
+fn the_iiwa_ends_its_push_at_its_targets_with_the_wrist_on_forward_kinematics() {
+    check_iiwa_final("iiwa_push", [-30.0, 70.0, 0.0, -75.0, 0.0, 0.0, 0.0], 3.0);
 }
 
 #[test]
