@@ -510,8 +510,9 @@ pub struct StabilityIssue {
 pub trait Simulation: Send {
     /// The settings of this simulation that the engine knows to be
     /// numerically unstable for its model, worst first; empty when none is
-    /// known (the default). The controller refuses to run a simulation
-    /// with issues unless its [`crate::controller::RunOptions`] allow it.
+    /// known (the default). [`crate::controller::refuse_unstable`] refuses
+    /// to run a simulation with issues unless its
+    /// [`crate::controller::RunOptions`] allow it.
     fn stability_issues(&self) -> Vec<StabilityIssue> {
         Vec::new()
     }

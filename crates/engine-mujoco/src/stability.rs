@@ -200,7 +200,7 @@ fn issue(
 mod tests {
     use super::*;
     use crate::MujocoEngine;
-    use realitygap_core::controller::{load_prepared, RunError, RunOptions};
+    use realitygap_core::controller::{load_prepared, refuse_unstable, RunError, RunOptions};
     use realitygap_core::engine::{EngineError, EngineSettings, SettingValue};
     use realitygap_core::params::PhysicalParams;
     use realitygap_core::robot::{PackageResolver, RobotModel};
@@ -266,6 +266,7 @@ targets_deg = { j1 = 10.0 }
             &PhysicalParams::none(),
             &options,
         )?;
+        refuse_unstable(&MujocoEngine, sim.as_ref(), &options)?;
         Ok(sim.stability_issues())
     }
 

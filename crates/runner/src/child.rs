@@ -10,7 +10,7 @@ use crate::protocol::{ChildResult, Job};
 use crate::Registry;
 use anyhow::{Context, Result};
 use realitygap_core::controller::{
-    load_prepared, run_scene_with, ControlParams, RunError, RunOptions,
+    load_prepared, refuse_unstable, run_scene_with, ControlParams, RunError, RunOptions,
 };
 use realitygap_core::engine::Simulation;
 use realitygap_core::params::PhysicalParams;
@@ -127,6 +127,7 @@ pub fn simulate(registry: Registry, job: &Job) -> Result<Option<ChildResult>> {
         &p.params,
         &options,
     )?;
+    refuse_unstable(p.engine.as_ref(), sim.as_ref(), &options)?;
     if job.check_only {
         return Ok(None);
     }
@@ -166,14 +167,16 @@ fn simulate_stitched(
             .iter()
             .find(|(e, _)| e == engine)
             .expect("every engine of the plan is prepared");
-        load_prepared(
+        let sim = load_prepared(
             p.engine.as_ref(),
             &p.scene,
             &p.robot,
             &p.settings,
             &p.params,
             &options,
-        )
+        )?;
+        refuse_unstable(p.engine.as_ref(), sim.as_ref(), &options)?;
+        Ok(sim)
     };
     if job.check_only {
         for engine in &plan.engines {
