@@ -128,13 +128,14 @@ fn every_scene_and_engine_runs_unrefused_and_unflagged_under_its_own_settings() 
 
 /// The `unstable` flag of a run, if any: (joint, time).
 fn unstable_flag(traj: &Trajectory) -> Option<(usize, f64)> {
-    health::check(traj, &HealthOptions::default())
-        .flags
-        .iter()
-        .find_map(|f| match f {
-            HealthFlag::Unstable { joint, t_s, .. } => Some((*joint, *t_s)),
-            _ => None,
-        })
+    let flags = health::check(traj, &HealthOptions::default()).flags;
+    for f in &flags {
+        eprintln!("health: {}", f.describe());
+    }
+    flags.iter().find_map(|f| match f {
+        HealthFlag::Unstable { joint, t_s, .. } => Some((*joint, *t_s)),
+        _ => None,
+    })
 }
 
 #[cfg(feature = "mujoco")]
