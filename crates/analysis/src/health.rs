@@ -4,7 +4,7 @@
 //! flagged runs are left out of a source's means and listed; in study mode
 //! they are averaged in, as the reference study did.
 
-use crate::instability::{self, InstabilityOptions};
+use realitygap_core::instability::{self, InstabilityOptions};
 use realitygap_core::Trajectory;
 use serde::Serialize;
 
@@ -22,7 +22,7 @@ pub struct HealthOptions {
     /// ... and at least this long, in seconds. Default 2 s.
     pub frozen_min_s: f64,
     /// Thresholds of the runtime instability signatures
-    /// ([`crate::instability`]).
+    /// ([`realitygap_core::instability`]).
     pub instability: InstabilityOptions,
 }
 
@@ -58,8 +58,11 @@ pub enum HealthFlag {
         max_abs_m: f64,
     },
     /// The motion has a signature of numerical instability
-    /// ([`crate::instability`]): a joint stalled against a saturated
-    /// command, or reversing direction at the sample rate.
+    /// ([`realitygap_core::instability`]): a joint reversing direction at
+    /// the sample rate (found here from the trajectory), or stalled
+    /// against a saturated command with no load to explain it (found by
+    /// the runner, which knows the servos and the robot, and recorded in
+    /// the run's manifest entry as `extra.unstable`).
     Unstable {
         /// The joint, 1-based, in the trajectory's joint order.
         joint: usize,
@@ -297,7 +300,9 @@ fn frozen(
 pub fn check(traj: &Trajectory, opts: &HealthOptions) -> RunHealth {
     let mut flags = Vec::new();
     non_finite_and_diverged(traj, opts, &mut flags);
-    if let Some(found) = instability::detect(traj, &opts.instability) {
+    // The trajectory alone cannot tell a stall from a load beyond the
+    // servo: every stall counts as explained here.
+    if let Some(found) = instability::detect(traj, &opts.instability, &|_, _| true) {
         flags.push(HealthFlag::Unstable {
             joint: found.joint,
             first_sample: found.first_sample,

@@ -28,7 +28,6 @@ pub mod align;
 pub mod bootstrap;
 pub mod compare;
 pub mod health;
-pub mod instability;
 pub mod kinematic;
 pub mod metrics;
 pub mod registration;

@@ -196,11 +196,15 @@ fn print_summary(plan: &Plan, stats: &BatchStats, total: usize, batch_wall_s: f6
                 load_failures.push(format!("{}/{}", g.scene_name, g.source));
             }
             None => say(format!(
-                "{}/{}: {} ok, {} diverged, {} failed, {} kept -> {dir}",
+                "{}/{}: {} ok, {} diverged{}, {} failed, {} kept -> {dir}",
                 g.scene_name,
                 g.source,
                 g.done.ok,
                 g.done.diverged,
+                match g.done.unstable {
+                    0 => String::new(),
+                    n => format!(", {n} unstable"),
+                },
                 g.done.failed,
                 plan.kept(g)
             )),

@@ -126,8 +126,18 @@ fn every_scene_and_engine_runs_unrefused_and_unflagged_under_its_own_settings() 
     assert_eq!(checked, SCENES.len() * engines_compiled().len());
 }
 
-/// The `unstable` flag of a run, if any: (joint, time).
-fn unstable_flag(traj: &Trajectory) -> Option<(usize, f64)> {
+/// The instability a run was stored with (status `unstable`, found by the
+/// runner with the servos and gravity), else the `unstable` flag of its
+/// health (from the trajectory alone): (joint, time). Prints what it finds.
+fn unstable_flag(entry: &serde_json::Value, traj: &Trajectory) -> Option<(usize, f64)> {
+    if entry["status"] == "unstable" {
+        eprintln!("stored: {}", entry["message"]);
+        let found = &entry["extra"]["unstable"];
+        return Some((
+            found["joint"].as_u64().unwrap() as usize,
+            found["t_s"].as_f64().unwrap(),
+        ));
+    }
     let flags = health::check(traj, &HealthOptions::default()).flags;
     for f in &flags {
         eprintln!("health: {}", f.describe());
@@ -170,7 +180,8 @@ fn mujoco_euler_on_the_iiwa_is_refused_then_flagged_when_allowed() {
     let (entry, traj) = the_run(&tmp.path().join("iiwa_reach/mujoco"));
     let issues = &entry["extra"]["allowed_unstable_settings"];
     assert_eq!(issues[0]["joint"], "lbr_iiwa_joint_7", "{entry}");
-    let (joint, t_s) = unstable_flag(&traj).expect("the run must be flagged unstable");
+    assert_eq!(entry["status"], "unstable", "{entry}");
+    let (joint, t_s) = unstable_flag(&entry, &traj).expect("the run must be flagged unstable");
     assert!((5..=7).contains(&joint), "joint {joint} at {t_s} s");
 }
 
@@ -197,9 +208,10 @@ fn mujoco_euler_at_5e4_on_scene_2_is_refused_then_flagged_when_allowed() {
     allowed.push("--allow-unstable");
     let out = run(&allowed);
     assert!(out.status.success(), "{}", text(&out));
-    let (_, traj) = the_run(&tmp.path().join("scene2_two_joints/mujoco"));
+    let (entry, traj) = the_run(&tmp.path().join("scene2_two_joints/mujoco"));
+    assert_eq!(entry["status"], "unstable", "{entry}");
     assert!(
-        unstable_flag(&traj).is_some(),
+        unstable_flag(&entry, &traj).is_some(),
         "scene 2 at 5e-4 s must be flagged"
     );
 }
@@ -222,8 +234,9 @@ fn bullet_at_one_step_per_control_period_is_flagged_on_scene_2() {
         out_dir.as_str(),
     ]);
     assert!(out.status.success(), "{}", text(&out));
-    let (_, traj) = the_run(&tmp.path().join("scene2_two_joints/bullet"));
-    let (joint, _) = unstable_flag(&traj).expect("Bullet at 0.05 s must be flagged");
+    let (entry, traj) = the_run(&tmp.path().join("scene2_two_joints/bullet"));
+    assert_eq!(entry["status"], "unstable", "{entry}");
+    let (joint, _) = unstable_flag(&entry, &traj).expect("Bullet at 0.05 s must be flagged");
     assert!(joint == 4 || joint == 5, "joint {joint}");
 }
 

@@ -290,6 +290,12 @@ impl Batch<'_> {
                 .extra
                 .insert("diverged_at_s".into(), serde_json::json!(t_s));
             g.done.diverged += 1;
+        } else if let Some(found) = &result.instability {
+            entry.status = RunStatus::Unstable;
+            entry.message = Some(found.to_message());
+            let json = serde_json::to_value(found).unwrap_or_default();
+            entry.extra.insert("unstable".into(), json);
+            g.done.unstable += 1;
         } else {
             g.done.ok += 1;
         }

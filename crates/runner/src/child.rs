@@ -12,8 +12,12 @@ use anyhow::{Context, Result};
 use realitygap_core::controller::{
     load_prepared, refuse_unstable, run_scene_with, ControlParams, RunError, RunOptions,
 };
+use realitygap_core::controller::{RunOutcome, RunStatus};
 use realitygap_core::engine::Simulation;
+use realitygap_core::instability::{detect, gravity_explains, Instability, InstabilityOptions};
 use realitygap_core::params::PhysicalParams;
+use realitygap_core::robot::RobotModel;
+use realitygap_core::scene::Scene;
 use realitygap_core::stitch::{phase_ticks, run_stitched, split_entry, StitchPlan};
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
@@ -136,6 +140,7 @@ pub fn simulate(registry: Registry, job: &Job) -> Result<Option<ChildResult>> {
     let outcome = run_scene_with(sim.as_mut(), &p.scene, &options, &control)?;
     let mut result = ChildResult::from_outcome(&outcome);
     result.stability_issues = issues;
+    result.instability = instability_of(&p.scene, &p.robot, &outcome);
     Ok(Some(result))
 }
 
@@ -187,7 +192,20 @@ fn simulate_stitched(
     let run = run_stitched(&scene, &engines, &options, &control, &mut load)?;
     let mut result = ChildResult::from_outcome(&run.outcome);
     result.handovers = run.handovers;
+    result.instability = instability_of(&scene, &first.robot, &run.outcome);
     Ok(Some(result))
+}
+
+/// The first signature of a numerical instability in a completed run
+/// (none for a diverged one), with stalls judged against the scene's
+/// servos and the robot's gravity torques.
+fn instability_of(scene: &Scene, robot: &RobotModel, outcome: &RunOutcome) -> Option<Instability> {
+    if outcome.status != RunStatus::Completed {
+        return None;
+    }
+    let traj = &outcome.trajectory;
+    let explained = gravity_explains(scene, robot, traj);
+    detect(traj, &InstabilityOptions::default(), &explained)
 }
 
 /// Ends this child process when the parent dies (Linux), so that killing a

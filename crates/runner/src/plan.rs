@@ -57,6 +57,8 @@ pub struct Done {
     pub ok: usize,
     /// Diverged.
     pub diverged: usize,
+    /// Completed with the signature of a numerical instability.
+    pub unstable: usize,
     /// Failed.
     pub failed: usize,
 }
@@ -64,7 +66,7 @@ pub struct Done {
 impl Done {
     /// Every run of the batch in this directory.
     pub fn total(&self) -> usize {
-        self.ok + self.diverged + self.failed
+        self.ok + self.diverged + self.unstable + self.failed
     }
 }
 
@@ -516,10 +518,11 @@ mod tests {
             Done {
                 ok: 1,
                 diverged: 2,
+                unstable: 4,
                 failed: 3
             }
             .total(),
-            6
+            10
         );
     }
 }

@@ -6,6 +6,7 @@
 use anyhow::{anyhow, Result};
 use realitygap_core::controller::{RunOutcome, RunStatus};
 use realitygap_core::engine::StabilityIssue;
+use realitygap_core::instability::Instability;
 use realitygap_core::pose::{Pose, Quat, Vec3};
 use realitygap_core::stitch::Handover;
 use realitygap_core::trajectory::{BodyTrack, Trajectory};
@@ -75,6 +76,11 @@ pub struct ChildResult {
     /// (`--allow-unstable`), empty otherwise.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub stability_issues: Vec<StabilityIssue>,
+    /// The signature of a numerical instability in the run's motion
+    /// (`realitygap_core::instability`, stalls judged against the servos
+    /// and gravity), when the run completed with one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub instability: Option<Instability>,
 }
 
 fn bits(v: &[f64]) -> Vec<u64> {
@@ -131,6 +137,7 @@ impl ChildResult {
                 .collect(),
             handovers: Vec::new(),
             stability_issues: Vec::new(),
+            instability: None,
         }
     }
 

@@ -106,6 +106,7 @@ fn deterministic_repeats_after_two_identical_ones_are_copies() {
         Done {
             ok: 5,
             diverged: 0,
+            unstable: 0,
             failed: 0
         }
     );

@@ -23,11 +23,19 @@
 //!
 //! Both need the joint angles and commands of the trajectory (simulated
 //! runs and recorded runs that carry them); a trajectory without them is
-//! not checked. A real joint blocked against its command (a hand pressed
-//! on the table, a load beyond the servo's `kv * max speed`) also stalls:
-//! the flag then still says the run is not the engine's normal behaviour.
+//! not checked. A stall can also be physics: a joint whose load (gravity)
+//! is beyond what its servo gives at the commanded speed, `kv |v_cmd|`
+//! capped at the force limit, does not move. So [`detect`] counts a stall
+//! only where the caller's `stall_explained` says the load cannot explain
+//! it: the runner, which knows the scene's servos and the robot, calls
+//! [`gravity_explains`] (a load below half the servo's capacity leaves the
+//! joint at least half the commanded speed, `v >= v_cmd - load / kv`, so a
+//! stall below a tenth of it is not the load's); the run health, which
+//! sees only the trajectory, checks the sign flips alone.
 
-use realitygap_core::Trajectory;
+use crate::robot::RobotModel;
+use crate::scene::Scene;
+use crate::trajectory::Trajectory;
 
 /// Thresholds of the instability signatures.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -60,7 +68,7 @@ impl Default for InstabilityOptions {
 }
 
 /// The first signature found in a run.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Instability {
     /// Joint number, 1-based, in the trajectory's joint order.
     pub joint: usize,
@@ -72,6 +80,36 @@ pub struct Instability {
     pub reason: String,
 }
 
+/// How a run message starts when the run was stored as unstable.
+pub const MESSAGE_PREFIX: &str = "unstable: joint ";
+
+impl Instability {
+    /// The run message of a run stored as unstable:
+    /// `unstable: joint J at sample S (t = T s): REASON`, read back by
+    /// [`Instability::from_message`].
+    pub fn to_message(&self) -> String {
+        format!(
+            "{MESSAGE_PREFIX}{} at sample {} (t = {} s): {}",
+            self.joint, self.first_sample, self.t_s, self.reason
+        )
+    }
+
+    /// The instability of a message written by [`Instability::to_message`];
+    /// `None` for any other message.
+    pub fn from_message(message: &str) -> Option<Instability> {
+        let rest = message.strip_prefix(MESSAGE_PREFIX)?;
+        let (joint, rest) = rest.split_once(" at sample ")?;
+        let (sample, rest) = rest.split_once(" (t = ")?;
+        let (t_s, reason) = rest.split_once(" s): ")?;
+        Some(Instability {
+            joint: joint.parse().ok()?,
+            first_sample: sample.parse().ok()?,
+            t_s: t_s.parse().ok()?,
+            reason: reason.to_string(),
+        })
+    }
+}
+
 /// Joint `j`'s column of a `[sample][joint]` table.
 fn column(rows: &[Vec<f64>], j: usize) -> Vec<f64> {
     rows.iter()
@@ -79,20 +117,23 @@ fn column(rows: &[Vec<f64>], j: usize) -> Vec<f64> {
         .collect()
 }
 
+/// Whether a load explains a stall of joint `j` (0-based) at sample `i`.
+pub type StallExplained<'a> = &'a dyn Fn(usize, usize) -> bool;
+
 /// The first stall of joint `j` (0-based): `(first sample, commanded
 /// travel, covered travel)`, rad.
 fn stall(
     t: &[f64],
-    q: &[f64],
-    cmd: &[f64],
-    v_max: f64,
-    window: usize,
+    (q, cmd): (&[f64], &[f64]),
+    (j, v_max, window): (usize, f64, usize),
     opts: &InstabilityOptions,
+    explained: StallExplained<'_>,
 ) -> Option<(usize, f64, f64)> {
     let n = t.len().min(q.len()).min(cmd.len());
     let mut run = 0usize;
     for i in 0..n.saturating_sub(1) {
-        let saturated = v_max > 0.0 && cmd[i].abs() >= opts.saturation_share * v_max;
+        let saturated =
+            v_max > 0.0 && cmd[i].abs() >= opts.saturation_share * v_max && !explained(i, j);
         run = match (
             saturated,
             run > 0 && i > 0 && cmd[i].signum() == cmd[i - 1].signum(),
@@ -131,9 +172,14 @@ fn flips(q: &[f64], opts: &InstabilityOptions) -> Option<usize> {
 }
 
 /// The earliest instability signature of `traj` (see the module
-/// documentation); `None` when it has none or lacks joint angles or
-/// commands.
-pub fn detect(traj: &Trajectory, opts: &InstabilityOptions) -> Option<Instability> {
+/// documentation), counting stalls only at samples and joints where
+/// `stall_explained` is false; `None` when it has none or lacks joint
+/// angles or commands.
+pub fn detect(
+    traj: &Trajectory,
+    opts: &InstabilityOptions,
+    stall_explained: StallExplained<'_>,
+) -> Option<Instability> {
     let (Some(angles), Some(commands)) =
         (&traj.joint_angles_rad, &traj.joint_velocity_commands_rad_s)
     else {
@@ -155,7 +201,8 @@ pub fn detect(traj: &Trajectory, opts: &InstabilityOptions) -> Option<Instabilit
     for j in 0..joints {
         let q = column(angles, j);
         let cmd = column(commands, j);
-        if let Some((s, wanted, covered)) = stall(t, &q, &cmd, v_max, window, opts) {
+        let found_stall = stall(t, (&q, &cmd), (j, v_max, window), opts, stall_explained);
+        if let Some((s, wanted, covered)) = found_stall {
             found.push(Instability {
                 joint: j + 1,
                 first_sample: s,
@@ -190,6 +237,51 @@ pub fn detect(traj: &Trajectory, opts: &InstabilityOptions) -> Option<Instabilit
     })
 }
 
+/// The stall test of a run of `scene` with `robot`: joint `j` (the
+/// scene's actuator order) at sample `i` of `traj` is explained when the
+/// gravity torque on it at the sampled angles is at least half of what
+/// its servo gives at the commanded speed (`kv |v_cmd|`, capped at the
+/// force limit). Held joints are at their scene angles.
+pub fn gravity_explains<'a>(
+    scene: &'a Scene,
+    robot: &'a RobotModel,
+    traj: &'a Trajectory,
+) -> impl Fn(usize, usize) -> bool + 'a {
+    let joint_index: Vec<Option<usize>> = scene
+        .actuators
+        .iter()
+        .map(|a| robot.joint_by_name(&a.joint))
+        .collect();
+    let mut held = vec![0.0; robot.joints.len()];
+    for (name, rad) in &scene.robot.held_joints_rad {
+        if let Some(k) = robot.joint_by_name(name) {
+            held[k] = *rad;
+        }
+    }
+    move |i: usize, j: usize| {
+        let (Some(angles), Some(commands), Some(Some(k))) = (
+            traj.joint_angles_rad.as_ref().and_then(|a| a.get(i)),
+            traj.joint_velocity_commands_rad_s
+                .as_ref()
+                .and_then(|c| c.get(i)),
+            joint_index.get(j),
+        ) else {
+            return true;
+        };
+        let mut positions = held.clone();
+        for (jj, q) in angles.iter().enumerate() {
+            if let Some(Some(kk)) = joint_index.get(jj) {
+                positions[*kk] = *q;
+            }
+        }
+        let tau = robot.gravity_torques(&scene.robot.base, &positions, scene.gravity_m_s2)[*k];
+        let servo = &scene.actuators[j];
+        let capacity =
+            (servo.kv * commands.get(j).copied().unwrap_or(0.0).abs()).min(servo.force_limit);
+        tau.abs() >= 0.5 * capacity
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -204,12 +296,38 @@ mod tests {
     }
 
     #[test]
+    fn the_run_message_reads_back() {
+        let i = Instability {
+            joint: 7,
+            first_sample: 12,
+            t_s: 0.6000000000000001,
+            reason: "joint 7 stalled (asked for 30.0 deg)".into(),
+        };
+        assert_eq!(Instability::from_message(&i.to_message()), Some(i));
+        assert_eq!(Instability::from_message("diverged at t = 1 s"), None);
+    }
+
+    #[test]
+    fn a_load_beyond_the_servo_explains_a_stall() {
+        let mut cmd = vec![0.0; 10];
+        cmd.extend(vec![-0.5; 30]);
+        let q = vec![0.3; 40];
+        let explained = |_: usize, j: usize| j == 1;
+        assert_eq!(
+            detect(&traj(&q, &cmd), &InstabilityOptions::default(), &explained),
+            None
+        );
+    }
+
+    #[test]
     fn a_tracking_joint_is_healthy() {
         // Saturated at 0.5 rad/s for 2 s, the joint follows.
         let cmd = vec![0.5; 41];
         let q: Vec<f64> = (0..41).map(|i| i as f64 * 0.05 * 0.5).collect();
         assert_eq!(
-            detect(&traj(&q, &cmd), &InstabilityOptions::default()),
+            detect(&traj(&q, &cmd), &InstabilityOptions::default(), &|_, _| {
+                false
+            }),
             None
         );
     }
@@ -222,7 +340,9 @@ mod tests {
         cmd.extend(vec![24f64.to_radians(); 60]);
         let q = vec![0.7; 65];
         assert_eq!(
-            detect(&traj(&q, &cmd), &InstabilityOptions::default()),
+            detect(&traj(&q, &cmd), &InstabilityOptions::default(), &|_, _| {
+                false
+            }),
             None
         );
     }
@@ -232,7 +352,10 @@ mod tests {
         let mut cmd = vec![0.0; 10];
         cmd.extend(vec![-0.5; 30]);
         let q = vec![0.3; 40];
-        let found = detect(&traj(&q, &cmd), &InstabilityOptions::default()).unwrap();
+        let found = detect(&traj(&q, &cmd), &InstabilityOptions::default(), &|_, _| {
+            false
+        })
+        .unwrap();
         assert_eq!((found.joint, found.first_sample), (2, 10));
         assert!((found.t_s - 0.5).abs() < 1e-12);
         assert!(found.reason.contains("joint 2 stalled"), "{}", found.reason);
@@ -244,13 +367,20 @@ mod tests {
             .map(|i| if i >= 12 && i % 2 == 1 { 0.05 } else { 0.0 })
             .collect();
         let cmd = vec![0.0; 30];
-        let found = detect(&traj(&q, &cmd), &InstabilityOptions::default()).unwrap();
+        let found = detect(&traj(&q, &cmd), &InstabilityOptions::default(), &|_, _| {
+            false
+        })
+        .unwrap();
         assert_eq!((found.joint, found.first_sample), (2, 12));
         assert!(found.reason.contains("reversed direction"));
         // Below the amplitude: jitter of a settled joint is no signature.
         let small: Vec<f64> = q.iter().map(|v| v * 0.01).collect();
         assert_eq!(
-            detect(&traj(&small, &cmd), &InstabilityOptions::default()),
+            detect(
+                &traj(&small, &cmd),
+                &InstabilityOptions::default(),
+                &|_, _| false
+            ),
             None
         );
     }
