@@ -27,6 +27,7 @@ use crate::metrics::{self, GoalMeasures};
 use crate::registration::{Registration, RigidFit};
 use crate::selection::RunSelection;
 use crate::stats::{self, MeanTrack};
+use realitygap_core::instability::Instability;
 use realitygap_core::trajectory::{CUBE, WRIST};
 use realitygap_core::{Quat, Trajectory, Vec3};
 use serde::{Deserialize, Serialize};
@@ -630,8 +631,32 @@ fn to_grid(
     };
     for (i, run) in src.runs.iter().enumerate() {
         let mut flags = health::check(&run.trajectory, &opts.health).flags;
-        if let Some(m) = &run.failed {
-            flags.insert(0, HealthFlag::Failed { message: m.clone() });
+        match run
+            .failed
+            .as_deref()
+            .map(|m| (m, Instability::from_message(m)))
+        {
+            // Stored as unstable by the runner: flagged like the health's
+            // own finding (which it replaces).
+            Some((_, Some(found))) => {
+                flags.retain(|f| !matches!(f, HealthFlag::Unstable { .. }));
+                flags.insert(
+                    0,
+                    HealthFlag::Unstable {
+                        joint: found.joint,
+                        first_sample: found.first_sample,
+                        t_s: found.t_s,
+                        reason: found.reason,
+                    },
+                );
+            }
+            Some((m, None)) => flags.insert(
+                0,
+                HealthFlag::Failed {
+                    message: m.to_string(),
+                },
+            ),
+            None => {}
         }
         let start = starts.get(i).cloned().flatten();
         if src.alignment.is_some() && start.is_none() {

@@ -4,6 +4,7 @@
 //! flagged runs are left out of a source's means and listed; in study mode
 //! they are averaged in, as the reference study did.
 
+use realitygap_core::instability::{self, InstabilityOptions};
 use realitygap_core::Trajectory;
 use serde::Serialize;
 
@@ -20,6 +21,9 @@ pub struct HealthOptions {
     pub frozen_min_fraction: f64,
     /// ... and at least this long, in seconds. Default 2 s.
     pub frozen_min_s: f64,
+    /// Thresholds of the runtime instability signatures
+    /// ([`realitygap_core::instability`]).
+    pub instability: InstabilityOptions,
 }
 
 impl Default for HealthOptions {
@@ -28,6 +32,7 @@ impl Default for HealthOptions {
             divergence_bound_m: 10.0,
             frozen_min_fraction: 0.5,
             frozen_min_s: 2.0,
+            instability: InstabilityOptions::default(),
         }
     }
 }
@@ -51,6 +56,22 @@ pub enum HealthFlag {
         t_s: f64,
         /// Largest position magnitude seen in the run, metres.
         max_abs_m: f64,
+    },
+    /// The motion has a signature of numerical instability
+    /// ([`realitygap_core::instability`]): a joint reversing direction at
+    /// the sample rate (found here from the trajectory), or stalled
+    /// against a saturated command with no load to explain it (found by
+    /// the runner, which knows the servos and the robot, and recorded in
+    /// the run's manifest entry as `extra.unstable`).
+    Unstable {
+        /// The joint, 1-based, in the trajectory's joint order.
+        joint: usize,
+        /// First sample of the signature.
+        first_sample: usize,
+        /// Its time, seconds.
+        t_s: f64,
+        /// What was seen.
+        reason: String,
     },
     /// Samples where every tracked position is exactly zero (a simulator
     /// that wrote nothing).
@@ -96,6 +117,7 @@ impl HealthFlag {
         match self {
             HealthFlag::NonFinite { .. } => "non_finite",
             HealthFlag::Diverged { .. } => "diverged",
+            HealthFlag::Unstable { .. } => "unstable",
             HealthFlag::ZeroRows { .. } => "zero_rows",
             HealthFlag::Frozen { .. } => "frozen",
             HealthFlag::Gaps { .. } => "gaps",
@@ -119,6 +141,12 @@ impl HealthFlag {
             HealthFlag::Diverged { first_sample, t_s, max_abs_m } => format!(
                 "diverged at sample {first_sample} (t = {t_s:.2} s), positions up to {max_abs_m:.3e} m"
             ),
+            HealthFlag::Unstable {
+                first_sample,
+                t_s,
+                reason,
+                ..
+            } => format!("unstable from sample {first_sample} (t = {t_s:.2} s): {reason}"),
             HealthFlag::ZeroRows { count, first_sample } => {
                 format!("{count} all-zero samples, first at sample {first_sample}")
             }
@@ -272,6 +300,16 @@ fn frozen(
 pub fn check(traj: &Trajectory, opts: &HealthOptions) -> RunHealth {
     let mut flags = Vec::new();
     non_finite_and_diverged(traj, opts, &mut flags);
+    // The trajectory alone cannot tell a stall from a load beyond the
+    // servo: every stall counts as explained here.
+    if let Some(found) = instability::detect(traj, &opts.instability, &|_, _| true) {
+        flags.push(HealthFlag::Unstable {
+            joint: found.joint,
+            first_sample: found.first_sample,
+            t_s: found.t_s,
+            reason: found.reason,
+        });
+    }
     let zero_rows = zero_rows(traj);
     if let Some(&first) = zero_rows.first() {
         flags.push(HealthFlag::ZeroRows {

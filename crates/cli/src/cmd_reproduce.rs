@@ -182,6 +182,7 @@ fn simulate(
             .map(Path::to_path_buf)
             .or_else(|| args.params.clone()),
         stitch: None,
+        allow_unstable: false,
     };
     match cmd_run::run(run_args) {
         Ok(()) => Vec::new(),

@@ -80,6 +80,12 @@ pub struct Args {
     /// in `OUT/<scene>/stitched-E1-E2-.../`. Not with --engine.
     #[arg(long, value_name = "E1,E2,...")]
     pub stitch: Option<String>,
+    /// Run settings that the engine knows to be numerically unstable for
+    /// the model (e.g. MuJoCo's Euler integrator with kv*dt/I_eff past its
+    /// bound) instead of refusing them; each run records the issues in its
+    /// manifest entry (`extra.allowed_unstable_settings`).
+    #[arg(long)]
+    pub allow_unstable: bool,
 }
 
 impl Args {
@@ -99,6 +105,7 @@ impl Args {
             timeout_s: self.timeout_s,
             params: self.params,
             stitch: self.stitch,
+            allow_unstable: self.allow_unstable,
         }
     }
 }
@@ -189,11 +196,15 @@ fn print_summary(plan: &Plan, stats: &BatchStats, total: usize, batch_wall_s: f6
                 load_failures.push(format!("{}/{}", g.scene_name, g.source));
             }
             None => say(format!(
-                "{}/{}: {} ok, {} diverged, {} failed, {} kept -> {dir}",
+                "{}/{}: {} ok, {} diverged{}, {} failed, {} kept -> {dir}",
                 g.scene_name,
                 g.source,
                 g.done.ok,
                 g.done.diverged,
+                match g.done.unstable {
+                    0 => String::new(),
+                    n => format!(", {n} unstable"),
+                },
                 g.done.failed,
                 plan.kept(g)
             )),

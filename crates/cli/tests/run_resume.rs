@@ -165,6 +165,10 @@ fn rerun_with_other_settings_is_refused() {
                 "1",
                 "--set",
                 "timestep_s=0.0005",
+                // Euler at 5e-4 s is refused on the Mico2 (kv*dt/I_eff
+                // past 2); implicitfast runs it.
+                "--set",
+                "integrator=implicitfast",
                 "--out",
             ])
             .arg(tmp.path())
@@ -193,6 +197,8 @@ fn perturbed_repeats_differ_and_are_seeded() {
                 "3",
                 "--set",
                 "mujoco.timestep_s=0.00025",
+                "--set",
+                "mujoco.integrator=implicitfast",
                 "--seed",
                 "7",
             ])
@@ -252,15 +258,23 @@ fn engines_lists_mujoco_with_its_version() {
 }
 
 /// At dt = 1e-3 the velocity servos of the light wrist links are unstable
-/// with explicit Euler (kv dt / I > 2): MuJoCo flags it and resets, and the
-/// run is stored as diverged, with when and why, rather than averaged in.
+/// with explicit Euler (kv dt / I > 2): refused before running unless
+/// `--allow-unstable`; then MuJoCo flags it and resets, and the run is
+/// stored as diverged, with when and why, rather than averaged in.
 #[test]
 fn unstable_timestep_is_recorded_as_diverged() {
     let tmp = tempfile::tempdir().unwrap();
     let out = Command::new(exe())
         .arg("run")
         .arg(scene("scene1_single_joint"))
-        .args(["--engine", "mujoco", "--set", "timestep_s=0.001", "--out"])
+        .args([
+            "--engine",
+            "mujoco",
+            "--set",
+            "timestep_s=0.001",
+            "--allow-unstable",
+            "--out",
+        ])
         .arg(tmp.path())
         .output()
         .unwrap();

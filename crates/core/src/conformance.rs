@@ -308,5 +308,10 @@ pub fn gravity_effect_rad(subject: Subject<'_>) -> (f64, f64) {
 pub fn diverges(engine: &dyn Engine, settings: &EngineSettings) -> RunOutcome {
     let scene = testing::scene("scene1_single_joint");
     let robot = testing::mico2();
-    crate::controller::simulate(engine, &scene, &robot, settings, &RunOptions::default()).unwrap()
+    // Meant to be unstable: run it even when the engine knows it is.
+    let options = RunOptions {
+        allow_unstable: true,
+        ..RunOptions::default()
+    };
+    crate::controller::simulate(engine, &scene, &robot, settings, &options).unwrap()
 }

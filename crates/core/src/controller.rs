@@ -252,6 +252,11 @@ pub struct RunOptions {
     /// A tracked body farther than this from the world origin (any
     /// coordinate, m) means the run diverged.
     pub divergence_bound_m: f64,
+    /// Run even when the loaded simulation reports settings known to be
+    /// numerically unstable ([`Simulation::stability_issues`]); otherwise
+    /// [`refuse_unstable`] (called by [`simulate_with`] and the runner)
+    /// refuses them with [`EngineError::UnstableSettings`].
+    pub allow_unstable: bool,
 }
 
 impl Default for RunOptions {
@@ -259,6 +264,7 @@ impl Default for RunOptions {
         RunOptions {
             perturbation: None,
             divergence_bound_m: 10.0,
+            allow_unstable: false,
         }
     }
 }
@@ -726,8 +732,8 @@ pub fn simulate(
 }
 
 /// Loads `scene` into `engine` with physical parameters and runs it:
-/// [`prepare`], [`Engine::load_with`], then the controller loop with the
-/// parameters' encoder offsets and latency.
+/// [`prepare`], [`Engine::load_with`], [`refuse_unstable`], then the
+/// controller loop with the parameters' encoder offsets and latency.
 pub fn simulate_with(
     engine: &dyn Engine,
     scene: &Scene,
@@ -738,6 +744,7 @@ pub fn simulate_with(
 ) -> Result<RunOutcome, RunError> {
     let (scene, robot) = prepare(engine, scene, robot, params)?;
     let mut sim = load_prepared(engine, &scene, &robot, settings, params, options)?;
+    refuse_unstable(engine, sim.as_ref(), options)?;
     run_scene_with(
         sim.as_mut(),
         &scene,
@@ -760,7 +767,9 @@ pub fn prepare(
 }
 
 /// Loads a scene prepared by [`prepare`] with the perturbation's mass and
-/// friction factors.
+/// friction factors. It does not refuse unstable settings (a sweep over
+/// settings such as `realitygap frontier` measures them): callers that run
+/// a user's settings follow it with [`refuse_unstable`].
 pub fn load_prepared(
     engine: &dyn Engine,
     scene: &Scene,
@@ -775,6 +784,37 @@ pub fn load_prepared(
         .map(|p| p.variation)
         .unwrap_or_default();
     Ok(engine.load_with(scene, robot, settings, &variation, params)?)
+}
+
+/// [`EngineError::UnstableSettings`] when `sim` reports settings known to
+/// be numerically unstable for its model
+/// ([`Simulation::stability_issues`]) and `options` do not allow them:
+/// the worst issue in full, the others by joint and value.
+pub fn refuse_unstable(
+    engine: &dyn Engine,
+    sim: &dyn Simulation,
+    options: &RunOptions,
+) -> Result<(), RunError> {
+    let issues = sim.stability_issues();
+    if issues.is_empty() || options.allow_unstable {
+        return Ok(());
+    }
+    let mut message = issues[0].message.clone();
+    if issues.len() > 1 {
+        let others: Vec<String> = issues[1..]
+            .iter()
+            .map(|i| {
+                let joint = i.joint.as_deref().unwrap_or("the model");
+                format!("\"{joint}\" ({} = {:.3})", i.quantity, i.value)
+            })
+            .collect();
+        message.push_str(&format!("; also past the bound: {}", others.join(", ")));
+    }
+    Err(EngineError::UnstableSettings {
+        engine: engine.name().to_string(),
+        message,
+    }
+    .into())
 }
 
 #[cfg(test)]

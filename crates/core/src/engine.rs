@@ -318,6 +318,16 @@ pub enum EngineError {
         /// What does not fit.
         message: String,
     },
+    /// Settings that the engine knows to be numerically unstable for the
+    /// loaded model ([`Simulation::stability_issues`]); refused before the
+    /// run unless the run allows unstable settings.
+    #[error("engine {engine}: unstable settings for this model, refused before running: {message} (run anyway with --allow-unstable)")]
+    UnstableSettings {
+        /// The engine's name.
+        engine: String,
+        /// Every issue found: joint, quantity, bound and the fixes.
+        message: String,
+    },
     /// A call that does not fit the simulation (e.g. a vector of the wrong
     /// length).
     #[error("engine {engine}: {message}")]
@@ -477,9 +487,35 @@ impl SimState {
     }
 }
 
+/// A setting that an engine knows to be numerically unstable for the
+/// loaded model, found at load time (after the model is built, so that
+/// masses and inertias are known).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct StabilityIssue {
+    /// The joint concerned (the model's name), when the issue is a joint's.
+    pub joint: Option<String>,
+    /// The quantity checked, e.g. `kv*dt/I_eff`.
+    pub quantity: String,
+    /// Its value for this model and these settings.
+    pub value: f64,
+    /// The bound it must stay below.
+    pub bound: f64,
+    /// The whole explanation: the numbers that make up the quantity and
+    /// the fixes (another setting, a smaller timestep).
+    pub message: String,
+}
+
 /// One running simulation of a scene (see the module documentation for the
 /// contract).
 pub trait Simulation: Send {
+    /// The settings of this simulation that the engine knows to be
+    /// numerically unstable for its model, worst first; empty when none is
+    /// known (the default). [`crate::controller::refuse_unstable`] refuses
+    /// to run a simulation with issues unless its
+    /// [`crate::controller::RunOptions`] allow it.
+    fn stability_issues(&self) -> Vec<StabilityIssue> {
+        Vec::new()
+    }
     /// The fixed timestep, s.
     fn timestep_s(&self) -> f64;
     /// Simulated time since the start, s.

@@ -28,6 +28,7 @@
 pub mod conformance;
 pub mod controller;
 pub mod engine;
+pub mod instability;
 pub mod params;
 pub mod pose;
 pub mod robot;

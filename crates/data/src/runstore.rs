@@ -76,6 +76,10 @@ pub enum RunStatus {
     Failed,
     /// Finished but the simulation blew up; its trajectory is stored.
     Diverged,
+    /// Finished, but its motion has the signature of a numerical
+    /// instability (`realitygap_core::instability`; the message says which
+    /// joint and when); its trajectory is stored.
+    Unstable,
 }
 
 impl fmt::Display for RunStatus {
@@ -84,6 +88,7 @@ impl fmt::Display for RunStatus {
             RunStatus::Ok => "ok",
             RunStatus::Failed => "failed",
             RunStatus::Diverged => "diverged",
+            RunStatus::Unstable => "unstable",
         })
     }
 }
@@ -364,8 +369,10 @@ impl RunStore {
     /// exists: a rerun can skip it.
     pub fn has_finished_run(&self, id: &str) -> bool {
         self.run(id).is_some_and(|r| {
-            matches!(r.status, RunStatus::Ok | RunStatus::Diverged)
-                && !r.file.is_empty()
+            matches!(
+                r.status,
+                RunStatus::Ok | RunStatus::Diverged | RunStatus::Unstable
+            ) && !r.file.is_empty()
                 && self.dir.join(&r.file).is_file()
         })
     }

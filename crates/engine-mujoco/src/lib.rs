@@ -43,6 +43,7 @@
 pub mod mjcf;
 pub mod model_params;
 pub mod settings;
+pub mod stability;
 mod state;
 
 pub use settings::{MujocoSettings, MUJOCO_DEFAULT_TIMESTEP_S, SETTINGS};
@@ -52,6 +53,7 @@ use mujoco_rs::mujoco_c;
 use mujoco_rs::prelude::*;
 use realitygap_core::engine::{
     Engine, EngineError, EngineSettings, ModelVariation, SettingInfo, SimState, Simulation,
+    StabilityIssue,
 };
 use realitygap_core::params::{ParamSupport, PhysicalParams};
 use realitygap_core::pose::{Pose, Quat, Vec3};
@@ -207,6 +209,8 @@ pub struct MujocoSimulation {
     held: Vec<HeldJoint>,
     /// Warning counters already seen (BADQPOS, BADQVEL, BADQACC).
     warnings_seen: [i32; 3],
+    /// The pre-run stability check's findings ([`stability::check`]).
+    stability: Vec<StabilityIssue>,
 }
 
 const INSTABILITY_WARNINGS: [(mujoco_c::mjtWarning, &str); 3] = [
@@ -445,10 +449,22 @@ impl MujocoSimulation {
             objects,
             held,
             warnings_seen: [0; 3],
+            stability: Vec::new(),
         };
         sim.place_held_joints();
         sim.data.forward();
         sim.warnings_seen = sim.warning_counts();
+        let servos: Vec<stability::ServoJoint<'_>> = scene
+            .actuators
+            .iter()
+            .enumerate()
+            .map(|(i, a)| stability::ServoJoint {
+                name: &a.joint,
+                dof: sim.dof_adr[i],
+                actuator: sim.ctrl_index[i],
+            })
+            .collect();
+        sim.stability = stability::check(&mut sim.data, &servos);
         Ok(sim)
     }
 
@@ -555,6 +571,10 @@ fn mjcf_note(scene: &Scene) -> String {
 }
 
 impl Simulation for MujocoSimulation {
+    fn stability_issues(&self) -> Vec<StabilityIssue> {
+        self.stability.clone()
+    }
+
     fn timestep_s(&self) -> f64 {
         self.data.model().opt().timestep
     }

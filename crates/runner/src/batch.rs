@@ -274,6 +274,12 @@ impl Batch<'_> {
             let handovers = serde_json::to_value(&result.handovers).unwrap_or_default();
             entry.extra.insert("handovers".into(), handovers);
         }
+        if !result.stability_issues.is_empty() {
+            let issues = serde_json::to_value(&result.stability_issues).unwrap_or_default();
+            entry
+                .extra
+                .insert("allowed_unstable_settings".into(), issues);
+        }
         self.stats.steps_total += result.engine_steps;
         self.stats.loop_time_total += result.wall_time_s;
         let g = &mut self.plan.groups[gi];
@@ -284,6 +290,12 @@ impl Batch<'_> {
                 .extra
                 .insert("diverged_at_s".into(), serde_json::json!(t_s));
             g.done.diverged += 1;
+        } else if let Some(found) = &result.instability {
+            entry.status = RunStatus::Unstable;
+            entry.message = Some(found.to_message());
+            let json = serde_json::to_value(found).unwrap_or_default();
+            entry.extra.insert("unstable".into(), json);
+            g.done.unstable += 1;
         } else {
             g.done.ok += 1;
         }

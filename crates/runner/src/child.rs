@@ -10,10 +10,14 @@ use crate::protocol::{ChildResult, Job};
 use crate::Registry;
 use anyhow::{Context, Result};
 use realitygap_core::controller::{
-    load_prepared, run_scene_with, ControlParams, RunError, RunOptions,
+    load_prepared, refuse_unstable, run_scene_with, ControlParams, RunError, RunOptions,
 };
+use realitygap_core::controller::{RunOutcome, RunStatus};
 use realitygap_core::engine::Simulation;
+use realitygap_core::instability::{detect, gravity_explains, Instability, InstabilityOptions};
 use realitygap_core::params::PhysicalParams;
+use realitygap_core::robot::RobotModel;
+use realitygap_core::scene::Scene;
 use realitygap_core::stitch::{phase_ticks, run_stitched, split_entry, StitchPlan};
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
@@ -106,6 +110,7 @@ fn run_options(job: &Job, joints: usize) -> Result<RunOptions> {
     let sample = (!perturbation.is_none()).then(|| perturbation.sample(job.seed, joints));
     Ok(RunOptions {
         perturbation: sample,
+        allow_unstable: job.allow_unstable,
         ..RunOptions::default()
     })
 }
@@ -126,12 +131,17 @@ pub fn simulate(registry: Registry, job: &Job) -> Result<Option<ChildResult>> {
         &p.params,
         &options,
     )?;
+    refuse_unstable(p.engine.as_ref(), sim.as_ref(), &options)?;
     if job.check_only {
         return Ok(None);
     }
     let control = ControlParams::from_params(&p.params, &p.scene);
+    let issues = sim.stability_issues();
     let outcome = run_scene_with(sim.as_mut(), &p.scene, &options, &control)?;
-    Ok(Some(ChildResult::from_outcome(&outcome)))
+    let mut result = ChildResult::from_outcome(&outcome);
+    result.stability_issues = issues;
+    result.instability = instability_of(&p.scene, &p.robot, &outcome);
+    Ok(Some(result))
 }
 
 /// Runs a stitched job: the scene prepared in every engine of the plan,
@@ -162,14 +172,16 @@ fn simulate_stitched(
             .iter()
             .find(|(e, _)| e == engine)
             .expect("every engine of the plan is prepared");
-        load_prepared(
+        let sim = load_prepared(
             p.engine.as_ref(),
             &p.scene,
             &p.robot,
             &p.settings,
             &p.params,
             &options,
-        )
+        )?;
+        refuse_unstable(p.engine.as_ref(), sim.as_ref(), &options)?;
+        Ok(sim)
     };
     if job.check_only {
         for engine in &plan.engines {
@@ -180,7 +192,20 @@ fn simulate_stitched(
     let run = run_stitched(&scene, &engines, &options, &control, &mut load)?;
     let mut result = ChildResult::from_outcome(&run.outcome);
     result.handovers = run.handovers;
+    result.instability = instability_of(&scene, &first.robot, &run.outcome);
     Ok(Some(result))
+}
+
+/// The first signature of a numerical instability in a completed run
+/// (none for a diverged one), with stalls judged against the scene's
+/// servos and the robot's gravity torques.
+fn instability_of(scene: &Scene, robot: &RobotModel, outcome: &RunOutcome) -> Option<Instability> {
+    if outcome.status != RunStatus::Completed {
+        return None;
+    }
+    let traj = &outcome.trajectory;
+    let explained = gravity_explains(scene, robot, traj);
+    detect(traj, &InstabilityOptions::default(), &explained)
 }
 
 /// Ends this child process when the parent dies (Linux), so that killing a
@@ -344,6 +369,7 @@ mod tests {
             params_text: None,
             check_only,
             stitch: None,
+            allow_unstable: false,
         }
     }
 

@@ -45,6 +45,9 @@ pub struct BatchSpec {
     /// per schedule phase (see `realitygap_core::stitch`); `engines` must
     /// then be empty.
     pub stitch: Option<String>,
+    /// Run settings the engine knows to be unstable for the model instead
+    /// of refusing them (`--allow-unstable`); recorded in the manifest.
+    pub allow_unstable: bool,
 }
 
 /// Runs of one results directory that ended each way in this batch.
@@ -54,6 +57,8 @@ pub struct Done {
     pub ok: usize,
     /// Diverged.
     pub diverged: usize,
+    /// Completed with the signature of a numerical instability.
+    pub unstable: usize,
     /// Failed.
     pub failed: usize,
 }
@@ -61,7 +66,7 @@ pub struct Done {
 impl Done {
     /// Every run of the batch in this directory.
     pub fn total(&self) -> usize {
-        self.ok + self.diverged + self.failed
+        self.ok + self.diverged + self.unstable + self.failed
     }
 }
 
@@ -165,7 +170,7 @@ fn config_json(
     params_file: Option<&PathBuf>,
     perturbation: &Perturbation,
 ) -> Result<serde_json::Value> {
-    Ok(serde_json::json!({
+    let mut config = serde_json::json!({
         "scene_file": p.scene.source.display().to_string(),
         "robot": {
             "urdf": p.scene.robot.urdf.display().to_string(),
@@ -188,7 +193,13 @@ fn config_json(
         "params": serde_json::to_value(&p.params)?,
         "perturbation": perturbation.describe(),
         "deterministic": perturbation.is_none(),
-    }))
+    });
+    if spec.allow_unstable {
+        // Only when set, so that directories written before the option
+        // existed keep their configuration.
+        config["allow_unstable"] = serde_json::json!(true);
+    }
+    Ok(config)
 }
 
 /// Opens (or creates) a group's results directory, checks that its runs
@@ -454,6 +465,7 @@ impl Plan {
             params_text: None,
             check_only,
             stitch: g.stitch.clone(),
+            allow_unstable: spec.allow_unstable,
         }
     }
 
@@ -506,10 +518,11 @@ mod tests {
             Done {
                 ok: 1,
                 diverged: 2,
+                unstable: 4,
                 failed: 3
             }
             .total(),
-            6
+            10
         );
     }
 }

@@ -5,6 +5,8 @@
 
 use anyhow::{anyhow, Result};
 use realitygap_core::controller::{RunOutcome, RunStatus};
+use realitygap_core::engine::StabilityIssue;
+use realitygap_core::instability::Instability;
 use realitygap_core::pose::{Pose, Quat, Vec3};
 use realitygap_core::stitch::Handover;
 use realitygap_core::trajectory::{BodyTrack, Trajectory};
@@ -41,6 +43,11 @@ pub struct Job {
     /// `None` for a run in `engine` alone.
     #[serde(default)]
     pub stitch: Option<Vec<String>>,
+    /// Run even with settings the engine knows to be unstable for the
+    /// model (`--allow-unstable`); the issues are then recorded in the run's
+    /// manifest entry.
+    #[serde(default)]
+    pub allow_unstable: bool,
 }
 
 /// What the child process sends back.
@@ -65,6 +72,15 @@ pub struct ChildResult {
     /// The handovers of a stitched run (empty otherwise).
     #[serde(default)]
     pub handovers: Vec<Handover>,
+    /// The unstable settings the run was allowed to run with
+    /// (`--allow-unstable`), empty otherwise.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub stability_issues: Vec<StabilityIssue>,
+    /// The signature of a numerical instability in the run's motion
+    /// (`realitygap_core::instability`, stalls judged against the servos
+    /// and gravity), when the run completed with one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub instability: Option<Instability>,
 }
 
 fn bits(v: &[f64]) -> Vec<u64> {
@@ -120,6 +136,8 @@ impl ChildResult {
                 .map(|r| bits(r))
                 .collect(),
             handovers: Vec::new(),
+            stability_issues: Vec::new(),
+            instability: None,
         }
     }
 

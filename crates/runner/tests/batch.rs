@@ -25,6 +25,7 @@ fn spec(out: &Path, repeats: u32) -> BatchSpec {
         timeout_s: Some(30.0),
         params: None,
         stitch: None,
+        allow_unstable: false,
     }
 }
 
@@ -105,6 +106,7 @@ fn deterministic_repeats_after_two_identical_ones_are_copies() {
         Done {
             ok: 5,
             diverged: 0,
+            unstable: 0,
             failed: 0
         }
     );

@@ -455,6 +455,7 @@ fn simulate_batch(
         timeout_s: None,
         params,
         stitch: plan.map(|p| p.join(",")),
+        allow_unstable: false,
     };
     let mut batch = Plan::new(runner.registry, spec)?;
     batch.check_loads(&runner.launcher);

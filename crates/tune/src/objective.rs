@@ -449,6 +449,7 @@ impl Simulator {
             params_text: Some(params_text.to_string()),
             check_only: false,
             stitch: None,
+            allow_unstable: false,
         }
     }
 }
