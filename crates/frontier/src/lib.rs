@@ -43,6 +43,8 @@
 //! and `reference/<scene>/<engine>/` (the converged reference's runs, in
 //! the results-directory format).
 
+#![forbid(unsafe_code)]
+
 use anyhow::{anyhow, bail, Context, Result};
 use realitygap_analysis::bootstrap::BootstrapOptions;
 use realitygap_analysis::compare::{CompareOptions, RunInput, SourceRuns};
