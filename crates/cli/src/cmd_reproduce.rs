@@ -65,6 +65,9 @@ pub struct Args {
     /// the untuned rows.
     #[arg(long, value_name = "DIR")]
     pub tuned: Vec<PathBuf>,
+    /// Where the simulations run (as for `run`).
+    #[command(flatten)]
+    pub executor: cmd_run::ExecutorArgs,
 }
 
 /// Stage timings, seconds, in order.
@@ -73,6 +76,8 @@ type Timings = Vec<(String, f64)>;
 /// Runs the command.
 pub fn run(args: Args) -> Result<()> {
     let started = Instant::now();
+    // `--executor slurm` without Slurm is an error now, not a warning per batch.
+    args.executor.executor()?;
     let data = study_recordings(&args.data)?;
     let scenes: Vec<PathBuf> = if args.scenes.is_empty() {
         study_scene_files()
@@ -183,6 +188,7 @@ fn simulate(
             .or_else(|| args.params.clone()),
         stitch: None,
         allow_unstable: false,
+        executor: args.executor.clone(),
     };
     match cmd_run::run(run_args) {
         Ok(()) => Vec::new(),

@@ -21,6 +21,7 @@ use crate::cmd_engines;
 use anyhow::Result;
 use indicatif::{ProgressBar, ProgressStyle};
 use realitygap_runner::prepare::resolver;
+use realitygap_runner::slurm::{Executor, SlurmOptions};
 use realitygap_runner::{BatchSpec, BatchStats, Launcher, Plan, Progress};
 use std::io::Write;
 use std::path::PathBuf;
@@ -86,6 +87,58 @@ pub struct Args {
     /// manifest entry (`extra.allowed_unstable_settings`).
     #[arg(long)]
     pub allow_unstable: bool,
+    /// Where the simulations run.
+    #[command(flatten)]
+    pub executor: ExecutorArgs,
+}
+
+/// `--executor local|slurm` and the Slurm options.
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct ExecutorArgs {
+    /// `local`: child processes on this machine, --jobs at a time;
+    /// `slurm`: one Slurm job array per batch (sbatch), each task running
+    /// its share of the simulations; the results directory must be on a
+    /// filesystem the compute nodes share.
+    #[arg(long, value_name = "local|slurm", default_value = "local", value_parser = ["local", "slurm"])]
+    pub executor: String,
+    /// Slurm partition (`sbatch --partition`).
+    #[arg(long, value_name = "NAME")]
+    pub slurm_partition: Option<String>,
+    /// Time limit of each array task (`sbatch --time`, e.g. 1:00:00).
+    #[arg(long, value_name = "TIME")]
+    pub slurm_time: Option<String>,
+    /// Memory of each array task (`sbatch --mem`, e.g. 2G).
+    #[arg(long, value_name = "SIZE")]
+    pub slurm_mem: Option<String>,
+    /// More sbatch arguments, passed as they are (repeatable).
+    #[arg(long = "slurm-arg", value_name = "ARG", allow_hyphen_values = true)]
+    pub slurm_args: Vec<String>,
+    /// At most this many array tasks at once (`--array=...%N`).
+    #[arg(long, value_name = "N")]
+    pub slurm_max_tasks: Option<usize>,
+    /// Simulations per array task.
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    pub slurm_runs_per_task: usize,
+}
+
+impl ExecutorArgs {
+    /// The executor these arguments choose.
+    pub fn executor(&self) -> Result<Executor> {
+        Ok(match self.executor.as_str() {
+            "slurm" => {
+                realitygap_runner::slurm::check_available()?;
+                Executor::Slurm(SlurmOptions {
+                    partition: self.slurm_partition.clone(),
+                    time: self.slurm_time.clone(),
+                    mem: self.slurm_mem.clone(),
+                    args: self.slurm_args.clone(),
+                    max_tasks: self.slurm_max_tasks,
+                    runs_per_task: self.slurm_runs_per_task.max(1),
+                })
+            }
+            _ => Executor::Local,
+        })
+    }
 }
 
 impl Args {
@@ -172,7 +225,9 @@ fn progress_bar(total: usize, skipped: usize) -> Bar {
 pub fn run(args: Args) -> Result<()> {
     let batch_start = Instant::now();
     let args = with_builtin_kinova(args)?;
+    let executor = args.executor.executor()?;
     let mut plan = Plan::new(cmd_engines::compiled, args.into_spec())?;
+    plan.executor = executor;
     let launcher = Launcher::this_executable();
     plan.check_loads(&launcher);
     let total = plan.total();

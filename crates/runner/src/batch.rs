@@ -4,6 +4,7 @@
 use crate::child::{run_child, ChildEnd, Launcher};
 use crate::plan::{run_id, Group, Plan};
 use crate::protocol::{ChildResult, Job};
+use crate::slurm::{run_array, Executor};
 use anyhow::{Context, Result};
 use realitygap_core::controller::repeat_seed;
 use realitygap_core::trajectory::Trajectory;
@@ -146,6 +147,18 @@ impl Plan {
     }
 }
 
+/// A fresh folder for one Slurm array of the batch: `OUT/.slurm/<unix
+/// time>-<n>`, the first `n` not yet taken.
+fn slurm_dir(out: &std::path::Path) -> std::path::PathBuf {
+    let secs = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    (0..)
+        .map(|n| out.join(".slurm").join(format!("{secs}-{n}")))
+        .find(|d| !d.exists())
+        .unwrap_or_else(|| out.join(".slurm").join("batch"))
+}
+
 /// A run's outcome on its way from a worker to the storing thread.
 type Finished = ((usize, u32), ChildEnd, f64);
 
@@ -178,6 +191,18 @@ impl Batch<'_> {
             .iter()
             .map(|&(g, r)| ((g, r), self.plan.job(&self.plan.groups[g], r, false)))
             .collect();
+        if let Executor::Slurm(opts) = &self.plan.executor {
+            let opts = opts.clone();
+            let dir = slurm_dir(&self.plan.spec.out);
+            let launcher = self.launcher;
+            return run_array(
+                jobs.into(),
+                &dir,
+                launcher,
+                &opts,
+                &mut |(gi, repeat), end, s| self.store(gi, repeat, end, s),
+            );
+        }
         let workers = self.plan.jobs.min(jobs.len());
         let queue = Mutex::new(jobs);
         let (launcher, timeout_s) = (self.launcher, self.plan.spec.timeout_s);

@@ -25,6 +25,7 @@ pub mod cpu_clock;
 pub mod plan;
 pub mod prepare;
 pub mod protocol;
+pub mod slurm;
 
 pub use batch::{BatchStats, Progress};
 pub use child::{run_child, run_one, ChildEnd, Launcher};

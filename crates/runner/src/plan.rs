@@ -104,6 +104,9 @@ pub struct Plan {
     pub params_file: Option<PathBuf>,
     /// The repeats' perturbation (none: a deterministic batch).
     pub perturbation: Perturbation,
+    /// Where the simulations run: this machine (default) or a Slurm job
+    /// array.
+    pub executor: crate::slurm::Executor,
 }
 
 /// The names and configuration of a stitched group.
@@ -283,6 +286,7 @@ impl Plan {
             jobs,
             params_file,
             perturbation,
+            executor: crate::slurm::Executor::Local,
         };
         for scene_file in plan.spec.scenes.clone() {
             for engine in &engines {

@@ -1,0 +1,231 @@
+//! `--executor slurm` against a real single-node Slurm cluster
+//! (`scripts/slurm-local start`, which `scripts/test` runs; `scripts/setup
+//! --tests` installs Slurm): the same runs byte for byte as the local pool,
+//! a cancelled array keeps its finished runs and a rerun completes the
+//! rest, and the errors (no sbatch, an unknown partition) are clear.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::sync::OnceLock;
+use std::time::{Duration, Instant};
+
+fn workspace() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+/// Starts the test cluster once for this test binary; its `SLURM_CONF`.
+fn cluster() -> &'static str {
+    static CONF: OnceLock<String> = OnceLock::new();
+    CONF.get_or_init(|| {
+        let out = Command::new(workspace().join("scripts/slurm-local"))
+            .arg("start")
+            .output()
+            .expect("scripts/slurm-local runs");
+        assert!(
+            out.status.success(),
+            "the test cluster did not start (run scripts/setup --tests, as root): {}{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let dir = std::env::var("REALITYGAP_SLURM_DIR").unwrap_or("/tmp/realitygap-slurm".into());
+        format!("{dir}/slurm.conf")
+    })
+}
+
+fn realitygap(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_realitygap"))
+        .args(args)
+        .env("SLURM_CONF", cluster())
+        .output()
+        .unwrap()
+}
+
+fn scene(name: &str) -> String {
+    workspace()
+        .join(format!("assets/scenes/{name}.toml"))
+        .display()
+        .to_string()
+}
+
+/// `run` of scenes 1 and 2 in ODE, `repeats` perturbed repeats (so that
+/// every run is simulated, not copied), with `extra` arguments.
+fn run_args(out: &Path, repeats: u32, extra: &[&str]) -> Vec<String> {
+    let mut a: Vec<String> = vec![
+        "run".into(),
+        scene("scene1_single_joint"),
+        scene("scene2_two_joints"),
+        "--engine".into(),
+        "ode".into(),
+        "--repeats".into(),
+        repeats.to_string(),
+        "--perturb".into(),
+        "sensor_noise_deg=0.1".into(),
+        "--out".into(),
+        out.display().to_string(),
+    ];
+    a.extend(extra.iter().map(|s| s.to_string()));
+    a
+}
+
+fn csvs(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut out = Vec::new();
+    for scene in ["scene1_single_joint", "scene2_two_joints"] {
+        let runs = dir.join(scene).join("ode/runs");
+        let mut names: Vec<_> = std::fs::read_dir(&runs)
+            .map(|r| {
+                r.flatten()
+                    .map(|e| e.file_name().to_string_lossy().into_owned())
+                    .collect()
+            })
+            .unwrap_or_default();
+        names.sort();
+        for n in names.into_iter().filter(|n| n.ends_with(".csv")) {
+            out.push((
+                format!("{scene}/{n}"),
+                std::fs::read(runs.join(&n)).unwrap(),
+            ));
+        }
+    }
+    out
+}
+
+#[test]
+fn slurm_and_local_store_the_same_runs_byte_for_byte() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (a, b) = (tmp.path().join("slurm"), tmp.path().join("local"));
+    let args = run_args(
+        &a,
+        2,
+        &["--executor", "slurm", "--slurm-runs-per-task", "2"],
+    );
+    let o = realitygap(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let args = run_args(&b, 2, &[]);
+    let o = realitygap(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (sa, sb) = (csvs(&a), csvs(&b));
+    assert_eq!(sa.len(), 4);
+    assert_eq!(
+        sa.iter().map(|x| &x.0).collect::<Vec<_>>(),
+        sb.iter().map(|x| &x.0).collect::<Vec<_>>()
+    );
+    for (x, y) in sa.iter().zip(&sb) {
+        assert!(x.1 == y.1, "{} differs between slurm and local", x.0);
+    }
+    // The submitted script is kept for the user.
+    let arrays: Vec<_> = std::fs::read_dir(a.join(".slurm"))
+        .unwrap()
+        .flatten()
+        .collect();
+    assert!(!arrays.is_empty());
+    let script = std::fs::read_to_string(arrays[0].path().join("submit.sh")).unwrap();
+    assert!(
+        script.contains("__run-one") && script.contains("SLURM_ARRAY_TASK_ID"),
+        "{script}"
+    );
+}
+
+/// The job id of the array writing into `out`, once Slurm lists it.
+fn job_id(out: &Path) -> Option<String> {
+    let o = Command::new("squeue")
+        .args(["-h", "-o", "%F %o"])
+        .env("SLURM_CONF", cluster())
+        .output()
+        .ok()?;
+    let text = String::from_utf8_lossy(&o.stdout).into_owned();
+    let needle = out.display().to_string();
+    text.lines()
+        .find(|l| l.contains(&needle))
+        .and_then(|l| l.split_whitespace().next().map(str::to_string))
+}
+
+#[test]
+fn a_cancelled_array_keeps_its_finished_runs_and_a_rerun_completes_them() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("cancel");
+    // One task at a time, so that the array is cancelled midway.
+    let args = run_args(&out, 4, &["--executor", "slurm", "--slurm-max-tasks", "1"]);
+    let child = Command::new(env!("CARGO_BIN_EXE_realitygap"))
+        .args(&args)
+        .env("SLURM_CONF", cluster())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let started = Instant::now();
+    let job = loop {
+        if let (Some(id), n) = (job_id(&out), csvs(&out).len()) {
+            if n >= 2 {
+                break id;
+            }
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(120),
+            "no run finished under Slurm"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    let status = Command::new("scancel")
+        .arg(&job)
+        .env("SLURM_CONF", cluster())
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let o = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr).into_owned() + &String::from_utf8_lossy(&o.stdout);
+    let kept = csvs(&out);
+    assert!(kept.len() < 8, "the array finished before it was cancelled");
+    assert!(!o.status.success(), "{err}");
+    assert!(err.contains("rerun the same command"), "{err}");
+    let manifest = std::fs::read_to_string(out.join("scene2_two_joints/ode/manifest.json"))
+        .unwrap_or_default()
+        + &std::fs::read_to_string(out.join("scene1_single_joint/ode/manifest.json")).unwrap();
+    assert!(
+        manifest.contains(&format!("slurm job {job}")),
+        "the failed runs name the Slurm job: {manifest}"
+    );
+    // The rerun resubmits only what is missing and leaves the rest as it was.
+    let args = run_args(&out, 4, &["--executor", "slurm"]);
+    let o = realitygap(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let after = csvs(&out);
+    assert_eq!(after.len(), 8);
+    for (name, bytes) in &kept {
+        let now = after.iter().find(|x| &x.0 == name).unwrap();
+        assert!(&now.1 == bytes, "{name} changed on the rerun");
+    }
+}
+
+#[test]
+fn slurm_errors_are_clear() {
+    let tmp = tempfile::tempdir().unwrap();
+    // No sbatch on the PATH.
+    let args = run_args(&tmp.path().join("a"), 1, &["--executor", "slurm"]);
+    let o = Command::new(env!("CARGO_BIN_EXE_realitygap"))
+        .args(&args)
+        .env("PATH", tmp.path())
+        .output()
+        .unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(e.contains("`sbatch` is not on the PATH"), "{e}");
+    assert!(!tmp.path().join("a").exists(), "it wrote before failing");
+    // A partition that does not exist: Slurm's own message, passed on.
+    let args = run_args(
+        &tmp.path().join("b"),
+        1,
+        &[
+            "--executor",
+            "slurm",
+            "--slurm-partition",
+            "nosuchpartition",
+        ],
+    );
+    let o = realitygap(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        e.contains("sbatch refused the job array") && e.contains("artition"),
+        "{e}"
+    );
+}

@@ -1,0 +1,297 @@
+//! The Slurm executor: a batch's simulations as one Slurm job array.
+//!
+//! The coordinating process writes every job of the batch as JSON into
+//! `OUT/.slurm/<batch>/jobs/`, and a submission script `submit.sh` (kept for
+//! the user to read and rerun) that runs `realitygap __run-one` on each of
+//! a task's jobs. `sbatch --array` submits it; each task writes one result
+//! file per job, atomically (`<i>.tmp` renamed to `<i>.json`; a failing
+//! child leaves `<i>.failed` with its last words). The coordinator polls the
+//! folder, stores every result as it appears exactly as the local pool
+//! does, and once Slurm no longer lists the job (`squeue`), reports the
+//! jobs that produced nothing with their job and task id and log path.
+//! The results directory must be on a filesystem the compute nodes share.
+
+use crate::child::{last_lines, ChildEnd, Launcher};
+use crate::protocol::{ChildResult, Job};
+use anyhow::{anyhow, bail, Context, Result};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+/// What `--executor slurm` passes to `sbatch`.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct SlurmOptions {
+    /// `--partition`.
+    pub partition: Option<String>,
+    /// `--time` (Slurm's format, e.g. `1:00:00`) of each array task.
+    pub time: Option<String>,
+    /// `--mem` of each array task (e.g. `2G`).
+    pub mem: Option<String>,
+    /// More `sbatch` arguments, passed as they are.
+    pub args: Vec<String>,
+    /// Array throttle: at most this many tasks at once (`%N`).
+    pub max_tasks: Option<usize>,
+    /// Simulations per array task (default 1).
+    pub runs_per_task: usize,
+}
+
+/// How a batch's simulations are executed.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub enum Executor {
+    /// Child processes on this machine (`--jobs` at a time).
+    #[default]
+    Local,
+    /// One Slurm job array per batch.
+    Slurm(SlurmOptions),
+}
+
+/// Checks that `sbatch` and `squeue` can be run; a clear error otherwise.
+pub fn check_available() -> Result<()> {
+    for tool in ["sbatch", "squeue"] {
+        let found = std::env::var_os("PATH")
+            .map(|p| std::env::split_paths(&p).any(|d| d.join(tool).is_file()))
+            .unwrap_or(false);
+        if !found {
+            bail!(
+                "--executor slurm: `{tool}` is not on the PATH; run on a machine with Slurm's client tools (or use --executor local)"
+            );
+        }
+    }
+    Ok(())
+}
+
+/// The submission script of an array of `count` jobs in `dir`.
+fn script(dir: &Path, program: &Path, args: &[String], count: usize, per_task: usize) -> String {
+    let q = |p: &Path| shell_quote(&p.display().to_string());
+    let args: Vec<String> = args.iter().map(|a| shell_quote(a)).collect();
+    format!(
+        "#!/bin/bash\n\
+         # realitygap: {count} simulations, {per_task} per array task. Rerun by hand with\n\
+         #   sbatch --array=0-{last} {script}\n\
+         set -u\n\
+         dir={dir}\n\
+         first=$((SLURM_ARRAY_TASK_ID * {per_task}))\n\
+         for ((i = first; i < first + {per_task} && i < {count}; i++)); do\n\
+         \x20 [ -e \"$dir/results/$i.json\" ] && continue\n\
+         \x20 if {program} {args} < \"$dir/jobs/$i.json\" > \"$dir/results/$i.tmp\" 2> \"$dir/results/$i.err\"; then\n\
+         \x20   mv \"$dir/results/$i.tmp\" \"$dir/results/$i.json\"\n\
+         \x20 else\n\
+         \x20   echo \"exit status $?\" >> \"$dir/results/$i.err\"\n\
+         \x20   mv \"$dir/results/$i.err\" \"$dir/results/$i.failed\"\n\
+         \x20 fi\n\
+         done\n",
+        last = count.div_ceil(per_task).saturating_sub(1),
+        script = q(&dir.join("submit.sh")),
+        dir = q(dir),
+        program = q(program),
+        args = args.join(" "),
+    )
+}
+
+fn shell_quote(s: &str) -> String {
+    format!("'{}'", s.replace('\'', "'\\''"))
+}
+
+/// A submitted array.
+struct Submitted {
+    job_id: String,
+    dir: PathBuf,
+    per_task: usize,
+}
+
+impl Submitted {
+    /// Whether Slurm still lists the job (pending or running).
+    fn listed(&self) -> Result<bool> {
+        let out = Command::new("squeue")
+            .args(["-h", "-j", &self.job_id, "-o", "%i"])
+            .output()
+            .context("running squeue")?;
+        // An unknown (finished and purged) job id is an error for squeue.
+        Ok(out.status.success() && !String::from_utf8_lossy(&out.stdout).trim().is_empty())
+    }
+
+    fn log(&self, task: usize) -> PathBuf {
+        self.dir.join("logs").join(format!("task_{task}.log"))
+    }
+
+    /// The end of job `i`, when its result or failure is there.
+    fn collect(&self, i: usize) -> Option<ChildEnd> {
+        let results = self.dir.join("results");
+        let ok = results.join(format!("{i}.json"));
+        if let Ok(text) = std::fs::read_to_string(&ok) {
+            return Some(match serde_json::from_str::<ChildResult>(&text) {
+                Ok(r) => ChildEnd::Done(Box::new(r)),
+                Err(e) => ChildEnd::Failed(format!("{}: not a result: {e}", ok.display())),
+            });
+        }
+        let failed = results.join(format!("{i}.failed"));
+        std::fs::read_to_string(&failed).ok().map(|t| {
+            ChildEnd::Failed(format!(
+                "slurm job {}_{}: {} (log {})",
+                self.job_id,
+                i / self.per_task,
+                last_lines(&t, 5),
+                self.log(i / self.per_task).display()
+            ))
+        })
+    }
+}
+
+/// Submits `jobs` as one job array in `dir` and stores each as its result
+/// appears (`store(key, end, elapsed)`); jobs that end without a result are
+/// stored as failed with Slurm's job and task id and the task's log.
+pub fn run_array<K: Copy + Ord>(
+    jobs: Vec<(K, Job)>,
+    dir: &Path,
+    launcher: &Launcher,
+    opts: &SlurmOptions,
+    store: &mut dyn FnMut(K, ChildEnd, f64) -> Result<()>,
+) -> Result<()> {
+    check_available()?;
+    let submitted = submit(&jobs, dir, launcher, opts)?;
+    let started = Instant::now();
+    let mut pending: BTreeMap<usize, K> =
+        jobs.iter().enumerate().map(|(i, (k, _))| (i, *k)).collect();
+    loop {
+        let listed = submitted.listed()?;
+        let done: Vec<(usize, ChildEnd)> = pending
+            .keys()
+            .filter_map(|&i| submitted.collect(i).map(|e| (i, e)))
+            .collect();
+        for (i, end) in done {
+            if let Some(k) = pending.remove(&i) {
+                store(k, end, started.elapsed().as_secs_f64())?;
+            }
+        }
+        if pending.is_empty() {
+            return Ok(());
+        }
+        if !listed {
+            // One last look: a result may have landed after the listing.
+            let late: Vec<(usize, ChildEnd)> = pending
+                .keys()
+                .filter_map(|&i| submitted.collect(i).map(|e| (i, e)))
+                .collect();
+            for (i, end) in late {
+                if let Some(k) = pending.remove(&i) {
+                    store(k, end, started.elapsed().as_secs_f64())?;
+                }
+            }
+            for (i, k) in std::mem::take(&mut pending) {
+                let task = i / submitted.per_task;
+                let log = std::fs::read_to_string(submitted.log(task)).unwrap_or_default();
+                let said = last_lines(&log, 3);
+                store(
+                    k,
+                    ChildEnd::Failed(format!(
+                        "slurm job {}_{task} ended without a result (cancelled, timed out or failed){}; log {}",
+                        submitted.job_id,
+                        if said.is_empty() { String::new() } else { format!(": {said}") },
+                        submitted.log(task).display()
+                    )),
+                    started.elapsed().as_secs_f64(),
+                )?;
+            }
+            return Ok(());
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    }
+}
+
+/// Writes the jobs and the script into `dir` and submits the array.
+fn submit<K>(
+    jobs: &[(K, Job)],
+    dir: &Path,
+    launcher: &Launcher,
+    opts: &SlurmOptions,
+) -> Result<Submitted> {
+    for sub in ["jobs", "results", "logs"] {
+        std::fs::create_dir_all(dir.join(sub)).with_context(|| {
+            format!(
+                "--executor slurm: cannot create {}",
+                dir.join(sub).display()
+            )
+        })?;
+    }
+    for (i, (_, job)) in jobs.iter().enumerate() {
+        let path = dir.join("jobs").join(format!("{i}.json"));
+        std::fs::write(&path, serde_json::to_vec(job)?)
+            .with_context(|| format!("--executor slurm: cannot write {}", path.display()))?;
+    }
+    let program = match &launcher.program {
+        Some(p) => p.clone(),
+        None => std::env::current_exe().context("finding this program for the Slurm tasks")?,
+    };
+    let per_task = opts.runs_per_task.max(1);
+    let tasks = jobs.len().div_ceil(per_task);
+    let script_path = dir.join("submit.sh");
+    std::fs::write(
+        &script_path,
+        script(dir, &program, &launcher.args, jobs.len(), per_task),
+    )
+    .with_context(|| format!("--executor slurm: cannot write {}", script_path.display()))?;
+    let mut array = format!("0-{}", tasks.saturating_sub(1));
+    if let Some(m) = opts.max_tasks {
+        array.push_str(&format!("%{}", m.max(1)));
+    }
+    let mut cmd = Command::new("sbatch");
+    cmd.args(["--parsable", "--job-name=realitygap", "--cpus-per-task=1"])
+        .arg(format!("--array={array}"))
+        .arg(format!(
+            "--output={}",
+            dir.join("logs").join("task_%a.log").display()
+        ));
+    for (flag, v) in [
+        ("--partition", &opts.partition),
+        ("--time", &opts.time),
+        ("--mem", &opts.mem),
+    ] {
+        if let Some(v) = v {
+            cmd.arg(format!("{flag}={v}"));
+        }
+    }
+    cmd.args(&opts.args).arg(&script_path);
+    let out = cmd.output().context("running sbatch")?;
+    if !out.status.success() {
+        return Err(anyhow!(
+            "sbatch refused the job array: {}",
+            String::from_utf8_lossy(&out.stderr).trim()
+        ));
+    }
+    let job_id = String::from_utf8_lossy(&out.stdout)
+        .trim()
+        .split(';')
+        .next()
+        .unwrap_or_default()
+        .to_string();
+    if job_id.is_empty() {
+        bail!("sbatch printed no job id");
+    }
+    Ok(Submitted {
+        job_id,
+        dir: dir.to_path_buf(),
+        per_task,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_script_runs_each_tasks_share_and_quotes_paths() {
+        let s = script(
+            Path::new("/r/it's here"),
+            Path::new("/bin/realitygap"),
+            &["__run-one".into()],
+            5,
+            2,
+        );
+        assert!(s.contains("dir='/r/it'\\''s here'"), "{s}");
+        assert!(s.contains("first=$((SLURM_ARRAY_TASK_ID * 2))"), "{s}");
+        assert!(s.contains("i < first + 2 && i < 5"), "{s}");
+        assert!(s.contains("sbatch --array=0-2"), "{s}");
+        assert!(s.contains("'/bin/realitygap' '__run-one'"), "{s}");
+    }
+}
