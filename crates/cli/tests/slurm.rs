@@ -229,3 +229,69 @@ fn slurm_errors_are_clear() {
         "{e}"
     );
 }
+
+/// Every run CSV below `dir`, by path relative to it.
+fn all_csvs(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap().flatten() {
+            let p = e.path();
+            if p.is_dir() && e.file_name() != ".slurm" {
+                stack.push(p);
+            } else if p.extension().is_some_and(|x| x == "csv")
+                && p.parent().is_some_and(|q| q.ends_with("runs"))
+            {
+                out.push((
+                    p.strip_prefix(dir).unwrap().to_path_buf(),
+                    std::fs::read(&p).unwrap(),
+                ));
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+#[test]
+fn reproduce_on_slurm_equals_reproduce_locally() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut tables = Vec::new();
+    let mut runs = Vec::new();
+    for executor in ["slurm", "local"] {
+        let out = tmp.path().join(executor);
+        let o = realitygap(&[
+            "reproduce",
+            "--data",
+            "none",
+            "--engine",
+            "ode",
+            "--engine",
+            "rapier",
+            "--repeats",
+            "2",
+            "--executor",
+            executor,
+            "--slurm-runs-per-task",
+            "3",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(
+            o.status.success(),
+            "{executor}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        tables.push(std::fs::read_to_string(out.join("report/table.md")).unwrap());
+        runs.push(all_csvs(&out.join("runs")));
+    }
+    assert_eq!(runs[0].len(), 12, "3 scenes x 2 engines x 2 repeats");
+    assert!(
+        runs[0] == runs[1],
+        "the run CSVs differ between slurm and local"
+    );
+    assert!(tables[0].contains("Rapier"), "{}", tables[0]);
+    assert_eq!(tables[0], tables[1]);
+    assert!(tmp.path().join("slurm/runs/.slurm").is_dir());
+    assert!(!tmp.path().join("local/runs/.slurm").exists());
+}
