@@ -8,11 +8,13 @@ use indicatif::{ProgressBar, ProgressStyle};
 use realitygap_analysis::selection::RunRange;
 use realitygap_core::params::PhysicalParams;
 use realitygap_runner::prepare::{engine_names, find_engine, overrides_for};
+use realitygap_runner::slurm::Executor;
 use realitygap_runner::Launcher;
 use realitygap_study::data_source::assets_dir;
 use realitygap_study::{load_study, DataSource};
 use realitygap_tune::objective::{Simulator, Target};
 use realitygap_tune::search::{Progress, SearchOptions};
+use realitygap_tune::slurm_batch::Gatherer;
 use realitygap_tune::space::Space;
 use realitygap_tune::{default_space_file, tune, TuneSpec};
 use std::path::PathBuf;
@@ -75,7 +77,16 @@ pub struct Args {
     /// Where a ROS package is: NAME=DIR (repeatable).
     #[arg(long = "package", value_name = "NAME=DIR")]
     pub packages: Vec<String>,
+    /// Where the simulations run (as for `run`): with `slurm`, each
+    /// generation's candidates are submitted together as one job array.
+    #[command(flatten)]
+    pub executor: crate::cmd_run::ExecutorArgs,
 }
+
+/// Evaluation threads with `--executor slurm`: enough for every candidate
+/// of a generation to wait on its array at once (CMA-ES's population is
+/// 4 + 3 ln n, 17 for 60 parameters).
+const SLURM_THREADS: usize = 64;
 
 /// Runs the command.
 pub fn run(args: Args) -> Result<()> {
@@ -119,9 +130,21 @@ pub fn run(args: Args) -> Result<()> {
         args.cube_weight,
     )
     .with_context(|| format!("study {}", args.study.display()))?;
-    let jobs = args
-        .jobs
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let executor = args.executor.executor()?;
+    let gatherer = match &executor {
+        Executor::Slurm(opts) => Some(std::sync::Arc::new(Gatherer::new(
+            Launcher::this_executable(),
+            opts.clone(),
+            args.out.join(".slurm"),
+        ))),
+        Executor::Local => None,
+    };
+    let jobs = match gatherer {
+        Some(_) => SLURM_THREADS,
+        None => args
+            .jobs
+            .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),
+    };
     let spec = TuneSpec {
         engine: engine.name().to_string(),
         fit_registration: !args.keep_registration && space.registration.is_some(),
@@ -140,6 +163,7 @@ pub fn run(args: Args) -> Result<()> {
         engine: spec.engine.clone(),
         robot: args.robot.clone(),
         packages: args.packages.clone(),
+        slurm: gatherer.clone(),
     };
     let bar = progress_bar(args.budget);
     let started = Instant::now();

@@ -336,3 +336,51 @@ fn bad_spaces_and_unsupported_keys_are_errors_before_anything_runs() {
         assert!(!out.join("history.csv").exists(), "{text}: it ran");
     }
 }
+
+/// `tune --executor slurm` (one job array per generation, on the test
+/// cluster that `scripts/test` starts with `scripts/slurm-local start`)
+/// finds exactly what the local tune finds with the same seed.
+#[test]
+fn a_tune_on_slurm_equals_the_local_tune() {
+    let started =
+        Command::new(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scripts/slurm-local"))
+            .arg("start")
+            .output()
+            .unwrap();
+    assert!(
+        started.status.success(),
+        "the test cluster did not start: {}",
+        String::from_utf8_lossy(&started.stderr)
+    );
+    let conf = std::env::var("REALITYGAP_SLURM_DIR").unwrap_or("/tmp/realitygap-slurm".into())
+        + "/slurm.conf";
+    let tmp = synthetic();
+    let d = tmp.path();
+    let local = d.join("local");
+    let on_slurm = d.join("slurm");
+    tune(d, local.to_str().unwrap(), "24");
+    let mut args = tune_args(d, on_slurm.to_str().unwrap(), "24");
+    args.extend(["--executor".into(), "slurm".into()]);
+    let o = Command::new(env!("CARGO_BIN_EXE_realitygap"))
+        .args(&args)
+        .env("SLURM_CONF", &conf)
+        .output()
+        .unwrap();
+    let o = ok(o);
+    drop(o);
+    assert_eq!(
+        std::fs::read_to_string(local.join("history.csv")).unwrap(),
+        std::fs::read_to_string(on_slurm.join("history.csv")).unwrap()
+    );
+    assert_eq!(
+        std::fs::read_to_string(local.join("tuned.toml")).unwrap(),
+        std::fs::read_to_string(on_slurm.join("tuned.toml")).unwrap()
+    );
+    // One array per generation (6 candidates each for 2 parameters), plus
+    // the sensitivity's and the final runs'.
+    let arrays = std::fs::read_dir(on_slurm.join(".slurm")).unwrap().count();
+    assert!(
+        (4..=12).contains(&arrays),
+        "{arrays} arrays for 24 evaluations"
+    );
+}

@@ -13,6 +13,7 @@
 pub mod objective;
 pub mod outputs;
 pub mod search;
+pub mod slurm_batch;
 pub mod space;
 
 use anyhow::{bail, Context, Result};

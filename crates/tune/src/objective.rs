@@ -373,8 +373,23 @@ pub fn score_of(reports: &[SceneReport], scenes: &[TargetScene]) -> Score {
     }
 }
 
-/// Runs candidates' scenes in child processes.
-#[derive(Debug, Clone)]
+/// A scene's trajectory from its child's end, or why it failed.
+fn trajectory_of(scene: &TargetScene, end: ChildEnd) -> std::result::Result<Trajectory, String> {
+    match end {
+        ChildEnd::Failed(m) => Err(format!("scene {}: failed: {m}", scene.name)),
+        ChildEnd::Done(r) => {
+            if let Some((t, why)) = &r.diverged {
+                return Err(format!("scene {}: diverged at {t:.2} s: {why}", scene.name));
+            }
+            r.trajectory()
+                .map_err(|e| format!("scene {}: {e:#}", scene.name))
+        }
+    }
+}
+
+/// Runs candidates' scenes in child processes, on this machine or as
+/// Slurm job arrays.
+#[derive(Clone)]
 pub struct Simulator {
     /// How to start a child.
     pub launcher: Launcher,
@@ -384,6 +399,8 @@ pub struct Simulator {
     pub robot: Option<String>,
     /// `NAME=DIR` package locations.
     pub packages: Vec<String>,
+    /// `None`: child processes here; `Some`: Slurm job arrays.
+    pub slurm: Option<std::sync::Arc<crate::slurm_batch::Gatherer>>,
 }
 
 impl Simulator {
@@ -395,28 +412,21 @@ impl Simulator {
         params: &PhysicalParams,
     ) -> std::result::Result<Vec<Trajectory>, String> {
         let text = params.to_toml_string();
+        if let Some(g) = &self.slurm {
+            let jobs = scenes.iter().map(|s| self.job_for(s, &text)).collect();
+            return scenes
+                .iter()
+                .zip(g.run(jobs))
+                .map(|(s, end)| trajectory_of(s, end))
+                .collect();
+        }
         scenes
             .iter()
-            .map(|s| self.simulate_scene(s, &text))
+            .map(|s| {
+                let job = self.job_for(s, &text);
+                trajectory_of(s, run_child(&self.launcher, &job, Some(SCENE_TIMEOUT_S)))
+            })
             .collect()
-    }
-
-    fn simulate_scene(
-        &self,
-        scene: &TargetScene,
-        params_text: &str,
-    ) -> std::result::Result<Trajectory, String> {
-        let job = self.job_for(scene, params_text);
-        match run_child(&self.launcher, &job, Some(SCENE_TIMEOUT_S)) {
-            ChildEnd::Failed(m) => Err(format!("scene {}: failed: {m}", scene.name)),
-            ChildEnd::Done(r) => {
-                if let Some((t, why)) = &r.diverged {
-                    return Err(format!("scene {}: diverged at {t:.2} s: {why}", scene.name));
-                }
-                r.trajectory()
-                    .map_err(|e| format!("scene {}: {e:#}", scene.name))
-            }
-        }
     }
 
     /// Checks, before anything runs, that every scene loads with `params`
