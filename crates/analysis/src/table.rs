@@ -486,7 +486,9 @@ fn csv(reports: &[SceneReport]) -> String {
     out
 }
 
-fn csv_field(s: &str) -> String {
+/// A CSV field, quoted (with doubled quotes) when it holds a comma, a
+/// quote or a newline.
+pub fn csv_field(s: &str) -> String {
     if s.contains([',', '"', '\n']) {
         format!("\"{}\"", s.replace('"', "\"\""))
     } else {

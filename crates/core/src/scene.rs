@@ -386,7 +386,7 @@ struct FileTrack {
 }
 
 /// Byte offset -> 1-based (line, column), column in characters.
-pub(crate) fn line_col(text: &str, offset: usize) -> (usize, usize) {
+pub fn line_col(text: &str, offset: usize) -> (usize, usize) {
     let offset = offset.min(text.len());
     let before = &text[..offset];
     let line = before.matches('\n').count() + 1;

@@ -110,7 +110,7 @@ impl Tuner<'_> {
     /// Simulates and scores parameters `params` with `registration`.
     pub fn score(&self, params: &PhysicalParams, registration: &Registration) -> Score {
         match self.simulator.simulate(&self.target.scenes, params) {
-            Ok(trajs) => self.target.score(&trajs, registration),
+            Ok(trajs) => self.target.score(trajs, registration),
             Err(m) => Score::failed(m),
         }
     }

@@ -209,19 +209,18 @@ impl Target {
             cube_weight_per_step,
             aligned_train: None,
         };
-        let reports = target.evaluate(
-            &vec![Vec::new(); target.scenes.len()],
-            RegistrationChoice::Estimate,
-            &target.train.clone(),
-            None,
-        )?;
+        // Align the training runs once; the registration estimate and every
+        // candidate's score reuse that alignment.
+        let no_sources = vec![Vec::new(); target.scenes.len()];
+        let opts = target.options(RegistrationChoice::Estimate, &target.train, None);
+        let inputs = target.inputs(&no_sources);
+        let aligned = align_references(&inputs, &opts)?;
+        let reports = evaluate_study_aligned(&inputs, &aligned, &opts);
         target.base_registration = reports
             .iter()
             .find_map(|r| r.registration.as_ref().map(|x| x.registration()))
             .unwrap_or(Registration::IDENTITY);
-        let opts = target.options(RegistrationChoice::None, &target.train, None);
-        let no_sources = vec![Vec::new(); target.scenes.len()];
-        target.aligned_train = Some(align_references(&target.inputs(&no_sources), &opts)?);
+        target.aligned_train = Some(aligned);
         Ok(target)
     }
 
@@ -282,10 +281,10 @@ impl Target {
     }
 
     /// One source per scene named `name` from one trajectory per scene.
-    pub fn sources(&self, name: &str, trajectories: &[Trajectory]) -> Vec<Vec<SourceRuns>> {
+    pub fn sources(&self, name: &str, trajectories: Vec<Trajectory>) -> Vec<Vec<SourceRuns>> {
         trajectories
-            .iter()
-            .map(|t| {
+            .into_iter()
+            .map(|trajectory| {
                 vec![SourceRuns {
                     name: name.to_string(),
                     kind: "simulated".into(),
@@ -293,7 +292,7 @@ impl Target {
                     alignment: None,
                     runs: vec![RunInput {
                         id: "run000".into(),
-                        trajectory: t.clone(),
+                        trajectory,
                         failed: None,
                     }],
                 }]
@@ -303,7 +302,7 @@ impl Target {
 
     /// The objective of one simulated trajectory per scene, registered by
     /// `registration`, on the training runs.
-    pub fn score(&self, trajectories: &[Trajectory], registration: &Registration) -> Score {
+    pub fn score(&self, trajectories: Vec<Trajectory>, registration: &Registration) -> Score {
         let sources = self.sources("candidate", trajectories);
         let choice = RegistrationChoice::Given {
             registration: *registration,

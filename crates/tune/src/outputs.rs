@@ -10,6 +10,7 @@ use crate::space::{Dim, Scale};
 use crate::Tuner;
 use anyhow::{anyhow, Context, Result};
 use rayon::prelude::*;
+use realitygap_analysis::bootstrap::BootstrapOptions;
 use realitygap_analysis::compare::{RegistrationChoice, SceneReport};
 use realitygap_analysis::registration::Registration;
 use realitygap_analysis::selection::RunSelection;
@@ -277,12 +278,11 @@ fn total(reports: &Reports) -> Option<Scored> {
             reps.clear();
         }
     }
-    let interval_m = (!reps.is_empty()).then(|| {
-        let mut r = reps.clone();
-        r.sort_by(f64::total_cmp);
-        let at = |p: f64| r[((p * (r.len() - 1) as f64).round() as usize).min(r.len() - 1)];
-        [at(0.025), at(0.975)]
-    });
+    let interval_m = realitygap_analysis::bootstrap::percentile_interval(
+        &reps,
+        BootstrapOptions::default().level,
+    )
+    .map(|i| [i.low_m, i.high_m]);
     Some(Scored {
         value_m: value,
         interval_m,
@@ -357,7 +357,7 @@ fn evaluate_both(
 ) -> Result<(Reports, Reports)> {
     let t = tuner.target;
     let u = t.evaluate(
-        &t.sources("untuned", untuned),
+        &t.sources("untuned", untuned.to_vec()),
         RegistrationChoice::Given {
             registration: t.base_registration,
             origin: "the measurement's estimate".into(),
@@ -366,7 +366,7 @@ fn evaluate_both(
         Some(RESAMPLES),
     )?;
     let v = t.evaluate(
-        &t.sources("tuned", tuned),
+        &t.sources("tuned", tuned.to_vec()),
         RegistrationChoice::Given {
             registration: *registration,
             origin: "tuned".into(),

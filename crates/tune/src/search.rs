@@ -16,6 +16,7 @@
 use crate::space::Space;
 use anyhow::{bail, Context, Result};
 use cmaes::{CMAESOptions, DVector, TerminationReason};
+use realitygap_analysis::table::csv_field;
 use std::collections::HashMap;
 use std::fs::OpenOptions;
 use std::io::Write;
@@ -122,14 +123,6 @@ pub struct History {
     path: PathBuf,
     header: Vec<String>,
     rows: Vec<Evaluation>,
-}
-
-fn csv_field(s: &str) -> String {
-    if s.contains([',', '"', '\n']) {
-        format!("\"{}\"", s.replace('"', "\"\"").replace('\n', " "))
-    } else {
-        s.to_string()
-    }
 }
 
 /// Splits one CSV line (fields may be quoted with doubled quotes).
@@ -269,7 +262,7 @@ impl History {
                 r.index.to_string(),
                 r.generation.to_string(),
                 num(r.objective),
-                csv_field(r.failed.as_deref().unwrap_or("")),
+                csv_field(&r.failed.as_deref().unwrap_or("").replace('\n', " ")),
             ];
             f.extend(r.parts.iter().map(|v| num(*v)));
             f.extend(r.values.iter().map(|v| num(*v)));

@@ -25,6 +25,7 @@
 
 use realitygap_core::engine::EngineSettings;
 use realitygap_core::params::PhysicalParams;
+use realitygap_core::scene::line_col;
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::fmt;
@@ -155,17 +156,6 @@ struct DimFile {
     scale: Option<Scale>,
     #[serde(default)]
     start: Option<f64>,
-}
-
-/// 1-based line and column of byte `offset` in `text`.
-fn line_col(text: &str, offset: usize) -> (usize, usize) {
-    let before = &text[..offset.min(text.len())];
-    let line = before.matches('\n').count() + 1;
-    let col = before
-        .rfind('\n')
-        .map_or(before.len(), |i| before.len() - i - 1)
-        + 1;
-    (line, col)
 }
 
 impl Space {
