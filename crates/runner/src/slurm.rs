@@ -115,6 +115,32 @@ impl Submitted {
         self.dir.join("logs").join(format!("task_{task}.log"))
     }
 
+    /// The jobs of `pending` whose result or failure is there, with their
+    /// ends: one listing of the results folder per poll, files read only
+    /// for the jobs it shows finished.
+    fn finished<K>(&self, pending: &BTreeMap<usize, K>) -> Vec<(usize, ChildEnd)> {
+        let Ok(entries) = std::fs::read_dir(self.dir.join("results")) else {
+            return Vec::new();
+        };
+        let mut ready: Vec<usize> = entries
+            .flatten()
+            .filter_map(|e| {
+                let name = e.file_name().to_string_lossy().into_owned();
+                let stem = name
+                    .strip_suffix(".json")
+                    .or(name.strip_suffix(".failed"))?;
+                stem.parse::<usize>().ok()
+            })
+            .filter(|i| pending.contains_key(i))
+            .collect();
+        ready.sort_unstable();
+        ready.dedup();
+        ready
+            .into_iter()
+            .filter_map(|i| self.collect(i).map(|e| (i, e)))
+            .collect()
+    }
+
     /// The end of job `i`, when its result or failure is there.
     fn collect(&self, i: usize) -> Option<ChildEnd> {
         let results = self.dir.join("results");
@@ -155,10 +181,7 @@ pub fn run_array<K: Copy + Ord>(
         jobs.iter().enumerate().map(|(i, (k, _))| (i, *k)).collect();
     loop {
         let listed = submitted.listed()?;
-        let done: Vec<(usize, ChildEnd)> = pending
-            .keys()
-            .filter_map(|&i| submitted.collect(i).map(|e| (i, e)))
-            .collect();
+        let done = submitted.finished(&pending);
         for (i, end) in done {
             if let Some(k) = pending.remove(&i) {
                 store(k, end, started.elapsed().as_secs_f64())?;
@@ -169,10 +192,7 @@ pub fn run_array<K: Copy + Ord>(
         }
         if !listed {
             // One last look: a result may have landed after the listing.
-            let late: Vec<(usize, ChildEnd)> = pending
-                .keys()
-                .filter_map(|&i| submitted.collect(i).map(|e| (i, e)))
-                .collect();
+            let late = submitted.finished(&pending);
             for (i, end) in late {
                 if let Some(k) = pending.remove(&i) {
                     store(k, end, started.elapsed().as_secs_f64())?;
