@@ -32,6 +32,8 @@ pub fn compiled() -> Vec<Box<dyn Engine>> {
     engines.push(Box::new(realitygap_engine_rapier::RapierEngine));
     #[cfg(feature = "bullet")]
     engines.push(Box::new(realitygap_engine_bullet::BulletEngine));
+    #[cfg(feature = "physx")]
+    engines.push(Box::new(realitygap_engine_physx::PhysxEngine));
     engines
 }
 

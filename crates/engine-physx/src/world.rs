@@ -334,6 +334,13 @@ fn empty_world(locked: &Locked<'_>, recipe: &Recipe<'_>) -> Result<World, String
         }
         let a = world.articulation;
         PxArticulationReducedCoordinate_setArticulationFlag_mut(a, PxArticulationFlag::FixBase, true);
+        // Drive force limits in newtons and newton metres (PhysX's default
+        // reads them as impulses per step).
+        PxArticulationReducedCoordinate_setArticulationFlag_mut(
+            a,
+            PxArticulationFlag::DriveLimitsAreForces,
+            true,
+        );
         PxArticulationReducedCoordinate_setSolverIterationCounts_mut(
             a,
             s.position_iterations,

@@ -191,6 +191,10 @@ pub fn default_grid(engine: &str) -> Result<Vec<Overlay>> {
             ts(&coarse),
         ]),
         "rapier" => cross(&[("solver_iterations".into(), ints(&[1, 4, 8])), ts(&coarse)]),
+        "physx" => cross(&[
+            ("position_iterations".into(), ints(&[8, 32, 64])),
+            ts(&coarse),
+        ]),
         "ode" => {
             let mut points = cross(&[
                 ("stepper".into(), texts(&["quick_step"])),
