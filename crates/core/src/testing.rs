@@ -14,7 +14,14 @@ use std::path::{Path, PathBuf};
 
 /// The workspace root (the folder with `assets/` and `crates/`).
 pub fn workspace() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+    // Under cargo, CARGO_MANIFEST_DIR at run time is the tested crate's own
+    // directory (every crate is `crates/NAME`); the compile-time value can
+    // name another checkout when a shared target directory was built there.
+    let dir = std::env::var_os("CARGO_MANIFEST_DIR")
+        .map(PathBuf::from)
+        .filter(|d| d.join("../../Cargo.toml").is_file())
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")));
+    dir.join("../..")
 }
 
 /// Environment variable that lets the tests needing the study's recordings

@@ -18,7 +18,7 @@
 //! (PhysX scenes are independent).
 
 use physx_sys::*;
-use std::cell::RefCell;
+use std::cell::{Cell, RefCell};
 use std::ffi::{c_void, CStr};
 use std::sync::{Mutex, MutexGuard, OnceLock};
 
@@ -35,6 +35,8 @@ const KEPT: usize = 32;
 
 thread_local! {
     static MESSAGES: RefCell<Vec<String>> = const { RefCell::new(Vec::new()) };
+    /// Whether this thread holds the SDK lock (it is not reentrant).
+    static HELD: Cell<bool> = const { Cell::new(false) };
 }
 
 /// The messages PhysX reported on this thread since the last call, oldest
@@ -112,12 +114,32 @@ pub struct Locked<'a> {
     pub physics: *mut PxPhysics,
 }
 
+impl Drop for Locked<'_> {
+    fn drop(&mut self) {
+        HELD.with(|h| h.set(false));
+    }
+}
+
 impl Sdk {
-    /// Locks the SDK for creating or releasing objects.
+    /// Locks the SDK for creating or releasing objects (the thread must
+    /// not hold it already: see [`Sdk::lock_unless_held`]).
     pub fn lock(&self) -> Locked<'_> {
+        let guard = self.lock.lock().unwrap_or_else(|e| e.into_inner());
+        HELD.with(|h| h.set(true));
         Locked {
-            _guard: self.lock.lock().unwrap_or_else(|e| e.into_inner()),
+            _guard: guard,
             physics: self.physics,
+        }
+    }
+
+    /// [`Sdk::lock`], or `None` when this thread holds the lock already
+    /// (a world released while another is being built on the same thread,
+    /// e.g. a half-built world dropped on a load error).
+    pub fn lock_unless_held(&self) -> Option<Locked<'_>> {
+        if HELD.with(|h| h.get()) {
+            None
+        } else {
+            Some(self.lock())
         }
     }
 }

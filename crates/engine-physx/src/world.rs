@@ -112,7 +112,8 @@ pub struct World {
 impl Drop for World {
     fn drop(&mut self) {
         let Ok(sdk) = crate::sdk::sdk() else { return };
-        let _locked = sdk.lock();
+        // Held already when a half-built world is dropped on a load error.
+        let _locked = sdk.lock_unless_held();
         // SAFETY: every pointer was created by this world and is released
         // once, actors and the articulation before their scene, under the
         // SDK lock.
