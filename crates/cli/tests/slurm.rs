@@ -295,3 +295,90 @@ fn reproduce_on_slurm_equals_reproduce_locally() {
     assert!(tmp.path().join("slurm/runs/.slurm").is_dir());
     assert!(!tmp.path().join("local/runs/.slurm").exists());
 }
+
+/// What a frontier sweep measures that does not depend on timing: per
+/// point its label, status, deviations, gap and per scene the same with
+/// the engine steps; the reference's halvings and gap.
+fn deterministic_frontier(out: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(out.join("frontier.json")).unwrap();
+    let j: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let scenes = |p: &serde_json::Value| -> Vec<serde_json::Value> {
+        p["scenes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|s| {
+                serde_json::json!([
+                    s["scene"], s["status"], s["engine_steps"], s["simulated_s"],
+                    s["deviation_by_body_m"], s["gap_m"]
+                ])
+            })
+            .collect()
+    };
+    let points: Vec<serde_json::Value> = j["points"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| {
+            assert!(p["cpu_s"].as_f64().unwrap() > 0.0, "{p}");
+            serde_json::json!([
+                p["label"], p["status"], p["max_deviation_m"], p["mean_deviation_m"],
+                p["gap_m"], p["within_tolerance"], scenes(p)
+            ])
+        })
+        .collect();
+    let r = &j["reference"];
+    serde_json::json!({
+        "points": points,
+        "reference": [r["set"], r["halvings"], r["converged"], r["gap_m"], scenes(r)],
+    })
+}
+
+#[test]
+fn frontier_on_slurm_gives_the_local_deviations_statuses_and_gaps() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut measured = Vec::new();
+    for executor in ["slurm", "local"] {
+        let out = tmp.path().join(executor);
+        let o = realitygap(&[
+            "frontier",
+            &scene("scene1_single_joint"),
+            &scene("scene2_two_joints"),
+            "--engine",
+            "ode",
+            "--sweep",
+            "stepper=quick_step,world_step",
+            "--sweep",
+            "timestep_s=0.01,0.005",
+            "--repeats",
+            "2",
+            "--data",
+            "builtin",
+            "--executor",
+            executor,
+            "--slurm-runs-per-task",
+            "3",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success(), "{executor}: {err}");
+        assert_eq!(err.contains("slurm: points:"), executor == "slurm", "{err}");
+        assert!(out.join("recommended.toml").is_file());
+        assert!(out.join("frontier_gap.svg").is_file());
+        measured.push(deterministic_frontier(&out));
+    }
+    let (slurm, local) = (&measured[0], &measured[1]);
+    assert_eq!(slurm["points"].as_array().unwrap().len(), 5, "{slurm}");
+    assert!(
+        slurm["points"][2][4].as_f64().is_some(),
+        "world_step 0.01 s has a gap: {slurm}"
+    );
+    assert_eq!(slurm, local);
+    // One array per stage, each script kept for the user.
+    for stage in ["reference", "halving-1", "points"] {
+        let script = tmp.path().join("slurm/.slurm").join(stage).join("submit.sh");
+        assert!(script.is_file(), "{}", script.display());
+    }
+    assert!(!tmp.path().join("local/.slurm").exists());
+}
