@@ -382,3 +382,54 @@ fn frontier_on_slurm_gives_the_local_deviations_statuses_and_gaps() {
     }
     assert!(!tmp.path().join("local/.slurm").exists());
 }
+
+#[test]
+fn a_results_directory_the_workers_cannot_write_is_a_clear_error() {
+    // The tests run as root, which writes anywhere: the tasks run as
+    // `nobody` instead (root may submit for another user), into a folder
+    // only root can write. The binary stays readable for them.
+    use std::os::unix::fs::PermissionsExt;
+    let tmp = tempfile::tempdir().unwrap();
+    std::fs::set_permissions(tmp.path(), std::fs::Permissions::from_mode(0o755)).unwrap();
+    let out = tmp.path().join("out");
+    let args = run_args(
+        &out,
+        1,
+        &["--executor", "slurm", "--slurm-arg=--uid=nobody"],
+    );
+    let o = realitygap(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(!o.status.success(), "{err}");
+    let array = std::fs::read_dir(out.join(".slurm"))
+        .unwrap()
+        .flatten()
+        .next()
+        .unwrap()
+        .path();
+    for needed in [
+        "ended without a result (FAILED".to_string(),
+        "without a log".to_string(),
+        format!("Slurm could not write {}/logs/task_", array.display()),
+        "must be on a filesystem the compute nodes share, writable by the job's user (nobody"
+            .to_string(),
+        "rerun the same command".to_string(),
+    ] {
+        assert!(err.contains(&needed), "missing \"{needed}\" in: {err}");
+    }
+    // Both runs are marked failed, each naming its Slurm job and task.
+    let mut tasks = Vec::new();
+    for scene in ["scene1_single_joint", "scene2_two_joints"] {
+        let text = std::fs::read_to_string(out.join(scene).join("ode/manifest.json")).unwrap();
+        let m: serde_json::Value = serde_json::from_str(&text).unwrap();
+        let run = &m["runs"][0];
+        assert_eq!(run["status"], "failed", "{run}");
+        let message = run["message"].as_str().unwrap();
+        let task = message
+            .strip_prefix("slurm job ")
+            .and_then(|t| t.split_whitespace().next())
+            .unwrap_or_else(|| panic!("no job and task id: {message}"));
+        assert!(task.contains('_'), "{message}");
+        tasks.push(task.to_string());
+    }
+    assert_ne!(tasks[0], tasks[1]);
+}

@@ -71,6 +71,10 @@ fn script(dir: &Path, program: &Path, args: &[String], count: usize, per_task: u
          #   sbatch --array=0-{last} {script}\n\
          set -u\n\
          dir={dir}\n\
+         if [ ! -w \"$dir/results\" ]; then\n\
+         \x20 echo \"realitygap: $(id -un) cannot write into $dir/results on $(hostname): the results directory must be on a filesystem the compute nodes share, writable by the job's user\" >&2\n\
+         \x20 exit 1\n\
+         fi\n\
          first=$((SLURM_ARRAY_TASK_ID * {per_task}))\n\
          for ((i = first; i < first + {per_task} && i < {count}; i++)); do\n\
          \x20 [ -e \"$dir/results/$i.json\" ] && continue\n\
@@ -141,6 +145,36 @@ impl Submitted {
             .collect()
     }
 
+    /// Why array task `task` left no result, in Slurm's terms: its job
+    /// and task id, Slurm's state and reason when it still knows them, the
+    /// task's last words and log; without a log (Slurm could not open it,
+    /// as when the job's user cannot write the results directory or the
+    /// compute node does not see it), what the directory must be.
+    fn missing(&self, task: usize, states: &BTreeMap<usize, TaskState>) -> String {
+        let log = self.log(task);
+        let state = states.get(&task);
+        let slurm_said = state
+            .map(|s| format!(" ({}, reason {})", s.state, s.reason))
+            .unwrap_or_default();
+        let head = format!("slurm job {}_{task} ended without a result{slurm_said}", self.job_id);
+        match std::fs::read_to_string(&log) {
+            Ok(text) => {
+                let said = last_lines(&text, 3);
+                let said = if said.is_empty() { String::new() } else { format!(": {said}") };
+                format!("{head} (cancelled, timed out or failed){said}; log {}", log.display())
+            }
+            Err(_) if state.is_some_and(|s| s.state == "CANCELLED") => {
+                format!("{head}: cancelled before it started; no log {}", log.display())
+            }
+            Err(_) => format!(
+                "{head} and without a log: Slurm could not write {}. The results directory {} must be on a filesystem the compute nodes share, writable by the job's user{}; give --out such a directory (or fix its permissions) and rerun",
+                log.display(),
+                self.dir.display(),
+                state.map(|s| format!(" ({})", s.user)).unwrap_or_default()
+            ),
+        }
+    }
+
     /// The end of job `i`, when its result or failure is there.
     fn collect(&self, i: usize) -> Option<ChildEnd> {
         let results = self.dir.join("results");
@@ -162,6 +196,50 @@ impl Submitted {
             ))
         })
     }
+}
+
+/// What Slurm says of one finished array task.
+#[derive(Debug, Clone, PartialEq)]
+struct TaskState {
+    /// `JobState`, e.g. `FAILED`, `CANCELLED`, `TIMEOUT`.
+    state: String,
+    /// `Reason`, e.g. `JobLaunchFailure`.
+    reason: String,
+    /// `UserId`, e.g. `nobody(65534)`.
+    user: String,
+}
+
+/// Slurm's record of every task of array `job_id` (`scontrol -o show
+/// job`), by task id; empty once Slurm has forgotten the job (`MinJobAge`)
+/// or when scontrol cannot be run.
+fn task_states(job_id: &str) -> BTreeMap<usize, TaskState> {
+    let Ok(out) = Command::new("scontrol")
+        .args(["-o", "show", "job", job_id])
+        .output()
+    else {
+        return BTreeMap::new();
+    };
+    parse_task_states(&String::from_utf8_lossy(&out.stdout))
+}
+
+/// [`task_states`] of scontrol's one-line-per-task output.
+fn parse_task_states(text: &str) -> BTreeMap<usize, TaskState> {
+    text.lines()
+        .filter_map(|line| {
+            let field = |key: &str| {
+                line.split_whitespace()
+                    .find_map(|f| f.strip_prefix(key)?.strip_prefix('='))
+                    .map(str::to_string)
+            };
+            let task = field("ArrayTaskId")?.parse::<usize>().ok()?;
+            let state = TaskState {
+                state: field("JobState")?,
+                reason: field("Reason").unwrap_or_default(),
+                user: field("UserId").unwrap_or_default(),
+            };
+            Some((task, state))
+        })
+        .collect()
 }
 
 /// Submits `jobs` as one job array in `dir` and stores each as its result
@@ -198,20 +276,10 @@ pub fn run_array<K: Copy + Ord>(
                     store(k, end, started.elapsed().as_secs_f64())?;
                 }
             }
+            let states = task_states(&submitted.job_id);
             for (i, k) in std::mem::take(&mut pending) {
-                let task = i / submitted.per_task;
-                let log = std::fs::read_to_string(submitted.log(task)).unwrap_or_default();
-                let said = last_lines(&log, 3);
-                store(
-                    k,
-                    ChildEnd::Failed(format!(
-                        "slurm job {}_{task} ended without a result (cancelled, timed out or failed){}; log {}",
-                        submitted.job_id,
-                        if said.is_empty() { String::new() } else { format!(": {said}") },
-                        submitted.log(task).display()
-                    )),
-                    started.elapsed().as_secs_f64(),
-                )?;
+                let message = submitted.missing(i / submitted.per_task, &states);
+                store(k, ChildEnd::Failed(message), started.elapsed().as_secs_f64())?;
             }
             return Ok(());
         }
@@ -313,5 +381,24 @@ mod tests {
         assert!(s.contains("i < first + 2 && i < 5"), "{s}");
         assert!(s.contains("sbatch --array=0-2"), "{s}");
         assert!(s.contains("'/bin/realitygap' '__run-one'"), "{s}");
+        assert!(s.contains("if [ ! -w \"$dir/results\" ]"), "{s}");
+    }
+
+    #[test]
+    fn scontrol_records_are_read_per_task() {
+        let text = "JobId=405 ArrayJobId=404 ArrayTaskId=1 JobName=realitygap UserId=nobody(65534) GroupId=root(0) JobState=FAILED Reason=JobLaunchFailure Dependency=(null)\n\
+                    JobId=404 ArrayJobId=404 ArrayTaskId=0 JobName=realitygap UserId=me(1000) GroupId=me(1000) JobState=CANCELLED Reason=None\n\
+                    JobId=406 ArrayJobId=404 ArrayTaskId=2-5 JobState=PENDING\n";
+        let states = parse_task_states(text);
+        assert_eq!(states.len(), 2, "{states:?}");
+        assert_eq!(
+            states[&1],
+            TaskState {
+                state: "FAILED".into(),
+                reason: "JobLaunchFailure".into(),
+                user: "nobody(65534)".into()
+            }
+        );
+        assert_eq!(states[&0].state, "CANCELLED");
     }
 }
