@@ -128,8 +128,13 @@ fn main() {
         );
         for &r in &per_task {
             let out = tmp.path().join(format!("slurm{r}"));
-            let args = ["--executor", "slurm", "--slurm-runs-per-task", &r.to_string()]
-                .map(String::from);
+            let args = [
+                "--executor",
+                "slurm",
+                "--slurm-runs-per-task",
+                &r.to_string(),
+            ]
+            .map(String::from);
             let slurm = batch(n, &out, &args);
             let tasks = tasks_submitted(&out);
             println!(

@@ -309,8 +309,12 @@ fn deterministic_frontier(out: &Path) -> serde_json::Value {
             .iter()
             .map(|s| {
                 serde_json::json!([
-                    s["scene"], s["status"], s["engine_steps"], s["simulated_s"],
-                    s["deviation_by_body_m"], s["gap_m"]
+                    s["scene"],
+                    s["status"],
+                    s["engine_steps"],
+                    s["simulated_s"],
+                    s["deviation_by_body_m"],
+                    s["gap_m"]
                 ])
             })
             .collect()
@@ -322,8 +326,13 @@ fn deterministic_frontier(out: &Path) -> serde_json::Value {
         .map(|p| {
             assert!(p["cpu_s"].as_f64().unwrap() > 0.0, "{p}");
             serde_json::json!([
-                p["label"], p["status"], p["max_deviation_m"], p["mean_deviation_m"],
-                p["gap_m"], p["within_tolerance"], scenes(p)
+                p["label"],
+                p["status"],
+                p["max_deviation_m"],
+                p["mean_deviation_m"],
+                p["gap_m"],
+                p["within_tolerance"],
+                scenes(p)
             ])
         })
         .collect();
@@ -377,7 +386,11 @@ fn frontier_on_slurm_gives_the_local_deviations_statuses_and_gaps() {
     assert_eq!(slurm, local);
     // One array per stage, each script kept for the user.
     for stage in ["reference", "halving-1", "points"] {
-        let script = tmp.path().join("slurm/.slurm").join(stage).join("submit.sh");
+        let script = tmp
+            .path()
+            .join("slurm/.slurm")
+            .join(stage)
+            .join("submit.sh");
         assert!(script.is_file(), "{}", script.display());
     }
     assert!(!tmp.path().join("local/.slurm").exists());

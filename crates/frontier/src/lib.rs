@@ -295,7 +295,11 @@ fn load_scenes(files: &[PathBuf], engine: &dyn Engine) -> Result<Vec<SceneCase>>
 
 /// The settings of `point` laid over the scene's own, checked by the engine
 /// and against the control period.
-pub(crate) fn settings_for(case: &SceneCase, engine: &dyn Engine, point: &Overlay) -> Result<EngineSettings> {
+pub(crate) fn settings_for(
+    case: &SceneCase,
+    engine: &dyn Engine,
+    point: &Overlay,
+) -> Result<EngineSettings> {
     let mut settings = case.scene.settings_for(engine.name());
     settings.extend(point.iter().cloned());
     let timestep_s = engine

@@ -148,20 +148,26 @@ impl<'a> SlurmSweep<'a> {
         ));
         let started = std::time::Instant::now();
         let mut shown = 0;
-        run_array(jobs, &dir, self.launcher, self.options, &mut |key, end, _| {
-            ends.insert(key, end);
-            // About ten progress lines per array.
-            let tenth = ends.len() * 10 / total;
-            if tenth > shown {
-                shown = tenth;
-                (self.say)(format!(
-                    "  slurm: {stage}: {}/{total} done after {:.1} s",
-                    ends.len(),
-                    started.elapsed().as_secs_f64()
-                ));
-            }
-            Ok(())
-        })
+        run_array(
+            jobs,
+            &dir,
+            self.launcher,
+            self.options,
+            &mut |key, end, _| {
+                ends.insert(key, end);
+                // About ten progress lines per array.
+                let tenth = ends.len() * 10 / total;
+                if tenth > shown {
+                    shown = tenth;
+                    (self.say)(format!(
+                        "  slurm: {stage}: {}/{total} done after {:.1} s",
+                        ends.len(),
+                        started.elapsed().as_secs_f64()
+                    ));
+                }
+                Ok(())
+            },
+        )
         .with_context(|| format!("frontier: the Slurm array of {stage}"))?;
         Ok(ends)
     }

@@ -156,7 +156,10 @@ impl Submitted {
         let slurm_said = state
             .map(|s| format!(" ({}, reason {})", s.state, s.reason))
             .unwrap_or_default();
-        let head = format!("slurm job {}_{task} ended without a result{slurm_said}", self.job_id);
+        let head = format!(
+            "slurm job {}_{task} ended without a result{slurm_said}",
+            self.job_id
+        );
         match std::fs::read_to_string(&log) {
             Ok(text) => {
                 let said = last_lines(&text, 3);
@@ -279,7 +282,11 @@ pub fn run_array<K: Copy + Ord>(
             let states = task_states(&submitted.job_id);
             for (i, k) in std::mem::take(&mut pending) {
                 let message = submitted.missing(i / submitted.per_task, &states);
-                store(k, ChildEnd::Failed(message), started.elapsed().as_secs_f64())?;
+                store(
+                    k,
+                    ChildEnd::Failed(message),
+                    started.elapsed().as_secs_f64(),
+                )?;
             }
             return Ok(());
         }
