@@ -256,6 +256,10 @@ pub fn run_array<K: Copy + Ord>(
     store: &mut dyn FnMut(K, ChildEnd, f64) -> Result<()>,
 ) -> Result<()> {
     check_available()?;
+    // Absolute, so that the script and the messages name it wherever the
+    // tasks start and the user reruns it.
+    let dir = &std::path::absolute(dir)
+        .with_context(|| format!("--executor slurm: the folder {}", dir.display()))?;
     let submitted = submit(&jobs, dir, launcher, opts)?;
     let started = Instant::now();
     let mut pending: BTreeMap<usize, K> =
