@@ -37,6 +37,12 @@
 //! default grids has hit a fatal error. Use `realitygap run` (one child
 //! process per run) to isolate a setting that does.
 //!
+//! **On Slurm** ([`FrontierSpec::executor`]), each stage of the sweep is
+//! one job array and every simulation its own `realitygap __run-one`,
+//! which times the control loop on its thread's CPU clock and returns the
+//! time with the trajectory; the repeats are folded as here (see the
+//! `slurm` module), so everything but the timings equals the local sweep.
+//!
 //! Outputs in `--out`: `frontier.json`, `frontier_deviation.svg/.png`,
 //! with `--data` `frontier_gap.svg/.png`, `recommended.toml` (a parameters
 //! file with the recommended setting as `[engine.NAME]`, for `run --params`)
