@@ -184,6 +184,10 @@ fn a_cancelled_array_keeps_its_finished_runs_and_a_rerun_completes_them() {
         manifest.contains(&format!("slurm job {job}")),
         "the failed runs name the Slurm job: {manifest}"
     );
+    // In Slurm's terms, and the tasks that never started are not taken
+    // for a directory they could not write.
+    assert!(manifest.contains("CANCELLED"), "{manifest}");
+    assert!(!manifest.contains("without a log"), "{manifest}");
     // The rerun resubmits only what is missing and leaves the rest as it was.
     let args = run_args(&out, 4, &["--executor", "slurm"]);
     let o = realitygap(&args.iter().map(String::as_str).collect::<Vec<_>>());

@@ -153,9 +153,9 @@ impl Submitted {
     fn missing(&self, task: usize, states: &BTreeMap<usize, TaskState>) -> String {
         let log = self.log(task);
         let state = states.get(&task);
-        let slurm_said = state
-            .map(|s| format!(" ({}, reason {})", s.state, s.reason))
-            .unwrap_or_default();
+        let slurm_said = state.map_or(" (cancelled, timed out or failed)".to_string(), |s| {
+            format!(" ({}, reason {})", s.state, s.reason)
+        });
         let head = format!(
             "slurm job {}_{task} ended without a result{slurm_said}",
             self.job_id
@@ -164,13 +164,13 @@ impl Submitted {
             Ok(text) => {
                 let said = last_lines(&text, 3);
                 let said = if said.is_empty() { String::new() } else { format!(": {said}") };
-                format!("{head} (cancelled, timed out or failed){said}; log {}", log.display())
+                format!("{head}{said}; log {}", log.display())
             }
             Err(_) if state.is_some_and(|s| s.state == "CANCELLED") => {
                 format!("{head}: cancelled before it started; no log {}", log.display())
             }
             Err(_) => format!(
-                "{head} and without a log: Slurm could not write {}. The results directory {} must be on a filesystem the compute nodes share, writable by the job's user{}; give --out such a directory (or fix its permissions) and rerun",
+                "{head} and without a log: Slurm could not write {}. The results directory holding {} must be on a filesystem the compute nodes share, writable by the job's user{}; give --out such a directory (or fix its permissions) and rerun",
                 log.display(),
                 self.dir.display(),
                 state.map(|s| format!(" ({})", s.user)).unwrap_or_default()
@@ -234,13 +234,31 @@ fn parse_task_states(text: &str) -> BTreeMap<usize, TaskState> {
                     .find_map(|f| f.strip_prefix(key)?.strip_prefix('='))
                     .map(str::to_string)
             };
-            let task = field("ArrayTaskId")?.parse::<usize>().ok()?;
+            let tasks = task_ids(&field("ArrayTaskId")?);
             let state = TaskState {
                 state: field("JobState")?,
                 reason: field("Reason").unwrap_or_default(),
                 user: field("UserId").unwrap_or_default(),
             };
-            Some((task, state))
+            Some(tasks.into_iter().map(move |t| (t, state.clone())))
+        })
+        .flatten()
+        .collect()
+}
+
+/// The task ids of scontrol's `ArrayTaskId` (`3`, or for the tasks that
+/// never started `1-5%1`, `1,3,5-7`, `0-9:2`).
+fn task_ids(spec: &str) -> Vec<usize> {
+    let spec = spec.split('%').next().unwrap_or_default();
+    spec.split(',')
+        .flat_map(|part| {
+            let (range, step) = part.split_once(':').unwrap_or((part, "1"));
+            let step = step.parse::<usize>().unwrap_or(1).max(1);
+            let (a, b) = range.split_once('-').unwrap_or((range, range));
+            match (a.parse::<usize>(), b.parse::<usize>()) {
+                (Ok(a), Ok(b)) => (a..=b).step_by(step).collect(),
+                _ => Vec::new(),
+            }
         })
         .collect()
 }
@@ -399,9 +417,12 @@ mod tests {
     fn scontrol_records_are_read_per_task() {
         let text = "JobId=405 ArrayJobId=404 ArrayTaskId=1 JobName=realitygap UserId=nobody(65534) GroupId=root(0) JobState=FAILED Reason=JobLaunchFailure Dependency=(null)\n\
                     JobId=404 ArrayJobId=404 ArrayTaskId=0 JobName=realitygap UserId=me(1000) GroupId=me(1000) JobState=CANCELLED Reason=None\n\
-                    JobId=406 ArrayJobId=404 ArrayTaskId=2-5 JobState=PENDING\n";
+                    JobId=404 ArrayJobId=404 ArrayTaskId=2-5%1 JobState=CANCELLED Reason=JobArrayTaskLimit\n\
+                    JobId=407 ArrayJobId=404 ArrayTaskId=bogus JobState=FAILED\n";
         let states = parse_task_states(text);
-        assert_eq!(states.len(), 2, "{states:?}");
+        assert_eq!(states.len(), 6, "{states:?}");
+        assert_eq!(states[&5].reason, "JobArrayTaskLimit");
+        assert_eq!(task_ids("1,3,6-10:2"), [1, 3, 6, 8, 10]);
         assert_eq!(
             states[&1],
             TaskState {
