@@ -2,6 +2,7 @@
 //! `realitygap_frontier` (see its documentation for what is measured).
 
 use crate::cmd_engines;
+use crate::cmd_run::ExecutorArgs;
 use anyhow::{Context, Result};
 use realitygap_frontier::{FrontierSpec, MAX_HALVINGS};
 use realitygap_study::data_source::DataSource;
@@ -40,6 +41,13 @@ pub struct Args {
     /// Output folder.
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
+    /// Where the simulations run (as for `run`): with `slurm`, the
+    /// reference's setting, each halving of its timestep, then every
+    /// setting x scene x repeat are job arrays, each simulation timed by
+    /// the task on its own thread's CPU clock; `--out` must be on a
+    /// filesystem the compute nodes share.
+    #[command(flatten)]
+    pub executor: ExecutorArgs,
 }
 
 /// `realitygap frontier`.
@@ -47,6 +55,7 @@ pub fn run(args: Args) -> Result<()> {
     cmd_engines::install_native_handlers();
     let engine = realitygap_runner::prepare::find_engine(cmd_engines::compiled, &args.engine)
         .context("--engine")?;
+    let executor = args.executor.executor()?;
     let spec = FrontierSpec {
         scenes: args.scenes,
         sweep: args.sweep,
@@ -55,6 +64,8 @@ pub fn run(args: Args) -> Result<()> {
         repeats: args.repeats,
         max_halvings: args.max_halvings,
         out: args.out,
+        executor,
+        launcher: realitygap_runner::Launcher::this_executable(),
         say: Box::new(|line| eprintln!("{line}")),
         tell: Box::new(|line| println!("{line}")),
     };

@@ -278,9 +278,23 @@ fn print_summary(plan: &Plan, stats: &BatchStats, total: usize, batch_wall_s: f6
         anyhow::bail!("the engine could not load {}", load_failures.join(", "));
     }
     if stats.failures > 0 {
-        anyhow::bail!("{} of {total} runs failed (their messages are in the manifests); rerun the same command to retry them", stats.failures);
+        let first = first_failure(plan)
+            .map(|m| format!("; the first: {m}"))
+            .unwrap_or_default();
+        anyhow::bail!("{} of {total} runs failed (their messages are in the manifests{first}); rerun the same command to retry them", stats.failures);
     }
     Ok(())
+}
+
+/// The message of the first failed run of the batch's results
+/// directories, for the final error (the progress bar's lines are not
+/// shown when standard error is not a terminal).
+fn first_failure(plan: &Plan) -> Option<String> {
+    plan.groups
+        .iter()
+        .flat_map(|g| g.store.runs())
+        .find(|r| r.status == realitygap_data::runstore::RunStatus::Failed)
+        .and_then(|r| r.message.clone())
 }
 
 /// Prints a line on standard output; a closed pipe (`| head`) is not an

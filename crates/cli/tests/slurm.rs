@@ -184,6 +184,10 @@ fn a_cancelled_array_keeps_its_finished_runs_and_a_rerun_completes_them() {
         manifest.contains(&format!("slurm job {job}")),
         "the failed runs name the Slurm job: {manifest}"
     );
+    // In Slurm's terms, and the tasks that never started are not taken
+    // for a directory they could not write.
+    assert!(manifest.contains("CANCELLED"), "{manifest}");
+    assert!(!manifest.contains("without a log"), "{manifest}");
     // The rerun resubmits only what is missing and leaves the rest as it was.
     let args = run_args(&out, 4, &["--executor", "slurm"]);
     let o = realitygap(&args.iter().map(String::as_str).collect::<Vec<_>>());
@@ -294,4 +298,155 @@ fn reproduce_on_slurm_equals_reproduce_locally() {
     assert_eq!(tables[0], tables[1]);
     assert!(tmp.path().join("slurm/runs/.slurm").is_dir());
     assert!(!tmp.path().join("local/runs/.slurm").exists());
+}
+
+/// What a frontier sweep measures that does not depend on timing: per
+/// point its label, status, deviations, gap and per scene the same with
+/// the engine steps; the reference's halvings and gap.
+fn deterministic_frontier(out: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(out.join("frontier.json")).unwrap();
+    let j: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let scenes = |p: &serde_json::Value| -> Vec<serde_json::Value> {
+        p["scenes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|s| {
+                serde_json::json!([
+                    s["scene"],
+                    s["status"],
+                    s["engine_steps"],
+                    s["simulated_s"],
+                    s["deviation_by_body_m"],
+                    s["gap_m"]
+                ])
+            })
+            .collect()
+    };
+    let points: Vec<serde_json::Value> = j["points"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| {
+            assert!(p["cpu_s"].as_f64().unwrap() > 0.0, "{p}");
+            serde_json::json!([
+                p["label"],
+                p["status"],
+                p["max_deviation_m"],
+                p["mean_deviation_m"],
+                p["gap_m"],
+                p["within_tolerance"],
+                scenes(p)
+            ])
+        })
+        .collect();
+    let r = &j["reference"];
+    serde_json::json!({
+        "points": points,
+        "reference": [r["set"], r["halvings"], r["converged"], r["gap_m"], scenes(r)],
+    })
+}
+
+#[test]
+fn frontier_on_slurm_gives_the_local_deviations_statuses_and_gaps() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut measured = Vec::new();
+    for executor in ["slurm", "local"] {
+        let out = tmp.path().join(executor);
+        let o = realitygap(&[
+            "frontier",
+            &scene("scene1_single_joint"),
+            &scene("scene2_two_joints"),
+            "--engine",
+            "ode",
+            "--sweep",
+            "stepper=quick_step,world_step",
+            "--sweep",
+            "timestep_s=0.01,0.005",
+            "--repeats",
+            "2",
+            "--data",
+            "builtin",
+            "--executor",
+            executor,
+            "--slurm-runs-per-task",
+            "3",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success(), "{executor}: {err}");
+        assert_eq!(err.contains("slurm: points:"), executor == "slurm", "{err}");
+        assert!(out.join("recommended.toml").is_file());
+        assert!(out.join("frontier_gap.svg").is_file());
+        measured.push(deterministic_frontier(&out));
+    }
+    let (slurm, local) = (&measured[0], &measured[1]);
+    assert_eq!(slurm["points"].as_array().unwrap().len(), 5, "{slurm}");
+    assert!(
+        slurm["points"][2][4].as_f64().is_some(),
+        "world_step 0.01 s has a gap: {slurm}"
+    );
+    assert_eq!(slurm, local);
+    // One array per stage, each script kept for the user.
+    for stage in ["reference", "halving-1", "points"] {
+        let script = tmp
+            .path()
+            .join("slurm/.slurm")
+            .join(stage)
+            .join("submit.sh");
+        assert!(script.is_file(), "{}", script.display());
+    }
+    assert!(!tmp.path().join("local/.slurm").exists());
+}
+
+#[test]
+fn a_results_directory_the_workers_cannot_write_is_a_clear_error() {
+    // The tests run as root, which writes anywhere: the tasks run as
+    // `nobody` instead (root may submit for another user), into a folder
+    // only root can write. The binary stays readable for them.
+    use std::os::unix::fs::PermissionsExt;
+    let tmp = tempfile::tempdir().unwrap();
+    std::fs::set_permissions(tmp.path(), std::fs::Permissions::from_mode(0o755)).unwrap();
+    let out = tmp.path().join("out");
+    let args = run_args(
+        &out,
+        1,
+        &["--executor", "slurm", "--slurm-arg=--uid=nobody"],
+    );
+    let o = realitygap(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(!o.status.success(), "{err}");
+    let array = std::fs::read_dir(out.join(".slurm"))
+        .unwrap()
+        .flatten()
+        .next()
+        .unwrap()
+        .path();
+    for needed in [
+        "ended without a result (FAILED".to_string(),
+        "without a log".to_string(),
+        format!("Slurm could not write {}/logs/task_", array.display()),
+        "must be on a filesystem the compute nodes share, writable by the job's user (nobody"
+            .to_string(),
+        "rerun the same command".to_string(),
+    ] {
+        assert!(err.contains(&needed), "missing \"{needed}\" in: {err}");
+    }
+    // Both runs are marked failed, each naming its Slurm job and task.
+    let mut tasks = Vec::new();
+    for scene in ["scene1_single_joint", "scene2_two_joints"] {
+        let text = std::fs::read_to_string(out.join(scene).join("ode/manifest.json")).unwrap();
+        let m: serde_json::Value = serde_json::from_str(&text).unwrap();
+        let run = &m["runs"][0];
+        assert_eq!(run["status"], "failed", "{run}");
+        let message = run["message"].as_str().unwrap();
+        let task = message
+            .strip_prefix("slurm job ")
+            .and_then(|t| t.split_whitespace().next())
+            .unwrap_or_else(|| panic!("no job and task id: {message}"));
+        assert!(task.contains('_'), "{message}");
+        tasks.push(task.to_string());
+    }
+    assert_ne!(tasks[0], tasks[1]);
 }

@@ -37,6 +37,12 @@
 //! default grids has hit a fatal error. Use `realitygap run` (one child
 //! process per run) to isolate a setting that does.
 //!
+//! **On Slurm** ([`FrontierSpec::executor`]), each stage of the sweep is
+//! one job array and every simulation its own `realitygap __run-one`,
+//! which times the control loop on its thread's CPU clock and returns the
+//! time with the trajectory; the repeats are folded as here (see the
+//! `slurm` module), so everything but the timings equals the local sweep.
+//!
 //! Outputs in `--out`: `frontier.json`, `frontier_deviation.svg/.png`,
 //! with `--data` `frontier_gap.svg/.png`, `recommended.toml` (a parameters
 //! file with the recommended setting as `[engine.NAME]`, for `run --params`)
@@ -45,11 +51,13 @@
 
 #![forbid(unsafe_code)]
 
+mod slurm;
+
 use anyhow::{anyhow, bail, Context, Result};
 use realitygap_analysis::bootstrap::BootstrapOptions;
 use realitygap_analysis::compare::{CompareOptions, RunInput, SourceRuns};
 use realitygap_core::controller::{
-    load_prepared, run_scene_with, ControlParams, RunOptions, RunStatus,
+    load_prepared, run_scene_with, ControlParams, RunOptions, RunOutcome, RunStatus,
 };
 use realitygap_core::engine::{Engine, EngineSettings, SettingValue};
 use realitygap_core::params::PhysicalParams;
@@ -58,6 +66,8 @@ use realitygap_core::scene::Scene;
 use realitygap_core::trajectory::Trajectory;
 use realitygap_data::runstore::{EngineInfo, RunEntry, RunStore, SourceKind};
 use realitygap_report::frontier::{FrontierFigure, FrontierPoint};
+use realitygap_runner::slurm::Executor;
+use realitygap_runner::Launcher;
 use realitygap_study::data_source::{assets_dir, DataSource};
 use realitygap_study::{Roots, Study};
 use serde::Serialize;
@@ -91,6 +101,12 @@ pub struct FrontierSpec {
     pub max_halvings: u32,
     /// Output folder.
     pub out: PathBuf,
+    /// Where the simulations run: in this process, one after the other
+    /// (`Local`), or each stage of the sweep as one Slurm job array.
+    pub executor: Executor,
+    /// How a Slurm task runs one simulation (`realitygap __run-one`);
+    /// unused locally.
+    pub launcher: Launcher,
     /// Where progress lines go (the command prints them on standard
     /// error).
     pub say: Box<dyn Fn(String)>,
@@ -289,7 +305,11 @@ fn load_scenes(files: &[PathBuf], engine: &dyn Engine) -> Result<Vec<SceneCase>>
 
 /// The settings of `point` laid over the scene's own, checked by the engine
 /// and against the control period.
-fn settings_for(case: &SceneCase, engine: &dyn Engine, point: &Overlay) -> Result<EngineSettings> {
+pub(crate) fn settings_for(
+    case: &SceneCase,
+    engine: &dyn Engine,
+    point: &Overlay,
+) -> Result<EngineSettings> {
     let mut settings = case.scene.settings_for(engine.name());
     settings.extend(point.iter().cloned());
     let timestep_s = engine
@@ -380,6 +400,42 @@ pub struct SceneResult {
     trajectory: Option<Trajectory>,
 }
 
+/// One timed simulation: its outcome and the CPU seconds of its control
+/// loop, or why it failed.
+pub(crate) type Attempt = std::result::Result<(RunOutcome, f64), String>;
+
+/// Runs one scene at `settings` in this process, timed on this thread's
+/// clock; a refused setting or a panic is an `Err` with the message.
+fn run_once(case: &SceneCase, engine: &dyn Engine, settings: &EngineSettings) -> Attempt {
+    let options = RunOptions::default();
+    let control = ControlParams::from_params(&PhysicalParams::none(), &case.scene);
+    let once = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        let mut sim = load_prepared(
+            engine,
+            &case.scene,
+            &case.robot,
+            settings,
+            &PhysicalParams::none(),
+            &options,
+        )?;
+        let start = thread_cpu_s();
+        let outcome = run_scene_with(sim.as_mut(), &case.scene, &options, &control)?;
+        Ok::<_, realitygap_core::controller::RunError>((outcome, thread_cpu_s() - start))
+    }));
+    match once {
+        Ok(Ok(done)) => Ok(done),
+        Ok(Err(e)) => Err(e.to_string()),
+        Err(panic) => {
+            let what = panic
+                .downcast_ref::<String>()
+                .cloned()
+                .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
+                .unwrap_or_else(|| "a panic".into());
+            Err(format!("the engine panicked: {what}"))
+        }
+    }
+}
+
 /// Runs one scene at `settings`, `repeats` times; never fails: a refused
 /// setting or a panic is a `failed` result.
 fn run_case(
@@ -388,50 +444,28 @@ fn run_case(
     settings: &EngineSettings,
     repeats: u32,
 ) -> SceneResult {
+    fold_attempts(case, (0..repeats).map(|_| run_once(case, engine, settings)))
+}
+
+/// The result of one scene from its repeats' attempts, in order: the
+/// smallest CPU time, the first run's trajectory and status; the first
+/// failure makes it `failed` (the attempts after it are not drawn).
+pub(crate) fn fold_attempts(
+    case: &SceneCase,
+    attempts: impl Iterator<Item = Attempt>,
+) -> SceneResult {
     let mut result = SceneResult {
-        scene: case.scene.name.clone(),
         status: "ok".into(),
-        message: None,
         cpu_s: f64::INFINITY,
-        simulated_s: 0.0,
-        engine_steps: 0,
-        max_deviation_m: None,
-        mean_deviation_m: None,
-        deviation_by_body_m: BTreeMap::new(),
-        gap_m: None,
-        trajectory: None,
+        ..run_case_placeholder(case)
     };
-    let options = RunOptions::default();
-    let control = ControlParams::from_params(&PhysicalParams::none(), &case.scene);
-    for _ in 0..repeats {
-        let once = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            let mut sim = load_prepared(
-                engine,
-                &case.scene,
-                &case.robot,
-                settings,
-                &PhysicalParams::none(),
-                &options,
-            )?;
-            let start = thread_cpu_s();
-            let outcome = run_scene_with(sim.as_mut(), &case.scene, &options, &control)?;
-            Ok::<_, realitygap_core::controller::RunError>((outcome, thread_cpu_s() - start))
-        }));
-        let (outcome, cpu_s) = match once {
-            Ok(Ok(done)) => done,
-            Ok(Err(e)) => return failed(result, e.to_string()),
-            Err(panic) => {
-                let what = panic
-                    .downcast_ref::<String>()
-                    .cloned()
-                    .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
-                    .unwrap_or_else(|| "a panic".into());
-                return failed(result, format!("the engine panicked: {what}"));
-            }
+    for attempt in attempts {
+        let (outcome, cpu_s) = match attempt {
+            Ok(done) => done,
+            Err(message) => return failed(result, message),
         };
         result.cpu_s = result.cpu_s.min(cpu_s);
         if result.trajectory.is_none() {
-            let t = &outcome.trajectory;
             result.simulated_s = match &outcome.status {
                 RunStatus::Completed => case.scene.duration_s,
                 RunStatus::Diverged { t_s, .. } => *t_s,
@@ -441,13 +475,13 @@ fn run_case(
                 result.message = Some(format!("diverged at t = {t_s:.4} s: {reason}"));
             }
             result.engine_steps = outcome.engine_steps;
-            result.trajectory = Some(t.clone());
+            result.trajectory = Some(outcome.trajectory);
         }
     }
     result
 }
 
-fn failed(mut result: SceneResult, message: String) -> SceneResult {
+pub(crate) fn failed(mut result: SceneResult, message: String) -> SceneResult {
     result.status = "failed".into();
     result.message = Some(message);
     result.cpu_s = f64::NAN;
@@ -544,18 +578,21 @@ fn json_of(v: &SettingValue) -> serde_json::Value {
     }
 }
 
-/// Runs every scene at one setting.
+/// Runs every scene at one setting, in this process.
 fn measure(cases: &[SceneCase], engine: &dyn Engine, overlay: &Overlay, repeats: u32) -> Point {
     let scenes: Vec<SceneResult> = cases
         .iter()
         .map(|case| match settings_for(case, engine, overlay) {
             Ok(settings) => run_case(case, engine, &settings, repeats),
-            Err(e) => {
-                let empty = run_case_placeholder(case);
-                failed(empty, e.to_string())
-            }
+            Err(e) => failed(run_case_placeholder(case), e.to_string()),
         })
         .collect();
+    point_of(engine, overlay, scenes)
+}
+
+/// The point of `overlay` from its scenes' results (deviations not yet
+/// scored).
+pub(crate) fn point_of(engine: &dyn Engine, overlay: &Overlay, scenes: Vec<SceneResult>) -> Point {
     let (label, group) = label(overlay);
     let cpu_s: f64 = scenes.iter().map(|s| s.cpu_s).sum();
     let simulated_s: f64 = scenes.iter().map(|s| s.simulated_s).sum();
@@ -587,7 +624,7 @@ fn measure(cases: &[SceneCase], engine: &dyn Engine, overlay: &Overlay, repeats:
     }
 }
 
-fn run_case_placeholder(case: &SceneCase) -> SceneResult {
+pub(crate) fn run_case_placeholder(case: &SceneCase) -> SceneResult {
     SceneResult {
         scene: case.scene.name.clone(),
         status: "failed".into(),
@@ -655,13 +692,13 @@ pub struct Halving {
     pub change_by_scene_m: Vec<f64>,
 }
 
+/// `measure(stage, overlay, repeats)` measures one point in every scene.
 fn converge(
     cases: &[SceneCase],
     engine: &dyn Engine,
     finest: &Overlay,
-    repeats: u32,
-    threshold_m: f64,
-    max_halvings: u32,
+    (repeats, threshold_m, max_halvings): (u32, f64, u32),
+    measure: &dyn Fn(&str, &Overlay, u32) -> Result<Point>,
     say: &dyn Fn(String),
 ) -> Result<Reference> {
     let trajectories_of = |p: &Point| -> Result<Vec<Trajectory>> {
@@ -688,11 +725,11 @@ fn converge(
             .unwrap_or(engine.default_timestep_s());
         overlay.push(("timestep_s".into(), SettingValue::Float(ts)));
     }
-    let mut point = measure(cases, engine, &overlay, repeats);
+    let mut point = measure("reference", &overlay, repeats)?;
     let mut trajectories = trajectories_of(&point)?;
     let mut halvings = Vec::new();
     let mut converged = false;
-    for _ in 0..max_halvings {
+    for halving in 1..=max_halvings {
         let finer: Overlay = overlay
             .iter()
             .map(|(k, v)| match (k.as_str(), v.as_f64()) {
@@ -700,7 +737,7 @@ fn converge(
                 _ => (k.clone(), v.clone()),
             })
             .collect();
-        let next = measure(cases, engine, &finer, 1);
+        let next = measure(&format!("halving-{halving}"), &finer, 1)?;
         let Ok(next_traj) = trajectories_of(&next) else {
             break;
         };
@@ -965,24 +1002,93 @@ pub fn run(args: &FrontierSpec, engine: &dyn Engine) -> Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
 
+    let (reference, mut points) = sweep(args, engine, &cases, &overlays, &finest, tolerance_m)?;
+    let mut reference = reference;
+    score(
+        &mut reference.point,
+        &reference.trajectories.clone(),
+        tolerance_m,
+    );
+    let notes = match &data {
+        Some(d) => {
+            let mut all: Vec<&mut Point> = points.iter_mut().collect();
+            all.push(&mut reference.point);
+            measure_gaps(&mut all, d, &args.out)?
+        }
+        None => vec![],
+    };
+    write_outputs(args, engine, &reference, &points, data.as_deref(), notes)
+}
+
+/// Measures the reference (converging) and then every point, here or on
+/// Slurm (`args.executor`); the reference and the scored points.
+fn sweep(
+    args: &FrontierSpec,
+    engine: &dyn Engine,
+    cases: &[SceneCase],
+    overlays: &[Overlay],
+    finest: &Overlay,
+    tolerance_m: f64,
+) -> Result<(Reference, Vec<Point>)> {
+    let slurm = match &args.executor {
+        Executor::Slurm(options) => Some(slurm::SlurmSweep::new(
+            options,
+            &args.launcher,
+            &args.out,
+            &args.scenes,
+            &*args.say,
+        )?),
+        Executor::Local => None,
+    };
+    let measure_one = |stage: &str, overlay: &Overlay, repeats: u32| -> Result<Point> {
+        match &slurm {
+            None => Ok(measure(cases, engine, overlay, repeats)),
+            Some(s) => s
+                .measure(stage, cases, engine, std::slice::from_ref(overlay), repeats)?
+                .pop()
+                .ok_or_else(|| anyhow!("the {stage} stage measured nothing")),
+        }
+    };
     (args.say)(format!(
         "frontier: {} in {} scene(s), reference from {}",
         engine.name(),
         cases.len(),
-        set_args(engine.name(), &finest).join(" ")
+        set_args(engine.name(), finest).join(" ")
     ));
     let reference = converge(
-        &cases,
+        cases,
         engine,
-        &finest,
-        args.repeats,
-        tolerance_m / 10.0,
-        args.max_halvings,
+        finest,
+        (args.repeats, tolerance_m / 10.0, args.max_halvings),
+        &measure_one,
         &args.say,
     )?;
+    let measured: Box<dyn Iterator<Item = Point>> = match &slurm {
+        None => Box::new(
+            overlays
+                .iter()
+                .map(|o| measure(cases, engine, o, args.repeats)),
+        ),
+        Some(s) => Box::new(
+            s.measure("points", cases, engine, overlays, args.repeats)?
+                .into_iter(),
+        ),
+    };
+    let points = score_points(args, overlays, measured, &reference, tolerance_m);
+    Ok((reference, points))
+}
+
+/// Scores the measured points (in the order of `overlays`) against the
+/// reference, saying each one's outcome as it comes.
+fn score_points(
+    args: &FrontierSpec,
+    overlays: &[Overlay],
+    measured: impl Iterator<Item = Point>,
+    reference: &Reference,
+    tolerance_m: f64,
+) -> Vec<Point> {
     let mut points: Vec<Point> = Vec::new();
-    for (i, o) in overlays.iter().enumerate() {
-        let mut p = measure(&cases, engine, o, args.repeats);
+    for (i, (o, mut p)) in overlays.iter().zip(measured).enumerate() {
         if o.is_empty() {
             p.label = "scene's own setting".into();
             p.group = "scene's own".into();
@@ -1005,21 +1111,7 @@ pub fn run(args: &FrontierSpec, engine: &dyn Engine) -> Result<()> {
         ));
         points.push(p);
     }
-    let mut reference = reference;
-    score(
-        &mut reference.point,
-        &reference.trajectories.clone(),
-        tolerance_m,
-    );
-    let notes = match &data {
-        Some(d) => {
-            let mut all: Vec<&mut Point> = points.iter_mut().collect();
-            all.push(&mut reference.point);
-            measure_gaps(&mut all, d, &args.out)?
-        }
-        None => vec![],
-    };
-    write_outputs(args, engine, &reference, &points, data.as_deref(), notes)
+    points
 }
 
 /// Writes `frontier.json`, the reference runs, the figures and the

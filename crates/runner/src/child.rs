@@ -137,8 +137,11 @@ pub fn simulate(registry: Registry, job: &Job) -> Result<Option<ChildResult>> {
     }
     let control = ControlParams::from_params(&p.params, &p.scene);
     let issues = sim.stability_issues();
+    let start = crate::cpu_clock::thread_cpu_s();
     let outcome = run_scene_with(sim.as_mut(), &p.scene, &options, &control)?;
+    let end = crate::cpu_clock::thread_cpu_s();
     let mut result = ChildResult::from_outcome(&outcome);
+    result.cpu_s = start.zip(end).map(|(a, b)| b - a);
     result.stability_issues = issues;
     result.instability = instability_of(&p.scene, &p.robot, &outcome);
     Ok(Some(result))

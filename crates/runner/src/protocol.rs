@@ -81,6 +81,12 @@ pub struct ChildResult {
     /// and gravity), when the run completed with one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub instability: Option<Instability>,
+    /// CPU time of the control loop (stepping and control, not the model
+    /// load) on the worker's thread clock (`CLOCK_THREAD_CPUTIME_ID`), s;
+    /// `None` where the platform has no such clock. `frontier` times its
+    /// runs on Slurm with it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cpu_s: Option<f64>,
 }
 
 fn bits(v: &[f64]) -> Vec<u64> {
@@ -138,6 +144,7 @@ impl ChildResult {
             handovers: Vec::new(),
             stability_issues: Vec::new(),
             instability: None,
+            cpu_s: None,
         }
     }
 

@@ -71,6 +71,10 @@ fn script(dir: &Path, program: &Path, args: &[String], count: usize, per_task: u
          #   sbatch --array=0-{last} {script}\n\
          set -u\n\
          dir={dir}\n\
+         if [ ! -w \"$dir/results\" ]; then\n\
+         \x20 echo \"realitygap: $(id -un) cannot write into $dir/results on $(hostname): the results directory must be on a filesystem the compute nodes share, writable by the job's user\" >&2\n\
+         \x20 exit 1\n\
+         fi\n\
          first=$((SLURM_ARRAY_TASK_ID * {per_task}))\n\
          for ((i = first; i < first + {per_task} && i < {count}; i++)); do\n\
          \x20 [ -e \"$dir/results/$i.json\" ] && continue\n\
@@ -141,6 +145,39 @@ impl Submitted {
             .collect()
     }
 
+    /// Why array task `task` left no result, in Slurm's terms: its job
+    /// and task id, Slurm's state and reason when it still knows them, the
+    /// task's last words and log; without a log (Slurm could not open it,
+    /// as when the job's user cannot write the results directory or the
+    /// compute node does not see it), what the directory must be.
+    fn missing(&self, task: usize, states: &BTreeMap<usize, TaskState>) -> String {
+        let log = self.log(task);
+        let state = states.get(&task);
+        let slurm_said = state.map_or(" (cancelled, timed out or failed)".to_string(), |s| {
+            format!(" ({}, reason {})", s.state, s.reason)
+        });
+        let head = format!(
+            "slurm job {}_{task} ended without a result{slurm_said}",
+            self.job_id
+        );
+        match std::fs::read_to_string(&log) {
+            Ok(text) => {
+                let said = last_lines(&text, 3);
+                let said = if said.is_empty() { String::new() } else { format!(": {said}") };
+                format!("{head}{said}; log {}", log.display())
+            }
+            Err(_) if state.is_some_and(|s| s.state == "CANCELLED") => {
+                format!("{head}: cancelled before it started; no log {}", log.display())
+            }
+            Err(_) => format!(
+                "{head} and without a log: Slurm could not write {}. The results directory holding {} must be on a filesystem the compute nodes share, writable by the job's user{}; give --out such a directory (or fix its permissions) and rerun",
+                log.display(),
+                self.dir.display(),
+                state.map(|s| format!(" ({})", s.user)).unwrap_or_default()
+            ),
+        }
+    }
+
     /// The end of job `i`, when its result or failure is there.
     fn collect(&self, i: usize) -> Option<ChildEnd> {
         let results = self.dir.join("results");
@@ -164,6 +201,68 @@ impl Submitted {
     }
 }
 
+/// What Slurm says of one finished array task.
+#[derive(Debug, Clone, PartialEq)]
+struct TaskState {
+    /// `JobState`, e.g. `FAILED`, `CANCELLED`, `TIMEOUT`.
+    state: String,
+    /// `Reason`, e.g. `JobLaunchFailure`.
+    reason: String,
+    /// `UserId`, e.g. `nobody(65534)`.
+    user: String,
+}
+
+/// Slurm's record of every task of array `job_id` (`scontrol -o show
+/// job`), by task id; empty once Slurm has forgotten the job (`MinJobAge`)
+/// or when scontrol cannot be run.
+fn task_states(job_id: &str) -> BTreeMap<usize, TaskState> {
+    let Ok(out) = Command::new("scontrol")
+        .args(["-o", "show", "job", job_id])
+        .output()
+    else {
+        return BTreeMap::new();
+    };
+    parse_task_states(&String::from_utf8_lossy(&out.stdout))
+}
+
+/// [`task_states`] of scontrol's one-line-per-task output.
+fn parse_task_states(text: &str) -> BTreeMap<usize, TaskState> {
+    text.lines()
+        .filter_map(|line| {
+            let field = |key: &str| {
+                line.split_whitespace()
+                    .find_map(|f| f.strip_prefix(key)?.strip_prefix('='))
+                    .map(str::to_string)
+            };
+            let tasks = task_ids(&field("ArrayTaskId")?);
+            let state = TaskState {
+                state: field("JobState")?,
+                reason: field("Reason").unwrap_or_default(),
+                user: field("UserId").unwrap_or_default(),
+            };
+            Some(tasks.into_iter().map(move |t| (t, state.clone())))
+        })
+        .flatten()
+        .collect()
+}
+
+/// The task ids of scontrol's `ArrayTaskId` (`3`, or for the tasks that
+/// never started `1-5%1`, `1,3,5-7`, `0-9:2`).
+fn task_ids(spec: &str) -> Vec<usize> {
+    let spec = spec.split('%').next().unwrap_or_default();
+    spec.split(',')
+        .flat_map(|part| {
+            let (range, step) = part.split_once(':').unwrap_or((part, "1"));
+            let step = step.parse::<usize>().unwrap_or(1).max(1);
+            let (a, b) = range.split_once('-').unwrap_or((range, range));
+            match (a.parse::<usize>(), b.parse::<usize>()) {
+                (Ok(a), Ok(b)) => (a..=b).step_by(step).collect(),
+                _ => Vec::new(),
+            }
+        })
+        .collect()
+}
+
 /// Submits `jobs` as one job array in `dir` and stores each as its result
 /// appears (`store(key, end, elapsed)`); jobs that end without a result are
 /// stored as failed with Slurm's job and task id and the task's log.
@@ -175,6 +274,10 @@ pub fn run_array<K: Copy + Ord>(
     store: &mut dyn FnMut(K, ChildEnd, f64) -> Result<()>,
 ) -> Result<()> {
     check_available()?;
+    // Absolute, so that the script and the messages name it wherever the
+    // tasks start and the user reruns it.
+    let dir = &std::path::absolute(dir)
+        .with_context(|| format!("--executor slurm: the folder {}", dir.display()))?;
     let submitted = submit(&jobs, dir, launcher, opts)?;
     let started = Instant::now();
     let mut pending: BTreeMap<usize, K> =
@@ -198,18 +301,12 @@ pub fn run_array<K: Copy + Ord>(
                     store(k, end, started.elapsed().as_secs_f64())?;
                 }
             }
+            let states = task_states(&submitted.job_id);
             for (i, k) in std::mem::take(&mut pending) {
-                let task = i / submitted.per_task;
-                let log = std::fs::read_to_string(submitted.log(task)).unwrap_or_default();
-                let said = last_lines(&log, 3);
+                let message = submitted.missing(i / submitted.per_task, &states);
                 store(
                     k,
-                    ChildEnd::Failed(format!(
-                        "slurm job {}_{task} ended without a result (cancelled, timed out or failed){}; log {}",
-                        submitted.job_id,
-                        if said.is_empty() { String::new() } else { format!(": {said}") },
-                        submitted.log(task).display()
-                    )),
+                    ChildEnd::Failed(message),
                     started.elapsed().as_secs_f64(),
                 )?;
             }
@@ -313,5 +410,27 @@ mod tests {
         assert!(s.contains("i < first + 2 && i < 5"), "{s}");
         assert!(s.contains("sbatch --array=0-2"), "{s}");
         assert!(s.contains("'/bin/realitygap' '__run-one'"), "{s}");
+        assert!(s.contains("if [ ! -w \"$dir/results\" ]"), "{s}");
+    }
+
+    #[test]
+    fn scontrol_records_are_read_per_task() {
+        let text = "JobId=405 ArrayJobId=404 ArrayTaskId=1 JobName=realitygap UserId=nobody(65534) GroupId=root(0) JobState=FAILED Reason=JobLaunchFailure Dependency=(null)\n\
+                    JobId=404 ArrayJobId=404 ArrayTaskId=0 JobName=realitygap UserId=me(1000) GroupId=me(1000) JobState=CANCELLED Reason=None\n\
+                    JobId=404 ArrayJobId=404 ArrayTaskId=2-5%1 JobState=CANCELLED Reason=JobArrayTaskLimit\n\
+                    JobId=407 ArrayJobId=404 ArrayTaskId=bogus JobState=FAILED\n";
+        let states = parse_task_states(text);
+        assert_eq!(states.len(), 6, "{states:?}");
+        assert_eq!(states[&5].reason, "JobArrayTaskLimit");
+        assert_eq!(task_ids("1,3,6-10:2"), [1, 3, 6, 8, 10]);
+        assert_eq!(
+            states[&1],
+            TaskState {
+                state: "FAILED".into(),
+                reason: "JobLaunchFailure".into(),
+                user: "nobody(65534)".into()
+            }
+        );
+        assert_eq!(states[&0].state, "CANCELLED");
     }
 }
