@@ -155,7 +155,7 @@ impl PhysxSimulation {
         let inputs = Inputs {
             scene: scene.clone(),
             robot: robot.clone(),
-            variation: variation.clone(),
+            variation: *variation,
             params: physical.clone(),
         };
         let world = Self::build(&inputs, &settings)?;
@@ -338,7 +338,9 @@ impl Simulation for PhysxSimulation {
         for (d, &a) in self.world.drives.iter().zip(rad) {
             // SAFETY: the joint belongs to this simulation's articulation.
             unsafe {
-                PxArticulationJointReducedCoordinate_setJointPosition_mut(d.joint, d.axis, a as f32);
+                PxArticulationJointReducedCoordinate_setJointPosition_mut(
+                    d.joint, d.axis, a as f32,
+                );
                 PxArticulationJointReducedCoordinate_setJointVelocity_mut(d.joint, d.axis, 0.0);
             }
         }

@@ -76,7 +76,9 @@ unsafe extern "C" fn on_error(
     let short = file.rsplit('/').next().unwrap_or(&file).to_string();
     let line_text = format!("{} ({short}:{line})", text(message));
     match code {
-        PxErrorCode::DebugInfo | PxErrorCode::NoError => log::debug!(target: "physx", "{line_text}"),
+        PxErrorCode::DebugInfo | PxErrorCode::NoError => {
+            log::debug!(target: "physx", "{line_text}")
+        }
         PxErrorCode::DebugWarning | PxErrorCode::PerfWarning => {
             log::warn!(target: "physx", "{line_text}")
         }

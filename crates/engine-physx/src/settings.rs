@@ -166,12 +166,18 @@ mod tests {
         for (k, v, want) in [
             ("solver", "jacobi", "setting `solver`"),
             ("position_iterations", "0", "setting `position_iterations`"),
-            ("position_iterations", "256", "setting `position_iterations`"),
+            (
+                "position_iterations",
+                "256",
+                "setting `position_iterations`",
+            ),
             ("timestep_s", "-1", "setting `timestep_s`"),
             ("contact_offset_m", "0", "setting `contact_offset_m`"),
             ("substeps", "2", "setting `substeps`: unknown setting"),
         ] {
-            let e = PhysxSettings::parse(&set(&[(k, v)])).unwrap_err().to_string();
+            let e = PhysxSettings::parse(&set(&[(k, v)]))
+                .unwrap_err()
+                .to_string();
             assert!(e.contains(want), "{k}={v}: {e}");
         }
     }

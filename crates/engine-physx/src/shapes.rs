@@ -99,10 +99,7 @@ pub fn geometry(
                 Pose::IDENTITY,
             ),
             Geometry::Sphere { radius_m } => (
-                ShapeGeometry::Sphere(PxSphereGeometry_new(positive(
-                    "sphere radius",
-                    *radius_m,
-                )?)),
+                ShapeGeometry::Sphere(PxSphereGeometry_new(positive("sphere radius", *radius_m)?)),
                 Pose::IDENTITY,
             ),
             Geometry::Capsule { radius_m, length_m } => {
@@ -275,6 +272,9 @@ mod tests {
         let Err(e) = stl_points(Path::new("/x/arm.dae"), "package://p/arm.dae") else {
             panic!("a DAE file was read");
         };
-        assert!(e.contains("package://p/arm.dae") && e.contains("STL"), "{e}");
+        assert!(
+            e.contains("package://p/arm.dae") && e.contains("STL"),
+            "{e}"
+        );
     }
 }

@@ -67,7 +67,11 @@ impl PhysxSimulation {
                 engine: ENGINE_NAME.to_string(),
                 message,
             })?;
-        if state.objects.iter().any(|o| o.pose.orientation.normalized().is_none()) {
+        if state
+            .objects
+            .iter()
+            .any(|o| o.pose.orientation.normalized().is_none())
+        {
             return Err(usage_error("an object's orientation has zero norm"));
         }
         self.world = Self::build(&self.inputs, &self.settings)?;
@@ -91,7 +95,11 @@ impl PhysxSimulation {
             // SAFETY: the actor belongs to the new scene.
             unsafe {
                 PxRigidActor_setGlobalPose_mut(actor as *mut PxRigidActor, &to_px(&o.pose), true);
-                PxRigidDynamic_setLinearVelocity_mut(actor, &vec_to_px(o.linear_velocity_m_s), true);
+                PxRigidDynamic_setLinearVelocity_mut(
+                    actor,
+                    &vec_to_px(o.linear_velocity_m_s),
+                    true,
+                );
                 PxRigidDynamic_setAngularVelocity_mut(
                     actor,
                     &vec_to_px(o.angular_velocity_rad_s),

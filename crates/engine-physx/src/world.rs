@@ -334,7 +334,11 @@ fn empty_world(locked: &Locked<'_>, recipe: &Recipe<'_>) -> Result<World, String
             return Err(format!("PhysX could not create an articulation{}", said()));
         }
         let a = world.articulation;
-        PxArticulationReducedCoordinate_setArticulationFlag_mut(a, PxArticulationFlag::FixBase, true);
+        PxArticulationReducedCoordinate_setArticulationFlag_mut(
+            a,
+            PxArticulationFlag::FixBase,
+            true,
+        );
         // Drive force limits in newtons and newton metres (PhysX's default
         // reads them as impulses per step).
         PxArticulationReducedCoordinate_setArticulationFlag_mut(
@@ -439,7 +443,8 @@ impl Builder<'_, '_> {
         let (geometry, shape_pose) =
             shapes::geometry(self.sdk, self.locked, &collision.geometry).map_err(context)?;
         let pose = offset.compose(&collision.origin).compose(&shape_pose);
-        self.attach(actor, &geometry, &pose, material).map_err(context)
+        self.attach(actor, &geometry, &pose, material)
+            .map_err(context)
     }
 
     /// Stages 2 and 3: one link per group, with its mass and shapes.
@@ -453,12 +458,18 @@ impl Builder<'_, '_> {
         let material = self.material(DEFAULT_FRICTION, None)?;
         let mut links: Vec<*mut PxArticulationLink> = Vec::with_capacity(plan.groups.len());
         for (g, group) in plan.groups.iter().enumerate() {
-            let parent = group.parent.map_or(std::ptr::null_mut(), |(_, pg)| links[pg]);
+            let parent = group
+                .parent
+                .map_or(std::ptr::null_mut(), |(_, pg)| links[pg]);
             let pose = to_px(&world_poses[group.top_link]);
             // SAFETY: the parent link was created before (groups come
             // parents first); the result is checked.
             let link = unsafe {
-                PxArticulationReducedCoordinate_createLink_mut(self.world.articulation, parent, &pose)
+                PxArticulationReducedCoordinate_createLink_mut(
+                    self.world.articulation,
+                    parent,
+                    &pose,
+                )
             };
             if link.is_null() {
                 return Err(format!(
@@ -471,7 +482,14 @@ impl Builder<'_, '_> {
             for &l in &group.links {
                 for (c, collision) in robot.links[l].collisions.iter().enumerate() {
                     let offset = plan.link_in_group[l];
-                    self.collision(link as *mut PxRigidActor, l, c, collision, &offset, material)?;
+                    self.collision(
+                        link as *mut PxRigidActor,
+                        l,
+                        c,
+                        collision,
+                        &offset,
+                        material,
+                    )?;
                 }
             }
             links.push(link);
@@ -506,7 +524,9 @@ impl Builder<'_, '_> {
                 robot.source.display()
             ));
         };
-        if !(m.mass_kg as f32).is_normal() || m.inertia_kg_m2.iter().any(|v| !(*v as f32).is_finite()) {
+        if !(m.mass_kg as f32).is_normal()
+            || m.inertia_kg_m2.iter().any(|v| !(*v as f32).is_finite())
+        {
             return Err(format!(
                 "link \"{top}\" and the links fixed to it: mass {} kg is out of single-precision range",
                 m.mass_kg
@@ -518,9 +538,21 @@ impl Builder<'_, '_> {
         // numbers.
         unsafe {
             let matrix = PxMat33 {
-                column0: PxVec3 { x: i[0], y: i[3], z: i[6] },
-                column1: PxVec3 { x: i[1], y: i[4], z: i[7] },
-                column2: PxVec3 { x: i[2], y: i[5], z: i[8] },
+                column0: PxVec3 {
+                    x: i[0],
+                    y: i[3],
+                    z: i[6],
+                },
+                column1: PxVec3 {
+                    x: i[1],
+                    y: i[4],
+                    z: i[7],
+                },
+                column2: PxVec3 {
+                    x: i[2],
+                    y: i[5],
+                    z: i[8],
+                },
             };
             let mut axes = PxQuat_new_1(PxIDENTITY::PxIdentity);
             let diagonal = phys_PxDiagonalize(&matrix, &mut axes);
@@ -558,7 +590,10 @@ impl Builder<'_, '_> {
                 }
                 JointKind::Prismatic => (PxArticulationJointType::Prismatic, PxArticulationAxis::X),
                 JointKind::Fixed => {
-                    return Err(format!("joint \"{}\" is fixed and cannot be driven", joint.name))
+                    return Err(format!(
+                        "joint \"{}\" is fixed and cannot be driven",
+                        joint.name
+                    ))
                 }
             };
             let basis = Pose::new(Vec3::ZERO, x_onto(joint.axis));
@@ -584,16 +619,26 @@ impl Builder<'_, '_> {
                 PxArticulationJointReducedCoordinate_setJointType_mut(px, kind);
                 PxArticulationJointReducedCoordinate_setParentPose_mut(px, &to_px(&parent_pose));
                 PxArticulationJointReducedCoordinate_setChildPose_mut(px, &to_px(&basis));
-                let limited = joint
-                    .limits
-                    .filter(|l| l.lower.is_finite() && l.upper.is_finite() && joint.kind != JointKind::Continuous);
+                let limited = joint.limits.filter(|l| {
+                    l.lower.is_finite()
+                        && l.upper.is_finite()
+                        && joint.kind != JointKind::Continuous
+                });
                 match limited {
                     Some(l) => {
-                        PxArticulationJointReducedCoordinate_setMotion_mut(px, axis, PxArticulationMotion::Limited);
+                        PxArticulationJointReducedCoordinate_setMotion_mut(
+                            px,
+                            axis,
+                            PxArticulationMotion::Limited,
+                        );
                         let limit = PxArticulationLimit_new_1(l.lower as f32, l.upper as f32);
                         PxArticulationJointReducedCoordinate_setLimitParams_mut(px, axis, &limit);
                     }
-                    None => PxArticulationJointReducedCoordinate_setMotion_mut(px, axis, PxArticulationMotion::Free),
+                    None => PxArticulationJointReducedCoordinate_setMotion_mut(
+                        px,
+                        axis,
+                        PxArticulationMotion::Free,
+                    ),
                 }
                 let d = PxArticulationDrive_new_1(
                     0.0,
@@ -658,13 +703,23 @@ impl Builder<'_, '_> {
             let restitution = self.recipe.params.restitution(&o.name);
             let material = self.material(o.friction.unwrap_or(DEFAULT_FRICTION), restitution)?;
             // SAFETY: creates a dynamic actor under the SDK lock; checked.
-            let actor = unsafe { PxPhysics_createRigidDynamic_mut(self.locked.physics, &to_px(&o.pose)) };
+            let actor =
+                unsafe { PxPhysics_createRigidDynamic_mut(self.locked.physics, &to_px(&o.pose)) };
             if actor.is_null() {
-                return Err(format!("PhysX could not create object \"{}\"{}", o.name, said()));
+                return Err(format!(
+                    "PhysX could not create object \"{}\"{}",
+                    o.name,
+                    said()
+                ));
             }
             self.world.objects.push(actor);
-            self.attach(actor as *mut PxRigidActor, &geometry, &Pose::IDENTITY, material)
-                .map_err(|e| format!("object \"{}\": {e}", o.name))?;
+            self.attach(
+                actor as *mut PxRigidActor,
+                &geometry,
+                &Pose::IDENTITY,
+                material,
+            )
+            .map_err(|e| format!("object \"{}\": {e}", o.name))?;
             let (x, y, z) = (size_m.x, size_m.y, size_m.z);
             let inertia = Vec3::new(y * y + z * z, x * x + z * z, x * x + y * y).scale(mass / 12.0);
             let s = self.recipe.settings;
@@ -676,7 +731,11 @@ impl Builder<'_, '_> {
                 PxRigidBody_setLinearDamping_mut(body, 0.0);
                 PxRigidBody_setAngularDamping_mut(body, 0.0);
                 PxRigidDynamic_setSleepThreshold_mut(actor, 0.0);
-                PxRigidDynamic_setSolverIterationCounts_mut(actor, s.position_iterations, s.velocity_iterations);
+                PxRigidDynamic_setSolverIterationCounts_mut(
+                    actor,
+                    s.position_iterations,
+                    s.velocity_iterations,
+                );
                 PxScene_addActor_mut(self.world.scene, actor as *mut PxActor, std::ptr::null());
             }
         }
@@ -697,13 +756,19 @@ mod tests {
             Vec3::new(0.3, -0.4, 0.5),
         ] {
             let got = x_onto(axis).rotate(Vec3::new(1.0, 0.0, 0.0));
-            assert!(got.distance(axis.scale(1.0 / axis.norm())) < 1e-12, "{axis:?}");
+            assert!(
+                got.distance(axis.scale(1.0 / axis.norm())) < 1e-12,
+                "{axis:?}"
+            );
         }
     }
 
     #[test]
     fn transforms_round_trip() {
-        let p = Pose::new(Vec3::new(0.1, -0.2, 0.3), Quat::from_euler_rpy(0.3, -0.2, 1.1));
+        let p = Pose::new(
+            Vec3::new(0.1, -0.2, 0.3),
+            Quat::from_euler_rpy(0.3, -0.2, 1.1),
+        );
         let back = from_px(&to_px(&p));
         assert!(back.position_m.distance(p.position_m) < 1e-7);
         assert!(back.orientation.angle_to(p.orientation) < 1e-6);
