@@ -256,3 +256,60 @@ fn with_data_the_gap_is_the_one_reproduce_reports() {
     assert!(j["reference"]["gap_m"].as_f64().unwrap().is_finite());
     assert!(out.join("frontier_gap.svg").is_file() && out.join("frontier_gap.png").is_file());
 }
+
+/// A scene outside the study (the iiwa reach) swept with study scenes:
+/// each point's gap is the study scenes' alone, the same as without it, and
+/// a note says the other scene has no real arm to compare with.
+#[test]
+fn a_scene_outside_the_study_leaves_the_gap_to_the_study_scenes() {
+    let Some(data) = realitygap::paper_data_for_tests() else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let scenes = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/scenes");
+    let run = |name: &str, extra: &[&str]| {
+        let out = tmp.path().join(name);
+        let mut args = vec![
+            "frontier".to_string(),
+            scenes
+                .join("scene1_single_joint.toml")
+                .display()
+                .to_string(),
+        ];
+        args.extend(extra.iter().map(|s| s.to_string()));
+        for a in [
+            "--engine",
+            "ode",
+            "--sweep",
+            "timestep_s=0.01",
+            "--repeats",
+            "1",
+            "--max-halvings",
+            "1",
+            "--data",
+            data.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ] {
+            args.push(a.to_string());
+        }
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        ok(&args);
+        frontier_json(&out)
+    };
+    let alone = run("alone", &[]);
+    let iiwa = scenes.join("iiwa_reach.toml").display().to_string();
+    let mixed = run("mixed", &[&iiwa]);
+    for (a, b) in alone["points"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(mixed["points"].as_array().unwrap())
+    {
+        let (ga, gb) = (a["gap_m"].as_f64().unwrap(), b["gap_m"].as_f64().unwrap());
+        assert!((ga - gb).abs() < 1e-9, "{ga} vs {gb}");
+    }
+    let notes = mixed["notes"].to_string();
+    assert!(notes.contains("iiwa_reach"), "{notes}");
+    assert!(tmp.path().join("mixed/frontier_gap.svg").is_file());
+}

@@ -848,8 +848,23 @@ fn measure_gaps(points: &mut [&mut Point], data: &Path, out: &Path) -> Result<Ve
             }
         }
     }
+    // A point's gap is over the study's scenes it ran (the others have no
+    // real arm to compare with); none when it ran none of them.
+    let in_study: Vec<usize> = names
+        .iter()
+        .enumerate()
+        .filter(|(_, n)| study.scenes.iter().any(|s| &s.name == *n))
+        .map(|(i, _)| i)
+        .collect();
     for p in points.iter_mut() {
-        p.gap_m = p.scenes.iter().map(|s| s.gap_m).sum::<Option<f64>>();
+        p.gap_m = if in_study.is_empty() {
+            None
+        } else {
+            in_study
+                .iter()
+                .map(|&si| p.scenes[si].gap_m)
+                .sum::<Option<f64>>()
+        };
     }
     Ok(notes)
 }
@@ -1226,7 +1241,7 @@ fn write_figures(
         recommended,
     )
     .write(&args.out)?;
-    if with_gap {
+    if with_gap && points.iter().any(|p| p.gap_m.is_some()) {
         figure(
             "frontier_gap",
             title("gap to the real arm"),
