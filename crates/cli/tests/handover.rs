@@ -20,6 +20,8 @@ fn engines() -> Vec<Box<dyn Engine>> {
     v.push(Box::new(realitygap_engine_ode::OdeEngine));
     #[cfg(feature = "rapier")]
     v.push(Box::new(realitygap_engine_rapier::RapierEngine));
+    #[cfg(feature = "physx")]
+    v.push(Box::new(realitygap_engine_physx::PhysxEngine));
     v
 }
 

@@ -78,6 +78,9 @@ fn engines_compiled() -> Vec<&'static str> {
     if cfg!(feature = "rapier") {
         engines.push("rapier");
     }
+    if cfg!(feature = "physx") {
+        engines.push("physx");
+    }
     engines
 }
 

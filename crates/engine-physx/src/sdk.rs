@@ -197,6 +197,33 @@ mod tests {
         assert_eq!(a, b);
     }
 
+    /// A call PhysX refuses (a material with negative friction) reaches
+    /// this module's callback, which keeps it for the engine's errors and
+    /// logs it, instead of PhysX's default callback printing it. PhysX
+    /// checks parameters in its checked build, which `physx-sys` makes for
+    /// the debug profile.
+    #[test]
+    fn physx_errors_reach_the_callback() {
+        let sdk = sdk().expect("PhysX starts");
+        take_messages();
+        let locked = sdk.lock();
+        // SAFETY: a plain creation call; a refused material is null.
+        let m = unsafe { PxPhysics_createMaterial_mut(locked.physics, -1.0, -1.0, 0.0) };
+        drop(locked);
+        let said = take_messages();
+        if cfg!(debug_assertions) {
+            assert!(m.is_null(), "PhysX accepted a negative friction");
+            assert!(
+                said.iter().any(|s| s.to_lowercase().contains("friction")),
+                "{said:?}"
+            );
+        }
+        if !m.is_null() {
+            // SAFETY: releases the material just created.
+            unsafe { PxRefCounted_release_mut(m as *mut PxRefCounted) };
+        }
+    }
+
     #[test]
     fn messages_are_kept_per_thread_and_taken_once() {
         take_messages();
