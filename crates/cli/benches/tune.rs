@@ -69,7 +69,8 @@ fn raw_seconds(engine: &str, dir: &Path) -> f64 {
 fn main() {
     let data = realitygap_core::testing::paper_data().expect("the study's recordings");
     let budget = std::env::var("BUDGET").unwrap_or_else(|_| "600".into());
-    let engines = std::env::var("ENGINES").unwrap_or_else(|_| "mujoco,rapier,ode,bullet,physx".into());
+    let engines =
+        std::env::var("ENGINES").unwrap_or_else(|_| "mujoco,rapier,ode,bullet,physx".into());
     let study = root().join("assets/studies/collins2019.toml");
     println!(
         "tune benchmark: budget {budget} evaluations, runs 1-15 fitted, 16-20 held out, 2 jobs"
