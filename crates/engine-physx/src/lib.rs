@@ -4,9 +4,9 @@
 //! (`PxArticulationReducedCoordinate`).
 //!
 //! [`PhysxEngine`] implements [`realitygap_core::Engine`]. Loading a scene
-//! runs the stages of [`world`]: rigid groups of links from core's shared
+//! runs the stages of the `world` module: rigid groups of links from core's shared
 //! planning, articulation links with the URDF mass properties, shapes
-//! (primitives and STL meshes cooked as convex hulls, see [`shapes`]),
+//! (primitives and STL meshes cooked as convex hulls, the `shapes` module),
 //! revolute joints with limits and velocity drives, the ground plane and
 //! the objects. The model is built from the [`RobotModel`] every engine
 //! shares, not by a URDF loader of PhysX's own.
@@ -20,18 +20,18 @@
 //! Every simulation steps on its caller's thread (a CPU dispatcher without
 //! worker threads), so runs are deterministic and parallel runs are
 //! separate threads. PhysX's messages go to the `log` crate, never to
-//! standard output ([`sdk`]). A non-finite joint or object state after a
+//! standard output (the `sdk` module). A non-finite joint or object state after a
 //! step ends the run as [`EngineError::Unstable`], with what PhysX said.
 //!
 //! Physical parameters: [`params`] lists the keys PhysX honours and how
 //! each maps. Simulation state: [`state`] reads and sets it.
 
 pub mod params;
-pub mod sdk;
+pub(crate) mod sdk;
 pub mod settings;
-pub mod shapes;
+pub(crate) mod shapes;
 pub mod state;
-pub mod world;
+pub(crate) mod world;
 
 use physx_sys::*;
 use realitygap_core::engine::{
@@ -138,7 +138,7 @@ pub(crate) fn usage_error(message: impl Into<String>) -> EngineError {
 }
 
 impl PhysxSimulation {
-    /// Builds the world of `scene` with `robot` (see [`world`]), configured
+    /// Builds the world of `scene` with `robot` (see the `world` module), configured
     /// by `settings` and changed by `variation`, with the engine-mapped keys
     /// of `params` (`armature`, `restitution`; `scene` and `robot` already
     /// carry the keys [`PhysicalParams::apply`] writes), at rest with every
@@ -159,14 +159,17 @@ impl PhysxSimulation {
             params: physical.clone(),
         };
         let world = Self::build(&inputs, &settings)?;
-        Ok(PhysxSimulation {
+        let mut sim = PhysxSimulation {
             targets: vec![0.0; world.drives.len()],
             world,
             inputs,
             settings,
             time_origin_s: 0.0,
             steps: 0,
-        })
+        };
+        // The links' poses from the joint state, as after a `set_state`.
+        sim.update_kinematics();
+        Ok(sim)
     }
 
     fn build(inputs: &Inputs, settings: &PhysxSettings) -> Result<World, EngineError> {
@@ -212,6 +215,9 @@ impl PhysxSimulation {
     }
 
     fn simulate(&mut self) {
+        // Shared with other scenes stepping, exclusive of any thread
+        // building or releasing a world (see the sdk module).
+        let _stepping = sdk::sdk().ok().map(|s| s.stepping());
         // SAFETY: the scene is valid and not simulating (every simulate is
         // followed by a blocking fetchResults).
         unsafe {

@@ -13,14 +13,21 @@
 //! (a CPU dispatcher without worker threads), so a thread's messages are
 //! those of its own simulation.
 //!
-//! Creating and releasing objects through `PxPhysics` is serialised by
-//! [`Sdk::lock`]; stepping different scenes on different threads is not
-//! (PhysX scenes are independent).
+//! PhysX's scenes are not independent: materials belong to the whole
+//! SDK, and each scene's `simulate` reads the SDK's material table. So
+//! the SDK has a readers-writer lock: creating and releasing objects takes
+//! it exclusively ([`Sdk::lock`]), stepping a scene takes it shared
+//! ([`Sdk::stepping`]); scenes step in parallel with each other, never
+//! while another thread builds or releases a world.
+//!
+//! PhysX's assertions (its debug build checks) go to the log and standard
+//! error, then abort the process as PhysX's own handler does, but without
+//! its print on standard output.
 
 use physx_sys::*;
 use std::cell::{Cell, RefCell};
 use std::ffi::{c_void, CStr};
-use std::sync::{Mutex, MutexGuard, OnceLock};
+use std::sync::{OnceLock, RwLock, RwLockReadGuard, RwLockWriteGuard};
 
 /// PhysX's version, as `PX_PHYSICS_VERSION_MAJOR.MINOR.BUGFIX` of the
 /// sources `physx-sys` builds.
@@ -84,7 +91,9 @@ unsafe extern "C" fn on_error(
         }
         _ => log::error!(target: "physx", "{line_text}"),
     }
-    MESSAGES.with(|m| {
+    // `try_with`: PhysX may report while this thread's locals are being
+    // destroyed; the message is logged anyway.
+    let _ = MESSAGES.try_with(|m| {
         let mut m = m.borrow_mut();
         if m.len() == KEPT {
             m.remove(0);
@@ -93,27 +102,54 @@ unsafe extern "C" fn on_error(
     });
 }
 
+/// PhysX's assertion handler: a failed internal check is a bug in PhysX or
+/// in how it is called, so the process stops, as with PhysX's own handler,
+/// after saying so on standard error and in the log (never on standard
+/// output).
+unsafe extern "C" fn on_assert(
+    expression: *const i8,
+    file: *const i8,
+    line: u32,
+    _ignore: *mut bool,
+    _user: *const c_void,
+) {
+    let file = text(file);
+    let short = file.rsplit('/').next().unwrap_or(&file).to_string();
+    let message = format!(
+        "PhysX assertion failed: {} ({short}:{line})",
+        text(expression)
+    );
+    log::error!(target: "physx", "{message}");
+    eprintln!("{message}");
+    std::process::abort();
+}
+
 /// The SDK's objects. They live for the whole process.
 pub struct Sdk {
     physics: *mut PxPhysics,
     /// Cooking parameters for convex meshes (PhysX's defaults for the
     /// SDK's tolerance scale).
     pub cooking: PxCookingParams,
-    lock: Mutex<()>,
+    lock: RwLock<()>,
 }
 
-// SAFETY: `physics` is only used while `lock` is held (see `Sdk::lock`),
-// or through objects created from it that belong to one simulation; the
-// cooking parameters are plain data.
+// SAFETY: `physics` is only used while `lock` is held exclusively (see
+// `Sdk::lock`), and scenes created from it step only while it is held
+// shared (`Sdk::stepping`); the cooking parameters are plain data.
 unsafe impl Send for Sdk {}
-// SAFETY: as above: shared access goes through the mutex.
+// SAFETY: as above: shared access goes through the lock.
 unsafe impl Sync for Sdk {}
 
-/// Holds the SDK's creation lock; gives the `PxPhysics`.
+/// Holds the SDK's lock exclusively; gives the `PxPhysics`.
 pub struct Locked<'a> {
-    _guard: MutexGuard<'a, ()>,
+    _guard: RwLockWriteGuard<'a, ()>,
     /// The SDK's `PxPhysics`.
     pub physics: *mut PxPhysics,
+}
+
+/// Holds the SDK's lock shared, for stepping a scene.
+pub struct Stepping<'a> {
+    _guard: RwLockReadGuard<'a, ()>,
 }
 
 impl Drop for Locked<'_> {
@@ -126,11 +162,19 @@ impl Sdk {
     /// Locks the SDK for creating or releasing objects (the thread must
     /// not hold it already: see [`Sdk::lock_unless_held`]).
     pub fn lock(&self) -> Locked<'_> {
-        let guard = self.lock.lock().unwrap_or_else(|e| e.into_inner());
+        let guard = self.lock.write().unwrap_or_else(|e| e.into_inner());
         HELD.with(|h| h.set(true));
         Locked {
             _guard: guard,
             physics: self.physics,
+        }
+    }
+
+    /// The lock held shared while a scene steps (see the module
+    /// documentation).
+    pub fn stepping(&self) -> Stepping<'_> {
+        Stepping {
+            _guard: self.lock.read().unwrap_or_else(|e| e.into_inner()),
         }
     }
 
@@ -159,6 +203,7 @@ fn create() -> Result<Sdk, String> {
     // physics; every pointer is checked before use and the objects are
     // never released (they live as long as the process).
     unsafe {
+        phys_PxSetAssertHandler(create_assert_handler(on_assert, std::ptr::null_mut()));
         let callback = create_error_callback(on_error, std::ptr::null_mut());
         let allocator = get_default_allocator() as *mut PxAllocatorCallback;
         let foundation = phys_PxCreateFoundation(PX_PHYSICS_VERSION, allocator, callback);
@@ -181,7 +226,7 @@ fn create() -> Result<Sdk, String> {
         Ok(Sdk {
             physics,
             cooking,
-            lock: Mutex::new(()),
+            lock: RwLock::new(()),
         })
     }
 }

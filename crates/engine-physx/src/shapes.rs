@@ -7,8 +7,9 @@
 //! - cylinder: PhysX has no cylinder; a convex mesh of two 32-gons (a
 //!   prism whose faces are within 0.5 % of the radius of the cylinder);
 //! - mesh: an STL file (read by [`TriangleMesh`]) cooked as the convex
-//!   hull of its vertices (at most 255, PhysX's limit; PhysX simplifies a
-//!   larger hull), scaled per axis. Every shape here belongs to an
+//!   hull of its vertices, scaled per axis. PhysX keeps at most 255 hull
+//!   vertices: a larger hull is cropped to that by its bounding box, which
+//!   makes the shape slightly larger than the true hull. Every shape here belongs to an
 //!   articulation link or a dynamic object, and PhysX collides triangle
 //!   meshes only on static and kinematic actors, so a mesh is always its
 //!   convex hull (MuJoCo collides with the hull too). Other mesh formats are

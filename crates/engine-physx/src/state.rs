@@ -75,6 +75,8 @@ impl PhysxSimulation {
             return Err(usage_error("an object's orientation has zero norm"));
         }
         self.world = Self::build(&self.inputs, &self.settings)?;
+        // What PhysX said while releasing the old world is not news.
+        crate::sdk::take_messages();
         for (i, d) in self.world.drives.iter().enumerate() {
             // SAFETY: the joint belongs to the new articulation, in its
             // scene, not simulating.

@@ -22,7 +22,8 @@
 //!    not collide a link with its parent link; other links may touch.
 //! 4. **Joints.** Every actuated joint is the inbound joint of its child's
 //!    link: revolute (about the joint frame's x axis, turned onto the URDF
-//!    axis; `eLIMITED` with the URDF limits, `eFREE` for continuous joints)
+//!    axis; `eLIMITED` with the URDF limits; continuous joints and limits
+//!    beyond a turn are `eREVOLUTE_UNWRAPPED`, whose angle does not wrap)
 //!    or prismatic. The scene's servo is the joint's drive on that axis:
 //!    stiffness 0, damping `kv`, maximum force the force limit, target
 //!    velocity set by the controller, force drive type; PhysX solves it
@@ -48,6 +49,11 @@ use realitygap_core::robot::plan::{self as shared, GroupSplit, RigidGroups, Trac
 use realitygap_core::robot::{Collision, JointKind, RobotModel};
 use realitygap_core::scene::{ObjectShape, Scene};
 use std::collections::HashMap;
+use std::f64::consts::TAU;
+
+/// Impacts slower than this do not bounce, m/s (PhysX needs a positive
+/// threshold; its default is 2 m/s at this tolerance scale).
+pub const BOUNCE_THRESHOLD_M_S: f32 = 0.05;
 
 /// Friction of every robot shape, and of the ground and objects when the
 /// scene gives none (Bullet's and Rapier's default).
@@ -321,6 +327,10 @@ fn empty_world(locked: &Locked<'_>, recipe: &Recipe<'_>) -> Result<World, String
         desc.gravity = vec_to_px(g);
         desc.cpuDispatcher = world.dispatcher as *mut PxCpuDispatcher;
         desc.filterShader = get_default_simulation_filter_shader();
+        // Impacts slower than this do not bounce: PhysX's default is 2 m/s
+        // at this tolerance scale, which would make a restitution
+        // parameter do nothing in a drop of 0.2 m.
+        desc.bounceThresholdVelocity = BOUNCE_THRESHOLD_M_S;
         desc.solverType = match s.solver {
             Solver::Pgs => PxSolverType::Pgs,
             Solver::Tgs => PxSolverType::Tgs,
@@ -556,6 +566,15 @@ impl Builder<'_, '_> {
             };
             let mut axes = PxQuat_new_1(PxIDENTITY::PxIdentity);
             let diagonal = phys_PxDiagonalize(&matrix, &mut axes);
+            let moments = [diagonal.x, diagonal.y, diagonal.z];
+            if moments.iter().any(|m| !(m.is_finite() && *m > 0.0)) {
+                return Err(format!(
+                    "link \"{top}\" and the links fixed to it: the principal moments of inertia {moments:?} kg m^2 \
+                     are not all positive; PhysX needs a positive-definite inertia on every moving link (check the \
+                     <inertia> values in {})",
+                    robot.source.display()
+                ));
+            }
             PxRigidBody_setMass_mut(body, m.mass_kg as f32);
             let com = PxTransform_new_5(&vec_to_px(m.com_m), &axes);
             PxRigidBody_setCMassLocalPose_mut(body, &com);
@@ -584,10 +603,21 @@ impl Builder<'_, '_> {
             if px.is_null() {
                 return Err(format!("joint \"{}\" has no PhysX joint", joint.name));
             }
+            let limited = joint.limits.filter(|l| {
+                l.lower.is_finite() && l.upper.is_finite() && joint.kind != JointKind::Continuous
+            });
             let (kind, axis) = match joint.kind {
-                JointKind::Revolute | JointKind::Continuous => {
-                    (PxArticulationJointType::Revolute, PxArticulationAxis::Twist)
-                }
+                // PhysX's eREVOLUTE wraps its angle into (-2 pi, 2 pi]: a
+                // joint free to turn further is eREVOLUTE_UNWRAPPED.
+                JointKind::Revolute | JointKind::Continuous => match limited {
+                    Some(l) if l.lower > -TAU && l.upper < TAU => {
+                        (PxArticulationJointType::Revolute, PxArticulationAxis::Twist)
+                    }
+                    _ => (
+                        PxArticulationJointType::RevoluteUnwrapped,
+                        PxArticulationAxis::Twist,
+                    ),
+                },
                 JointKind::Prismatic => (PxArticulationJointType::Prismatic, PxArticulationAxis::X),
                 JointKind::Fixed => {
                     return Err(format!(
@@ -600,15 +630,24 @@ impl Builder<'_, '_> {
             let parent_pose = plan.link_in_group[joint.parent]
                 .compose(&joint.origin)
                 .compose(&basis);
-            let damping = joint.damping.max(0.0);
+            if joint.damping.is_nan() || joint.damping < 0.0 {
+                return Err(format!(
+                    "joint \"{}\": damping must be >= 0, found {}",
+                    joint.name, joint.damping
+                ));
+            }
+            let damping = joint.damping;
+            // With the servo off (limit 0) the drive is the damping alone,
+            // towards rest: no gain, so no target velocity.
+            let servo_on = spec.force_limit > 0.0;
             let drive = Drive {
                 name: spec.joint.clone(),
                 joint: px,
                 axis,
-                kv: spec.kv,
+                kv: if servo_on { spec.kv } else { 0.0 },
                 damping,
             };
-            let (stiffness_damping, max_force) = if spec.force_limit > 0.0 {
+            let (stiffness_damping, max_force) = if servo_on {
                 (spec.kv + damping, spec.force_limit.min(f32::MAX as f64))
             } else {
                 (damping, f32::MAX as f64)
@@ -619,11 +658,6 @@ impl Builder<'_, '_> {
                 PxArticulationJointReducedCoordinate_setJointType_mut(px, kind);
                 PxArticulationJointReducedCoordinate_setParentPose_mut(px, &to_px(&parent_pose));
                 PxArticulationJointReducedCoordinate_setChildPose_mut(px, &to_px(&basis));
-                let limited = joint.limits.filter(|l| {
-                    l.lower.is_finite()
-                        && l.upper.is_finite()
-                        && joint.kind != JointKind::Continuous
-                });
                 match limited {
                     Some(l) => {
                         PxArticulationJointReducedCoordinate_setMotion_mut(
@@ -677,7 +711,9 @@ impl Builder<'_, '_> {
                 PxShape_setContactOffset_mut(shape, self.recipe.settings.contact_offset_m as f32);
                 PxShape_setRestOffset_mut(shape, 0.0);
             }
-            PxScene_addActor_mut(self.world.scene, actor as *mut PxActor, std::ptr::null());
+            if !PxScene_addActor_mut(self.world.scene, actor as *mut PxActor, std::ptr::null()) {
+                return Err(format!("PhysX refused the ground plane{}", said()));
+            }
         }
         Ok(())
     }
@@ -736,7 +772,10 @@ impl Builder<'_, '_> {
                     s.position_iterations,
                     s.velocity_iterations,
                 );
-                PxScene_addActor_mut(self.world.scene, actor as *mut PxActor, std::ptr::null());
+                if !PxScene_addActor_mut(self.world.scene, actor as *mut PxActor, std::ptr::null())
+                {
+                    return Err(format!("PhysX refused object \"{}\"{}", o.name, said()));
+                }
             }
         }
         Ok(())

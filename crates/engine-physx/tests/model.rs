@@ -402,3 +402,66 @@ fn a_flung_cube_ends_the_run_as_diverged() {
         RunStatus::Completed => panic!("the run completed"),
     }
 }
+
+/// Continuous joints (the Mico2's joints 1, 4, 5 and 6) are PhysX's
+/// unwrapped revolute joints: an angle beyond a full turn is set and read
+/// back as it is, not wrapped (PhysX's `eREVOLUTE` wraps at 2 pi).
+#[test]
+fn continuous_joints_turn_past_a_full_turn() {
+    let s = scene("scene1_single_joint");
+    let mut sim = load(&s, &mico2());
+    let angles = [7.0, 0.3, -0.2, -8.0, 6.5, 13.0];
+    sim.set_joint_angles_rad(&angles).unwrap();
+    let mut read = [0.0; 6];
+    sim.joint_angles_rad(&mut read);
+    for (r, a) in read.iter().zip(&angles) {
+        assert!((r - a).abs() < 1e-5, "{a} rad read back as {r}");
+    }
+}
+
+/// A moving link whose inertia is not positive definite (here link 3 with
+/// a zero moment) is a load error naming the link, not an inertia PhysX
+/// replaces silently.
+#[test]
+fn a_link_without_a_positive_inertia_is_a_load_error() {
+    let tmp = TempUrdf::new("inertia");
+    let robot = tmp.mico2_with(|t| {
+        let start = t.find("<link name=\"m1n6s300_link_3\"").unwrap();
+        let i = start + t[start..].find("ixx=\"").unwrap() + "ixx=\"".len();
+        let end = i + t[i..].find('"').unwrap();
+        format!("{}0{}", &t[..i], &t[end..])
+    });
+    let e = load_error(
+        &scene("scene1_single_joint"),
+        &robot,
+        &EngineSettings::new(),
+    );
+    assert!(
+        e.contains("m1n6s300_link_3") && e.contains("principal moments"),
+        "{e}"
+    );
+}
+
+/// With the servo off (force limit 0) the drive is the joint's damping
+/// alone: a velocity target changes nothing.
+#[test]
+fn with_the_servo_off_a_target_velocity_does_nothing() {
+    let fall = |target: f64| {
+        let mut s = scene("scene1_single_joint");
+        for a in &mut s.actuators {
+            a.force_limit = 0.0;
+        }
+        let mut robot = mico2();
+        let j = robot.joint_by_name("m1n6s300_joint_2").unwrap();
+        robot.joints[j].damping = 2.0;
+        let mut sim = load(&s, &robot);
+        sim.set_joint_velocity_targets(&[0.0, target, 0.0, 0.0, 0.0, 0.0]);
+        sim.step_n(40).unwrap();
+        let mut q = [0.0; 6];
+        sim.joint_angles_rad(&mut q);
+        q[1]
+    };
+    let (still, pushed) = (fall(0.0), fall(1.0));
+    assert!(still.abs() > 1e-3, "joint 2 did not move: {still}");
+    assert_eq!(still, pushed);
+}
