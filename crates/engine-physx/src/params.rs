@@ -4,7 +4,7 @@
 //!
 //! [`PhysicalParams::apply`] (core) writes `damping`, `frictionloss`, `kv`,
 //! `force_limit`, `mass_scale`, `mass_kg` and `friction` into the scene and
-//! robot before the engine loads; [`crate::world`] turns them into the
+//! robot before the engine loads; the `world` module turns them into the
 //! drives and the links' mass properties, and applies `armature` and
 //! `restitution` itself.
 //!
