@@ -18,23 +18,10 @@ pub struct Args {
     pub params: bool,
 }
 
-/// Every engine compiled in (cargo features of this crate), by name.
-// The pushes depend on the features compiled in: no `vec![...]` can say that.
-#[allow(clippy::vec_init_then_push)]
+/// Every engine compiled in (cargo features of this crate), by name
+/// ([`realitygap::compiled_engines`]).
 pub fn compiled() -> Vec<Box<dyn Engine>> {
-    #[allow(unused_mut)]
-    let mut engines: Vec<Box<dyn Engine>> = Vec::new();
-    #[cfg(feature = "mujoco")]
-    engines.push(Box::new(realitygap_engine_mujoco::MujocoEngine));
-    #[cfg(feature = "ode")]
-    engines.push(Box::new(realitygap_engine_ode::OdeEngine));
-    #[cfg(feature = "rapier")]
-    engines.push(Box::new(realitygap_engine_rapier::RapierEngine));
-    #[cfg(feature = "bullet")]
-    engines.push(Box::new(realitygap_engine_bullet::BulletEngine));
-    #[cfg(feature = "physx")]
-    engines.push(Box::new(realitygap_engine_physx::PhysxEngine));
-    engines
+    realitygap::compiled_engines()
 }
 
 /// Prepares the engines' native libraries for this process (MuJoCo: route

@@ -6,6 +6,29 @@
 
 #![forbid(unsafe_code)]
 
+use realitygap_core::engine::Engine;
+
+/// Every engine compiled in (cargo features of this crate), in
+/// `realitygap engines` order: the command's registry, and the tests' and
+/// benchmarks' list of engines.
+// The pushes depend on the features compiled in: no `vec![...]` can say that.
+#[allow(clippy::vec_init_then_push)]
+pub fn compiled_engines() -> Vec<Box<dyn Engine>> {
+    #[allow(unused_mut)]
+    let mut engines: Vec<Box<dyn Engine>> = Vec::new();
+    #[cfg(feature = "mujoco")]
+    engines.push(Box::new(realitygap_engine_mujoco::MujocoEngine));
+    #[cfg(feature = "ode")]
+    engines.push(Box::new(realitygap_engine_ode::OdeEngine));
+    #[cfg(feature = "rapier")]
+    engines.push(Box::new(realitygap_engine_rapier::RapierEngine));
+    #[cfg(feature = "bullet")]
+    engines.push(Box::new(realitygap_engine_bullet::BulletEngine));
+    #[cfg(feature = "physx")]
+    engines.push(Box::new(realitygap_engine_physx::PhysxEngine));
+    engines
+}
+
 /// The study's recordings (with `kinova_description`), for tests and
 /// benchmarks: `realitygap_core::testing::paper_data`, which finds
 /// `../shared/paper-data` or the built-in study data unpacked in the cache

@@ -65,23 +65,10 @@ fn the_run(dir: &Path) -> (serde_json::Value, Trajectory) {
 }
 
 fn engines_compiled() -> Vec<&'static str> {
-    let mut engines = Vec::new();
-    if cfg!(feature = "mujoco") {
-        engines.push("mujoco");
-    }
-    if cfg!(feature = "bullet") {
-        engines.push("bullet");
-    }
-    if cfg!(feature = "ode") {
-        engines.push("ode");
-    }
-    if cfg!(feature = "rapier") {
-        engines.push("rapier");
-    }
-    if cfg!(feature = "physx") {
-        engines.push("physx");
-    }
-    engines
+    realitygap::compiled_engines()
+        .iter()
+        .map(|e| e.name())
+        .collect()
 }
 
 const SCENES: [&str; 5] = [

@@ -15,22 +15,8 @@ use realitygap_core::Vec3;
 use std::path::Path;
 use std::process::Command;
 
-// The pushes depend on the features compiled in: no `vec![...]` can say that.
-#[allow(clippy::vec_init_then_push)]
 fn engines() -> Vec<Box<dyn Engine>> {
-    #[allow(unused_mut)]
-    let mut v: Vec<Box<dyn Engine>> = Vec::new();
-    #[cfg(feature = "mujoco")]
-    v.push(Box::new(realitygap_engine_mujoco::MujocoEngine));
-    #[cfg(feature = "bullet")]
-    v.push(Box::new(realitygap_engine_bullet::BulletEngine));
-    #[cfg(feature = "ode")]
-    v.push(Box::new(realitygap_engine_ode::OdeEngine));
-    #[cfg(feature = "rapier")]
-    v.push(Box::new(realitygap_engine_rapier::RapierEngine));
-    #[cfg(feature = "physx")]
-    v.push(Box::new(realitygap_engine_physx::PhysxEngine));
-    v
+    realitygap::compiled_engines()
 }
 
 fn engine(name: &str) -> Option<Box<dyn Engine>> {

@@ -133,6 +133,24 @@ impl ModelVariation {
     pub fn is_identity(&self) -> bool {
         self.mass_scale == 1.0 && self.friction_scale == 1.0
     }
+
+    /// Checks the factors: masses by a positive, friction by a
+    /// non-negative finite factor; the message says which is not.
+    pub fn check(&self) -> Result<(), String> {
+        if !(self.mass_scale.is_finite() && self.mass_scale > 0.0) {
+            return Err(format!(
+                "the mass factor must be positive and finite, found {}",
+                self.mass_scale
+            ));
+        }
+        if !(self.friction_scale.is_finite() && self.friction_scale >= 0.0) {
+            return Err(format!(
+                "the friction factor must be >= 0 and finite, found {}",
+                self.friction_scale
+            ));
+        }
+        Ok(())
+    }
 }
 
 /// A setting an engine accepts, for `realitygap engines` and error messages.

@@ -119,6 +119,25 @@ impl Default for Quat {
 }
 
 impl Quat {
+    /// The rotation that takes the x axis onto the direction of `axis`: the
+    /// shortest arc, a half turn about z when `axis` is -x, none when
+    /// `axis` is zero. Engines whose revolute joints turn about their
+    /// frame's x axis (Rapier, PhysX) turn that frame onto a URDF axis
+    /// with it.
+    pub fn x_onto(axis: Vec3) -> Quat {
+        let x = Vec3::new(1.0, 0.0, 0.0);
+        let n = axis.norm();
+        let a = if n > 0.0 { axis.scale(1.0 / n) } else { x };
+        let d = x.dot(a);
+        if d < -1.0 + 1e-12 {
+            return Quat::new(0.0, 0.0, 0.0, 1.0);
+        }
+        let c = x.cross(a);
+        Quat::new(1.0 + d, c.x, c.y, c.z)
+            .normalized()
+            .unwrap_or(Quat::IDENTITY)
+    }
+
     /// The identity rotation.
     pub const IDENTITY: Quat = Quat {
         w: 1.0,
@@ -330,6 +349,22 @@ impl Pose {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    #[test]
+    fn x_onto_maps_x_to_the_axis() {
+        for axis in [
+            Vec3::new(0.0, 0.0, 1.0),
+            Vec3::new(0.0, 0.0, -1.0),
+            Vec3::new(1.0, 0.0, 0.0),
+            Vec3::new(-1.0, 0.0, 0.0),
+            Vec3::new(0.0, 1.0, 0.0),
+            Vec3::new(0.3, -0.4, 0.5),
+        ] {
+            let got = Quat::x_onto(axis).rotate(Vec3::new(1.0, 0.0, 0.0));
+            let want = axis.scale(1.0 / axis.norm());
+            assert!(got.distance(want) < 1e-12, "{axis:?} -> {got:?}");
+        }
+    }
     use std::f64::consts::{FRAC_PI_2, PI};
 
     fn close(a: f64, b: f64, tol: f64) -> bool {

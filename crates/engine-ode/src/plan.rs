@@ -281,17 +281,8 @@ pub fn mesh_plan(
     scale: Vec3,
     link_name: &str,
 ) -> Result<MeshPlan, PlanError> {
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .unwrap_or("")
-        .to_ascii_lowercase();
-    if ext != "stl" {
-        return Err(PlanError(format!(
-            "link \"{link_name}\": mesh \"{uri}\" ({}) is not an STL file; the ODE engine reads STL meshes only",
-            path.display()
-        )));
-    }
+    realitygap_core::robot::stl::require_stl(path, uri, "ODE")
+        .map_err(|e| PlanError(format!("link \"{link_name}\": {e}")))?;
     let mesh =
         TriangleMesh::read(path).map_err(|e| PlanError(format!("link \"{link_name}\": {e}")))?;
     if mesh.triangles.is_empty() {

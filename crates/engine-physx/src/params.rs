@@ -114,7 +114,8 @@ pub fn check(
         let Some(link) = robot.link_by_name(name) else {
             continue;
         };
-        if l.mass_scale.is_some() && in_fixed_base(scene, robot, link) {
+        if l.mass_scale.is_some() && realitygap_core::robot::plan::in_fixed_base(scene, robot, link)
+        {
             return Err(param_error(
                 format!("links.{name}.mass_scale"),
                 format!(
@@ -125,19 +126,6 @@ pub fn check(
         }
     }
     Ok(())
-}
-
-/// True when no controlled joint lies between `link` and the root.
-fn in_fixed_base(scene: &Scene, robot: &RobotModel, link: usize) -> bool {
-    let mut at = link;
-    while let Some(j) = robot.parent_joint(at) {
-        let joint = &robot.joints[j];
-        if scene.actuators.iter().any(|a| a.joint == joint.name) {
-            return false;
-        }
-        at = joint.parent;
-    }
-    true
 }
 
 #[cfg(test)]

@@ -176,17 +176,7 @@ fn cylinder_points(radius: f32, length: f32) -> Vec<PxVec3> {
 
 /// The vertices of an STL file, or an error naming the file.
 fn stl_points(path: &Path, uri: &str) -> Result<Vec<PxVec3>, String> {
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .unwrap_or("")
-        .to_ascii_lowercase();
-    if ext != "stl" {
-        return Err(format!(
-            "mesh \"{uri}\" ({}) is not an STL file; the PhysX engine reads STL meshes only",
-            path.display()
-        ));
-    }
+    realitygap_core::robot::stl::require_stl(path, uri, "PhysX")?;
     let mesh = TriangleMesh::read(path).map_err(|e| format!("mesh \"{uri}\": {e}"))?;
     let points: Vec<PxVec3> = mesh
         .triangles

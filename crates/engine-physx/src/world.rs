@@ -182,22 +182,6 @@ pub fn vec_from_px(v: PxVec3) -> Vec3 {
     Vec3::new(v.x as f64, v.y as f64, v.z as f64)
 }
 
-/// The rotation that takes the x axis onto the unit vector `axis` (the
-/// shortest arc; a half turn about z when `axis` is -x).
-fn x_onto(axis: Vec3) -> Quat {
-    let x = Vec3::new(1.0, 0.0, 0.0);
-    let n = axis.norm();
-    let a = if n > 0.0 { axis.scale(1.0 / n) } else { x };
-    let d = x.dot(a);
-    if d < -1.0 + 1e-12 {
-        return Quat::new(0.0, 0.0, 0.0, 1.0);
-    }
-    let c = x.cross(a);
-    Quat::new(1.0 + d, c.x, c.y, c.z)
-        .normalized()
-        .unwrap_or(Quat::IDENTITY)
-}
-
 /// Everything a world is built from.
 pub struct Recipe<'a> {
     /// The scene.
@@ -215,8 +199,8 @@ pub struct Recipe<'a> {
 /// Builds the world of a recipe (see the module documentation). Errors are
 /// messages for [`realitygap_core::EngineError::Load`].
 pub fn build(recipe: &Recipe<'_>) -> Result<World, String> {
-    check_variation(recipe.variation)?;
-    check_servos(recipe.scene)?;
+    recipe.variation.check()?;
+    shared::check_servos(recipe.scene).map_err(|e| e.0)?;
     let plan = shared::plan_robot(recipe.scene, recipe.robot, GroupSplit::AtActuatedJoints)
         .map_err(|e| e.0)?;
     let sdk = crate::sdk::sdk()?;
@@ -258,40 +242,6 @@ pub fn build(recipe: &Recipe<'_>) -> Result<World, String> {
         })
         .collect();
     Ok(world)
-}
-
-fn check_variation(variation: &ModelVariation) -> Result<(), String> {
-    if !(variation.mass_scale.is_finite() && variation.mass_scale > 0.0) {
-        return Err(format!(
-            "the mass factor must be positive and finite, found {}",
-            variation.mass_scale
-        ));
-    }
-    if !(variation.friction_scale.is_finite() && variation.friction_scale >= 0.0) {
-        return Err(format!(
-            "the friction factor must be >= 0 and finite, found {}",
-            variation.friction_scale
-        ));
-    }
-    Ok(())
-}
-
-fn check_servos(scene: &Scene) -> Result<(), String> {
-    for a in &scene.actuators {
-        if !(a.kv.is_finite() && a.kv > 0.0) {
-            return Err(format!(
-                "actuator of joint \"{}\": kv must be positive and finite, found {}",
-                a.joint, a.kv
-            ));
-        }
-        if a.force_limit.is_nan() || a.force_limit < 0.0 {
-            return Err(format!(
-                "actuator of joint \"{}\": force limit must be >= 0 (0 = servo off), found {}",
-                a.joint, a.force_limit
-            ));
-        }
-    }
-    Ok(())
 }
 
 /// A scene with the recipe's gravity and solver, stepping on the calling
@@ -626,7 +576,7 @@ impl Builder<'_, '_> {
                     ))
                 }
             };
-            let basis = Pose::new(Vec3::ZERO, x_onto(joint.axis));
+            let basis = Pose::new(Vec3::ZERO, Quat::x_onto(joint.axis));
             let parent_pose = plan.link_in_group[joint.parent]
                 .compose(&joint.origin)
                 .compose(&basis);
@@ -785,22 +735,6 @@ impl Builder<'_, '_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn x_onto_maps_x_to_the_axis() {
-        for axis in [
-            Vec3::new(0.0, 0.0, 1.0),
-            Vec3::new(0.0, 0.0, -1.0),
-            Vec3::new(-1.0, 0.0, 0.0),
-            Vec3::new(0.3, -0.4, 0.5),
-        ] {
-            let got = x_onto(axis).rotate(Vec3::new(1.0, 0.0, 0.0));
-            assert!(
-                got.distance(axis.scale(1.0 / axis.norm())) < 1e-12,
-                "{axis:?}"
-            );
-        }
-    }
 
     #[test]
     fn transforms_round_trip() {

@@ -121,22 +121,6 @@ pub(crate) fn from_rapier_pose(p: &RPose) -> Pose {
     )
 }
 
-/// The rotation that takes the x axis onto the unit vector `axis` (the
-/// shortest arc; a half turn about z when `axis` is -x).
-fn x_onto(axis: Vec3) -> Quat {
-    let x = Vec3::new(1.0, 0.0, 0.0);
-    let n = axis.norm();
-    let a = if n > 0.0 { axis.scale(1.0 / n) } else { x };
-    let d = x.dot(a);
-    if d < -1.0 + 1e-12 {
-        return Quat::new(0.0, 0.0, 0.0, 1.0);
-    }
-    let c = x.cross(a);
-    Quat::new(1.0 + d, c.x, c.y, c.z)
-        .normalized()
-        .unwrap_or(Quat::IDENTITY)
-}
-
 /// Builds the world of `scene` with `robot` (see the module documentation),
 /// with the engine-mapped keys of `params` (already checked by
 /// [`crate::params::check`]). Errors are messages for
@@ -148,10 +132,10 @@ pub fn assemble(
     variation: &ModelVariation,
     params: &PhysicalParams,
 ) -> Result<Assembly, String> {
-    check_variation(variation)?;
+    variation.check()?;
     let shared_plan =
         shared::plan_robot(scene, robot, GroupSplit::AtActuatedJoints).map_err(|e| e.0)?;
-    check_servos(scene)?;
+    shared::check_servos(scene).map_err(|e| e.0)?;
     let plan = &shared_plan.groups;
     let world_poses = robot.forward_kinematics(&scene.robot.base, &shared_plan.initial_positions);
     let mut world = new_world(scene, settings, params);
@@ -203,42 +187,6 @@ pub fn assemble(
         body_names,
         objects,
     })
-}
-
-fn check_variation(variation: &ModelVariation) -> Result<(), String> {
-    if !(variation.mass_scale.is_finite() && variation.mass_scale > 0.0) {
-        return Err(format!(
-            "the mass factor must be positive and finite, found {}",
-            variation.mass_scale
-        ));
-    }
-    if !(variation.friction_scale.is_finite() && variation.friction_scale >= 0.0) {
-        return Err(format!(
-            "the friction factor must be >= 0 and finite, found {}",
-            variation.friction_scale
-        ));
-    }
-    Ok(())
-}
-
-/// The servos' gains and force limits, checked (the joints themselves are
-/// resolved by core's shared planning).
-fn check_servos(scene: &Scene) -> Result<(), String> {
-    for a in &scene.actuators {
-        if !(a.kv.is_finite() && a.kv > 0.0) {
-            return Err(format!(
-                "actuator of joint \"{}\": kv must be positive and finite, found {}",
-                a.joint, a.kv
-            ));
-        }
-        if a.force_limit.is_nan() || a.force_limit < 0.0 {
-            return Err(format!(
-                "actuator of joint \"{}\": force limit must be >= 0 (0 = servo off), found {}",
-                a.joint, a.force_limit
-            ));
-        }
-    }
-    Ok(())
 }
 
 /// An empty world with the scene's gravity, the solver settings and the
@@ -362,7 +310,7 @@ fn add_joints(
         };
         let joint = &robot.joints[j];
         let spec = &scene.actuators[a];
-        let basis = Pose::new(Vec3::ZERO, x_onto(joint.axis));
+        let basis = Pose::new(Vec3::ZERO, Quat::x_onto(joint.axis));
         let frame1 = plan.link_in_group[joint.parent]
             .compose(&joint.origin)
             .compose(&basis);
@@ -550,22 +498,6 @@ fn add_objects(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn x_onto_maps_x_to_the_axis() {
-        for axis in [
-            Vec3::new(0.0, 0.0, 1.0),
-            Vec3::new(0.0, 0.0, -1.0),
-            Vec3::new(1.0, 0.0, 0.0),
-            Vec3::new(-1.0, 0.0, 0.0),
-            Vec3::new(0.0, 1.0, 0.0),
-            Vec3::new(0.3, -0.4, 0.5),
-        ] {
-            let got = x_onto(axis).rotate(Vec3::new(1.0, 0.0, 0.0));
-            let want = axis.scale(1.0 / axis.norm());
-            assert!(got.distance(want) < 1e-12, "{axis:?} -> {got:?}");
-        }
-    }
 
     #[test]
     fn rapier_pose_round_trip() {

@@ -109,17 +109,7 @@ impl ShapeBuilder {
         if let Some(shape) = self.cache.get(&key) {
             return Ok(shape.clone());
         }
-        let ext = path
-            .extension()
-            .and_then(|e| e.to_str())
-            .unwrap_or("")
-            .to_ascii_lowercase();
-        if ext != "stl" {
-            return Err(format!(
-                "mesh \"{uri}\" ({}) is not an STL file; the Rapier engine reads STL meshes only",
-                path.display()
-            ));
-        }
+        realitygap_core::robot::stl::require_stl(path, uri, "Rapier")?;
         if !(scale.is_finite() && scale.x != 0.0 && scale.y != 0.0 && scale.z != 0.0) {
             return Err(format!(
                 "mesh \"{uri}\": scale ({}, {}, {}) must be finite and non-zero",

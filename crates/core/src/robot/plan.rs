@@ -165,6 +165,40 @@ pub fn group_mass(
     combine_masses(&link_mass_parts(robot, links, link_in_group, mass_scale))
 }
 
+/// The servos' gains and force limits: `kv` positive and finite, the
+/// force limit >= 0 (0 turns the servo off).
+pub fn check_servos(scene: &Scene) -> Result<(), PlanError> {
+    for a in &scene.actuators {
+        if !(a.kv.is_finite() && a.kv > 0.0) {
+            return Err(PlanError(format!(
+                "actuator of joint \"{}\": kv must be positive and finite, found {}",
+                a.joint, a.kv
+            )));
+        }
+        if a.force_limit.is_nan() || a.force_limit < 0.0 {
+            return Err(PlanError(format!(
+                "actuator of joint \"{}\": force limit must be >= 0 (0 = servo off), found {}",
+                a.joint, a.force_limit
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// True when no joint of the scene's actuators lies between `link` and the
+/// root: the link is part of the robot's fixed base.
+pub fn in_fixed_base(scene: &Scene, robot: &RobotModel, link: usize) -> bool {
+    let mut at = link;
+    while let Some(j) = robot.parent_joint(at) {
+        let joint = &robot.joints[j];
+        if scene.actuators.iter().any(|a| a.joint == joint.name) {
+            return false;
+        }
+        at = joint.parent;
+    }
+    true
+}
+
 /// The robot joints the scene's actuators drive, in actuator order. Each
 /// must exist, be movable, not mimic another joint, and carry one actuator
 /// only.

@@ -56,6 +56,25 @@ impl Aabb {
     }
 }
 
+/// Refuses a mesh file that is not STL (by its extension), for engines
+/// that read STL meshes only: the message names the mesh as the URDF wrote
+/// it (`uri`), the resolved path and the engine.
+pub fn require_stl(path: &Path, uri: &str, engine: &str) -> Result<(), String> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    if ext == "stl" {
+        Ok(())
+    } else {
+        Err(format!(
+            "mesh \"{uri}\" ({}) is not an STL file; the {engine} engine reads STL meshes only",
+            path.display()
+        ))
+    }
+}
+
 impl TriangleMesh {
     /// Reads an STL file, binary or ASCII.
     pub fn read(path: &Path) -> Result<Self, StlError> {
