@@ -457,7 +457,7 @@ pub(crate) fn fold_attempts(
     let mut result = SceneResult {
         status: "ok".into(),
         cpu_s: f64::INFINITY,
-        ..run_case_placeholder(case)
+        ..not_run(case)
     };
     for attempt in attempts {
         let (outcome, cpu_s) = match attempt {
@@ -584,7 +584,7 @@ fn measure(cases: &[SceneCase], engine: &dyn Engine, overlay: &Overlay, repeats:
         .iter()
         .map(|case| match settings_for(case, engine, overlay) {
             Ok(settings) => run_case(case, engine, &settings, repeats),
-            Err(e) => failed(run_case_placeholder(case), e.to_string()),
+            Err(e) => failed(not_run(case), e.to_string()),
         })
         .collect();
     point_of(engine, overlay, scenes)
@@ -624,7 +624,9 @@ pub(crate) fn point_of(engine: &dyn Engine, overlay: &Overlay, scenes: Vec<Scene
     }
 }
 
-pub(crate) fn run_case_placeholder(case: &SceneCase) -> SceneResult {
+/// A scene's result before any run: status `failed`, nothing measured
+/// (what a run that never happens reports, and the start of a fold).
+pub(crate) fn not_run(case: &SceneCase) -> SceneResult {
     SceneResult {
         scene: case.scene.name.clone(),
         status: "failed".into(),

@@ -15,8 +15,8 @@
 //! as locally.
 
 use crate::{
-    failed, fold_attempts, point_of, run_case_placeholder, set_args, settings_for, Attempt,
-    Overlay, Point, SceneCase,
+    failed, fold_attempts, not_run, point_of, set_args, settings_for, Attempt, Overlay, Point,
+    SceneCase,
 };
 use anyhow::{anyhow, Context, Result};
 use realitygap_core::controller::{RunOutcome, RunStatus};
@@ -97,7 +97,7 @@ impl<'a> SlurmSweep<'a> {
                     .enumerate()
                     .map(|(si, case)| match settings_for(case, engine, overlay) {
                         Ok(_) => fold_attempts(case, (0..repeats).map(|r| take((pi, si, r)))),
-                        Err(e) => failed(run_case_placeholder(case), e.to_string()),
+                        Err(e) => failed(not_run(case), e.to_string()),
                     })
                     .collect();
                 point_of(engine, overlay, scenes)
