@@ -681,15 +681,36 @@ mod tests {
         assert_eq!(unpack(tmp.path()).action, CacheAction::Reused);
     }
 
-    /// The archive holds the study's recordings exactly as published: the
-    /// same files, byte for byte, as the paper-data folder (less its README).
+    /// The archive holds the study's recordings exactly as published. Always:
+    /// the archive matches its recorded SHA-256 (checked while unpacking),
+    /// and the unpacked files, and the unpack's own manifest, are exactly the
+    /// committed list of the published files with their SHA-256
+    /// (`paper-data.files.sha256`, `sha256sum` format, written by
+    /// `scripts/pack-study-data`). When the published folder is beside the
+    /// project (`../shared/paper-data`), also the full comparison: the same
+    /// files, byte for byte, less the folder's README, and the folder matches
+    /// the committed list.
     #[test]
     fn the_archive_holds_paper_data_byte_for_byte() {
-        let Some(paper) = crate::published_paper_data() else {
-            return;
-        };
         let tmp = tempfile::tempdir().unwrap();
-        let dir = unpack(tmp.path()).dir;
+        let unpacked = unpack(tmp.path());
+        let dir = unpacked.dir;
+        assert_eq!(
+            archive().sha256,
+            hex(&Sha256::digest(fs::read(archive().path).unwrap()))
+        );
+        let list_path = assets().join("study-data/paper-data.files.sha256");
+        let listed: Vec<(String, String)> = fs::read_to_string(&list_path)
+            .unwrap()
+            .lines()
+            .map(|line| {
+                let (hash, path) = line.split_once("  ").unwrap_or_else(|| {
+                    panic!("{}: not a sha256sum line: {line}", list_path.display())
+                });
+                (path.to_string(), hash.to_string())
+            })
+            .collect();
+        assert_eq!(listed.len(), 495, "{}", list_path.display());
         let list = |root: &Path| {
             let mut out = Vec::new();
             let mut stack = vec![root.to_path_buf()];
@@ -706,16 +727,53 @@ mod tests {
             out.sort();
             out
         };
-        let mut expected = list(&paper);
-        expected.retain(|p| p != Path::new("README.md"));
+        let sha = |p: &Path| hex(&Sha256::digest(fs::read(p).unwrap()));
         let mut found = list(&dir);
         found.retain(|p| p != Path::new(MANIFEST_NAME));
-        assert_eq!(found, expected);
+        let mut expected: Vec<PathBuf> = listed.iter().map(|(p, _)| PathBuf::from(p)).collect();
+        expected.sort();
+        assert_eq!(found, expected, "the unpacked files against the list");
+        for (rel, hash) in &listed {
+            assert_eq!(&sha(&dir.join(rel)), hash, "{rel} differs from the list");
+        }
+        let manifest = check_unpacked(&dir, &archive().sha256).unwrap();
+        let mut in_manifest: Vec<(String, String)> = manifest
+            .files
+            .iter()
+            .map(|f| (f.path.clone(), f.sha256.clone()))
+            .collect();
+        in_manifest.sort();
+        let mut sorted_list = listed.clone();
+        sorted_list.sort();
+        assert_eq!(
+            in_manifest, sorted_list,
+            "the unpack's manifest against the list"
+        );
+
+        let Some(paper) = crate::published_paper_data() else {
+            eprintln!(
+                "../shared/paper-data is not beside the project: checked the archive against its checksum and the committed file list only"
+            );
+            return;
+        };
+        let mut published = list(&paper);
+        published.retain(|p| p != Path::new("README.md"));
+        assert_eq!(
+            found, published,
+            "the unpacked files against the published folder"
+        );
         for rel in &found {
             assert!(
                 fs::read(dir.join(rel)).unwrap() == fs::read(paper.join(rel)).unwrap(),
                 "{} differs",
                 rel.display()
+            );
+        }
+        for (rel, hash) in &listed {
+            assert_eq!(
+                &sha(&paper.join(rel)),
+                hash,
+                "published {rel} differs from the list"
             );
         }
     }
