@@ -1,11 +1,17 @@
 //! `realitygap import`: bring real (Qualisys motion capture) and recorded
-//! simulator trajectories into a results directory, one run per file.
+//! simulator trajectories into a results directory, one run per file; and a
+//! robot's own joint recordings (ROS 2 bags, CSV, LeRobot datasets), one run
+//! per episode.
 
 use anyhow::{bail, Result};
 use clap::{Args, Subcommand, ValueEnum};
+use realitygap_core::{CommandKind, RobotModel};
 use realitygap_data::qualisys::{self, QualisysOptions};
 use realitygap_data::recorded::{self, QuatOrder, RecordedOptions};
-use realitygap_data::SourceKind;
+use realitygap_data::{ImportError, SourceKind};
+use realitygap_recordings::csvfile::CsvOptions;
+use realitygap_recordings::rosbag::RosbagOptions;
+use realitygap_recordings::Recording;
 use realitygap_study::import::{import_files, ImportTarget};
 use serde_json::{json, Map, Value};
 use std::path::PathBuf;
@@ -20,6 +26,128 @@ pub enum ImportCommand {
     /// Simulator output recorded elsewhere: one row of 14 numbers per
     /// control step (wrist xyz, wrist quaternion, cube xyz, cube quaternion).
     Recorded(RecordedArgs),
+    /// A ROS 2 bag (rosbag2 folder, or one .mcap or .db3 file): the
+    /// sensor_msgs/msg/JointState topic and the commands ros2_control was
+    /// sent (std_msgs/msg/Float64MultiArray or
+    /// trajectory_msgs/msg/JointTrajectory). One run per bag, or per episode
+    /// with --split-gap.
+    Rosbag(RosbagArgs),
+    /// CSV joint recordings, one file per episode: a time column (time_s,
+    /// time, t, timestamp, __time) and columns named <joint>/position,
+    /// <joint>/velocity, <joint>/effort and <joint>/<kind>_command (any
+    /// prefix before the joint, as PlotJuggler exports a bag).
+    Csv(CsvArgs),
+    /// A LeRobot dataset (v3, or v2 with the same columns): one run per
+    /// episode_index, observation.state as the joint positions and action
+    /// as the commands.
+    Lerobot(LerobotArgs),
+}
+
+/// The robot a joint recording is of, and where its runs go.
+#[derive(Args)]
+pub struct RobotTarget {
+    /// The robot's URDF: recorded joint names are matched against its
+    /// moving joints, and the end effector's pose comes from its forward
+    /// kinematics.
+    #[arg(long, value_name = "URDF")]
+    robot: PathBuf,
+    /// Where a ROS package is, for package:// URIs in the URDF: NAME=DIR
+    /// (repeatable; ROS_PACKAGE_PATH is searched too).
+    #[arg(long = "package", value_name = "NAME=DIR")]
+    packages: Vec<String>,
+    /// The link whose pose is stored as the end effector (`wrist` body)
+    /// [default: the child link of the last moving joint].
+    #[arg(long, value_name = "NAME")]
+    link: Option<String>,
+    /// Results directory to create or add to.
+    #[arg(long)]
+    out: PathBuf,
+    /// Source name written into the manifest.
+    #[arg(long, default_value = "real")]
+    source: String,
+}
+
+/// Kind of recorded commands.
+#[derive(Clone, Copy, ValueEnum)]
+enum CommandKindArg {
+    /// Joint positions (rad, m).
+    Position,
+    /// Joint velocities (rad/s, m/s).
+    Velocity,
+    /// Joint efforts (N m, N).
+    Effort,
+}
+
+impl From<CommandKindArg> for CommandKind {
+    fn from(k: CommandKindArg) -> CommandKind {
+        match k {
+            CommandKindArg::Position => CommandKind::Position,
+            CommandKindArg::Velocity => CommandKind::Velocity,
+            CommandKindArg::Effort => CommandKind::Effort,
+        }
+    }
+}
+
+/// Arguments of `import rosbag`.
+#[derive(Args)]
+pub struct RosbagArgs {
+    /// The bags: rosbag2 folders (metadata.yaml with .mcap or .db3 files)
+    /// or single .mcap/.db3 files; each is one run, or several with
+    /// --split-gap.
+    #[arg(required = true)]
+    bags: Vec<PathBuf>,
+    #[command(flatten)]
+    target: RobotTarget,
+    /// The sensor_msgs/msg/JointState topic [default: the only one, else
+    /// /joint_states].
+    #[arg(long, value_name = "TOPIC")]
+    joint_states: Option<String>,
+    /// The command topic [default: the only Float64MultiArray or
+    /// JointTrajectory topic].
+    #[arg(long, value_name = "TOPIC")]
+    commands: Option<String>,
+    /// Import the joint states alone, without commands.
+    #[arg(long, conflicts_with = "commands")]
+    no_commands: bool,
+    /// What the commands are [default: from the message (JointTrajectory)
+    /// or the topic's name (forward_position_controller, ...)].
+    #[arg(long, value_enum)]
+    command_kind: Option<CommandKindArg>,
+    /// The joints of a Float64MultiArray's values, in order, comma-separated
+    /// [default: the URDF's moving joints, when the count matches].
+    #[arg(long, value_delimiter = ',', value_name = "J1,J2,...")]
+    command_joints: Option<Vec<String>>,
+    /// Split a bag into episodes where the joint states stop for longer
+    /// than this many seconds.
+    #[arg(long, value_name = "SECONDS")]
+    split_gap: Option<f64>,
+}
+
+/// Arguments of `import csv`.
+#[derive(Args)]
+pub struct CsvArgs {
+    /// The CSV files, one episode each (run id = file stem).
+    #[arg(required = true)]
+    files: Vec<PathBuf>,
+    #[command(flatten)]
+    target: RobotTarget,
+    /// A column that follows no naming convention: ROLE=NAME, ROLE being
+    /// `time` or <joint>/<field> (field position, velocity, effort,
+    /// position_command, velocity_command, effort_command); repeatable.
+    #[arg(long = "column", value_name = "ROLE=NAME", value_parser = parse_column)]
+    columns: Vec<(String, String)>,
+}
+
+/// Arguments of `import lerobot`.
+#[derive(Args)]
+pub struct LerobotArgs {
+    /// The dataset folder (with meta/info.json and data/).
+    dataset: PathBuf,
+    #[command(flatten)]
+    target: RobotTarget,
+    /// What `action` holds [default: position, LeRobot's convention].
+    #[arg(long, value_enum)]
+    command_kind: Option<CommandKindArg>,
 }
 
 /// Arguments of `import qualisys`.
@@ -87,6 +215,18 @@ pub struct RecordedArgs {
     norm_tolerance: f64,
 }
 
+/// Parses `ROLE=NAME` (split at the first `=`).
+fn parse_column(s: &str) -> Result<(String, String), String> {
+    match s.split_once('=') {
+        Some((role, name)) if !role.trim().is_empty() && !name.trim().is_empty() => {
+            Ok((role.trim().to_string(), name.trim().to_string()))
+        }
+        _ => Err(format!(
+            "expected ROLE=NAME (e.g. \"time=stamp\" or \"joint1/position=q0\"), found {s:?}"
+        )),
+    }
+}
+
 /// Parses `NAME=ROLE` (split at the last `=`).
 fn parse_role(s: &str) -> Result<(String, String), String> {
     match s.rsplit_once('=') {
@@ -104,7 +244,146 @@ pub fn run(cmd: ImportCommand) -> Result<()> {
     match cmd {
         ImportCommand::Qualisys(args) => import_qualisys(args),
         ImportCommand::Recorded(args) => import_recorded(args),
+        ImportCommand::Rosbag(args) => import_rosbag(args),
+        ImportCommand::Csv(args) => import_csv(args),
+        ImportCommand::Lerobot(args) => import_lerobot(args),
     }
+}
+
+/// The robot of a joint recording, and its moving joints' names.
+fn load_robot(target: &RobotTarget) -> Result<(RobotModel, Vec<String>)> {
+    let packages = realitygap_runner::prepare::resolver(&target.packages)?;
+    let robot = RobotModel::from_urdf_file(&target.robot, &packages)?;
+    let names = robot
+        .actuated_joints()
+        .iter()
+        .map(|&j| robot.joints[j].name.clone())
+        .collect();
+    Ok((robot, names))
+}
+
+/// Stores the episodes read, or nothing when any fails; says a line per run.
+fn store_episodes(
+    read: impl FnOnce(&[String]) -> Result<Vec<Recording>, ImportError>,
+    target: &RobotTarget,
+) -> Result<()> {
+    let (robot, joints) = load_robot(target)?;
+    let link = realitygap_recordings::end_effector(&robot, target.link.as_deref())
+        .map_err(|e| anyhow::anyhow!("{}: {e}", target.robot.display()))?;
+    let recordings = read(&joints)?;
+    let runs = realitygap_recordings::store(
+        &recordings,
+        &realitygap_recordings::StoreTarget {
+            out: &target.out,
+            source: &target.source,
+            urdf: &target.robot,
+            robot: &robot,
+            link,
+        },
+    )?;
+    for (run, rec) in runs.iter().zip(&recordings) {
+        let t = &run.trajectory;
+        let duration = t.time_s.last().copied().unwrap_or(0.0);
+        let rate = if duration > 0.0 {
+            (t.len() - 1) as f64 / duration
+        } else {
+            0.0
+        };
+        let commands = match &t.commands {
+            Some(c) => format!("{} {} commands", c.len(), c.kind),
+            None => "no commands".into(),
+        };
+        println!(
+            "{}: {} samples, {duration:.2} s at {rate:.0} Hz, {} joints{}{}, {commands}{} <- {}",
+            run.id,
+            t.len(),
+            t.joint_count(),
+            if t.joint_velocities_rad_s.is_some() {
+                ", velocities"
+            } else {
+                ""
+            },
+            if t.joint_efforts_nm.is_some() {
+                ", efforts"
+            } else {
+                ""
+            },
+            if run.replaced { " (replaced)" } else { "" },
+            rec.file.display()
+        );
+        for w in &run.warnings {
+            println!("  warning: {w}");
+        }
+    }
+    println!(
+        "imported {} episodes of robot '{}' into {} (source '{}', end effector {})",
+        runs.len(),
+        robot.name,
+        target.out.display(),
+        target.source,
+        robot.links[link].name
+    );
+    Ok(())
+}
+
+fn import_rosbag(args: RosbagArgs) -> Result<()> {
+    if let Some(g) = args.split_gap {
+        if !(g.is_finite() && g > 0.0) {
+            bail!("--split-gap must be a positive number of seconds, not {g}");
+        }
+    }
+    let bags = args.bags.clone();
+    store_episodes(
+        |joints| {
+            let opts = RosbagOptions {
+                joint_states: args.joint_states.clone(),
+                commands: args.commands.clone(),
+                no_commands: args.no_commands,
+                command_kind: args.command_kind.map(CommandKind::from),
+                command_joints: args.command_joints.clone(),
+                robot_joints: joints.to_vec(),
+                split_gap_s: args.split_gap,
+            };
+            let mut all = Vec::new();
+            for bag in &bags {
+                all.extend(realitygap_recordings::rosbag::import_rosbag(bag, &opts)?);
+            }
+            Ok(all)
+        },
+        &args.target,
+    )
+}
+
+fn import_csv(args: CsvArgs) -> Result<()> {
+    let opts = CsvOptions {
+        columns: args.columns.clone(),
+    };
+    store_episodes(
+        |_| {
+            args.files
+                .iter()
+                .map(|f| realitygap_recordings::csvfile::import_csv(f, &opts))
+                .collect()
+        },
+        &args.target,
+    )
+}
+
+#[cfg(feature = "lerobot")]
+fn import_lerobot(args: LerobotArgs) -> Result<()> {
+    let opts = realitygap_recordings::lerobot::LeRobotOptions {
+        command_kind: args.command_kind.map(CommandKind::from),
+    };
+    store_episodes(
+        |_| realitygap_recordings::lerobot::import_lerobot(&args.dataset, &opts),
+        &args.target,
+    )
+}
+
+#[cfg(not(feature = "lerobot"))]
+fn import_lerobot(args: LerobotArgs) -> Result<()> {
+    let _ = (&args.dataset, &args.target, args.command_kind);
+    bail!("this realitygap was built without LeRobot support (cargo feature `lerobot`)")
 }
 
 fn import_qualisys(args: QualisysArgs) -> Result<()> {

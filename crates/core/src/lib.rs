@@ -42,7 +42,7 @@ pub use params::{ParamKey, ParamSupport, PhysicalParams};
 pub use pose::{Pose, Quat, Vec3};
 pub use robot::{RobotError, RobotModel};
 pub use scene::{Scene, SceneError};
-pub use trajectory::{BodyTrack, Trajectory, TrajectoryError};
+pub use trajectory::{BodyTrack, CommandKind, JointCommands, Trajectory, TrajectoryError};
 
 /// The version of realitygap, as written into every manifest.
 pub const TOOL_VERSION: &str = env!("CARGO_PKG_VERSION");

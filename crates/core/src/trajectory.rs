@@ -4,7 +4,10 @@
 //! start of the run). At each sample it holds the pose of every tracked body
 //! (world frame of the source: the simulator's world, or the capture
 //! system's own frame for real recordings), and, where the source knows
-//! them, the joint angles and the commanded joint velocities.
+//! them, the joint angles, the commanded joint velocities, and for joint
+//! recordings (a robot's own `/joint_states`) the measured joint velocities
+//! and efforts. A run driven by recorded commands also carries those
+//! commands, at their own timestamps ([`JointCommands`]).
 //!
 //! Tracked bodies are named by role: `wrist` (the frame of the arm's last
 //! link, or the wrist marker body on the real arm), `cube`, `base`.
@@ -43,6 +46,149 @@ pub struct Trajectory {
     pub joint_angles_rad: Option<Vec<Vec<f64>>>,
     /// Commanded joint velocities in rad/s, `[sample][joint]`, when known.
     pub joint_velocity_commands_rad_s: Option<Vec<Vec<f64>>>,
+    /// Measured joint velocities in rad/s (m/s for prismatic joints),
+    /// `[sample][joint]`, when recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub joint_velocities_rad_s: Option<Vec<Vec<f64>>>,
+    /// Measured joint efforts in N m (N for prismatic joints),
+    /// `[sample][joint]`, when recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub joint_efforts_nm: Option<Vec<Vec<f64>>>,
+    /// The joint commands the run was driven by, at their own timestamps,
+    /// when known (a recording's commands; not the study's P controller).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub commands: Option<JointCommands>,
+}
+
+/// What a joint command asks of the joint's servo.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum CommandKind {
+    /// A joint position (rad, or m for prismatic joints): a position
+    /// servo (PD) tracks it.
+    Position,
+    /// A joint velocity (rad/s, or m/s): a velocity servo (`kv`) tracks it.
+    Velocity,
+    /// A joint effort (N m, or N): applied as is.
+    Effort,
+}
+
+impl CommandKind {
+    /// Every kind, in a fixed order.
+    pub const ALL: [CommandKind; 3] = [
+        CommandKind::Position,
+        CommandKind::Velocity,
+        CommandKind::Effort,
+    ];
+
+    /// The lower-case name (`position`, `velocity`, `effort`).
+    pub fn name(self) -> &'static str {
+        match self {
+            CommandKind::Position => "position",
+            CommandKind::Velocity => "velocity",
+            CommandKind::Effort => "effort",
+        }
+    }
+
+    /// The kind with this lower-case name.
+    pub fn from_name(name: &str) -> Option<CommandKind> {
+        CommandKind::ALL.into_iter().find(|k| k.name() == name)
+    }
+
+    /// Unit of a command value of this kind for a revolute joint.
+    pub fn unit(self) -> &'static str {
+        match self {
+            CommandKind::Position => "rad",
+            CommandKind::Velocity => "rad/s",
+            CommandKind::Effort => "N m",
+        }
+    }
+}
+
+impl std::fmt::Display for CommandKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Joint commands of one kind at their own timestamps: what a recording's
+/// controller sent (ros2_control's command topic, a dataset's `action`).
+/// Between two samples the command holds (zero-order hold).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct JointCommands {
+    /// What the values ask of the servo.
+    pub kind: CommandKind,
+    /// The commanded joints, as 0-based indices into the trajectory's
+    /// joint columns (the robot's actuated joints, in order from the base).
+    pub joints: Vec<usize>,
+    /// Time of each command, seconds from the start of the run,
+    /// non-decreasing; may start before or after the first sample.
+    pub time_s: Vec<f64>,
+    /// `[command][commanded joint]`, in the unit of `kind`.
+    pub values: Vec<Vec<f64>>,
+}
+
+impl JointCommands {
+    /// Number of commands.
+    pub fn len(&self) -> usize {
+        self.time_s.len()
+    }
+
+    /// True when there is no command.
+    pub fn is_empty(&self) -> bool {
+        self.time_s.is_empty()
+    }
+
+    /// The command in force at time `t_s` (the latest at or before it),
+    /// `None` before the first.
+    pub fn held_at(&self, t_s: f64) -> Option<&[f64]> {
+        let i = self.time_s.partition_point(|&c| c <= t_s);
+        i.checked_sub(1).map(|i| self.values[i].as_slice())
+    }
+
+    /// Checks lengths, widths, finite non-decreasing times and joint
+    /// indices below `joint_count` (when the trajectory has joints).
+    pub fn validate(&self, joint_count: usize) -> Result<(), TrajectoryError> {
+        let what = || format!("{} commands", self.kind);
+        if self.values.len() != self.time_s.len() {
+            return Err(TrajectoryError::LengthMismatch {
+                what: what(),
+                expected: self.time_s.len(),
+                found: self.values.len(),
+            });
+        }
+        if let Some((sample, r)) = self
+            .values
+            .iter()
+            .enumerate()
+            .find(|(_, r)| r.len() != self.joints.len())
+        {
+            return Err(TrajectoryError::JointCount {
+                what: what(),
+                sample,
+                expected: self.joints.len(),
+                found: r.len(),
+            });
+        }
+        if let Some(i) = self
+            .time_s
+            .windows(2)
+            .position(|w| w[0] > w[1] || w[0].is_nan() || w[1].is_nan())
+            .or_else(|| self.time_s.iter().position(|t| !t.is_finite()))
+        {
+            return Err(TrajectoryError::Commands(format!(
+                "command {i}: time is not finite or goes backwards"
+            )));
+        }
+        if joint_count > 0 {
+            if let Some(&j) = self.joints.iter().find(|&&j| j >= joint_count) {
+                return Err(TrajectoryError::Commands(format!(
+                    "commanded joint index {j} is beyond the {joint_count} joints"
+                )));
+            }
+        }
+        Ok(())
+    }
 }
 
 /// A trajectory whose parts do not fit together.
@@ -73,6 +219,9 @@ pub enum TrajectoryError {
     /// Two bodies have the same role.
     #[error("body role '{0}' appears twice")]
     DuplicateRole(String),
+    /// The commands do not fit (times, joint indices).
+    #[error("commands: {0}")]
+    Commands(String),
 }
 
 impl Trajectory {
@@ -89,6 +238,9 @@ impl Trajectory {
                 .collect(),
             joint_angles_rad: None,
             joint_velocity_commands_rad_s: None,
+            joint_velocities_rad_s: None,
+            joint_efforts_nm: None,
+            commands: None,
         }
     }
 
@@ -125,6 +277,8 @@ impl Trajectory {
         self.joint_angles_rad
             .as_ref()
             .or(self.joint_velocity_commands_rad_s.as_ref())
+            .or(self.joint_velocities_rad_s.as_ref())
+            .or(self.joint_efforts_nm.as_ref())
             .and_then(|rows| rows.first())
             .map_or(0, |r| r.len())
     }
@@ -151,6 +305,8 @@ impl Trajectory {
                 "joint velocity commands",
                 &self.joint_velocity_commands_rad_s,
             ),
+            ("joint velocities", &self.joint_velocities_rad_s),
+            ("joint efforts", &self.joint_efforts_nm),
         ] {
             if let Some(rows) = rows {
                 if rows.len() != n {
@@ -172,6 +328,9 @@ impl Trajectory {
                     });
                 }
             }
+        }
+        if let Some(c) = &self.commands {
+            c.validate(self.joint_count())?;
         }
         Ok(())
     }

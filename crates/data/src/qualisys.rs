@@ -606,8 +606,7 @@ pub fn parse(
             .zip(rows.poses)
             .map(|(role, poses)| BodyTrack { role, poses })
             .collect(),
-        joint_angles_rad: None,
-        joint_velocity_commands_rad_s: None,
+        ..Trajectory::default()
     };
     Ok(ImportedRun {
         trajectory,

@@ -352,8 +352,7 @@ fn into_run(
                 poses: cube,
             },
         ],
-        joint_angles_rad: None,
-        joint_velocity_commands_rad_s: None,
+        ..Trajectory::default()
     };
     Ok(ImportedRun {
         trajectory,

@@ -4,6 +4,8 @@
 //! results/mujoco-scene1/
 //!   manifest.json        tool version, source, kind, scene, engine, settings, one entry per run
 //!   runs/<run id>.csv    the run's trajectory
+//!   runs/<run id>.commands.csv   the joint commands it was driven by, at their
+//!                        own timestamps (runs of a joint recording only)
 //! ```
 //!
 //! One directory holds one source (an engine, the real arm, a recorded
@@ -22,7 +24,9 @@
 //! `t_s`, then for each body `<role>_x_m,<role>_y_m,<role>_z_m,<role>_qw,
 //! <role>_qx,<role>_qy,<role>_qz` (position in metres, unit quaternion body
 //! to world), then when known `q1_rad..qN_rad` (joint angles) and
-//! `qd_cmd1_rad_s..qd_cmdN_rad_s` (commanded joint velocities). A gap (lost
+//! `qd_cmd1_rad_s..qd_cmdN_rad_s` (commanded joint velocities), then for
+//! joint recordings `qd1_rad_s..qdN_rad_s` (measured joint velocities) and
+//! `tau1_nm..tauN_nm` (measured joint efforts). A gap (lost
 //! pose) is seven empty cells. Numbers are printed with the shortest text
 //! that reads back to the same `f64` (exponent form below 1e-5 and from
 //! 1e16 on; `NaN`, `inf`, `-inf`), so a written run reads back exactly.
@@ -36,7 +40,9 @@ use std::fs;
 use std::io::{self, Write as _};
 use std::path::{Path, PathBuf};
 
+mod commandcsv;
 mod runcsv;
+pub use commandcsv::{format_commands_csv, parse_commands_csv};
 pub use runcsv::{format_run_csv, parse_run_csv, read_run_csv};
 
 /// File name of the manifest in a results directory.
@@ -111,6 +117,10 @@ pub struct RunEntry {
     /// empty for a failed run without trajectory.
     #[serde(default)]
     pub file: String,
+    /// Path of the run's commands file relative to the directory
+    /// (`runs/<id>.commands.csv`), for a run driven by recorded commands.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub commands_file: Option<String>,
     /// Files the run was imported from (empty for simulated runs).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub origin: Vec<String>,
@@ -136,6 +146,7 @@ impl RunEntry {
         RunEntry {
             id: id.into(),
             file: String::new(),
+            commands_file: None,
             origin: Vec::new(),
             status: RunStatus::Ok,
             message: None,
@@ -396,6 +407,20 @@ impl RunStore {
         entry.file = format!("{RUNS_DIR}/{}.csv", entry.id);
         let runs = self.dir.join(RUNS_DIR);
         fs::create_dir_all(&runs).map_err(io_err("create", &runs))?;
+        let commands_file = format!("{RUNS_DIR}/{}.commands.csv", entry.id);
+        match &trajectory.commands {
+            Some(c) => {
+                write_atomic(
+                    &self.dir.join(&commands_file),
+                    format_commands_csv(c).as_bytes(),
+                )?;
+                entry.commands_file = Some(commands_file);
+            }
+            None => {
+                remove_if_there(&self.dir.join(&commands_file))?;
+                entry.commands_file = None;
+            }
+        }
         write_atomic(&self.dir.join(&entry.file), text.as_bytes())?;
         self.upsert(entry);
         self.save_manifest()
@@ -407,17 +432,14 @@ impl RunStore {
         validate_run_id(&entry.id)?;
         entry.status = RunStatus::Failed;
         entry.file = String::new();
-        let old = self.dir.join(RUNS_DIR).join(format!("{}.csv", entry.id));
-        match fs::remove_file(&old) {
-            Ok(()) => {}
-            Err(e) if e.kind() == io::ErrorKind::NotFound => {}
-            Err(e) => {
-                return Err(StoreError::Io {
-                    action: "remove",
-                    path: old,
-                    source: e,
-                })
-            }
+        entry.commands_file = None;
+        for suffix in ["csv", "commands.csv"] {
+            remove_if_there(
+                &self
+                    .dir
+                    .join(RUNS_DIR)
+                    .join(format!("{}.{suffix}", entry.id)),
+            )?;
         }
         self.upsert(entry);
         self.save_manifest()
@@ -440,20 +462,32 @@ impl RunStore {
                 entry.status
             )));
         }
-        let rel = Path::new(&entry.file);
-        if rel.is_absolute()
-            || rel
-                .components()
-                .any(|c| !matches!(c, std::path::Component::Normal(_)))
-        {
-            return Err(no(format!(
-                "its file '{}' is not a path inside the directory",
-                entry.file
-            )));
-        }
-        let path = self.dir.join(rel);
+        let inside = |file: &str| {
+            let rel = Path::new(file);
+            if rel.is_absolute()
+                || rel
+                    .components()
+                    .any(|c| !matches!(c, std::path::Component::Normal(_)))
+            {
+                return Err(no(format!(
+                    "its file '{file}' is not a path inside the directory"
+                )));
+            }
+            Ok(self.dir.join(rel))
+        };
+        let path = inside(&entry.file)?;
         let bytes = fs::read(&path).map_err(io_err("read", &path))?;
-        Ok(parse_run_csv(&bytes, &path)?)
+        let mut trajectory = parse_run_csv(&bytes, &path)?;
+        if let Some(file) = &entry.commands_file {
+            let path = inside(file)?;
+            let bytes = fs::read(&path).map_err(io_err("read", &path))?;
+            let commands = parse_commands_csv(&bytes, &path)?;
+            commands
+                .validate(trajectory.joint_count())
+                .map_err(|e| ImportError::new(&path, e.to_string()))?;
+            trajectory.commands = Some(commands);
+        }
+        Ok(trajectory)
     }
 
     fn upsert(&mut self, entry: RunEntry) {
@@ -473,6 +507,19 @@ impl RunStore {
             })?;
         text.push('\n');
         write_atomic(&self.dir.join(MANIFEST_FILE), text.as_bytes())
+    }
+}
+
+/// Removes a file, if it is there.
+fn remove_if_there(path: &Path) -> Result<(), StoreError> {
+    match fs::remove_file(path) {
+        Ok(()) => Ok(()),
+        Err(e) if e.kind() == io::ErrorKind::NotFound => Ok(()),
+        Err(e) => Err(StoreError::Io {
+            action: "remove",
+            path: path.to_path_buf(),
+            source: e,
+        }),
     }
 }
 

@@ -166,6 +166,7 @@ impl ChildResult {
             joint_velocity_commands_rad_s: Some(
                 self.commands_rad_s.iter().map(|r| unbits(r)).collect(),
             ),
+            ..Trajectory::default()
         };
         t.validate()
             .map_err(|e| anyhow!("the run's trajectory is inconsistent: {e}"))?;

@@ -19,7 +19,7 @@ const BODY_SUFFIXES: [&str; 7] = ["_x_m", "_y_m", "_z_m", "_qw", "_qx", "_qy", "
 
 /// Appends a number in the shortest form that reads back to the same
 /// `f64`; exponent form for magnitudes below 1e-5 or from 1e16 on.
-fn push_f64(out: &mut String, x: f64) {
+pub(crate) fn push_f64(out: &mut String, x: f64) {
     let a = x.abs();
     let _ = if x.is_nan() {
         out.write_str("NaN")
@@ -77,11 +77,18 @@ fn push_header(out: &mut String, trajectory: &Trajectory) {
     for j in 1..=row_width(&trajectory.joint_velocity_commands_rad_s) {
         let _ = write!(out, ",qd_cmd{j}_rad_s");
     }
+    for j in 1..=row_width(&trajectory.joint_velocities_rad_s) {
+        let _ = write!(out, ",qd{j}_rad_s");
+    }
+    for j in 1..=row_width(&trajectory.joint_efforts_nm) {
+        let _ = write!(out, ",tau{j}_nm");
+    }
     out.push('\n');
 }
 
 /// Appends sample `i` as one line: time, seven cells per body (empty at a
-/// gap), joint angles, joint velocity commands.
+/// gap), joint angles, joint velocity commands, measured joint velocities,
+/// joint efforts.
 fn push_sample(out: &mut String, trajectory: &Trajectory, i: usize) {
     push_f64(out, trajectory.time_s[i]);
     for b in &trajectory.bodies {
@@ -99,6 +106,8 @@ fn push_sample(out: &mut String, trajectory: &Trajectory, i: usize) {
     for rows in [
         &trajectory.joint_angles_rad,
         &trajectory.joint_velocity_commands_rad_s,
+        &trajectory.joint_velocities_rad_s,
+        &trajectory.joint_efforts_nm,
     ]
     .into_iter()
     .flatten()
@@ -166,11 +175,19 @@ fn split_cells(text: &str, ranges: &mut Vec<(usize, usize)>) {
 enum Column {
     /// Cell `k` (0..7) of body `b`'s pose.
     Body(usize, usize),
-    /// The next joint angle.
-    Joint,
-    /// The next joint velocity command.
-    Command,
+    /// The next value of per-joint series `k` ([`SERIES`]).
+    Series(usize),
 }
+
+/// The per-joint series of a run CSV, in column order: the column name's
+/// prefix and suffix around the 1-based joint number: joint angles, joint
+/// velocity commands, measured joint velocities, joint efforts.
+const SERIES: [(&str, &str); 4] = [
+    ("q", "_rad"),
+    ("qd_cmd", "_rad_s"),
+    ("qd", "_rad_s"),
+    ("tau", "_nm"),
+];
 
 /// The columns of a run CSV, read from its header.
 struct Header {
@@ -182,10 +199,8 @@ struct Header {
     columns: Vec<Column>,
     /// Body roles, in column order.
     roles: Vec<String>,
-    /// Number of joint-angle columns.
-    joints: usize,
-    /// Number of joint-velocity-command columns.
-    commands: usize,
+    /// Number of columns of each per-joint series ([`SERIES`]).
+    series: [usize; 4],
 }
 
 impl Header {
@@ -205,8 +220,7 @@ impl Header {
             columns: Vec::with_capacity(names.len()),
             names,
             roles: Vec::new(),
-            joints: 0,
-            commands: 0,
+            series: [0; 4],
         };
         if h.names.first().map(Vec::as_slice) != Some(b"t_s") {
             let found = h.names.first().map(Vec::as_slice).unwrap_or_default();
@@ -232,23 +246,24 @@ impl Header {
         if let Some(role) = name.strip_suffix(b"_x_m") {
             self.parse_body(i, role, file)?;
             Ok(7)
-        } else if name == format!("q{}_rad", self.joints + 1).as_bytes() {
-            self.columns.push(Column::Joint);
-            self.joints += 1;
-            Ok(1)
-        } else if name == format!("qd_cmd{}_rad_s", self.commands + 1).as_bytes() {
-            self.columns.push(Column::Command);
-            self.commands += 1;
+        } else if let Some(k) = (0..SERIES.len()).find(|&k| {
+            let (prefix, suffix) = SERIES[k];
+            name == format!("{prefix}{}{suffix}", self.series[k] + 1).as_bytes()
+        }) {
+            self.columns.push(Column::Series(k));
+            self.series[k] += 1;
             Ok(1)
         } else {
+            let expected: Vec<String> = (0..SERIES.len())
+                .map(|k| format!("{}{}{}", SERIES[k].0, self.series[k] + 1, SERIES[k].1))
+                .collect();
             Err(self.error(
                 file,
                 i,
                 format!(
-                    "unexpected column name {}: expected <role>_x_m, q{}_rad or qd_cmd{}_rad_s",
+                    "unexpected column name {}: expected <role>_x_m, {}",
                     show_bytes(&name, 40),
-                    self.joints + 1,
-                    self.commands + 1
+                    expected.join(", ")
                 ),
             ))
         }
@@ -292,8 +307,8 @@ struct Samples<'h> {
     header: &'h Header,
     file: &'h Path,
     trajectory: Trajectory,
-    angles: Vec<Vec<f64>>,
-    velocity_commands: Vec<Vec<f64>>,
+    /// Rows of each per-joint series ([`SERIES`]).
+    series: [Vec<Vec<f64>>; 4],
     /// Scratch: the current row's seven cells per body.
     body_cells: Vec<[Option<f64>; 7]>,
 }
@@ -304,8 +319,7 @@ impl<'h> Samples<'h> {
             header,
             file,
             trajectory: Trajectory::with_bodies(&header.roles),
-            angles: Vec::new(),
-            velocity_commands: Vec::new(),
+            series: Default::default(),
             body_cells: vec![[None; 7]; header.roles.len()],
         }
     }
@@ -350,8 +364,8 @@ impl<'h> Samples<'h> {
             ));
         }
         self.trajectory.time_s.push(t);
-        let mut angle_row = Vec::with_capacity(self.header.joints);
-        let mut command_row = Vec::with_capacity(self.header.commands);
+        let mut rows: [Vec<f64>; 4] =
+            std::array::from_fn(|k| Vec::with_capacity(self.header.series[k]));
         for (col, column) in self.header.columns.iter().enumerate() {
             let col = col + 1;
             match *column {
@@ -363,16 +377,14 @@ impl<'h> Samples<'h> {
                         Some(self.number(record, line, col)?)
                     };
                 }
-                Column::Joint => angle_row.push(self.number(record, line, col)?),
-                Column::Command => command_row.push(self.number(record, line, col)?),
+                Column::Series(k) => rows[k].push(self.number(record, line, col)?),
             }
         }
         self.push_poses(line)?;
-        if self.header.joints > 0 {
-            self.angles.push(angle_row);
-        }
-        if self.header.commands > 0 {
-            self.velocity_commands.push(command_row);
+        for (k, row) in rows.into_iter().enumerate() {
+            if self.header.series[k] > 0 {
+                self.series[k].push(row);
+            }
         }
         Ok(())
     }
@@ -409,12 +421,13 @@ impl<'h> Samples<'h> {
 
     /// The trajectory read.
     fn finish(mut self) -> Trajectory {
-        if self.header.joints > 0 {
-            self.trajectory.joint_angles_rad = Some(self.angles);
-        }
-        if self.header.commands > 0 {
-            self.trajectory.joint_velocity_commands_rad_s = Some(self.velocity_commands);
-        }
+        let [angles, velocity_commands, velocities, efforts] = self.series;
+        let present = |k: usize, rows| (self.header.series[k] > 0).then_some(rows);
+        let t = &mut self.trajectory;
+        t.joint_angles_rad = present(0, angles);
+        t.joint_velocity_commands_rad_s = present(1, velocity_commands);
+        t.joint_velocities_rad_s = present(2, velocities);
+        t.joint_efforts_nm = present(3, efforts);
         debug_assert!(self.trajectory.validate().is_ok());
         self.trajectory
     }
