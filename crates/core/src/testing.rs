@@ -97,6 +97,26 @@ fn builtin_copy() -> Option<PathBuf> {
         .then_some(dir)
 }
 
+/// The joint-recording fixtures: a simulated KUKA iiwa written as ROS 2
+/// bags, CSV and a LeRobot dataset by an independent writer
+/// (`tools/fixtures/`, made by `scripts/make-fixtures`, which
+/// `scripts/setup --tests` runs). Panics with that advice when absent.
+pub fn joint_recording_fixtures() -> PathBuf {
+    let dir = workspace().join("third_party/fixtures/joint-recordings");
+    assert!(
+        dir.join("truth.json").is_file(),
+        "the joint-recording fixtures are missing at {}: run scripts/make-fixtures (scripts/setup --tests does)",
+        dir.display()
+    );
+    dir
+}
+
+/// The KUKA LBR iiwa's URDF that `scripts/setup` takes from the pybullet
+/// wheel.
+pub fn iiwa_urdf() -> PathBuf {
+    workspace().join("third_party/pybullet_data/kuka_iiwa/model.urdf")
+}
+
 /// One of the project's scenes, by name (`scene1_single_joint`, ...).
 pub fn scene(name: &str) -> Scene {
     Scene::from_file(

@@ -3,21 +3,11 @@
 //! (`scripts/make-fixtures`), cut, flipped and overwritten at random.
 
 use proptest::prelude::*;
-use realitygap_core::testing::workspace;
+use realitygap_core::testing::joint_recording_fixtures as fixtures;
 use realitygap_recordings::csvfile::{parse_csv, CsvOptions};
 use realitygap_recordings::lerobot::{import_lerobot, LeRobotOptions};
 use realitygap_recordings::rosbag::{import_rosbag, RosbagOptions};
 use std::path::{Path, PathBuf};
-
-fn fixtures() -> PathBuf {
-    let dir = workspace().join("third_party/fixtures/joint-recordings");
-    assert!(
-        dir.join("truth.json").is_file(),
-        "the joint-recording fixtures are missing at {}: run scripts/make-fixtures",
-        dir.display()
-    );
-    dir
-}
 
 /// The one storage file of a bag folder with this extension.
 fn storage_file(rel: &str, ext: &str) -> PathBuf {

@@ -5,7 +5,6 @@
 //! `scripts/make-fixtures`, which `scripts/setup --tests` calls).
 
 use realitygap_core::robot::{PackageResolver, RobotModel};
-use realitygap_core::testing::workspace;
 use realitygap_core::{CommandKind, Trajectory};
 use realitygap_recordings::csvfile::{import_csv, CsvOptions};
 use realitygap_recordings::lerobot::{import_lerobot, LeRobotOptions};
@@ -13,20 +12,7 @@ use realitygap_recordings::rosbag::{import_rosbag, RosbagOptions};
 use realitygap_recordings::{end_effector, store, Recording, StoreTarget};
 use std::path::PathBuf;
 
-/// The fixtures folder; a panic that says how to make it when absent.
-fn fixtures() -> PathBuf {
-    let dir = workspace().join("third_party/fixtures/joint-recordings");
-    assert!(
-        dir.join("truth.json").is_file(),
-        "the joint-recording fixtures are missing at {}: run scripts/make-fixtures (scripts/setup --tests does)",
-        dir.display()
-    );
-    dir
-}
-
-fn urdf() -> PathBuf {
-    workspace().join("third_party/pybullet_data/kuka_iiwa/model.urdf")
-}
+use realitygap_core::testing::{iiwa_urdf as urdf, joint_recording_fixtures as fixtures};
 
 fn iiwa() -> RobotModel {
     RobotModel::from_urdf_file(&urdf(), &PackageResolver::new()).unwrap()

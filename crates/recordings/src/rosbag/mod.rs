@@ -126,6 +126,19 @@ fn list_topics(bag: &Bag, filter: &dyn Fn(&Topic) -> bool) -> String {
     }
 }
 
+/// The topic called `name`, or an error listing the bag's topics.
+fn named_topic<'a>(path: &Path, bag: &'a Bag, name: &str) -> Result<&'a Topic, ImportError> {
+    bag.topic(name).map(|i| &bag.topics[i]).ok_or_else(|| {
+        ImportError::new(
+            path,
+            format!(
+                "the bag has no topic {name}; its topics are {}",
+                list_topics(bag, &|_| true)
+            ),
+        )
+    })
+}
+
 /// The JointState topic.
 fn choose_states_topic(
     path: &Path,
@@ -133,15 +146,7 @@ fn choose_states_topic(
     opts: &RosbagOptions,
 ) -> Result<String, ImportError> {
     if let Some(name) = &opts.joint_states {
-        let t = bag.topic(name).map(|i| &bag.topics[i]).ok_or_else(|| {
-            ImportError::new(
-                path,
-                format!(
-                    "the bag has no topic {name}; its topics are {}",
-                    list_topics(bag, &|_| true)
-                ),
-            )
-        })?;
+        let t = named_topic(path, bag, name)?;
         if t.type_name != msgs::JOINT_STATE {
             return Err(ImportError::new(
                 path,
@@ -197,15 +202,7 @@ fn choose_command_topic(
     }
     let is_command = |t: &Topic| COMMAND_TYPES.contains(&t.type_name.as_str());
     if let Some(name) = &opts.commands {
-        let t = bag.topic(name).map(|i| &bag.topics[i]).ok_or_else(|| {
-            ImportError::new(
-                path,
-                format!(
-                    "the bag has no topic {name}; its topics are {}",
-                    list_topics(bag, &|_| true)
-                ),
-            )
-        })?;
+        let t = named_topic(path, bag, name)?;
         if !is_command(t) {
             return Err(ImportError::new(
                 path,

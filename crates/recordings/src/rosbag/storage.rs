@@ -154,6 +154,19 @@ fn log_time(file: &Path, topic: &str, ns: u64) -> Result<i64, ImportError> {
     })
 }
 
+/// The topic of an MCAP channel.
+fn topic_of(channel: &mcap::Channel) -> Topic {
+    Topic {
+        name: channel.topic.clone(),
+        type_name: channel
+            .schema
+            .as_ref()
+            .map(|s| s.name.clone())
+            .unwrap_or_default(),
+        encoding: channel.message_encoding.clone(),
+    }
+}
+
 /// Reads the messages of one MCAP file.
 fn read_mcap(
     file: &Path,
@@ -177,15 +190,7 @@ fn read_mcap(
         let (topic, kept) = match channels.get(&channel.id) {
             Some(&known) => known,
             None => {
-                let topic = Topic {
-                    name: channel.topic.clone(),
-                    type_name: channel
-                        .schema
-                        .as_ref()
-                        .map(|s| s.name.clone())
-                        .unwrap_or_default(),
-                    encoding: channel.message_encoding.clone(),
-                };
+                let topic = topic_of(channel);
                 let kept = keep(&topic);
                 let i = topic_index(bag, file, topic)?;
                 channels.insert(channel.id, (i, kept));
@@ -205,15 +210,7 @@ fn read_mcap(
     // Topics declared in the summary without messages are topics too.
     if let Ok(Some(summary)) = mcap::Summary::read(&bytes) {
         for channel in summary.channels.values() {
-            let topic = Topic {
-                name: channel.topic.clone(),
-                type_name: channel
-                    .schema
-                    .as_ref()
-                    .map(|s| s.name.clone())
-                    .unwrap_or_default(),
-                encoding: channel.message_encoding.clone(),
-            };
+            let topic = topic_of(channel);
             topic_index(bag, file, topic)?;
         }
     }
