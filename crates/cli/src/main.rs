@@ -11,6 +11,7 @@ mod cmd_compare;
 mod cmd_engines;
 mod cmd_frontier;
 mod cmd_import;
+mod cmd_replay;
 mod cmd_report;
 mod cmd_reproduce;
 mod cmd_run;
@@ -38,6 +39,11 @@ enum Command {
     /// Simulate scenes in engines, in parallel, into a results directory;
     /// a rerun skips finished runs.
     Run(cmd_run::Args),
+    /// Replay a robot's recorded episodes (from `import rosbag|csv|lerobot`)
+    /// in every engine from their first joint state, with the recorded
+    /// commands at their timestamps; the physics-free model beside them and
+    /// the joint-space table.
+    Replay(cmd_replay::Args),
     /// List the physics engines compiled in, with their versions.
     Engines(cmd_engines::Args),
     /// Write the figures (SVG, PNG), tables and a self-contained
@@ -71,6 +77,7 @@ fn main() -> ExitCode {
         Command::Compare(args) => cmd_compare::run(args),
         Command::Import(cmd) => cmd_import::run(cmd),
         Command::Run(args) => cmd_run::run(args),
+        Command::Replay(args) => cmd_replay::run(args),
         Command::Engines(args) => cmd_engines::run(args),
         Command::Report(args) => cmd_report::run(args),
         Command::Reproduce(args) => cmd_reproduce::run(args),

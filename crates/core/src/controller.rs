@@ -326,7 +326,12 @@ pub enum RunError {
 }
 
 /// Checks the state read at one tick; the reason when it is unusable.
-fn divergence(angles: &[f64], poses: &[Pose], roles: &[String], bound_m: f64) -> Option<String> {
+pub(crate) fn divergence(
+    angles: &[f64],
+    poses: &[Pose],
+    roles: &[String],
+    bound_m: f64,
+) -> Option<String> {
     if let Some(j) = angles.iter().position(|a| !a.is_finite()) {
         return Some(format!("joint {} angle is not finite", j + 1));
     }

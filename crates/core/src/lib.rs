@@ -31,6 +31,7 @@ pub mod engine;
 pub mod instability;
 pub mod params;
 pub mod pose;
+pub mod replay;
 pub mod robot;
 pub mod scene;
 pub mod stitch;

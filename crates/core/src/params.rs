@@ -7,6 +7,7 @@
 //! armature = 0.01             # reflected rotor inertia, kg m^2
 //! frictionloss = 0.2          # dry (Coulomb) joint friction, N m
 //! kv = 40.0                   # velocity-servo gain, N m s/rad
+//! kp = 700.0                  # position gain of a replay's PD servo, N m/rad
 //! force_limit = 30.0          # actuator torque limit, N m
 //! offset_deg = 0.3            # encoder zero offset: true = measured + offset
 //!
@@ -71,6 +72,10 @@ pub struct JointParams {
     /// Velocity-servo gain, N m s/rad.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub kv: Option<f64>,
+    /// Position gain of the PD servo that replays recorded position
+    /// commands (`tau = kp (q_cmd - q) - kv qd`), N m/rad.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub kp: Option<f64>,
     /// Actuator torque limit, N m (0 switches the servo off).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub force_limit: Option<f64>,
@@ -182,6 +187,8 @@ pub enum ParamKey {
     JointFrictionloss,
     /// `joints.J.kv`
     JointKv,
+    /// `joints.J.kp`
+    JointKp,
     /// `joints.J.force_limit`
     JointForceLimit,
     /// `joints.J.offset_deg`
@@ -210,11 +217,12 @@ pub enum ParamKey {
 
 impl ParamKey {
     /// Every key, in the file's order.
-    pub const ALL: [ParamKey; 16] = [
+    pub const ALL: [ParamKey; 17] = [
         ParamKey::JointDamping,
         ParamKey::JointArmature,
         ParamKey::JointFrictionloss,
         ParamKey::JointKv,
+        ParamKey::JointKp,
         ParamKey::JointForceLimit,
         ParamKey::JointOffset,
         ParamKey::LinkMassScale,
@@ -237,6 +245,7 @@ impl ParamKey {
             ParamKey::JointArmature => "joints.<joint>.armature",
             ParamKey::JointFrictionloss => "joints.<joint>.frictionloss",
             ParamKey::JointKv => "joints.<joint>.kv",
+            ParamKey::JointKp => "joints.<joint>.kp",
             ParamKey::JointForceLimit => "joints.<joint>.force_limit",
             ParamKey::JointOffset => "joints.<joint>.offset_deg",
             ParamKey::LinkMassScale => "links.<link>.mass_scale",
@@ -258,6 +267,7 @@ impl ParamKey {
         matches!(
             self,
             ParamKey::JointOffset
+                | ParamKey::JointKp
                 | ParamKey::ControllerDelay
                 | ParamKey::ControllerGain
                 | ParamKey::ControllerMaxSpeed
@@ -274,6 +284,9 @@ impl ParamKey {
             ParamKey::ControllerDelay => {
                 Some("commands reach the servos delay_s after they are computed, at the next engine step")
             }
+            ParamKey::JointKp => Some(
+                "the replay's PD servo: the engine's velocity servo (gain kv) with the target (kp/kv)(q_cmd - q), set at every engine step",
+            ),
             ParamKey::ControllerGain => Some("replaces the scene's controller gain"),
             ParamKey::ControllerMaxSpeed => Some("replaces the scene's command clamp"),
             ParamKey::ControllerMaxAccel => Some(
@@ -355,6 +368,7 @@ struct FileJoint {
     armature: Num,
     frictionloss: Num,
     kv: Num,
+    kp: Num,
     force_limit: Num,
     offset_deg: Num,
 }
@@ -498,6 +512,7 @@ impl PhysicalParams {
                 armature: r.value(&f("armature"), &j.armature, Range::NonNegative)?,
                 frictionloss: r.value(&f("frictionloss"), &j.frictionloss, Range::NonNegative)?,
                 kv: r.value(&f("kv"), &j.kv, Range::Positive)?,
+                kp: r.value(&f("kp"), &j.kp, Range::NonNegative)?,
                 force_limit: r.value(&f("force_limit"), &j.force_limit, Range::NonNegative)?,
                 offset_deg: r.value(&f("offset_deg"), &j.offset_deg, Range::Finite)?,
             };
@@ -589,6 +604,7 @@ impl PhysicalParams {
                 ("armature", j.armature),
                 ("frictionloss", j.frictionloss),
                 ("kv", j.kv),
+                ("kp", j.kp),
                 ("force_limit", j.force_limit),
                 ("offset_deg", j.offset_deg),
             ];
@@ -673,6 +689,7 @@ impl PhysicalParams {
                 (ParamKey::JointArmature, j.armature),
                 (ParamKey::JointFrictionloss, j.frictionloss),
                 (ParamKey::JointKv, j.kv),
+                (ParamKey::JointKp, j.kp),
                 (ParamKey::JointForceLimit, j.force_limit),
                 (ParamKey::JointOffset, j.offset_deg),
             ];

@@ -26,6 +26,7 @@ pub mod import;
 pub mod load;
 pub mod measure;
 pub mod provenance;
+pub mod replay;
 pub mod reproduce;
 pub mod stitch;
 pub mod study;

@@ -67,6 +67,21 @@ pub fn import_rosbag(path: &Path, opts: &RosbagOptions) -> Result<Vec<Recording>
     })?;
     let states_index = bag.topic(&states_topic).unwrap_or(usize::MAX);
     let states = read_states(path, &bag, states_index)?;
+    // Joints the robot lacks make every later question (command joints)
+    // moot: say so first.
+    if !opts.robot_joints.is_empty() {
+        if let Some(n) = states.names.iter().find(|n| !opts.robot_joints.contains(n)) {
+            return Err(ImportError::new(
+                path,
+                format!(
+                    "the recording names joint '{n}', which the robot does not have as a moving joint; its moving joints are {}; the recording's joints are {}",
+                    opts.robot_joints.join(", "),
+                    states.names.join(", ")
+                ),
+            )
+            .with_field(states_topic));
+        }
+    }
     let mut warnings = Vec::new();
     let commands = match &command_topic {
         None => {

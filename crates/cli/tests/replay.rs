@@ -1,0 +1,234 @@
+//! End-to-end: `realitygap replay` of the independent writer's recordings
+//! of a simulated KUKA iiwa (`scripts/make-fixtures`): with the writer's own
+//! parameters (truth.json) MuJoCo, Rapier and ODE reproduce the recording;
+//! every compiled engine replays it at the defaults; the physics-free model
+//! is a row of the table; reruns keep finished runs; effort commands and
+//! impossible gains are refused with a reason.
+
+use realitygap_core::testing::{iiwa_urdf, joint_recording_fixtures as fixtures};
+use realitygap_data::RunStore;
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn realitygap(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_realitygap"))
+        .args(args)
+        .output()
+        .expect("the binary runs")
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join("replay-tests")
+        .join(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn path(p: &Path) -> String {
+    p.display().to_string()
+}
+
+/// Imports the first two episodes of the MCAP bags into `dir/real`.
+fn import(dir: &Path) -> PathBuf {
+    let real = dir.join("real");
+    let f = fixtures();
+    let out = realitygap(&[
+        "import",
+        "rosbag",
+        &path(&f.join("mcap/episode_000")),
+        &path(&f.join("mcap/episode_001")),
+        "--robot",
+        &path(&iiwa_urdf()),
+        "--out",
+        &path(&real),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    real
+}
+
+/// The writer's known parameters as a params file, without the keys in
+/// `leave_out`.
+fn truth_params(dir: &Path, leave_out: &[&str]) -> PathBuf {
+    let truth: Value =
+        serde_json::from_str(&std::fs::read_to_string(fixtures().join("truth.json")).unwrap())
+            .unwrap();
+    let mut toml = String::new();
+    for (name, j) in truth["joints"].as_object().unwrap() {
+        toml.push_str(&format!("[joints.{name}]\n"));
+        for (ours, theirs) in [
+            ("kp", "kp"),
+            ("kv", "kd"),
+            ("damping", "damping"),
+            ("armature", "armature"),
+            ("frictionloss", "frictionloss"),
+        ] {
+            if !leave_out.contains(&ours) {
+                toml.push_str(&format!("{ours} = {}\n", j[theirs].as_f64().unwrap()));
+            }
+        }
+    }
+    toml.push_str(&format!(
+        "[controller]\ndelay_s = {}\n",
+        truth["delay_s"].as_f64().unwrap()
+    ));
+    let file = dir.join(format!("truth-{}.toml", leave_out.join("-")));
+    std::fs::write(&file, toml).unwrap();
+    file
+}
+
+/// The joint-space rows written by a replay, by source.
+fn rows(out: &Path) -> Vec<Value> {
+    let v: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("joint_space.json")).unwrap())
+            .unwrap();
+    v.as_array().unwrap().clone()
+}
+
+fn rms_of(rows: &[Value], source: &str) -> f64 {
+    rows.iter()
+        .find(|r| r["source"] == source)
+        .unwrap_or_else(|| panic!("no row {source}"))["rms_all_deg"]
+        .as_f64()
+        .unwrap()
+}
+
+#[test]
+fn with_the_writers_parameters_the_engines_reproduce_the_recording() {
+    let dir = scratch("truth");
+    let real = import(&dir);
+    let params = truth_params(&dir, &[]);
+    let out = dir.join("replay");
+    let mut args = vec![
+        "replay".to_string(),
+        path(&real),
+        "--params".into(),
+        path(&params),
+    ];
+    for e in ["mujoco", "rapier", "ode"] {
+        args.extend(["--engine".into(), e.into()]);
+    }
+    args.extend(["--out".into(), path(&out)]);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let run = realitygap(&args);
+    let stdout = text(&run.stdout);
+    assert!(run.status.success(), "{stdout}{}", text(&run.stderr));
+    let rows = rows(&out);
+    let kinematic = rms_of(&rows, "kinematic");
+    assert!(
+        kinematic > 0.5,
+        "the physics-free model lags the arm: {kinematic}"
+    );
+    for e in ["mujoco", "rapier", "ode"] {
+        let rms = rms_of(&rows, e);
+        println!("{e}: {rms:.4} deg RMS against the recording (kinematic {kinematic:.3})");
+        assert!(rms < 0.05, "{e} with the writer's parameters: {rms} deg");
+    }
+    assert!(out.join("replay.toml").is_file() && out.join("joint_space.md").is_file());
+    let store = RunStore::open(&out.join("mujoco")).unwrap();
+    assert_eq!(store.runs().len(), 2);
+    // A rerun simulates nothing again.
+    let again = realitygap(&args);
+    assert!(again.status.success());
+    assert!(
+        text(&again.stdout).contains("6 kept from an earlier batch"),
+        "{}",
+        text(&again.stdout)
+    );
+}
+
+#[test]
+fn every_engine_replays_at_its_defaults_and_refusals_are_named() {
+    let dir = scratch("defaults");
+    let real = import(&dir);
+    let out = dir.join("replay");
+    let run = realitygap(&["replay", &path(&real), "--out", &path(&out)]);
+    let stdout = text(&run.stdout);
+    assert!(run.status.success(), "{stdout}{}", text(&run.stderr));
+    let rows = rows(&out);
+    let engines = realitygap::compiled_engines();
+    assert_eq!(rows.len(), engines.len() + 1, "{stdout}");
+    for e in &engines {
+        let rms = rms_of(&rows, e.name());
+        assert!(rms.is_finite() && rms < 5.0, "{}: {rms}", e.name());
+    }
+    // A key an engine cannot honour fails that engine's runs by name.
+    let params = truth_params(&dir, &[]);
+    let run = realitygap(&[
+        "replay",
+        &path(&real),
+        "--engine",
+        "physx",
+        "--params",
+        &path(&params),
+        "--out",
+        &path(&dir.join("physx")),
+    ]);
+    let stderr = text(&run.stderr);
+    assert!(!run.status.success());
+    assert!(
+        stderr.contains(
+            "in physx: failed: engine physx: parameter `joints.lbr_iiwa_joint_1.frictionloss`"
+        ),
+        "{stderr}"
+    );
+}
+
+#[test]
+fn effort_commands_and_bad_gains_are_refused_with_a_reason() {
+    let dir = scratch("refused");
+    // The writer's CSV with its command columns read as efforts.
+    let csv = std::fs::read_to_string(fixtures().join("csv/episode_000.csv")).unwrap();
+    let effort = dir.join("effort.csv");
+    std::fs::write(&effort, csv.replace("/position_command", "/effort_command")).unwrap();
+    let real = dir.join("real");
+    let out = realitygap(&[
+        "import",
+        "csv",
+        &path(&effort),
+        "--robot",
+        &path(&iiwa_urdf()),
+        "--out",
+        &path(&real),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let run = realitygap(&[
+        "replay",
+        &path(&real),
+        "--engine",
+        "mujoco",
+        "--out",
+        &path(&dir.join("r")),
+    ]);
+    let stderr = text(&run.stderr);
+    assert!(!run.status.success());
+    assert!(
+        stderr.contains("effort commands cannot be replayed yet"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    // A negative gain is refused where the file says it.
+    let bad = dir.join("bad.toml");
+    std::fs::write(&bad, "[joints.lbr_iiwa_joint_2]\nkp = -5.0\n").unwrap();
+    let real = import(&dir);
+    let run = realitygap(&[
+        "replay",
+        &path(&real),
+        "--params",
+        &path(&bad),
+        "--out",
+        &path(&dir.join("b")),
+    ]);
+    let stderr = text(&run.stderr);
+    assert!(!run.status.success());
+    assert!(
+        stderr.contains("bad.toml:2:6") && stderr.contains("kp"),
+        "{stderr}"
+    );
+}

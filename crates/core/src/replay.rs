@@ -1,0 +1,340 @@
+//! Replaying a recording's joint commands in a simulation: the controller
+//! loop of a run driven by recorded commands instead of the study's P
+//! controller.
+//!
+//! The simulation starts from the recording's first joint state (angles and
+//! velocities). At every engine step the command in force `delay_s` earlier
+//! (zero-order hold; before the first command, the first joint state is
+//! held) drives each joint through its servo:
+//!
+//! - **position** commands: a PD servo, `tau = kp (q_cmd - q) - kv qd`,
+//!   limited to the actuator's force limit. It runs on the engine's own
+//!   velocity servo (`tau = kv (v_target - qd)`, each engine's native and,
+//!   where the engine has it, implicit mechanism) with the target
+//!   `v_target = (kp / kv) (q_cmd - q)` set again at every engine step:
+//!   the same torque law.
+//! - **velocity** commands: the velocity servo's target is the command.
+//! - **effort** commands: not yet: the engines' joint interface takes
+//!   velocity targets only, so such a plan is refused with that reason.
+//!
+//! Joints without a command hold their first recorded angle through the
+//! same PD servo. The samples are recorded at the recording's own times, at
+//! the engine step nearest to each (at most half a timestep away).
+
+use crate::controller::{RunError, RunOutcome, RunStatus};
+use crate::engine::{EngineError, Simulation};
+use crate::pose::Pose;
+use crate::trajectory::{CommandKind, JointCommands, Trajectory};
+use std::time::Instant;
+
+/// What a replay needs besides the simulation. Per-joint vectors follow the
+/// simulation's controlled joints (the scene's actuators).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReplayPlan {
+    /// The recorded commands; `joints` index the controlled joints.
+    pub commands: JointCommands,
+    /// Times to record a sample at, s from the start, non-decreasing.
+    pub sample_times_s: Vec<f64>,
+    /// The first recorded joint angles, rad.
+    pub initial_angles_rad: Vec<f64>,
+    /// The first recorded joint velocities, rad/s (zeros when unknown).
+    pub initial_velocities_rad_s: Vec<f64>,
+    /// Position gain of each joint's PD servo, N m/rad.
+    pub kp: Vec<f64>,
+    /// Velocity gain of each joint's servo (the scene's `kv`: the PD
+    /// servo's `kd`), N m s/rad.
+    pub kv: Vec<f64>,
+    /// Time from a command's timestamp to its reaching the servo, s.
+    pub delay_s: f64,
+    /// Roles of the simulation's tracked bodies, in order.
+    pub roles: Vec<String>,
+    /// A tracked body farther than this from the origin means divergence, m.
+    pub divergence_bound_m: f64,
+}
+
+impl ReplayPlan {
+    /// Why this plan cannot be replayed in a simulation of `joints`
+    /// controlled joints, if it cannot.
+    pub fn check(&self, joints: usize) -> Result<(), String> {
+        if self.commands.kind == CommandKind::Effort {
+            return Err(
+                "effort commands cannot be replayed yet: the engines' joint interface takes velocity targets only"
+                    .into(),
+            );
+        }
+        self.commands.validate(joints).map_err(|e| e.to_string())?;
+        for (what, v) in [
+            ("initial angles", &self.initial_angles_rad),
+            ("initial velocities", &self.initial_velocities_rad_s),
+            ("kp", &self.kp),
+            ("kv", &self.kv),
+        ] {
+            if v.len() != joints {
+                return Err(format!("{} {what} for {joints} joints", v.len()));
+            }
+            if let Some(j) = v.iter().position(|x| !x.is_finite()) {
+                return Err(format!("{what} of joint {} is {}", j + 1, v[j]));
+            }
+        }
+        if let Some(j) = (0..joints).find(|&j| self.kv[j] <= 0.0 || self.kp[j] < 0.0) {
+            return Err(format!(
+                "joint {} has kp = {} and kv = {}: a position servo needs kp >= 0 and kv > 0",
+                j + 1,
+                self.kp[j],
+                self.kv[j]
+            ));
+        }
+        if !(self.delay_s.is_finite() && self.delay_s >= 0.0) {
+            return Err(format!("the delay {} s is not a time >= 0", self.delay_s));
+        }
+        if self.sample_times_s.is_empty() {
+            return Err("no sample time".into());
+        }
+        if self
+            .sample_times_s
+            .windows(2)
+            .any(|w| w[1] < w[0] || !w[1].is_finite())
+            || !self.sample_times_s[0].is_finite()
+        {
+            return Err("the sample times are not finite and non-decreasing".into());
+        }
+        Ok(())
+    }
+
+    /// The velocity targets for the joints at `angles`, time `t_s`.
+    fn targets(&self, t_s: f64, angles: &[f64], out: &mut [f64]) {
+        let held = self.commands.held_at(t_s - self.delay_s);
+        // Every joint holds its first angle unless commanded.
+        for (j, o) in out.iter_mut().enumerate() {
+            *o = self.kp[j] / self.kv[j] * (self.initial_angles_rad[j] - angles[j]);
+        }
+        let Some(values) = held else { return };
+        for (&j, &v) in self.commands.joints.iter().zip(values) {
+            out[j] = match self.commands.kind {
+                CommandKind::Position => self.kp[j] / self.kv[j] * (v - angles[j]),
+                CommandKind::Velocity | CommandKind::Effort => v,
+            };
+        }
+    }
+}
+
+/// Replays `plan` on a freshly loaded `sim`: the trajectory at the plan's
+/// sample times (tracked poses, joint angles, and the velocity targets in
+/// force as the commands sent), until the end or until the run diverges.
+pub fn replay(sim: &mut dyn Simulation, plan: &ReplayPlan) -> Result<RunOutcome, RunError> {
+    let joints = sim.joint_count();
+    let usage = |message: String| EngineError::Usage {
+        engine: "replay".to_string(),
+        message,
+    };
+    plan.check(joints).map_err(usage)?;
+    if sim.tracked_count() != plan.roles.len() {
+        return Err(usage(format!(
+            "the simulation tracks {} bodies, the plan names {}",
+            sim.tracked_count(),
+            plan.roles.len()
+        ))
+        .into());
+    }
+    let started = Instant::now();
+    let dt = sim.timestep_s();
+    let mut state = sim.state()?;
+    state.joint_angles_rad.clone_from(&plan.initial_angles_rad);
+    state
+        .joint_velocities_rad_s
+        .clone_from(&plan.initial_velocities_rad_s);
+    let mut targets = vec![0.0; joints];
+    plan.targets(0.0, &plan.initial_angles_rad, &mut targets);
+    state.joint_velocity_targets_rad_s.clone_from(&targets);
+    state.time_s = 0.0;
+    state.native = None;
+    sim.set_state(&state)?;
+
+    let mut trajectory = Trajectory::with_bodies(&plan.roles);
+    let mut angle_rows = Vec::with_capacity(plan.sample_times_s.len());
+    let mut target_rows = Vec::with_capacity(plan.sample_times_s.len());
+    let mut angles = vec![0.0; joints];
+    let mut poses = vec![Pose::IDENTITY; plan.roles.len()];
+    let mut status = RunStatus::Completed;
+    let mut steps = 0u64;
+    let mut next_sample = 0usize;
+    while next_sample < plan.sample_times_s.len() {
+        let t_s = steps as f64 * dt;
+        sim.joint_angles_rad(&mut angles);
+        plan.targets(t_s, &angles, &mut targets);
+        // Record every sample whose nearest engine step is this one.
+        while next_sample < plan.sample_times_s.len()
+            && plan.sample_times_s[next_sample] < t_s + 0.5 * dt
+        {
+            sim.tracked_poses(&mut poses);
+            if let Some(reason) =
+                crate::controller::divergence(&angles, &poses, &plan.roles, plan.divergence_bound_m)
+            {
+                status = RunStatus::Diverged { t_s, reason };
+                break;
+            }
+            trajectory.time_s.push(plan.sample_times_s[next_sample]);
+            for (track, pose) in trajectory.bodies.iter_mut().zip(&poses) {
+                track.poses.push(Some(*pose));
+            }
+            angle_rows.push(angles.clone());
+            target_rows.push(targets.clone());
+            next_sample += 1;
+        }
+        if !matches!(status, RunStatus::Completed) || next_sample == plan.sample_times_s.len() {
+            break;
+        }
+        sim.set_joint_velocity_targets(&targets);
+        match sim.step() {
+            Ok(()) => steps += 1,
+            Err(EngineError::Unstable {
+                t_s: at, message, ..
+            }) => {
+                steps += 1;
+                status = RunStatus::Diverged {
+                    t_s: at,
+                    reason: message,
+                };
+                break;
+            }
+            Err(e) => return Err(e.into()),
+        }
+    }
+    trajectory.joint_angles_rad = Some(angle_rows);
+    trajectory.joint_velocity_commands_rad_s = Some(target_rows);
+    Ok(RunOutcome {
+        trajectory,
+        status,
+        engine_steps: steps,
+        wall_time_s: started.elapsed().as_secs_f64(),
+    })
+}
+
+/// The physics-free model of a recording: the commands applied with perfect
+/// tracking, from the first recorded angles. Position commands: the angle is
+/// the command in force `delay_s` earlier (the first angle before any);
+/// velocity commands: their integral (zero-order hold) from the first
+/// angle. Joints without a command stay at their first angle. One row of
+/// angles per sample time, rad. `None` for effort commands, which say
+/// nothing of the motion without physics.
+pub fn kinematic_angles(
+    commands: &JointCommands,
+    initial_angles_rad: &[f64],
+    sample_times_s: &[f64],
+    delay_s: f64,
+) -> Option<Vec<Vec<f64>>> {
+    match commands.kind {
+        CommandKind::Effort => None,
+        CommandKind::Position => Some(
+            sample_times_s
+                .iter()
+                .map(|&t| {
+                    let mut row = initial_angles_rad.to_vec();
+                    if let Some(v) = commands.held_at(t - delay_s) {
+                        for (&j, &x) in commands.joints.iter().zip(v) {
+                            row[j] = x;
+                        }
+                    }
+                    row
+                })
+                .collect(),
+        ),
+        CommandKind::Velocity => {
+            let mut angles = initial_angles_rad.to_vec();
+            let mut rows = Vec::with_capacity(sample_times_s.len());
+            let mut t_prev = sample_times_s.first().copied().unwrap_or(0.0);
+            for &t in sample_times_s {
+                // Integrate the held velocity between command boundaries.
+                let (from, to) = (t_prev - delay_s, t - delay_s);
+                let mut edges: Vec<f64> = commands
+                    .time_s
+                    .iter()
+                    .copied()
+                    .filter(|&c| c > from && c < to)
+                    .collect();
+                edges.insert(0, from);
+                edges.push(to);
+                for w in edges.windows(2) {
+                    if let Some(v) = commands.held_at(w[0]) {
+                        for (&j, &x) in commands.joints.iter().zip(v) {
+                            angles[j] += x * (w[1] - w[0]);
+                        }
+                    }
+                }
+                rows.push(angles.clone());
+                t_prev = t;
+            }
+            Some(rows)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn commands(kind: CommandKind) -> JointCommands {
+        JointCommands {
+            kind,
+            joints: vec![1],
+            time_s: vec![0.0, 1.0],
+            values: vec![vec![0.5], vec![-0.5]],
+        }
+    }
+
+    #[test]
+    fn the_kinematic_model_holds_positions_and_integrates_velocities() {
+        let times = [0.0, 0.5, 1.0, 1.5, 2.0];
+        let pos =
+            kinematic_angles(&commands(CommandKind::Position), &[0.1, 0.2], &times, 0.0).unwrap();
+        assert_eq!(pos[1], [0.1, 0.5]);
+        assert_eq!(pos[3], [0.1, -0.5]);
+        let delayed =
+            kinematic_angles(&commands(CommandKind::Position), &[0.1, 0.2], &times, 0.75).unwrap();
+        assert_eq!(
+            delayed[0],
+            [0.1, 0.2],
+            "nothing before the first command arrives"
+        );
+        assert_eq!(delayed[2], [0.1, 0.5]);
+        let vel =
+            kinematic_angles(&commands(CommandKind::Velocity), &[0.0, 0.0], &times, 0.0).unwrap();
+        let q: Vec<f64> = vel.iter().map(|r| r[1]).collect();
+        for (a, b) in q.iter().zip([0.0, 0.25, 0.5, 0.25, 0.0]) {
+            assert!((a - b).abs() < 1e-12, "{q:?}");
+        }
+        assert!(kinematic_angles(&commands(CommandKind::Effort), &[0.0; 2], &times, 0.0).is_none());
+    }
+
+    #[test]
+    fn bad_plans_are_refused_with_a_reason() {
+        let plan = ReplayPlan {
+            commands: commands(CommandKind::Position),
+            sample_times_s: vec![0.0, 1.0],
+            initial_angles_rad: vec![0.0; 2],
+            initial_velocities_rad_s: vec![0.0; 2],
+            kp: vec![10.0; 2],
+            kv: vec![1.0; 2],
+            delay_s: 0.0,
+            roles: vec![],
+            divergence_bound_m: 10.0,
+        };
+        assert_eq!(plan.check(2), Ok(()));
+        let mut bad = plan.clone();
+        bad.kv[0] = 0.0;
+        assert!(bad.check(2).unwrap_err().contains("kv > 0"));
+        let mut bad = plan.clone();
+        bad.commands.kind = CommandKind::Effort;
+        assert!(bad
+            .check(2)
+            .unwrap_err()
+            .contains("effort commands cannot be replayed yet"));
+        let mut bad = plan.clone();
+        bad.kp[1] = f64::NAN;
+        assert!(bad.check(2).unwrap_err().contains("kp of joint 2 is NaN"));
+        assert!(plan.check(1).is_err(), "commands joint 2 of 1");
+        let mut bad = plan;
+        bad.sample_times_s = vec![1.0, 0.5];
+        assert!(bad.check(2).is_err());
+    }
+}

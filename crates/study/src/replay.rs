@@ -1,0 +1,587 @@
+//! `realitygap replay`: a robot's recorded episodes (a results directory
+//! of `realitygap import rosbag|csv|lerobot`) replayed in every engine, and
+//! the gap measured in joint space.
+//!
+//! For each episode and engine: a scene of the recording's robot (the URDF,
+//! its base at the origin, one servo per moving joint with the typed gains
+//! `joints.<joint>.kp` and `joints.<joint>.kv`, its end effector tracked as
+//! `wrist`; written to `OUT/replay.toml`, or the user's `--scene`), the
+//! engine started from the episode's first joint state, and the recorded
+//! commands applied at their timestamps ([`realitygap_core::replay`]). One
+//! results directory per engine (`OUT/<engine>/`, a run per episode, rerun
+//! skips finished runs), and the physics-free model (`OUT/kinematic/`: the
+//! commands with perfect tracking), then the joint-space table.
+
+use anyhow::{anyhow, bail, Context, Result};
+use realitygap_core::controller::{load_prepared, prepare, refuse_unstable, RunOptions, RunStatus};
+use realitygap_core::replay::{kinematic_angles, replay, ReplayPlan};
+use realitygap_core::robot::RobotModel;
+use realitygap_core::trajectory::WRIST;
+use realitygap_core::{BodyTrack, Engine, PhysicalParams, Pose, Scene, Trajectory};
+use realitygap_data::{EngineInfo, RunEntry, RunStatus as StoredStatus, RunStore, SourceKind};
+use serde_json::{json, Value};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+/// Name of the scene written into the output folder.
+pub const SCENE_FILE: &str = "replay.toml";
+/// Source name of the physics-free model.
+pub const KINEMATIC: &str = "kinematic";
+/// Engine timestep of the generated scene, s (every engine).
+pub const TIMESTEP_S: f64 = 1e-3;
+
+/// What to replay, where, and how.
+pub struct ReplayRequest<'a> {
+    /// The recorded episodes (a results directory of an import).
+    pub real_dir: &'a Path,
+    /// The robot's URDF; `None`: the one the import recorded.
+    pub urdf: Option<&'a Path>,
+    /// ROS packages for `package://` URIs (NAME=DIR).
+    pub packages: &'a [String],
+    /// Typed physical parameters (servo gains, damping, delay, ...).
+    pub params: &'a PhysicalParams,
+    /// A scene to use instead of the generated one.
+    pub scene: Option<&'a Path>,
+    /// The output folder.
+    pub out: &'a Path,
+}
+
+/// One recorded episode.
+pub struct Episode {
+    /// Its run id.
+    pub id: String,
+    /// Its trajectory (joint angles, commands, end-effector poses).
+    pub real: Trajectory,
+}
+
+/// Everything a replay needs, read and checked before any engine runs.
+pub struct Prepared {
+    /// The robot.
+    pub robot: RobotModel,
+    /// The scene every engine runs.
+    pub scene: Scene,
+    /// The episodes.
+    pub episodes: Vec<Episode>,
+    /// The end-effector link's name.
+    pub link: String,
+}
+
+/// The default gains of a joint whose gains the parameters do not give:
+/// full effort at 0.05 rad of error (kp; effort 100 N m when the URDF gives
+/// none or no finite one), and kv = kp * 0.1 s. Printed in the scene file.
+fn default_gains(effort_limit: f64) -> (f64, f64) {
+    let effort = if effort_limit.is_finite() && effort_limit > 0.0 && effort_limit < 1e5 {
+        effort_limit
+    } else {
+        100.0
+    };
+    let kp = effort / 0.05;
+    (kp, kp * 0.1)
+}
+
+/// The TOML of the generated replay scene.
+pub fn scene_toml(robot: &RobotModel, urdf: &Path, link: &str, duration_s: f64) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "# The scene of `realitygap replay`: robot {} ({}), every moving joint\n\
+         # servoed, the end effector {link} tracked. Gains: kv here is the servo's\n\
+         # velocity gain (N m s/rad); the position gain kp is a parameter\n\
+         # (joints.<joint>.kp, default in the comment of each actuator).",
+        robot.name,
+        urdf.display()
+    );
+    let _ = writeln!(s, "name = \"replay\"");
+    let _ = writeln!(
+        s,
+        "description = \"Replay of recorded joint commands on {}\"",
+        robot.name
+    );
+    let _ = writeln!(s, "duration_s = {duration_s:?}\n");
+    let _ = writeln!(
+        s,
+        "[robot]\nurdf = {:?}\nbase_position_m = [0.0, 0.0, 0.0]\nbase_rpy_deg = [0.0, 0.0, 0.0]\n",
+        urdf.display().to_string()
+    );
+    let _ = writeln!(s, "# Unused by a replay (the recorded commands drive the servos).\n[controller]\ngain_per_s = 1.0\nmax_speed_deg_s = 1.0\nperiod_s = {TIMESTEP_S:?}\n");
+    for &j in &robot.actuated_joints() {
+        let joint = &robot.joints[j];
+        let effort = joint.limits.as_ref().map_or(0.0, |l| l.effort);
+        let force = if effort.is_finite() && effort > 0.0 {
+            effort
+        } else {
+            1e6
+        };
+        let (kp, kv) = default_gains(force);
+        let _ = writeln!(
+            s,
+            "[[actuator]]  # default kp = {kp:?} N m/rad\njoint = {:?}\nkv = {kv:?}\nforce_limit = {force:?}\n",
+            joint.name
+        );
+    }
+    let _ = writeln!(s, "[[schedule]]\nt_s = 0.0\ntargets_deg = {{}}\n");
+    let _ = writeln!(s, "[[track]]\nrole = \"wrist\"\nlink = {link:?}\n");
+    for engine in ["mujoco", "bullet", "ode", "rapier", "physx"] {
+        let _ = writeln!(s, "[engine.{engine}]\ntimestep_s = {TIMESTEP_S:?}");
+        match engine {
+            // Implicit servo damping: stiff gains at 1 ms stay stable.
+            "mujoco" => {
+                let _ = writeln!(s, "integrator = \"implicitfast\"");
+            }
+            // The kv servo (motor CFM = 1/kv), so that kv and the PD law hold;
+            // ODE's default motor is stiff and has no gain.
+            "ode" => {
+                let _ = writeln!(s, "servo = \"kv\"");
+            }
+            _ => {}
+        }
+        s.push('\n');
+    }
+    s
+}
+
+/// Reads the episodes and the robot, and writes or reads the scene.
+pub fn prepare_replay(req: &ReplayRequest) -> Result<Prepared> {
+    let store = RunStore::open(req.real_dir).with_context(|| {
+        format!(
+            "reading the recorded episodes in {}",
+            req.real_dir.display()
+        )
+    })?;
+    let settings = &store.manifest().settings;
+    let urdf: PathBuf = match req.urdf {
+        Some(u) => u.to_path_buf(),
+        None => settings
+            .get("urdf")
+            .and_then(Value::as_str)
+            .map(PathBuf::from)
+            .ok_or_else(|| {
+                anyhow!(
+                    "{}: the manifest names no URDF (not an import of joint recordings?): give --robot",
+                    req.real_dir.display()
+                )
+            })?,
+    };
+    let resolver = realitygap_runner::prepare::resolver(req.packages)?;
+    let robot = RobotModel::from_urdf_file(&urdf, &resolver)?;
+    let recorded: Vec<String> = settings
+        .get("joints")
+        .and_then(Value::as_array)
+        .map(|a| {
+            a.iter()
+                .filter_map(|v| v.as_str().map(String::from))
+                .collect()
+        })
+        .unwrap_or_default();
+    let moving: Vec<String> = robot
+        .actuated_joints()
+        .iter()
+        .map(|&j| robot.joints[j].name.clone())
+        .collect();
+    if !recorded.is_empty() && recorded != moving {
+        bail!(
+            "{}: the episodes are of the joints {}, robot '{}' ({}) has the moving joints {}",
+            req.real_dir.display(),
+            recorded.join(", "),
+            robot.name,
+            urdf.display(),
+            moving.join(", ")
+        );
+    }
+    let link = settings
+        .get("end_effector_link")
+        .and_then(Value::as_str)
+        .map(String::from)
+        .unwrap_or_else(|| {
+            robot.links[robot.joints[*robot.actuated_joints().last().unwrap_or(&0)].child]
+                .name
+                .clone()
+        });
+    let mut episodes = Vec::new();
+    for run in store.runs() {
+        if run.status != StoredStatus::Ok {
+            continue;
+        }
+        let real = store.read_run(&run.id)?;
+        if real.commands.is_none() {
+            bail!(
+                "{}: run '{}' has no recorded commands to replay (import it with its command topic or columns)",
+                req.real_dir.display(),
+                run.id
+            );
+        }
+        if real.joint_count() != moving.len() {
+            bail!(
+                "{}: run '{}' has {} joints, robot '{}' {}",
+                req.real_dir.display(),
+                run.id,
+                real.joint_count(),
+                robot.name,
+                moving.len()
+            );
+        }
+        episodes.push(Episode {
+            id: run.id.clone(),
+            real,
+        });
+    }
+    if episodes.is_empty() {
+        bail!("{}: no recorded episode to replay", req.real_dir.display());
+    }
+    let duration = episodes
+        .iter()
+        .map(|e| e.real.time_s.last().copied().unwrap_or(0.0))
+        .fold(0.0, f64::max);
+    let duration_s = ((duration / TIMESTEP_S).ceil().max(1.0)) * TIMESTEP_S;
+    std::fs::create_dir_all(req.out).with_context(|| format!("creating {}", req.out.display()))?;
+    let scene = match req.scene {
+        Some(path) => Scene::from_file(path)?,
+        None => {
+            let abs_urdf = std::fs::canonicalize(&urdf).unwrap_or(urdf.clone());
+            let text = scene_toml(&robot, &abs_urdf, &link, duration_s);
+            let path = req.out.join(SCENE_FILE);
+            std::fs::write(&path, &text).with_context(|| format!("writing {}", path.display()))?;
+            Scene::from_toml_str(&text, &path)?
+        }
+    };
+    scene.validate(&robot)?;
+    Ok(Prepared {
+        robot,
+        scene,
+        episodes,
+        link,
+    })
+}
+
+/// The replay plan of one episode in `scene` with `params`.
+pub fn plan_for(episode: &Episode, scene: &Scene, params: &PhysicalParams) -> Result<ReplayPlan> {
+    let real = &episode.real;
+    let commands = real
+        .commands
+        .clone()
+        .ok_or_else(|| anyhow!("run '{}' has no commands", episode.id))?;
+    let angles = real
+        .joint_angles_rad
+        .as_ref()
+        .and_then(|r| r.first())
+        .cloned()
+        .ok_or_else(|| anyhow!("run '{}' has no joint angles", episode.id))?;
+    let velocities = real
+        .joint_velocities_rad_s
+        .as_ref()
+        .and_then(|r| r.first())
+        .cloned()
+        .unwrap_or_else(|| vec![0.0; angles.len()]);
+    let mut kp = Vec::new();
+    let mut kv = Vec::new();
+    for a in &scene.actuators {
+        let given = params.joints.get(&a.joint);
+        let (default_kp, _) = default_gains(a.force_limit);
+        kp.push(given.and_then(|g| g.kp).unwrap_or(default_kp));
+        kv.push(given.and_then(|g| g.kv).unwrap_or(a.kv));
+    }
+    Ok(ReplayPlan {
+        commands,
+        sample_times_s: real.time_s.clone(),
+        initial_angles_rad: angles,
+        initial_velocities_rad_s: velocities,
+        kp,
+        kv,
+        delay_s: params.delay_s(),
+        roles: scene.tracked.iter().map(|t| t.role.clone()).collect(),
+        divergence_bound_m: RunOptions::default().divergence_bound_m,
+    })
+}
+
+/// The physics-free model of an episode: the commands with perfect tracking
+/// through forward kinematics (`None` for effort commands).
+pub fn kinematic_run(
+    episode: &Episode,
+    robot: &RobotModel,
+    link: usize,
+    delay_s: f64,
+) -> Option<Trajectory> {
+    let real = &episode.real;
+    let commands = real.commands.as_ref()?;
+    let first = real.joint_angles_rad.as_ref()?.first()?;
+    let angles = kinematic_angles(commands, first, &real.time_s, delay_s)?;
+    let actuated = robot.actuated_joints();
+    let mut full = vec![0.0; robot.joints.len()];
+    let poses = angles
+        .iter()
+        .map(|row| {
+            for (&j, &q) in actuated.iter().zip(row) {
+                full[j] = q;
+            }
+            robot.link_pose(&Pose::IDENTITY, &full, link)
+        })
+        .collect();
+    Some(Trajectory {
+        time_s: real.time_s.clone(),
+        bodies: vec![BodyTrack {
+            role: WRIST.into(),
+            poses,
+        }],
+        joint_angles_rad: Some(angles),
+        ..Trajectory::default()
+    })
+}
+
+/// The outcome of one replayed episode in one engine.
+pub struct Replayed {
+    /// The run id (the episode's).
+    pub id: String,
+    /// The engine's name.
+    pub engine: String,
+    /// What happened: the trajectory stored, or why not.
+    pub result: Result<(Trajectory, RunStatus, f64), String>,
+    /// True when the run was already stored (not simulated again).
+    pub reused: bool,
+}
+
+/// Replays one episode in one engine.
+pub fn replay_one(
+    engine: &dyn Engine,
+    prepared: &Prepared,
+    episode: &Episode,
+    params: &PhysicalParams,
+) -> Result<(Trajectory, RunStatus, f64), String> {
+    let options = RunOptions::default();
+    let (scene, robot) =
+        prepare(engine, &prepared.scene, &prepared.robot, params).map_err(|e| e.to_string())?;
+    let settings = scene
+        .engine_settings
+        .get(engine.name())
+        .cloned()
+        .unwrap_or_default();
+    let mut sim = load_prepared(engine, &scene, &robot, &settings, params, &options)
+        .map_err(|e| e.to_string())?;
+    refuse_unstable(engine, sim.as_ref(), &options).map_err(|e| e.to_string())?;
+    let plan = plan_for(episode, &scene, params).map_err(|e| e.to_string())?;
+    let outcome = replay(sim.as_mut(), &plan).map_err(|e| e.to_string())?;
+    Ok((outcome.trajectory, outcome.status, outcome.wall_time_s))
+}
+
+/// Stores one replayed run in `OUT/<engine>/`.
+pub fn store_replayed(out: &Path, engine: &dyn Engine, run: &Replayed) -> Result<()> {
+    let dir = out.join(engine.name());
+    let mut store =
+        RunStore::create_or_open(&dir, engine.name(), SourceKind::Simulated, Some("replay"))?;
+    store.set_engine(EngineInfo {
+        name: engine.name().to_string(),
+        version: engine.version(),
+    })?;
+    let mut entry = RunEntry::new(&run.id);
+    match &run.result {
+        Ok((trajectory, status, wall)) => {
+            entry.wall_time_s = Some(*wall);
+            if let RunStatus::Diverged { t_s, reason } = status {
+                entry.status = StoredStatus::Diverged;
+                entry.message = Some(format!("diverged at {t_s:.3} s: {reason}"));
+            }
+            store.write_run(entry, trajectory)?;
+        }
+        Err(message) => {
+            entry.message = Some(message.clone());
+            store.record_failed_run(entry)?;
+        }
+    }
+    Ok(())
+}
+
+/// Stores the physics-free runs in `OUT/kinematic/`.
+pub fn store_kinematic(out: &Path, prepared: &Prepared, delay_s: f64) -> Result<usize> {
+    let link = prepared
+        .robot
+        .link_by_name(&prepared.link)
+        .ok_or_else(|| anyhow!("robot has no link {}", prepared.link))?;
+    let mut store = RunStore::create_or_open(
+        &out.join(KINEMATIC),
+        KINEMATIC,
+        SourceKind::Simulated,
+        Some("replay"),
+    )?;
+    store.set_settings(json!({"model": "the recorded commands with perfect tracking, through forward kinematics", "delay_s": delay_s}))?;
+    let mut count = 0;
+    for e in &prepared.episodes {
+        if let Some(t) = kinematic_run(e, &prepared.robot, link, delay_s) {
+            store.write_run(RunEntry::new(&e.id), &t)?;
+            count += 1;
+        }
+    }
+    Ok(count)
+}
+
+/// Joint-space errors of one source against the recordings.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct JointSpaceRow {
+    /// Source name (an engine, or `kinematic`).
+    pub source: String,
+    /// Episodes compared.
+    pub episodes: usize,
+    /// Per joint: RMS angle error over every sample of every episode, deg.
+    pub rms_deg: Vec<f64>,
+    /// Per joint: largest absolute angle error, deg.
+    pub max_deg: Vec<f64>,
+    /// RMS over all joints and samples, deg.
+    pub rms_all_deg: f64,
+    /// The per-episode all-joint RMS, smallest and largest, deg.
+    pub episode_range_deg: (f64, f64),
+    /// RMS end-effector position error, mm.
+    pub end_effector_rms_mm: f64,
+}
+
+/// The joint-space comparison of `runs` (episode id -> trajectory) with the
+/// recordings; `None` when no episode was comparable.
+pub fn joint_space_row(
+    source: &str,
+    prepared: &Prepared,
+    runs: &[(String, Trajectory)],
+) -> Option<JointSpaceRow> {
+    let joints = prepared.robot.actuated_joints().len();
+    let mut sum = vec![0.0; joints];
+    let mut max = vec![0.0f64; joints];
+    let mut n = 0usize;
+    let mut ee_sum = 0.0;
+    let mut ee_n = 0usize;
+    let mut per_episode = Vec::new();
+    for (id, sim) in runs {
+        let Some(e) = prepared.episodes.iter().find(|e| &e.id == id) else {
+            continue;
+        };
+        let (Some(real_q), Some(sim_q)) = (&e.real.joint_angles_rad, &sim.joint_angles_rad) else {
+            continue;
+        };
+        let len = real_q.len().min(sim_q.len());
+        if len == 0 {
+            continue;
+        }
+        let mut ep_sum = 0.0;
+        for i in 0..len {
+            for j in 0..joints {
+                let d = (sim_q[i][j] - real_q[i][j]).to_degrees();
+                sum[j] += d * d;
+                ep_sum += d * d;
+                max[j] = max[j].max(d.abs());
+            }
+            let real_p = e.real.bodies.first().and_then(|b| b.poses[i]);
+            let sim_p = sim
+                .bodies
+                .first()
+                .and_then(|b| b.poses.get(i).copied().flatten());
+            if let (Some(a), Some(b)) = (real_p, sim_p) {
+                let d = a.position_m - b.position_m;
+                ee_sum += d.dot(d);
+                ee_n += 1;
+            }
+        }
+        n += len;
+        per_episode.push((ep_sum / (len * joints) as f64).sqrt());
+    }
+    if n == 0 {
+        return None;
+    }
+    let rms_deg: Vec<f64> = sum.iter().map(|s| (s / n as f64).sqrt()).collect();
+    let rms_all_deg = (sum.iter().sum::<f64>() / (n * joints) as f64).sqrt();
+    let lo = per_episode.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = per_episode.iter().copied().fold(0.0, f64::max);
+    Some(JointSpaceRow {
+        source: source.to_string(),
+        episodes: per_episode.len(),
+        rms_deg,
+        max_deg: max,
+        rms_all_deg,
+        episode_range_deg: (lo, hi),
+        end_effector_rms_mm: if ee_n > 0 {
+            (ee_sum / ee_n as f64).sqrt() * 1e3
+        } else {
+            f64::NAN
+        },
+    })
+}
+
+/// The joint-space table as Markdown.
+pub fn joint_space_markdown(rows: &[JointSpaceRow], joint_names: &[String]) -> String {
+    let mut s = String::from("| source | episodes | RMS all joints (deg) | per-episode range (deg) | end effector RMS (mm) |");
+    for j in joint_names {
+        let _ = write!(s, " {j} RMS (deg) |");
+    }
+    s.push('\n');
+    s.push_str("|---|---:|---:|---:|---:|");
+    for _ in joint_names {
+        s.push_str("---:|");
+    }
+    s.push('\n');
+    for r in rows {
+        let _ = write!(
+            s,
+            "| {} | {} | {:.3} | [{:.3}, {:.3}] | {:.2} |",
+            r.source,
+            r.episodes,
+            r.rms_all_deg,
+            r.episode_range_deg.0,
+            r.episode_range_deg.1,
+            r.end_effector_rms_mm
+        );
+        for x in &r.rms_deg {
+            let _ = write!(s, " {x:.3} |");
+        }
+        s.push('\n');
+    }
+    s
+}
+
+/// Replays every episode in every engine, in parallel over the machine's
+/// cores, storing each run as it finishes (an interrupted batch loses no
+/// finished run; a rerun skips runs already stored). `done` is told of
+/// each run, stored or kept.
+pub fn replay_all(
+    engines: &[Box<dyn Engine>],
+    prepared: &Prepared,
+    params: &PhysicalParams,
+    out: &Path,
+    done: &(dyn Fn(&Replayed) + Sync),
+) -> Result<Vec<Replayed>> {
+    use rayon::prelude::*;
+    let finished = |engine: &dyn Engine, id: &str| {
+        RunStore::open(&out.join(engine.name()))
+            .map(|s| s.has_finished_run(id))
+            .unwrap_or(false)
+    };
+    let jobs: Vec<(usize, usize)> = (0..engines.len())
+        .flat_map(|e| (0..prepared.episodes.len()).map(move |k| (e, k)))
+        .collect();
+    let lock = std::sync::Mutex::new(());
+    let results: Vec<Result<Replayed>> = jobs
+        .par_iter()
+        .map(|&(e, k)| {
+            let engine = engines[e].as_ref();
+            let episode = &prepared.episodes[k];
+            if finished(engine, &episode.id) {
+                let store = RunStore::open(&out.join(engine.name()))?;
+                let trajectory = store.read_run(&episode.id)?;
+                let run = Replayed {
+                    id: episode.id.clone(),
+                    engine: engine.name().to_string(),
+                    result: Ok((trajectory, RunStatus::Completed, 0.0)),
+                    reused: true,
+                };
+                done(&run);
+                return Ok(run);
+            }
+            let run = Replayed {
+                id: episode.id.clone(),
+                engine: engine.name().to_string(),
+                result: replay_one(engine, prepared, episode, params),
+                reused: false,
+            };
+            {
+                let _guard = lock.lock().unwrap_or_else(|p| p.into_inner());
+                store_replayed(out, engine, &run)?;
+            }
+            done(&run);
+            Ok(run)
+        })
+        .collect();
+    results.into_iter().collect()
+}
