@@ -102,6 +102,13 @@ pub(crate) fn paper_data() -> PathBuf {
 /// passes every test.
 #[cfg(test)]
 pub(crate) fn published_paper_data() -> Option<PathBuf> {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/paper-data");
+    // The crate's folder at run time (cargo sets it; so does
+    // scripts/test-without-shared for a copy of the project), else at build
+    // time: the copy's ../shared is what counts, not the build's.
+    let crate_dir = std::env::var_os("CARGO_MANIFEST_DIR")
+        .map(PathBuf::from)
+        .filter(|d| d.join("../../Cargo.toml").is_file())
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")));
+    let dir = crate_dir.join("../../../shared/paper-data");
     (dir.join("MotionCapture").is_dir() && dir.join("Simulation").is_dir()).then_some(dir)
 }
