@@ -129,7 +129,26 @@ fn with_the_writers_parameters_the_engines_reproduce_the_recording() {
         let rms = rms_of(&rows, e);
         println!("{e}: {rms:.4} deg RMS against the recording (kinematic {kinematic:.3})");
         assert!(rms < 0.05, "{e} with the writer's parameters: {rms} deg");
+        let row = rows.iter().find(|r| r["source"] == e).unwrap();
+        assert!(
+            row["delay_ms"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .all(|d| d.as_f64() == Some(0.0)),
+            "{e} keeps time with the recording: {row}"
+        );
     }
+    // Perfect tracking leads the arm (its servo lags): a negative delay.
+    let kin = rows.iter().find(|r| r["source"] == "kinematic").unwrap();
+    assert!(
+        kin["delay_ms"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|d| d.as_f64().unwrap() < -20.0),
+        "{kin}"
+    );
     assert!(out.join("replay.toml").is_file() && out.join("joint_space.md").is_file());
     let store = RunStore::open(&out.join("mujoco")).unwrap();
     assert_eq!(store.runs().len(), 2);

@@ -429,6 +429,40 @@ pub struct JointSpaceRow {
     pub episode_range_deg: (f64, f64),
     /// RMS end-effector position error, mm.
     pub end_effector_rms_mm: f64,
+    /// Per joint: the tracking delay against the recording, ms: the shift
+    /// of the source's angles (whole samples, within ±`MAX_DELAY_S`) that
+    /// fits the recorded angles best; positive when the source lags.
+    pub delay_ms: Vec<f64>,
+}
+
+/// The largest tracking delay looked for, s.
+pub const MAX_DELAY_S: f64 = 0.2;
+
+/// Accumulates, per joint and per shift of `sim` against `real` (in whole
+/// samples, `-max_shift..=max_shift`), the squared angle differences and
+/// their count: `costs[j][shift + max_shift]`.
+fn add_shift_costs(
+    real: &[Vec<f64>],
+    sim: &[Vec<f64>],
+    max_shift: usize,
+    costs: &mut [Vec<(f64, usize)>],
+) {
+    let len = real.len().min(sim.len());
+    for (j, cost) in costs.iter_mut().enumerate() {
+        for (k, slot) in cost.iter_mut().enumerate() {
+            let shift = k as isize - max_shift as isize;
+            // The source lags by `shift` samples: sim[i + shift] ~ real[i].
+            for (i, real_row) in real.iter().enumerate().take(len) {
+                let t = i as isize + shift;
+                if t < 0 || t >= len as isize {
+                    continue;
+                }
+                let d = sim[t as usize][j] - real_row[j];
+                slot.0 += d * d;
+                slot.1 += 1;
+            }
+        }
+    }
 }
 
 /// The joint-space comparison of `runs` (episode id -> trajectory) with the
@@ -445,6 +479,17 @@ pub fn joint_space_row(
     let mut ee_sum = 0.0;
     let mut ee_n = 0usize;
     let mut per_episode = Vec::new();
+    let spacing = prepared
+        .episodes
+        .first()
+        .and_then(|e| {
+            let t = &e.real.time_s;
+            (t.len() > 1).then(|| (t[t.len() - 1] - t[0]) / (t.len() - 1) as f64)
+        })
+        .filter(|s| *s > 0.0)
+        .unwrap_or(1.0);
+    let max_shift = (MAX_DELAY_S / spacing).round() as usize;
+    let mut costs = vec![vec![(0.0, 0usize); 2 * max_shift + 1]; joints];
     for (id, sim) in runs {
         let Some(e) = prepared.episodes.iter().find(|e| &e.id == id) else {
             continue;
@@ -477,6 +522,7 @@ pub fn joint_space_row(
         }
         n += len;
         per_episode.push((ep_sum / (len * joints) as f64).sqrt());
+        add_shift_costs(&real_q[..len], &sim_q[..len], max_shift, &mut costs);
     }
     if n == 0 {
         return None;
@@ -497,17 +543,28 @@ pub fn joint_space_row(
         } else {
             f64::NAN
         },
+        delay_ms: costs
+            .iter()
+            .map(|c| {
+                let mean = |k: usize| c[k].0 / c[k].1 as f64;
+                let best = (0..c.len())
+                    .filter(|&k| c[k].1 > 0)
+                    .min_by(|&a, &b| mean(a).total_cmp(&mean(b)))
+                    .unwrap_or(max_shift);
+                (best as f64 - max_shift as f64) * spacing * 1e3
+            })
+            .collect(),
     })
 }
 
 /// The joint-space table as Markdown.
 pub fn joint_space_markdown(rows: &[JointSpaceRow], joint_names: &[String]) -> String {
-    let mut s = String::from("| source | episodes | RMS all joints (deg) | per-episode range (deg) | end effector RMS (mm) |");
+    let mut s = String::from("| source | episodes | RMS all joints (deg) | per-episode range (deg) | end effector RMS (mm) | delay per joint (ms) |");
     for j in joint_names {
         let _ = write!(s, " {j} RMS (deg) |");
     }
     s.push('\n');
-    s.push_str("|---|---:|---:|---:|---:|");
+    s.push_str("|---|---:|---:|---:|---:|---|");
     for _ in joint_names {
         s.push_str("---:|");
     }
@@ -515,13 +572,18 @@ pub fn joint_space_markdown(rows: &[JointSpaceRow], joint_names: &[String]) -> S
     for r in rows {
         let _ = write!(
             s,
-            "| {} | {} | {:.3} | [{:.3}, {:.3}] | {:.2} |",
+            "| {} | {} | {:.3} | [{:.3}, {:.3}] | {:.2} | {} |",
             r.source,
             r.episodes,
             r.rms_all_deg,
             r.episode_range_deg.0,
             r.episode_range_deg.1,
-            r.end_effector_rms_mm
+            r.end_effector_rms_mm,
+            r.delay_ms
+                .iter()
+                .map(|d| format!("{d:.0}"))
+                .collect::<Vec<_>>()
+                .join(" / ")
         );
         for x in &r.rms_deg {
             let _ = write!(s, " {x:.3} |");
