@@ -2,43 +2,20 @@
 //! writer's recordings of a simulated KUKA iiwa (`scripts/make-fixtures`),
 //! and on damaged ones.
 
+mod common;
+use common::{path, realitygap, scratch, text};
 use realitygap_core::testing::{iiwa_urdf, joint_recording_fixtures as fixtures, workspace};
 use realitygap_data::{RunStore, SourceKind};
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::path::PathBuf;
 
 fn urdf() -> String {
     iiwa_urdf().display().to_string()
 }
 
-fn realitygap(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_realitygap"))
-        .args(args)
-        .output()
-        .expect("the binary runs")
-}
-
-fn text(bytes: &[u8]) -> String {
-    String::from_utf8_lossy(bytes).into_owned()
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
-        .join("import-recordings-tests")
-        .join(name);
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn path(p: &Path) -> String {
-    p.display().to_string()
-}
-
 #[test]
 fn every_format_imports_through_the_command() {
     let f = fixtures();
-    let base = scratch("formats");
+    let base = scratch("import-recordings-tests", "formats");
     let urdf = urdf();
     let bag_out = base.join("bag");
     let out = realitygap(&[
@@ -109,7 +86,7 @@ fn every_format_imports_through_the_command() {
 #[test]
 fn bad_recordings_fail_with_a_located_message_and_write_nothing() {
     let f = fixtures();
-    let base = scratch("bad");
+    let base = scratch("import-recordings-tests", "bad");
     let urdf = urdf();
     let cases: [(&str, PathBuf, &str); 4] = [
         (

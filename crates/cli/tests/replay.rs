@@ -5,35 +5,12 @@
 //! is a row of the table; reruns keep finished runs; effort commands and
 //! impossible gains are refused with a reason.
 
+mod common;
+use common::{path, realitygap, scratch, text};
 use realitygap_core::testing::{iiwa_urdf, joint_recording_fixtures as fixtures};
 use realitygap_data::RunStore;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn realitygap(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_realitygap"))
-        .args(args)
-        .output()
-        .expect("the binary runs")
-}
-
-fn text(bytes: &[u8]) -> String {
-    String::from_utf8_lossy(bytes).into_owned()
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
-        .join("replay-tests")
-        .join(name);
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn path(p: &Path) -> String {
-    p.display().to_string()
-}
 
 /// Imports the first two episodes of the MCAP bags into `dir/real`.
 fn import(dir: &Path) -> PathBuf {
@@ -101,7 +78,7 @@ fn rms_of(rows: &[Value], source: &str) -> f64 {
 
 #[test]
 fn with_the_writers_parameters_the_engines_reproduce_the_recording() {
-    let dir = scratch("truth");
+    let dir = scratch("replay-tests", "truth");
     let real = import(&dir);
     let params = truth_params(&dir, &[]);
     let out = dir.join("replay");
@@ -164,7 +141,7 @@ fn with_the_writers_parameters_the_engines_reproduce_the_recording() {
 
 #[test]
 fn every_engine_replays_at_its_defaults_and_refusals_are_named() {
-    let dir = scratch("defaults");
+    let dir = scratch("replay-tests", "defaults");
     let real = import(&dir);
     let out = dir.join("replay");
     let run = realitygap(&["replay", &path(&real), "--out", &path(&out)]);
@@ -201,7 +178,7 @@ fn every_engine_replays_at_its_defaults_and_refusals_are_named() {
 
 #[test]
 fn effort_commands_and_bad_gains_are_refused_with_a_reason() {
-    let dir = scratch("refused");
+    let dir = scratch("replay-tests", "refused");
     // The writer's CSV with its command columns read as efforts.
     let csv = std::fs::read_to_string(fixtures().join("csv/episode_000.csv")).unwrap();
     let effort = dir.join("effort.csv");

@@ -242,16 +242,7 @@ impl Recording {
         let t0 = self.states.time_ns[0];
         let seconds = |t: i64| (t - t0) as f64 / NS_PER_S;
         let angles = reorder(&self.states.position);
-        let mut full = vec![0.0; robot.joints.len()];
-        let poses: Vec<Option<Pose>> = angles
-            .iter()
-            .map(|row| {
-                for (&j, &q) in actuated.iter().zip(row) {
-                    full[j] = q;
-                }
-                robot.link_pose(&Pose::IDENTITY, &full, link)
-            })
-            .collect();
+        let poses = robot.link_poses_from_actuated(&Pose::IDENTITY, &angles, link);
         let commands = match &self.commands {
             None => None,
             Some(c) => {

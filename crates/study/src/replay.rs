@@ -305,17 +305,7 @@ pub fn kinematic_run(
     let commands = real.commands.as_ref()?;
     let first = real.joint_angles_rad.as_ref()?.first()?;
     let angles = kinematic_angles(commands, first, &real.time_s, delay_s)?;
-    let actuated = robot.actuated_joints();
-    let mut full = vec![0.0; robot.joints.len()];
-    let poses = angles
-        .iter()
-        .map(|row| {
-            for (&j, &q) in actuated.iter().zip(row) {
-                full[j] = q;
-            }
-            robot.link_pose(&Pose::IDENTITY, &full, link)
-        })
-        .collect();
+    let poses = robot.link_poses_from_actuated(&Pose::IDENTITY, &angles, link);
     Some(Trajectory {
         time_s: real.time_s.clone(),
         bodies: vec![BodyTrack {

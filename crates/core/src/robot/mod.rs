@@ -693,6 +693,28 @@ impl RobotModel {
         poses
     }
 
+    /// World poses of `link` for each row of positions in
+    /// [`RobotModel::actuated_joints`] order (a joint recording's samples),
+    /// with the root link frame at `base`; `None` when `link` is out of
+    /// range.
+    pub fn link_poses_from_actuated(
+        &self,
+        base: &Pose,
+        rows: &[Vec<f64>],
+        link: usize,
+    ) -> Vec<Option<Pose>> {
+        let actuated = self.actuated_joints();
+        let mut full = vec![0.0; self.joints.len()];
+        rows.iter()
+            .map(|row| {
+                for (&j, &q) in actuated.iter().zip(row) {
+                    full[j] = q;
+                }
+                self.link_pose(base, &full, link)
+            })
+            .collect()
+    }
+
     /// World pose of one link frame (see [`RobotModel::forward_kinematics`]);
     /// only the joints on the chain to `link` are evaluated. `None` when
     /// `link` is out of range.
