@@ -24,8 +24,28 @@ use std::time::Instant;
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// The study file (TOML), e.g. assets/studies/collins2019.toml: its
-    /// scenes are simulated and compared with its real runs.
-    pub study: PathBuf,
+    /// scenes are simulated and compared with its real runs. Not with
+    /// --recordings.
+    #[arg(required_unless_present = "recordings", conflicts_with = "recordings")]
+    pub study: Option<PathBuf>,
+    /// Tune against a robot's own recorded episodes instead of a study: a
+    /// results directory written by `realitygap import rosbag|csv|lerobot`
+    /// (joint space; --robot is then the URDF, default the one the import
+    /// recorded).
+    #[arg(long, value_name = "DIR")]
+    pub recordings: Option<PathBuf>,
+    /// With --recordings: parameters known and fixed, never searched (the
+    /// servo gains of your ros2_control configuration, say), as a
+    /// parameters file.
+    #[arg(long, value_name = "FILE")]
+    pub params: Option<PathBuf>,
+    /// With --recordings: a replay scene to use instead of the generated
+    /// one (engine settings, actuators), as for `replay --scene`.
+    #[arg(long, value_name = "FILE")]
+    pub scene: Option<PathBuf>,
+    /// With --recordings: Levenberg-Marquardt iterations at most.
+    #[arg(long, default_value_t = 30, value_name = "N")]
+    pub iterations: usize,
     /// Folder of the study's recordings: `builtin` (default) or a folder.
     #[arg(long, value_name = "builtin|DIR", default_value = "builtin")]
     pub data: DataSource,
@@ -38,7 +58,9 @@ pub struct Args {
     /// Parameter space (TOML); default assets/tuning/<engine>.toml.
     #[arg(long, value_name = "FILE")]
     pub space: Option<PathBuf>,
-    /// Real runs to fit on, e.g. 1-15 (default: all).
+    /// Real runs (or recorded episodes, numbered from 1 in the results
+    /// directory's order) to fit on, e.g. 1-15 (default: all; with
+    /// --recordings and no --holdout, all but the last quarter).
     #[arg(long, value_name = "RANGE")]
     pub runs: Option<String>,
     /// Real runs to score on and never fit on, e.g. 16-20.
@@ -90,6 +112,21 @@ const SLURM_THREADS: usize = 64;
 
 /// Runs the command.
 pub fn run(args: Args) -> Result<()> {
+    if let Some(recordings) = args.recordings.clone() {
+        return run_recordings(args, &recordings);
+    }
+    for (given, flag) in [
+        (args.params.is_some(), "--params"),
+        (args.scene.is_some(), "--scene"),
+    ] {
+        if given {
+            anyhow::bail!("{flag} belongs to a tune against recordings: give --recordings DIR");
+        }
+    }
+    let study_file = args
+        .study
+        .clone()
+        .context("give a study file, or --recordings DIR")?;
     let registry = cmd_engines::compiled;
     let engine = find_engine(registry, &args.engine)?;
     let space_file = args
@@ -115,7 +152,7 @@ pub fn run(args: Args) -> Result<()> {
         engine.name(),
         &engine_names(registry),
     )?);
-    let (study, roots) = load_study(&args.study, &args.data, None)?;
+    let (study, roots) = load_study(&study_file, &args.data, None)?;
     let range = |v: &Option<String>, flag: &str| -> Result<Option<RunRange>> {
         Ok(match v {
             Some(v) => Some(RunRange::parse(v, flag)?),
@@ -129,7 +166,7 @@ pub fn run(args: Args) -> Result<()> {
         range(&args.holdout, "--holdout")?,
         args.cube_weight,
     )
-    .with_context(|| format!("study {}", args.study.display()))?;
+    .with_context(|| format!("study {}", study_file.display()))?;
     let executor = args.executor.executor()?;
     let gatherer = match &executor {
         Executor::Slurm(opts) => Some(std::sync::Arc::new(Gatherer::new(
@@ -176,6 +213,82 @@ pub fn run(args: Args) -> Result<()> {
         eprintln!("  {}", f.display());
     }
     eprintln!("  {}", args.out.join("history.csv").display());
+    Ok(())
+}
+
+/// `tune --recordings`: the engine fitted to a robot's own episodes in
+/// joint space.
+fn run_recordings(args: Args, recordings: &std::path::Path) -> Result<()> {
+    use realitygap_tune::recordings::{
+        summary_markdown, tune_recordings, write_summary, RecordingsSpec,
+    };
+    if !matches!(args.executor.executor()?, Executor::Local) {
+        anyhow::bail!("--recordings runs on this machine only (--executor local)");
+    }
+    let engine = find_engine(cmd_engines::compiled, &args.engine)?;
+    let known = realitygap_runner::prepare::read_params(args.params.as_deref())?;
+    let urdf = args.robot.as_ref().map(PathBuf::from);
+    let prepared =
+        realitygap_study::replay::prepare_replay(&realitygap_study::replay::ReplayRequest {
+            real_dir: recordings,
+            urdf: urdf.as_deref(),
+            packages: &args.packages,
+            params: &known,
+            scene: args.scene.as_deref(),
+            out: &args.out,
+        })?;
+    let space = match &args.space {
+        Some(f) => Some(Space::from_file(f)?),
+        None => None,
+    };
+    let range = |v: &Option<String>, flag: &str| -> Result<Option<RunRange>> {
+        Ok(match v {
+            Some(v) => Some(RunRange::parse(v, flag)?),
+            None => None,
+        })
+    };
+    let spec = RecordingsSpec {
+        engine: engine.as_ref(),
+        prepared: &prepared,
+        known: &known,
+        space,
+        selection: realitygap_analysis::selection::RunSelection {
+            runs: range(&args.runs, "--runs")?,
+            holdout: range(&args.holdout, "--holdout")?,
+        },
+        out: args.out.clone(),
+        jobs: args
+            .jobs
+            .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),
+        max_iterations: args.iterations,
+    };
+    eprintln!(
+        "tuning {} against {} recorded episodes of robot '{}' in joint space",
+        engine.name(),
+        prepared.episodes.len(),
+        prepared.robot.name
+    );
+    let bar = ProgressBar::new_spinner();
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} {elapsed_precise} {pos} evaluations, {msg}")
+            .expect("a valid template"),
+    );
+    bar.enable_steady_tick(std::time::Duration::from_millis(200));
+    let on_progress = |p: realitygap_tune::recordings::RecordingsProgress| {
+        bar.set_position(p.evaluations as u64);
+        bar.set_message(format!(
+            "{}; best training RMS {:.4} deg",
+            p.phase, p.best_rms_deg
+        ));
+    };
+    let mut result = tune_recordings(&spec, &on_progress)?;
+    bar.finish_and_clear();
+    write_summary(&args.out, recordings, &mut result)?;
+    print!("{}", summary_markdown(&result.summary));
+    eprintln!("\nwrote:");
+    for f in &result.files {
+        eprintln!("  {}", f.display());
+    }
     Ok(())
 }
 

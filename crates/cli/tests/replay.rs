@@ -6,7 +6,7 @@
 //! impossible gains are refused with a reason.
 
 mod common;
-use common::{path, realitygap, scratch, text};
+use common::{import_bags, path, realitygap, scratch, text, truth_params};
 use realitygap_core::testing::{iiwa_urdf, joint_recording_fixtures as fixtures};
 use realitygap_data::RunStore;
 use serde_json::Value;
@@ -14,50 +14,7 @@ use std::path::{Path, PathBuf};
 
 /// Imports the first two episodes of the MCAP bags into `dir/real`.
 fn import(dir: &Path) -> PathBuf {
-    let real = dir.join("real");
-    let f = fixtures();
-    let out = realitygap(&[
-        "import",
-        "rosbag",
-        &path(&f.join("mcap/episode_000")),
-        &path(&f.join("mcap/episode_001")),
-        "--robot",
-        &path(&iiwa_urdf()),
-        "--out",
-        &path(&real),
-    ]);
-    assert!(out.status.success(), "{}", text(&out.stderr));
-    real
-}
-
-/// The writer's known parameters as a params file, without the keys in
-/// `leave_out`.
-fn truth_params(dir: &Path, leave_out: &[&str]) -> PathBuf {
-    let truth: Value =
-        serde_json::from_str(&std::fs::read_to_string(fixtures().join("truth.json")).unwrap())
-            .unwrap();
-    let mut toml = String::new();
-    for (name, j) in truth["joints"].as_object().unwrap() {
-        toml.push_str(&format!("[joints.{name}]\n"));
-        for (ours, theirs) in [
-            ("kp", "kp"),
-            ("kv", "kd"),
-            ("damping", "damping"),
-            ("armature", "armature"),
-            ("frictionloss", "frictionloss"),
-        ] {
-            if !leave_out.contains(&ours) {
-                toml.push_str(&format!("{ours} = {}\n", j[theirs].as_f64().unwrap()));
-            }
-        }
-    }
-    toml.push_str(&format!(
-        "[controller]\ndelay_s = {}\n",
-        truth["delay_s"].as_f64().unwrap()
-    ));
-    let file = dir.join(format!("truth-{}.toml", leave_out.join("-")));
-    std::fs::write(&file, toml).unwrap();
-    file
+    import_bags(dir, 2)
 }
 
 /// The joint-space rows written by a replay, by source.

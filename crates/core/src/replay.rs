@@ -5,7 +5,8 @@
 //! The simulation starts from the recording's first joint state (angles and
 //! velocities). At every engine step the command in force `delay_s` earlier
 //! (zero-order hold; before the first command, the first joint state is
-//! held) drives each joint through its servo:
+//! held; a delay between two engine steps blends the two, see
+//! `ReplayPlan::targets`) drives each joint through its servo:
 //!
 //! - **position** commands: a PD servo, `tau = kp (q_cmd - q) - kv qd`,
 //!   limited to the actuator's force limit. It runs on the engine's own
@@ -101,9 +102,9 @@ impl ReplayPlan {
         Ok(())
     }
 
-    /// The velocity targets for the joints at `angles`, time `t_s`.
-    fn targets(&self, t_s: f64, angles: &[f64], out: &mut [f64]) {
-        let held = self.commands.held_at(t_s - self.delay_s);
+    /// The velocity targets at `angles` for the commands `held` (none yet:
+    /// every joint holds its first angle).
+    fn targets_for(&self, held: Option<&[f64]>, angles: &[f64], out: &mut [f64]) {
         // Every joint holds its first angle unless commanded.
         for (j, o) in out.iter_mut().enumerate() {
             *o = self.kp[j] / self.kv[j] * (self.initial_angles_rad[j] - angles[j]);
@@ -114,6 +115,32 @@ impl ReplayPlan {
                 CommandKind::Position => self.kp[j] / self.kv[j] * (v - angles[j]),
                 CommandKind::Velocity | CommandKind::Effort => v,
             };
+        }
+    }
+
+    /// The velocity targets for the joints at `angles`, at the engine step
+    /// starting at `t_s` (steps of `dt_s`): the commands in force `delay_s`
+    /// earlier. A delay of whole steps is exactly that; a delay `(m + phi)`
+    /// steps, `0 < phi < 1`, blends the targets of `m` and `m + 1` steps
+    /// (`1 - phi` and `phi`), so that a replay is continuous in the delay
+    /// (which `tune --recordings` fits by its gradient) and exact on the
+    /// engine-step grid. `scratch` holds one value per joint.
+    fn targets(&self, t_s: f64, dt_s: f64, angles: &[f64], out: &mut [f64], scratch: &mut [f64]) {
+        let steps = self.delay_s / dt_s;
+        let whole = (steps + 1e-9).floor();
+        let phi = steps - whole;
+        if phi <= 1e-9 {
+            self.targets_for(self.commands.held_at(t_s - self.delay_s), angles, out);
+            return;
+        }
+        self.targets_for(self.commands.held_at(t_s - whole * dt_s), angles, out);
+        self.targets_for(
+            self.commands.held_at(t_s - (whole + 1.0) * dt_s),
+            angles,
+            scratch,
+        );
+        for (o, s) in out.iter_mut().zip(scratch.iter()) {
+            *o = (1.0 - phi) * *o + phi * s;
         }
     }
 }
@@ -144,7 +171,14 @@ pub fn replay(sim: &mut dyn Simulation, plan: &ReplayPlan) -> Result<RunOutcome,
         .joint_velocities_rad_s
         .clone_from(&plan.initial_velocities_rad_s);
     let mut targets = vec![0.0; joints];
-    plan.targets(0.0, &plan.initial_angles_rad, &mut targets);
+    let mut scratch = vec![0.0; joints];
+    plan.targets(
+        0.0,
+        dt,
+        &plan.initial_angles_rad,
+        &mut targets,
+        &mut scratch,
+    );
     state.joint_velocity_targets_rad_s.clone_from(&targets);
     state.time_s = 0.0;
     state.native = None;
@@ -161,7 +195,7 @@ pub fn replay(sim: &mut dyn Simulation, plan: &ReplayPlan) -> Result<RunOutcome,
     while next_sample < plan.sample_times_s.len() {
         let t_s = steps as f64 * dt;
         sim.joint_angles_rad(&mut angles);
-        plan.targets(t_s, &angles, &mut targets);
+        plan.targets(t_s, dt, &angles, &mut targets, &mut scratch);
         // Record every sample whose nearest engine step is this one.
         while next_sample < plan.sample_times_s.len()
             && plan.sample_times_s[next_sample] < t_s + 0.5 * dt
@@ -304,6 +338,35 @@ mod tests {
             assert!((a - b).abs() < 1e-12, "{q:?}");
         }
         assert!(kinematic_angles(&commands(CommandKind::Effort), &[0.0; 2], &times, 0.0).is_none());
+    }
+
+    #[test]
+    fn a_delay_between_engine_steps_blends_the_two_neighbouring_steps() {
+        let plan = |delay_s: f64| ReplayPlan {
+            commands: commands(CommandKind::Velocity),
+            sample_times_s: vec![0.0],
+            initial_angles_rad: vec![0.0; 2],
+            initial_velocities_rad_s: vec![0.0; 2],
+            kp: vec![10.0; 2],
+            kv: vec![1.0; 2],
+            delay_s,
+            roles: vec![],
+            divergence_bound_m: 10.0,
+        };
+        let target = |delay_s: f64, t_s: f64| {
+            let (mut out, mut scratch) = (vec![0.0; 2], vec![0.0; 2]);
+            plan(delay_s).targets(t_s, 0.01, &[0.0; 2], &mut out, &mut scratch);
+            out[1]
+        };
+        // The command switches from 0.5 to -0.5 at 1 s: with 20 ms of delay
+        // the step at 1.02 s has the new one, the step at 1.01 s the old.
+        assert_eq!(target(0.02, 1.02), -0.5);
+        assert_eq!(target(0.02, 1.01), 0.5);
+        // 25 ms: half of each at 1.02 s (the steps of 20 and 30 ms).
+        assert!((target(0.025, 1.02) - 0.0).abs() < 1e-12);
+        assert_eq!(target(0.025, 1.03), -0.5);
+        // Continuous in the delay: 20.1 ms is close to 20 ms.
+        assert!((target(0.0201, 1.02) - (-0.5 + 0.01)).abs() < 1e-9);
     }
 
     #[test]

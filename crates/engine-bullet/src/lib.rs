@@ -923,11 +923,10 @@ fn dynamics_info(
 /// Checks the robot's collision meshes before Bullet reads them: Bullet
 /// replaces a mesh it cannot read by an empty shape, with at most a
 /// warning (none at all for a Wavefront OBJ file without geometry), so a
-/// damaged file is caught here with a precise message. STL files are read
-/// in full; OBJ files must have at least three vertices and one face;
-/// COLLADA files are refused (Bullet's reader crashes on malformed ones);
-/// other formats are left to Bullet (whose warnings are checked after
-/// loading).
+/// damaged file is caught here with a precise message: STL, OBJ and
+/// COLLADA files are read in full by realitygap's reader (COLLADA files
+/// then reach Bullet as STL: see `urdf_file`); other formats are left to
+/// Bullet (whose warnings are checked after loading).
 fn check_meshes(robot: &RobotModel) -> Result<(), EngineError> {
     for link in &robot.links {
         for c in &link.collisions {
@@ -945,31 +944,11 @@ fn check_meshes(robot: &RobotModel) -> Result<(), EngineError> {
                 .extension()
                 .map(|e| e.to_string_lossy().to_ascii_lowercase())
                 .unwrap_or_default();
-            match extension.as_str() {
-                "stl" => {
-                    let mesh = TriangleMesh::read(path).map_err(|e| fail(e.to_string()))?;
-                    if mesh.triangles.is_empty() {
-                        return Err(fail(format!("{} has no triangles", path.display())));
-                    }
+            if matches!(extension.as_str(), "stl" | "obj" | "dae") {
+                let mesh = TriangleMesh::read(path).map_err(|e| fail(e.to_string()))?;
+                if mesh.triangles.is_empty() {
+                    return Err(fail(format!("{} has no triangles", path.display())));
                 }
-                "obj" => {
-                    let bytes = std::fs::read(path).map_err(|e| fail(format!("{}: {e}", path.display())))?;
-                    let text = String::from_utf8_lossy(&bytes);
-                    let starts = |prefix: &str| {
-                        text.lines().filter(|l| l.trim_start().strip_prefix(prefix).is_some_and(|r| r.starts_with([' ', '\t']))).count()
-                    };
-                    if starts("v") < 3 || starts("f") < 1 {
-                        return Err(fail(format!("{} has no vertices and faces (not a Wavefront OBJ mesh?)", path.display())));
-                    }
-                }
-                "dae" => {
-                    return Err(fail(format!(
-                        "{}: COLLADA meshes are not accepted by the Bullet engine (Bullet 3.08's COLLADA reader \
-                         crashes on files it does not expect, so it cannot be trusted with them); convert the mesh to STL or OBJ",
-                        path.display()
-                    )))
-                }
-                _ => {}
             }
         }
     }

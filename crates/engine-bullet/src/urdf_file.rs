@@ -8,14 +8,18 @@
 //! would not be found. The engine therefore hands Bullet a temporary copy of
 //! the URDF file in which
 //! - every collision mesh `filename` attribute is the absolute path the
-//!   robot model resolved;
+//!   robot model resolved; a COLLADA mesh is handed over as a temporary
+//!   binary STL file of its triangles as realitygap's reader reads them
+//!   (units and node transforms applied), because Bullet 3.08's COLLADA
+//!   reader crashes on files it does not expect;
 //! - the `<visual>` elements are blanked out (replaced by as many line
 //!   breaks, so Bullet's line numbers still match the original file): they
 //!   play no part in the physics, and in DIRECT mode Bullet would still
 //!   read every visual mesh for its software renderer, including COLLADA
 //!   files, whose reader crashes on files it does not expect.
 //!
-//! The copy is deleted as soon as Bullet has loaded it. A URDF file without
+//! The copy (and the STL files) are deleted as soon as Bullet has loaded
+//! it. A URDF file without
 //! meshes and visuals is loaded as it is.
 
 /// Escapes text for an XML attribute value (`<>&'"` as entities).
@@ -36,6 +40,8 @@ const BULLET_MAX_PATH: usize = 1023;
 pub(crate) struct UrdfForBullet {
     path: PathBuf,
     temporary: bool,
+    /// Temporary STL copies of COLLADA meshes, removed on drop.
+    meshes: Vec<PathBuf>,
 }
 
 impl UrdfForBullet {
@@ -49,6 +55,9 @@ impl Drop for UrdfForBullet {
     fn drop(&mut self) {
         if self.temporary {
             let _ = std::fs::remove_file(&self.path);
+        }
+        for m in &self.meshes {
+            let _ = std::fs::remove_file(m);
         }
     }
 }
@@ -325,12 +334,31 @@ pub(crate) fn prepare(robot: &RobotModel) -> Result<UrdfForBullet, String> {
         // `source` only names it): written from the model itself.
         return write_temporary(&from_model(robot));
     }
-    let meshes = mesh_paths(robot);
+    let mut meshes = mesh_paths(robot);
     if meshes.is_empty() && robot.links.iter().all(|l| l.visuals.is_empty()) {
         return Ok(UrdfForBullet {
             path: robot.source.clone(),
             temporary: false,
+            meshes: Vec::new(),
         });
+    }
+    // COLLADA meshes reach Bullet as STL files of the same triangles.
+    let mut stl_copies = Vec::new();
+    for path in meshes.values_mut() {
+        if realitygap_core::robot::stl::mesh_format(path) == Some("dae") {
+            let mesh =
+                realitygap_core::robot::stl::TriangleMesh::read(path).map_err(|e| e.to_string())?;
+            let copy = temporary_path("stl")?;
+            std::fs::write(&copy, mesh.to_binary_stl()).map_err(|e| {
+                format!(
+                    "cannot write the STL copy {} of {}: {e}",
+                    copy.display(),
+                    path.display()
+                )
+            })?;
+            stl_copies.push(copy.clone());
+            *path = copy;
+        }
     }
     let text = std::fs::read_to_string(&robot.source)
         .map_err(|e| format!("cannot read URDF file {}: {e}", robot.source.display()))?;
@@ -347,7 +375,35 @@ pub(crate) fn prepare(robot: &RobotModel) -> Result<UrdfForBullet, String> {
             robot.source.display()
         ));
     }
-    write_temporary(&copy)
+    let mut urdf = write_temporary(&copy)?;
+    urdf.meshes = stl_copies;
+    Ok(urdf)
+}
+
+/// A new, unused temporary file name with extension `ext`.
+fn temporary_path(ext: &str) -> Result<PathBuf, String> {
+    let dir = std::env::temp_dir();
+    loop {
+        let n = COPIES.fetch_add(1, Ordering::Relaxed);
+        let path = dir.join(format!(
+            "realitygap-bullet-{}-{n}.{ext}",
+            std::process::id()
+        ));
+        match std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&path)
+        {
+            Ok(_) => return Ok(path),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
+            Err(e) => {
+                return Err(format!(
+                    "cannot create a temporary file in {}: {e}",
+                    dir.display()
+                ))
+            }
+        }
+    }
 }
 
 /// Writes `text` to a new temporary URDF file.
@@ -366,6 +422,7 @@ fn write_temporary(copy: &str) -> Result<UrdfForBullet, String> {
                 let result = UrdfForBullet {
                     path,
                     temporary: true,
+                    meshes: Vec::new(),
                 };
                 file.write_all(copy.as_bytes()).map_err(|e| {
                     format!(

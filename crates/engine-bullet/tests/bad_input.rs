@@ -173,13 +173,17 @@ fn empty_obj_mesh_is_a_clear_error() {
         msg.contains("arm.urdf: link \"upper\": collision mesh"),
         "{msg}"
     );
-    assert!(msg.contains("upper.obj has no vertices and faces"), "{msg}");
+    assert!(
+        msg.contains("upper.obj") && msg.contains("holds no triangle"),
+        "{msg}"
+    );
 }
 
-/// COLLADA collision meshes are refused (Bullet's COLLADA reader
-/// dereferences missing elements and crashes on a malformed file).
+/// A damaged COLLADA collision mesh is a clear error before Bullet sees it
+/// (Bullet's own COLLADA reader dereferences missing elements and crashes
+/// on a malformed file; well-formed ones reach it as STL).
 #[test]
-fn collada_mesh_is_refused() {
+fn damaged_collada_mesh_is_a_clear_error() {
     let (scene, robot) = arm_with_mesh_file(
         &temp_dir("dae"),
         "upper.dae",
@@ -190,10 +194,7 @@ fn collada_mesh_is_refused() {
         msg.contains("arm.urdf: link \"upper\": collision mesh"),
         "{msg}"
     );
-    assert!(
-        msg.contains("upper.dae: COLLADA meshes are not accepted"),
-        "{msg}"
-    );
+    assert!(msg.contains("upper.dae: not a valid COLLADA mesh"), "{msg}");
 }
 
 /// A mesh format the engine leaves to Bullet (here an unknown extension):

@@ -345,9 +345,34 @@ impl RobotWriter<'_> {
                     .and_then(|e| e.to_str())
                     .unwrap_or("")
                     .to_ascii_lowercase();
+                let name = format!("mesh{}", self.mesh_count);
+                if ext == "dae" {
+                    // MuJoCo reads no COLLADA: its triangles go inline
+                    // (realitygap's reader, units and transforms applied).
+                    let mesh = realitygap_core::robot::stl::TriangleMesh::read(path)
+                        .map_err(|e| MjcfError(format!("link \"{link}\": mesh \"{uri}\": {e}")))?;
+                    let mut vertex = String::new();
+                    let mut face = String::new();
+                    for (k, t) in mesh.triangles.iter().enumerate() {
+                        for v in t {
+                            write!(vertex, "{} ", v3(*v)).unwrap();
+                        }
+                        write!(face, "{} {} {} ", 3 * k, 3 * k + 1, 3 * k + 2).unwrap();
+                    }
+                    self.mesh_count += 1;
+                    writeln!(
+                        self.assets,
+                        "    <mesh name=\"{name}\" vertex=\"{}\" face=\"{}\" scale=\"{}\"/>",
+                        vertex.trim_end(),
+                        face.trim_end(),
+                        v3(*scale)
+                    )
+                    .unwrap();
+                    return Ok(format!("type=\"mesh\" mesh=\"{name}\""));
+                }
                 if !matches!(ext.as_str(), "stl" | "obj" | "msh") {
                     return Err(MjcfError(format!(
-                        "link \"{link}\": mesh \"{uri}\" ({}) is not a format MuJoCo reads (STL, OBJ or MSH)",
+                        "link \"{link}\": mesh \"{uri}\" ({}) is not a mesh format read (STL, OBJ, COLLADA .dae, or MuJoCo's MSH)",
                         path.display()
                     )));
                 }
@@ -357,7 +382,6 @@ impl RobotWriter<'_> {
                         path.display()
                     ))
                 })?;
-                let name = format!("mesh{}", self.mesh_count);
                 self.mesh_count += 1;
                 writeln!(
                     self.assets,
@@ -528,21 +552,46 @@ targets_deg = { j1 = 10.0 }
     }
 
     #[test]
-    fn rejects_mesh_formats_mujoco_cannot_read() {
+    fn collada_goes_inline_and_unknown_formats_are_refused() {
         let dir = std::env::temp_dir().join(format!("rg-dae-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         std::fs::write(dir.join("part.dae"), "<COLLADA/>").unwrap();
-        let urdf = ARM.replace(
-            "<box size=\"0.1 0.2 0.3\"/>",
-            "<mesh filename=\"part.dae\"/>",
-        );
-        let robot = RobotModel::from_urdf_str(&urdf, &dir, &PackageResolver::new()).unwrap();
-        let scene = Scene::from_toml_str(SCENE, &dir.join("t.toml")).unwrap();
-        let err = scene_to_mjcf(&scene, &robot).unwrap_err();
+        std::fs::write(dir.join("part.ply"), "ply\n").unwrap();
+        let with = |file: &str| {
+            let urdf = ARM.replace(
+                "<box size=\"0.1 0.2 0.3\"/>",
+                &format!("<mesh filename=\"{file}\"/>"),
+            );
+            let robot = RobotModel::from_urdf_str(&urdf, &dir, &PackageResolver::new()).unwrap();
+            let scene = Scene::from_toml_str(SCENE, &dir.join("t.toml")).unwrap();
+            scene_to_mjcf(&scene, &robot)
+        };
+        let err = with("part.ply").unwrap_err();
         assert!(
-            err.0.contains("part.dae") && err.0.contains("STL, OBJ or MSH"),
+            err.0.contains("part.ply") && err.0.contains("STL, OBJ, COLLADA .dae"),
             "{}",
             err.0
+        );
+        let err = with("part.dae").unwrap_err();
+        assert!(
+            err.0.contains("part.dae") && err.0.contains("not a valid COLLADA mesh"),
+            "{}",
+            err.0
+        );
+        // A tetrahedron in OBJ, written as COLLADA by hand: inline.
+        std::fs::write(
+            dir.join("tet.dae"),
+            r##"<COLLADA xmlns="http://www.collada.org/2005/11/COLLADASchema" version="1.4.1"><asset><unit meter="0.5"/><up_axis>Z_UP</up_axis></asset>
+<library_geometries><geometry id="g"><mesh><source id="p"><float_array id="a" count="12">0 0 0 1 0 0 0 1 0 0 0 1</float_array><technique_common><accessor source="#a" count="4" stride="3"><param name="X" type="float"/><param name="Y" type="float"/><param name="Z" type="float"/></accessor></technique_common></source>
+<vertices id="v"><input semantic="POSITION" source="#p"/></vertices><triangles count="4"><input semantic="VERTEX" source="#v" offset="0"/><p>0 2 1 0 1 3 0 3 2 1 2 3</p></triangles></mesh></geometry></library_geometries>
+<library_visual_scenes><visual_scene id="s"><node id="n"><instance_geometry url="#g"/></node></visual_scene></library_visual_scenes><scene><instance_visual_scene url="#s"/></scene></COLLADA>"##,
+        )
+        .unwrap();
+        let xml = with("tet.dae").unwrap();
+        assert!(xml.contains("face=\"0 1 2 3 4 5 6 7 8 9 10 11\""), "{xml}");
+        assert!(
+            xml.contains("vertex=\"0.0 0.0 0.0 0.0 0.5 0.0 0.5 0.0 0.0"),
+            "{xml}"
         );
         let _ = std::fs::remove_dir_all(&dir);
     }

@@ -281,7 +281,7 @@ pub fn mesh_plan(
     scale: Vec3,
     link_name: &str,
 ) -> Result<MeshPlan, PlanError> {
-    realitygap_core::robot::stl::require_stl(path, uri, "ODE")
+    realitygap_core::robot::stl::require_mesh_format(path, uri, "ODE")
         .map_err(|e| PlanError(format!("link \"{link_name}\": {e}")))?;
     let mesh =
         TriangleMesh::read(path).map_err(|e| PlanError(format!("link \"{link_name}\": {e}")))?;
@@ -781,7 +781,7 @@ mod tests {
         )
         .unwrap_err();
         assert!(
-            e.0.contains("link \"hand\"") && e.0.contains("STL meshes only"),
+            e.0.contains("link \"hand\"") && e.0.contains("not a valid COLLADA mesh"),
             "{}",
             e.0
         );

@@ -257,7 +257,10 @@ fn models_ode_cannot_take_are_clear_errors() {
         "dae",
     );
     assert!(
-        e.contains("engine ode") && e.contains("link \"arm\"") && e.contains("STL meshes only"),
+        e.contains("engine ode")
+            && e.contains("link \"arm\"")
+            && e.contains("hand.dae")
+            && e.contains("not a valid COLLADA mesh"),
         "{e}"
     );
     assert!(e.contains("arm.urdf"), "{e}");

@@ -176,7 +176,7 @@ fn cylinder_points(radius: f32, length: f32) -> Vec<PxVec3> {
 
 /// The vertices of an STL file, or an error naming the file.
 fn stl_points(path: &Path, uri: &str) -> Result<Vec<PxVec3>, String> {
-    realitygap_core::robot::stl::require_stl(path, uri, "PhysX")?;
+    realitygap_core::robot::stl::require_mesh_format(path, uri, "PhysX")?;
     let mesh = TriangleMesh::read(path).map_err(|e| format!("mesh \"{uri}\": {e}"))?;
     let points: Vec<PxVec3> = mesh
         .triangles

@@ -109,7 +109,7 @@ impl ShapeBuilder {
         if let Some(shape) = self.cache.get(&key) {
             return Ok(shape.clone());
         }
-        realitygap_core::robot::stl::require_stl(path, uri, "Rapier")?;
+        realitygap_core::robot::stl::require_mesh_format(path, uri, "Rapier")?;
         if !(scale.is_finite() && scale.x != 0.0 && scale.y != 0.0 && scale.z != 0.0) {
             return Err(format!(
                 "mesh \"{uri}\": scale ({}, {}, {}) must be finite and non-zero",
@@ -322,7 +322,7 @@ mod tests {
         std::fs::write(&dae, "<COLLADA/>").unwrap();
         let err = b.shape(&mesh(dae, 1.0), MeshShape::ConvexHull).unwrap_err();
         assert!(
-            err.contains("arm.dae") && err.contains("STL meshes only"),
+            err.contains("arm.dae") && err.contains("not a valid COLLADA mesh"),
             "{err}"
         );
         let missing = dir.join("gone.stl");

@@ -6,12 +6,17 @@
 //! - [`space`]: what is fitted ([`space::Space`], `assets/tuning/<engine>.toml`);
 //! - [`objective`]: what is minimised and how a candidate is simulated;
 //! - [`mod@search`]: CMA-ES with parallel, isolated, resumable evaluations;
-//! - [`outputs`]: sensitivity, the final scores and the files written.
+//! - [`outputs`]: sensitivity, the final scores and the files written;
+//! - [`recordings`]: `tune --recordings`, a robot's own recorded episodes
+//!   fitted in joint space by [`least_squares`] (Levenberg-Marquardt with
+//!   intervals and an identifiability report).
 
 #![forbid(unsafe_code)]
 
+pub mod least_squares;
 pub mod objective;
 pub mod outputs;
+pub mod recordings;
 pub mod search;
 pub mod slurm_batch;
 pub mod space;

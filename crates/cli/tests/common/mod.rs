@@ -35,3 +35,61 @@ pub fn scratch(group: &str, name: &str) -> PathBuf {
 pub fn path(p: &Path) -> String {
     p.display().to_string()
 }
+
+/// Imports the first `episodes` episodes of the independent writer's MCAP
+/// bags (`scripts/make-fixtures`) into `dir/real`.
+pub fn import_bags(dir: &Path, episodes: usize) -> PathBuf {
+    let real = dir.join("real");
+    let f = realitygap_core::testing::joint_recording_fixtures();
+    let mut args = vec!["import".to_string(), "rosbag".into()];
+    for e in 0..episodes {
+        args.push(path(&f.join(format!("mcap/episode_{e:03}"))));
+    }
+    args.extend([
+        "--robot".into(),
+        path(&realitygap_core::testing::iiwa_urdf()),
+        "--out".into(),
+        path(&real),
+    ]);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let out = realitygap(&args);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    real
+}
+
+/// The writer's known parameters (`truth.json`: kp, kd as kv, damping,
+/// armature, frictionloss, the delay) as a params file in `dir`, without
+/// the keys in `leave_out` (`delay_s` leaves the delay out).
+pub fn truth_params(dir: &Path, leave_out: &[&str]) -> PathBuf {
+    let truth = truth();
+    let mut toml = String::new();
+    for (name, j) in truth["joints"].as_object().unwrap() {
+        toml.push_str(&format!("[joints.{name}]\n"));
+        for (ours, theirs) in [
+            ("kp", "kp"),
+            ("kv", "kd"),
+            ("damping", "damping"),
+            ("armature", "armature"),
+            ("frictionloss", "frictionloss"),
+        ] {
+            if !leave_out.contains(&ours) {
+                toml.push_str(&format!("{ours} = {}\n", j[theirs].as_f64().unwrap()));
+            }
+        }
+    }
+    if !leave_out.contains(&"delay_s") {
+        toml.push_str(&format!(
+            "[controller]\ndelay_s = {}\n",
+            truth["delay_s"].as_f64().unwrap()
+        ));
+    }
+    let file = dir.join(format!("truth-{}.toml", leave_out.join("-")));
+    std::fs::write(&file, toml).unwrap();
+    file
+}
+
+/// The writer's `truth.json`.
+pub fn truth() -> serde_json::Value {
+    let f = realitygap_core::testing::joint_recording_fixtures().join("truth.json");
+    serde_json::from_str(&std::fs::read_to_string(&f).unwrap()).unwrap()
+}

@@ -1,5 +1,9 @@
-//! A small STL reader (binary and ASCII), enough to measure meshes and to
-//! hand their triangles to an engine that cannot read STL itself.
+//! Mesh files as triangle soups: STL (binary and ASCII, read here),
+//! Wavefront OBJ and COLLADA (`.dae`, read with the `mesh-loader` crate,
+//! which applies COLLADA's `<unit>`, `<up_axis>` and node transforms), so
+//! that every engine that builds its own collision shapes reads the three
+//! formats URDFs in the wild use, and an engine that reads files itself
+//! can be given a format it knows ([`TriangleMesh::to_binary_stl`]).
 
 use crate::pose::Vec3;
 use std::path::{Path, PathBuf};
@@ -13,18 +17,18 @@ pub struct TriangleMesh {
     pub triangles: Vec<[Vec3; 3]>,
 }
 
-/// Why an STL file could not be read.
+/// Why a mesh file could not be read.
 #[derive(Debug, thiserror::Error)]
 pub enum StlError {
     /// The file could not be read.
-    #[error("cannot read STL file {}: {source}", path.display())]
+    #[error("cannot read mesh file {}: {source}", path.display())]
     Io {
         /// The file.
         path: PathBuf,
         /// The operating system's reason.
         source: std::io::Error,
     },
-    /// The content is neither valid binary nor valid ASCII STL.
+    /// The content is not a valid mesh of its format.
     #[error("{}{}: {message}", path.display(), line.map(|l| format!(":{l}")).unwrap_or_default())]
     Malformed {
         /// The file.
@@ -34,6 +38,14 @@ pub enum StlError {
         /// What is wrong.
         message: String,
     },
+}
+
+fn malformed(path: &Path, message: String) -> StlError {
+    StlError::Malformed {
+        path: path.to_path_buf(),
+        line: None,
+        message,
+    }
 }
 
 /// An axis-aligned bounding box, in the mesh's frame.
@@ -56,33 +68,116 @@ impl Aabb {
     }
 }
 
-/// Refuses a mesh file that is not STL (by its extension), for engines
-/// that read STL meshes only: the message names the mesh as the URDF wrote
-/// it (`uri`), the resolved path and the engine.
-pub fn require_stl(path: &Path, uri: &str, engine: &str) -> Result<(), String> {
+/// The mesh formats read, by file extension (lower case).
+pub const MESH_FORMATS: [&str; 3] = ["stl", "obj", "dae"];
+
+/// The format of a mesh file by its extension: `stl`, `obj` or `dae`.
+pub fn mesh_format(path: &Path) -> Option<&'static str> {
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
         .unwrap_or("")
         .to_ascii_lowercase();
-    if ext == "stl" {
-        Ok(())
-    } else {
-        Err(format!(
-            "mesh \"{uri}\" ({}) is not an STL file; the {engine} engine reads STL meshes only",
+    MESH_FORMATS.iter().copied().find(|f| *f == ext)
+}
+
+/// Refuses a mesh file whose format (by its extension) is not read: the
+/// message names the mesh as the URDF wrote it (`uri`), the resolved path
+/// and the engine.
+pub fn require_mesh_format(path: &Path, uri: &str, engine: &str) -> Result<(), String> {
+    match mesh_format(path) {
+        Some(_) => Ok(()),
+        None => Err(format!(
+            "mesh \"{uri}\" ({}) is not a mesh format the {engine} engine reads (STL, OBJ, COLLADA .dae)",
             path.display()
-        ))
+        )),
     }
 }
 
 impl TriangleMesh {
-    /// Reads an STL file, binary or ASCII.
+    /// Reads a mesh file by its extension: STL (binary or ASCII; also any
+    /// extension that is not `.obj` or `.dae`), Wavefront OBJ, COLLADA.
     pub fn read(path: &Path) -> Result<Self, StlError> {
         let bytes = std::fs::read(path).map_err(|source| StlError::Io {
             path: path.to_path_buf(),
             source,
         })?;
-        Self::parse(&bytes, path)
+        match mesh_format(path) {
+            Some("obj") => Self::parse_obj(&bytes, path),
+            Some("dae") => Self::parse_collada(&bytes, path),
+            _ => Self::parse(&bytes, path),
+        }
+    }
+
+    /// Parses Wavefront OBJ content (its material library is not read);
+    /// `path` names it in errors.
+    pub fn parse_obj(bytes: &[u8], path: &Path) -> Result<Self, StlError> {
+        let scene = mesh_loader::obj::from_slice::<Vec<u8>, _>(bytes, Some(path), |_| {
+            Err(std::io::Error::other("materials are not read"))
+        })
+        .map_err(|e| malformed(path, format!("not a valid Wavefront OBJ mesh: {e}")))?;
+        Self::from_scene(scene, path)
+    }
+
+    /// Parses COLLADA content (`<unit>`, `<up_axis>` and node transforms
+    /// applied); `path` names it in errors.
+    pub fn parse_collada(bytes: &[u8], path: &Path) -> Result<Self, StlError> {
+        let scene = mesh_loader::collada::from_slice(bytes)
+            .map_err(|e| malformed(path, format!("not a valid COLLADA mesh: {e}")))?;
+        Self::from_scene(scene, path)
+    }
+
+    fn from_scene(scene: mesh_loader::Scene, path: &Path) -> Result<Self, StlError> {
+        let mut triangles = Vec::new();
+        for mesh in &scene.meshes {
+            for (k, face) in mesh.faces.iter().enumerate() {
+                let mut corner = [Vec3::ZERO; 3];
+                for (c, &i) in corner.iter_mut().zip(face) {
+                    let v = mesh.vertices.get(i as usize).ok_or_else(|| {
+                        malformed(
+                            path,
+                            format!(
+                                "mesh \"{}\": face {} names vertex {} of {}",
+                                mesh.name,
+                                k + 1,
+                                i as usize + 1,
+                                mesh.vertices.len()
+                            ),
+                        )
+                    })?;
+                    *c = Vec3::new(v[0] as f64, v[1] as f64, v[2] as f64);
+                    if !(c.x.is_finite() && c.y.is_finite() && c.z.is_finite()) {
+                        return Err(malformed(
+                            path,
+                            format!("mesh \"{}\": vertex {} is not finite", mesh.name, i + 1),
+                        ));
+                    }
+                }
+                triangles.push(corner);
+            }
+        }
+        if triangles.is_empty() {
+            return Err(malformed(path, "holds no triangle".into()));
+        }
+        Ok(TriangleMesh { triangles })
+    }
+
+    /// The mesh as a binary STL file's bytes (f32 corners, zero normals),
+    /// for an engine that reads STL but not the mesh's own format.
+    pub fn to_binary_stl(&self) -> Vec<u8> {
+        let mut b = vec![0u8; 80];
+        b[..22].copy_from_slice(b"realitygap binary STL ");
+        b.extend_from_slice(&(self.triangles.len() as u32).to_le_bytes());
+        for t in &self.triangles {
+            b.extend_from_slice(&[0u8; 12]);
+            for v in t {
+                for c in [v.x, v.y, v.z] {
+                    b.extend_from_slice(&(c as f32).to_le_bytes());
+                }
+            }
+            b.extend_from_slice(&[0u8; 2]);
+        }
+        b
     }
 
     /// Parses STL content; `path` names it in errors.
@@ -179,6 +274,81 @@ impl TriangleMesh {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    const OBJ: &str = "# a tetrahedron\nmtllib missing.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n";
+
+    fn collada(unit: f64, up: &str, scale: f64) -> String {
+        let p: Vec<String> = [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0]
+            .iter()
+            .map(|x| format!("{}", x * scale))
+            .collect();
+        format!(
+            r##"<?xml version="1.0"?>
+<COLLADA xmlns="http://www.collada.org/2005/11/COLLADASchema" version="1.4.1">
+<asset><unit meter="{unit}"/><up_axis>{up}</up_axis></asset>
+<library_geometries><geometry id="g"><mesh>
+<source id="g-pos"><float_array id="g-arr" count="9">{}</float_array>
+<technique_common><accessor source="#g-arr" count="3" stride="3"><param name="X" type="float"/><param name="Y" type="float"/><param name="Z" type="float"/></accessor></technique_common></source>
+<vertices id="g-v"><input semantic="POSITION" source="#g-pos"/></vertices>
+<triangles count="1"><input semantic="VERTEX" source="#g-v" offset="0"/><p>0 1 2</p></triangles>
+</mesh></geometry></library_geometries>
+<library_visual_scenes><visual_scene id="s"><node id="n"><instance_geometry url="#g"/></node></visual_scene></library_visual_scenes>
+<scene><instance_visual_scene url="#s"/></scene>
+</COLLADA>"##,
+            p.join(" ")
+        )
+    }
+
+    #[test]
+    fn reads_obj_and_collada_with_units() {
+        let dir = std::env::temp_dir().join(format!("rg-mesh-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let obj = dir.join("t.OBJ");
+        std::fs::write(&obj, OBJ).unwrap();
+        let m = TriangleMesh::read(&obj).unwrap();
+        assert_eq!(m.triangles.len(), 4);
+        assert_eq!(m.aabb().unwrap().max, Vec3::new(1.0, 1.0, 1.0));
+        // The same triangle in metres, and in millimetres with its unit.
+        let a = dir.join("m.dae");
+        std::fs::write(&a, collada(1.0, "Z_UP", 1.0)).unwrap();
+        let b = dir.join("mm.dae");
+        std::fs::write(&b, collada(0.001, "Z_UP", 1000.0)).unwrap();
+        let (a, b) = (
+            TriangleMesh::read(&a).unwrap(),
+            TriangleMesh::read(&b).unwrap(),
+        );
+        assert_eq!(a.triangles.len(), 1);
+        for (p, q) in a.triangles[0].iter().zip(&b.triangles[0]) {
+            assert!((*p - *q).norm() < 1e-9, "{p:?} {q:?}");
+        }
+        // Written as STL, read back: the same triangles (f32).
+        let stl = dir.join("back.stl");
+        std::fs::write(&stl, m.to_binary_stl()).unwrap();
+        assert_eq!(TriangleMesh::read(&stl).unwrap(), m);
+        // Damaged files name the file and what is wrong.
+        let bad = dir.join("bad.obj");
+        std::fs::write(&bad, OBJ.replace("f 2 3 4", "f 2 3 99")).unwrap();
+        let e = TriangleMesh::read(&bad).unwrap_err().to_string();
+        assert!(
+            e.contains("bad.obj") && e.contains("face index out of bounds"),
+            "{e}"
+        );
+        let bad = dir.join("bad.dae");
+        let text = collada(1.0, "Z_UP", 1.0);
+        std::fs::write(&bad, &text[..text.len() / 2]).unwrap();
+        let e = TriangleMesh::read(&bad).unwrap_err().to_string();
+        assert!(e.contains("bad.dae") && e.contains("COLLADA"), "{e}");
+        let empty = dir.join("empty.obj");
+        std::fs::write(&empty, "# nothing\n").unwrap();
+        let e = TriangleMesh::read(&empty).unwrap_err().to_string();
+        assert!(e.contains("no triangle"), "{e}");
+        assert!(
+            require_mesh_format(Path::new("x.ply"), "package://p/x.ply", "ODE")
+                .unwrap_err()
+                .contains("(STL, OBJ, COLLADA .dae)")
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 
     fn binary_stl(tris: &[[[f32; 3]; 3]]) -> Vec<u8> {
         let mut b = vec![0u8; 80];

@@ -1,0 +1,272 @@
+//! End-to-end: `realitygap tune --recordings` on the independent writer's
+//! recordings of a simulated KUKA iiwa (`scripts/make-fixtures`), whose
+//! physical parameters are known (`truth.json`): with the servo gains given
+//! as known, MuJoCo recovers the joints' damping, armature (less the
+//! implicit servo's dt kv) and dry friction and the command delay, and the
+//! held-out joint RMS falls well below the untuned engine's and the
+//! physics-free model's.
+
+mod common;
+use common::{import_bags, path, realitygap, scratch, text, truth, truth_params};
+use serde_json::Value;
+
+fn summary(out: &std::path::Path) -> Value {
+    serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap()
+}
+
+fn param<'a>(s: &'a Value, key: &str) -> &'a Value {
+    s["params"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p["key"] == key)
+        .unwrap_or_else(|| panic!("no fitted {key}: {s}"))
+}
+
+fn holdout_rms(s: &Value, source_prefix: &str) -> f64 {
+    s["scores"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|x| x["source"].as_str().unwrap().starts_with(source_prefix))
+        .unwrap_or_else(|| panic!("no score {source_prefix}: {s}"))["holdout"]["rms_deg"]
+        .as_f64()
+        .unwrap()
+}
+
+#[test]
+fn mujoco_recovers_the_writers_parameters_with_the_gains_known() {
+    let dir = scratch("tune-recordings-tests", "truth");
+    let real = import_bags(&dir, 4);
+    // Known: the servo gains (kp, and kd as kv). Searched: damping,
+    // armature, frictionloss per joint, and the delay.
+    let known = truth_params(&dir, &["damping", "armature", "frictionloss", "delay_s"]);
+    let out = dir.join("tune");
+    let run = realitygap(&[
+        "tune",
+        "--recordings",
+        &path(&real),
+        "--engine",
+        "mujoco",
+        "--params",
+        &path(&known),
+        "--runs",
+        "1-2",
+        "--holdout",
+        "3-4",
+        "--out",
+        &path(&out),
+    ]);
+    let stdout = text(&run.stdout);
+    assert!(run.status.success(), "{stdout}{}", text(&run.stderr));
+    println!("{stdout}");
+    let s = summary(&out);
+    let t = truth();
+    // MuJoCo integrates the replay's velocity servo implicitly (implicitfast,
+    // the generated scene's integrator): its kv enters the mass matrix as
+    // M + dt kv, so the armature it fits is the writer's (an explicit PD
+    // through qfrc_applied) less dt kv. The timestep of the scene is 1 ms.
+    let dt = 1e-3;
+    let mut worst = (0.0f64, String::new());
+    for (name, j) in t["joints"].as_object().unwrap() {
+        for field in ["damping", "armature"] {
+            let want = j[field].as_f64().unwrap();
+            let mut got = param(&s, &format!("joints.{name}.{field}"))["value"]
+                .as_f64()
+                .unwrap();
+            if field == "armature" {
+                got += dt * j["kd"].as_f64().unwrap();
+            }
+            let rel = (got - want).abs() / want;
+            if rel > worst.0 {
+                worst = (rel, format!("{name}.{field}: {got} vs {want}"));
+            }
+            assert!(rel < 0.10, "{name}.{field}: fitted {got}, truth {want}");
+        }
+        let want = j["frictionloss"].as_f64().unwrap();
+        let got = param(&s, &format!("joints.{name}.frictionloss"))["value"]
+            .as_f64()
+            .unwrap();
+        assert!(
+            (got - want).abs() < 0.05 * want,
+            "{name}.frictionloss: fitted {got}, truth {want}"
+        );
+    }
+    println!("worst relative error of damping and armature: {worst:?}");
+    // The delay within one joint-state sample (5 ms).
+    let delay = param(&s, "controller.delay_s");
+    let got = delay["value"].as_f64().unwrap();
+    let want = t["delay_s"].as_f64().unwrap();
+    assert!((got - want).abs() <= 0.005 + 1e-9, "delay {got} vs {want}");
+    // Held out: at least 5x below the untuned engine, and below the
+    // physics-free model.
+    let untuned = holdout_rms(&s, "mujoco untuned");
+    let tuned = holdout_rms(&s, "mujoco tuned");
+    let kinematic = holdout_rms(&s, "physics-free (perfect");
+    assert!(
+        tuned * 5.0 <= untuned,
+        "held out: tuned {tuned}, untuned {untuned}"
+    );
+    assert!(
+        tuned < kinematic,
+        "held out: tuned {tuned}, physics-free {kinematic}"
+    );
+    assert!(
+        s["verdict"].as_str().unwrap().contains(" beats "),
+        "{}",
+        s["verdict"]
+    );
+    for f in ["tuned.toml", "space.toml", "history.csv", "summary.md"] {
+        assert!(out.join(f).is_file(), "{f}");
+    }
+    // The tuned file replays: `replay --params tuned.toml` on the held-out
+    // episodes gives the tune's held-out figure.
+    let tuned_file = std::fs::read_to_string(out.join("tuned.toml")).unwrap();
+    assert!(tuned_file.contains("damping"), "{tuned_file}");
+}
+
+#[test]
+fn without_known_gains_the_summary_names_what_angles_cannot_separate() {
+    let dir = scratch("tune-recordings-tests", "unknown-gains");
+    let real = import_bags(&dir, 2);
+    // Known: everything but damping and kv of every joint; angles alone
+    // cannot tell the joint's damping from the servo's kv (both multiply
+    // its velocity).
+    let known = truth_params(&dir, &["damping", "kv"]);
+    let space = dir.join("space.toml");
+    let t = truth();
+    let mut toml = String::from("[params]\n");
+    for name in t["joints"].as_object().unwrap().keys().take(2) {
+        toml.push_str(&format!(
+            "\"joints.{name}.damping\" = {{ low = 0.0, high = 10.0, start = 0.0 }}\n\"joints.{name}.kv\" = {{ low = 5.0, high = 60.0, start = 40.0 }}\n"
+        ));
+    }
+    std::fs::write(&space, toml).unwrap();
+    // The other joints' gains come from the truth; only two joints' pairs
+    // are searched, on one episode, briefly.
+    let mut known_text = std::fs::read_to_string(&known).unwrap();
+    for (name, j) in t["joints"].as_object().unwrap().iter().skip(2) {
+        known_text = known_text.replace(
+            &format!("[joints.{name}]\n"),
+            &format!(
+                "[joints.{name}]\ndamping = {}\nkv = {}\n",
+                j["damping"], j["kd"]
+            ),
+        );
+    }
+    std::fs::write(&known, known_text).unwrap();
+    let out = dir.join("tune");
+    let run = realitygap(&[
+        "tune",
+        "--recordings",
+        &path(&real),
+        "--engine",
+        "mujoco",
+        "--params",
+        &path(&known),
+        "--space",
+        &path(&space),
+        "--iterations",
+        "4",
+        "--out",
+        &path(&out),
+    ]);
+    let stdout = text(&run.stdout);
+    assert!(run.status.success(), "{stdout}{}", text(&run.stderr));
+    let s = summary(&out);
+    let trading = s["identifiability"]["trading"].as_array().unwrap();
+    let names: Vec<String> = t["joints"]
+        .as_object()
+        .unwrap()
+        .keys()
+        .take(2)
+        .cloned()
+        .collect();
+    for name in &names {
+        assert!(
+            trading.iter().any(|p| {
+                p[0] == format!("joints.{name}.damping") && p[1] == format!("joints.{name}.kv")
+            }),
+            "{name}: {trading:?}\n{stdout}"
+        );
+    }
+    assert!(stdout.contains("trade against each other"), "{stdout}");
+}
+
+#[test]
+fn bad_requests_are_named() {
+    let dir = scratch("tune-recordings-tests", "bad");
+    // --params belongs to --recordings.
+    let run = realitygap(&[
+        "tune",
+        "assets/studies/collins2019.toml",
+        "--engine",
+        "mujoco",
+        "--params",
+        "x.toml",
+        "--out",
+        &path(&dir.join("x")),
+    ]);
+    assert!(!run.status.success());
+    assert!(
+        text(&run.stderr).contains("--recordings"),
+        "{}",
+        text(&run.stderr)
+    );
+    // A folder that is not an import.
+    let run = realitygap(&[
+        "tune",
+        "--recordings",
+        &path(&dir),
+        "--engine",
+        "mujoco",
+        "--out",
+        &path(&dir.join("y")),
+    ]);
+    assert!(!run.status.success());
+    assert!(
+        text(&run.stderr).contains(&path(&dir)),
+        "{}",
+        text(&run.stderr)
+    );
+    // Known parameters that fix every key of the space.
+    let real = import_bags(&dir, 1);
+    let known = truth_params(&dir, &[]);
+    let space = dir.join("space.toml");
+    std::fs::write(
+        &space,
+        "[params]\n\"joints.lbr_iiwa_joint_1.damping\" = { low = 0.0, high = 5.0 }\n",
+    )
+    .unwrap();
+    let run = realitygap(&[
+        "tune",
+        "--recordings",
+        &path(&real),
+        "--engine",
+        "mujoco",
+        "--params",
+        &path(&known),
+        "--space",
+        &path(&space),
+        "--out",
+        &path(&dir.join("z")),
+    ]);
+    let stderr = text(&run.stderr);
+    assert!(!run.status.success());
+    assert!(stderr.contains("nothing to fit"), "{stderr}");
+    // A held-out range past the episodes.
+    let run = realitygap(&[
+        "tune",
+        "--recordings",
+        &path(&real),
+        "--engine",
+        "mujoco",
+        "--holdout",
+        "5",
+        "--out",
+        &path(&dir.join("w")),
+    ]);
+    let stderr = text(&run.stderr);
+    assert!(!run.status.success());
+    assert!(stderr.contains("--holdout \"5\""), "{stderr}");
+}

@@ -1,0 +1,471 @@
+//! Bounded Levenberg-Marquardt on a residual vector, with the Jacobian by
+//! forward differences (its columns evaluated in parallel), and the
+//! confidence intervals and identifiability of the fitted coordinates
+//! from that Jacobian.
+//!
+//! Coordinates live in the unit box `[0, 1]^n` (a [`crate::space::Space`]'s
+//! normalised coordinates): a step that would leave the box is projected
+//! back onto it, and a coordinate held at a bound by the gradient is
+//! reported as such.
+//!
+//! The intervals are the Gauss-Newton covariance `s^2 (J^T J)^-1` (what
+//! `mujoco.sysid` gives), with one correction: residuals of a simulated
+//! trajectory are strongly correlated from one sample to the next, which
+//! makes the plain `s^2 / n` far too optimistic. The number of independent
+//! residuals is estimated from the lag-1 autocorrelation `rho` of the
+//! residuals at the optimum (`n_eff = n (1 - rho) / (1 + rho)`, the
+//! AR(1) effective sample size), and the covariance is scaled by
+//! `n / n_eff`.
+
+use cmaes::DVector;
+use nalgebra::DMatrix;
+use rayon::prelude::*;
+use serde::Serialize;
+
+/// A residual function: coordinates in `[0, 1]^n` to the residual
+/// vector (always the same length), or why it could not be evaluated.
+pub type Residuals<'a> = dyn Fn(&[f64]) -> Result<Vec<f64>, String> + Sync + 'a;
+
+/// Settings of a fit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FitOptions {
+    /// Iterations (Jacobians) at most.
+    pub max_iterations: usize,
+    /// Forward-difference step in normalised units.
+    pub step: f64,
+    /// The fit has converged when an accepted step lowers the cost by less
+    /// than this fraction.
+    pub tolerance: f64,
+    /// Parallel evaluations of the Jacobian's columns.
+    pub jobs: usize,
+}
+
+impl Default for FitOptions {
+    fn default() -> Self {
+        FitOptions {
+            max_iterations: 30,
+            step: 1e-3,
+            tolerance: 1e-6,
+            jobs: 1,
+        }
+    }
+}
+
+/// The end of a fit.
+#[derive(Debug, Clone)]
+pub struct Fit {
+    /// The best coordinates found.
+    pub u: Vec<f64>,
+    /// Their residuals.
+    pub residuals: Vec<f64>,
+    /// Sum of squared residuals there.
+    pub cost: f64,
+    /// Sum of squared residuals at the start.
+    pub start_cost: f64,
+    /// The Jacobian at `u` (residuals x coordinates), when one was
+    /// computed there.
+    pub jacobian: Option<DMatrix<f64>>,
+    /// Iterations (Jacobians) done.
+    pub iterations: usize,
+    /// Residual evaluations done.
+    pub evaluations: usize,
+    /// Why it stopped.
+    pub reason: String,
+}
+
+fn cost_of(r: &[f64]) -> f64 {
+    r.iter().map(|x| x * x).sum()
+}
+
+/// The Jacobian of `f` at `u` (with residuals `r0` there) by forward
+/// differences of `step` (backward at the upper bound), its columns in
+/// parallel on `jobs` threads. `Err` names the first coordinate whose
+/// perturbation could not be evaluated.
+pub fn jacobian(
+    f: &Residuals,
+    u: &[f64],
+    r0: &[f64],
+    step: f64,
+    jobs: usize,
+) -> Result<DMatrix<f64>, String> {
+    let columns: Vec<Result<Vec<f64>, String>> = pool(jobs).install(|| {
+        (0..u.len())
+            .into_par_iter()
+            .map(|i| {
+                // Forward, or backward at the upper bound or where the
+                // forward point cannot be evaluated (a diverging engine).
+                let first = if u[i] + step <= 1.0 { step } else { -step };
+                let mut last = String::new();
+                let mut found = None;
+                for h in [first, -first] {
+                    if !(0.0..=1.0).contains(&(u[i] + h)) {
+                        continue;
+                    }
+                    let mut x = u.to_vec();
+                    x[i] += h;
+                    match f(&x) {
+                        Ok(r) => {
+                            found = Some((h, r));
+                            break;
+                        }
+                        Err(m) => last = m,
+                    }
+                }
+                let (h, r) = found.ok_or_else(|| format!("coordinate {i}: {last}"))?;
+                if r.len() != r0.len() {
+                    return Err(format!(
+                        "coordinate {i}: {} residuals, {} at the centre",
+                        r.len(),
+                        r0.len()
+                    ));
+                }
+                Ok(r.iter().zip(r0).map(|(a, b)| (a - b) / h).collect())
+            })
+            .collect()
+    });
+    let mut j = DMatrix::zeros(r0.len(), u.len());
+    for (i, c) in columns.into_iter().enumerate() {
+        let c = c?;
+        j.set_column(i, &DVector::from_vec(c));
+    }
+    Ok(j)
+}
+
+fn pool(jobs: usize) -> rayon::ThreadPool {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(jobs.max(1))
+        .build()
+        .unwrap_or_else(|_| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(1)
+                .build()
+                .expect("a one-thread pool")
+        })
+}
+
+/// Levenberg-Marquardt from `u0` in the unit box. `on_evaluation` is told
+/// the cost of every evaluation at the fit's own points (not the
+/// Jacobian's columns), with a label of the phase.
+pub fn levenberg_marquardt(
+    f: &Residuals,
+    u0: &[f64],
+    options: FitOptions,
+    on_evaluation: &(dyn Fn(&str, &[f64], f64) + Sync),
+) -> Result<Fit, String> {
+    let mut u: Vec<f64> = u0.iter().map(|x| x.clamp(0.0, 1.0)).collect();
+    let mut r = f(&u).map_err(|m| format!("at the start: {m}"))?;
+    let mut cost = cost_of(&r);
+    on_evaluation("start", &u, cost);
+    let start_cost = cost;
+    let mut evaluations = 1usize;
+    let mut lambda = 1e-3;
+    let mut iterations = 0;
+    let mut jac = None;
+    let n = u.len();
+    if n == 0 {
+        return Ok(Fit {
+            u,
+            residuals: r,
+            cost,
+            start_cost,
+            jacobian: None,
+            iterations: 0,
+            evaluations,
+            reason: "nothing to fit".into(),
+        });
+    }
+    let reason = 'outer: loop {
+        if iterations >= options.max_iterations {
+            break "the iteration limit".to_string();
+        }
+        let j = match jacobian(f, &u, &r, options.step, options.jobs) {
+            Ok(j) => j,
+            Err(m) => break format!("the Jacobian could not be evaluated ({m})"),
+        };
+        evaluations += n;
+        iterations += 1;
+        let jt = j.transpose();
+        let a = &jt * &j;
+        let g = &jt * DVector::from_column_slice(&r);
+        jac = Some(j);
+        // Coordinates held at a bound by the gradient stay there this
+        // iteration (an active set): a step computed as if they could
+        // cross the bound, then clipped, is a poor step.
+        let free: Vec<usize> = (0..n)
+            .filter(|&i| !((u[i] <= 0.0 && g[i] > 0.0) || (u[i] >= 1.0 && g[i] < 0.0)))
+            .collect();
+        if free.is_empty() {
+            break 'outer "every coordinate is held at a bound".to_string();
+        }
+        let nf = free.len();
+        let af = DMatrix::from_fn(nf, nf, |r, c| a[(free[r], free[c])]);
+        let gf = DVector::from_fn(nf, |r, _| g[free[r]]);
+        loop {
+            let mut m = af.clone();
+            for i in 0..nf {
+                m[(i, i)] += lambda * af[(i, i)].max(1e-12) + 1e-12;
+            }
+            let Some(chol) = m.cholesky() else {
+                lambda *= 10.0;
+                if lambda > 1e12 {
+                    break 'outer "the normal equations are singular".to_string();
+                }
+                continue;
+            };
+            let step = chol.solve(&(-&gf));
+            let mut delta = vec![0.0; n];
+            for (k, &i) in free.iter().enumerate() {
+                delta[i] = step[k];
+            }
+            let trial: Vec<f64> = u
+                .iter()
+                .zip(&delta)
+                .map(|(x, d)| (x + d).clamp(0.0, 1.0))
+                .collect();
+            let moved = trial
+                .iter()
+                .zip(&u)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max);
+            if moved < 1e-10 {
+                break 'outer "the step vanished (at a bound or a minimum)".to_string();
+            }
+            evaluations += 1;
+            match f(&trial) {
+                Ok(rt) if rt.len() == r.len() && cost_of(&rt) < cost => {
+                    let new_cost = cost_of(&rt);
+                    on_evaluation("step", &trial, new_cost);
+                    let gain = (cost - new_cost) / cost.max(f64::MIN_POSITIVE);
+                    u = trial;
+                    r = rt;
+                    cost = new_cost;
+                    lambda = (lambda / 3.0).max(1e-9);
+                    jac = None;
+                    if gain < options.tolerance {
+                        break 'outer format!(
+                            "converged (the last step gained {:.1e} of the cost)",
+                            gain
+                        );
+                    }
+                    break;
+                }
+                Ok(rt) => {
+                    if rt.len() == r.len() {
+                        on_evaluation("rejected", &trial, cost_of(&rt));
+                    }
+                    lambda *= 4.0;
+                }
+                Err(_) => {
+                    on_evaluation("failed", &trial, f64::INFINITY);
+                    lambda *= 4.0;
+                }
+            }
+            if lambda > 1e10 {
+                break 'outer "no step lowers the cost (converged)".to_string();
+            }
+        }
+    };
+    Ok(Fit {
+        u,
+        residuals: r,
+        cost,
+        start_cost,
+        jacobian: jac,
+        iterations,
+        evaluations,
+        reason,
+    })
+}
+
+/// The spread of the fitted coordinates: their covariance in normalised
+/// units, and what it says about identifiability.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Spread {
+    /// Residuals.
+    pub n: usize,
+    /// Lag-1 autocorrelation of the residuals.
+    pub rho: f64,
+    /// Effective number of independent residuals.
+    pub n_eff: f64,
+    /// Residual variance `cost / (n_eff - p)` (the noise the intervals
+    /// assume), in the residuals' units squared.
+    pub variance: f64,
+    /// Standard deviation of each coordinate, normalised units (infinite
+    /// where the data say nothing of it).
+    pub sd_u: Vec<f64>,
+    /// Correlation of each pair of coordinates.
+    pub correlation: Vec<Vec<f64>>,
+}
+
+/// Lag-1 autocorrelation of `r`.
+pub fn lag1_autocorrelation(r: &[f64]) -> f64 {
+    if r.len() < 3 {
+        return 0.0;
+    }
+    let mean = r.iter().sum::<f64>() / r.len() as f64;
+    let var: f64 = r.iter().map(|x| (x - mean) * (x - mean)).sum();
+    if var <= 0.0 {
+        return 0.0;
+    }
+    let cov: f64 = r.windows(2).map(|w| (w[0] - mean) * (w[1] - mean)).sum();
+    (cov / var).clamp(-0.999, 0.999)
+}
+
+/// The spread of a fit with residuals `r` and Jacobian `j` there.
+pub fn spread(j: &DMatrix<f64>, r: &[f64]) -> Spread {
+    let n = r.len();
+    let p = j.ncols();
+    let rho = lag1_autocorrelation(r).max(0.0);
+    let n_eff = (n as f64 * (1.0 - rho) / (1.0 + rho)).max(p as f64 + 1.0);
+    let variance = cost_of(r) / (n_eff - p as f64).max(1.0);
+    // Covariance of the coordinates: variance * (J^T J)^-1, with the
+    // residual count reduced to n_eff: scaled by n / n_eff. J^T J is
+    // first scaled to unit diagonal, so that its conditioning measures
+    // what the data tell apart, not the parameters' units.
+    let a = j.transpose() * j;
+    let scale = n as f64 / n_eff;
+    let d: Vec<f64> = (0..p).map(|i| a[(i, i)].max(0.0).sqrt()).collect();
+    let seen: Vec<usize> = (0..p).filter(|&i| d[i] > 0.0).collect();
+    let mut sd_u = vec![f64::INFINITY; p];
+    let mut correlation = vec![vec![f64::NAN; p]; p];
+    let m = seen.len();
+    if m > 0 {
+        let sm = DMatrix::from_fn(m, m, |r, c| {
+            a[(seen[r], seen[c])] / (d[seen[r]] * d[seen[c]])
+        });
+        let eig = sm.clone().symmetric_eigen();
+        let top = eig.eigenvalues.iter().copied().fold(0.0, f64::max);
+        // Directions the data do not see: parameters moving along them
+        // leave the residuals unchanged, so their spread is unbounded and
+        // they trade against each other (correlation +-1).
+        let mut blind = vec![false; m];
+        let mut inv = DMatrix::zeros(m, m);
+        for (k, &lambda) in eig.eigenvalues.iter().enumerate() {
+            let v = eig.eigenvectors.column(k);
+            if lambda <= 1e-10 * top {
+                for r in 0..m {
+                    if v[r].abs() > 0.1 {
+                        blind[r] = true;
+                        for c in 0..m {
+                            if v[c].abs() > 0.1 && r != c {
+                                correlation[seen[r]][seen[c]] = (v[r] * v[c]).signum();
+                            }
+                        }
+                    }
+                }
+            } else {
+                inv += (v * v.transpose()) / lambda;
+            }
+        }
+        for r in 0..m {
+            if blind[r] {
+                continue;
+            }
+            sd_u[seen[r]] = (variance * scale * inv[(r, r)]).max(0.0).sqrt() / d[seen[r]];
+            for c in 0..m {
+                if blind[c] {
+                    continue;
+                }
+                let den = (inv[(r, r)] * inv[(c, c)]).sqrt();
+                if den > 0.0 {
+                    correlation[seen[r]][seen[c]] = (inv[(r, c)] / den).clamp(-1.0, 1.0);
+                }
+            }
+        }
+    }
+    Spread {
+        n,
+        rho,
+        n_eff,
+        variance,
+        sd_u,
+        correlation,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// y = a exp(-b t) + c on a grid, coordinates mapped a = 4u0,
+    /// b = 2u1, c = u2 - 0.5.
+    fn model(u: &[f64], t: f64) -> f64 {
+        4.0 * u[0] * (-(2.0 * u[1]) * t).exp() + u[2] - 0.5
+    }
+
+    #[test]
+    fn fits_a_curve_and_its_intervals_cover_the_truth() {
+        let truth = [0.6, 0.35, 0.7];
+        let mut noise = realitygap_core::controller::SplitMix64::new(3);
+        let data: Vec<(f64, f64)> = (0..200)
+            .map(|i| {
+                let t = i as f64 * 0.02;
+                (t, model(&truth, t) + 0.01 * (noise.uniform() - 0.5))
+            })
+            .collect();
+        let f = |u: &[f64]| -> Result<Vec<f64>, String> {
+            Ok(data.iter().map(|(t, y)| model(u, *t) - y).collect())
+        };
+        let fit = levenberg_marquardt(
+            &f,
+            &[0.2, 0.8, 0.2],
+            FitOptions {
+                jobs: 2,
+                ..FitOptions::default()
+            },
+            &|_, _, _| {},
+        )
+        .unwrap();
+        assert!(fit.cost < fit.start_cost * 1e-3, "{fit:?}");
+        let r = f(&fit.u).unwrap();
+        let j = jacobian(&f, &fit.u, &r, 1e-6, 1).unwrap();
+        let s = spread(&j, &r);
+        for (i, want) in truth.iter().enumerate() {
+            assert!(
+                (fit.u[i] - want).abs() < 3.0 * s.sd_u[i] + 1e-4,
+                "coordinate {i}: {} vs {want} (sd {})",
+                fit.u[i],
+                s.sd_u[i]
+            );
+            assert!(s.sd_u[i] < 0.01, "{s:?}");
+            assert!(s.correlation[i][i] > 0.999, "{s:?}");
+        }
+    }
+
+    #[test]
+    fn names_coordinates_that_trade_against_each_other() {
+        // Only the sum u0 + u1 matters.
+        let f = |u: &[f64]| -> Result<Vec<f64>, String> {
+            Ok((0..50)
+                .map(|i| {
+                    (u[0] + u[1]) * i as f64 * 0.1 - 0.8 * i as f64 * 0.1 + 0.001 * (i % 3) as f64
+                })
+                .collect())
+        };
+        let fit =
+            levenberg_marquardt(&f, &[0.1, 0.1], FitOptions::default(), &|_, _, _| {}).unwrap();
+        assert!((fit.u[0] + fit.u[1] - 0.8).abs() < 1e-3, "{fit:?}");
+        let r = f(&fit.u).unwrap();
+        let j = jacobian(&f, &fit.u, &r, 1e-4, 1).unwrap();
+        let s = spread(&j, &r);
+        assert!(s.correlation[0][1] < -0.99, "{s:?}");
+        assert!(s.sd_u.iter().all(|x| x.is_infinite()), "{s:?}");
+    }
+
+    #[test]
+    fn a_failing_start_is_an_error_and_failing_steps_are_rejected() {
+        let f = |_: &[f64]| -> Result<Vec<f64>, String> { Err("diverged".into()) };
+        let e = levenberg_marquardt(&f, &[0.5], FitOptions::default(), &|_, _, _| {}).unwrap_err();
+        assert!(e.contains("diverged"), "{e}");
+        // Evaluations fail past u = 0.6; the minimum at 0.9 is beyond.
+        let g = |u: &[f64]| -> Result<Vec<f64>, String> {
+            if u[0] > 0.6 {
+                Err("diverged".into())
+            } else {
+                Ok(vec![u[0] - 0.9])
+            }
+        };
+        let fit = levenberg_marquardt(&g, &[0.1], FitOptions::default(), &|_, _, _| {}).unwrap();
+        assert!(fit.u[0] <= 0.6 && fit.u[0] > 0.5, "{fit:?}");
+    }
+}

@@ -1,0 +1,1248 @@
+//! `realitygap tune --recordings`: fits an engine's physical parameters to
+//! a robot's own recorded episodes (a results directory of `realitygap
+//! import rosbag|csv|lerobot`) in joint space, then scores the untuned and
+//! the tuned engine, and the physics-free model, on the training and the
+//! held-out episodes.
+//!
+//! - **Space.** Built from the URDF for a robot the project has never
+//!   seen ([`default_space`]: every moving joint's damping, armature and
+//!   dry friction, the servo gains `kp` and `kv`, and the command delay),
+//!   less what the engine cannot honour and what the user fixes with
+//!   known parameters (`--params`: the ros2_control gains, say). A space
+//!   file (`--space`, the format of [`crate::space`]) overrides it; the
+//!   space used is written to `OUT/space.toml` to edit and pass back.
+//! - **Objective.** The joint angles of every training episode replayed
+//!   in the engine ([`realitygap_study::replay`]) against the recorded
+//!   ones, degrees, sample by sample: a least-squares problem.
+//! - **Search.** The command delay first, scanned over its range at the
+//!   untuned parameters (a gradient search from a delay far from the truth
+//!   can settle where a wrong delay and wrong damping make up for each
+//!   other); then Levenberg-Marquardt ([`crate::least_squares`]) on every
+//!   parameter, the delay included (a replay is continuous in the delay:
+//!   between two engine steps it blends them, [`realitygap_core::replay`]).
+//! - **Intervals.** Each fitted parameter's 95 % interval from the
+//!   Jacobian at the optimum (Gauss-Newton, with the residual count
+//!   reduced for their autocorrelation). The identifiability report names
+//!   parameters whose interval spans their
+//!   whole range (the data do not see them) and pairs whose estimates are
+//!   correlated beyond 0.95 (they trade against each other: joint damping
+//!   and the servo's `kv` both multiply the joint velocity, and joint
+//!   angles alone cannot tell them apart).
+//! - **Scores.** Joint-space RMS over all joints and samples, per episode
+//!   set, with a 95 % bootstrap interval over episodes (none from a single
+//!   episode), for the untuned engine, the tuned engine, and the
+//!   physics-free model (perfect tracking of the commands, undelayed and
+//!   with the fitted delay).
+
+use crate::least_squares::{self, FitOptions};
+use crate::space::{params_of, Dim, Scale, Space};
+use anyhow::{anyhow, bail, Context, Result};
+use realitygap_analysis::bootstrap::percentile_interval;
+use realitygap_analysis::selection::RunSelection;
+use realitygap_core::controller::{RunStatus, SplitMix64};
+use realitygap_core::params::{ParamKey, PhysicalParams};
+use realitygap_core::trajectory::CommandKind;
+use realitygap_core::{Engine, Trajectory};
+use realitygap_study::replay::{kinematic_run, replay_one, Episode, Prepared};
+use serde::Serialize;
+use std::fmt::Write as _;
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::time::Instant;
+
+/// The space key of the command delay (scanned before the fit).
+pub const DELAY_KEY: &str = "controller.delay_s";
+
+/// Everything a tune against recordings is asked to do.
+pub struct RecordingsSpec<'a> {
+    /// The engine.
+    pub engine: &'a dyn Engine,
+    /// The recordings, the robot and the replay scene.
+    pub prepared: &'a Prepared,
+    /// Parameters known and fixed (`--params`): never searched.
+    pub known: &'a PhysicalParams,
+    /// The space; `None`: built from the URDF ([`default_space`]).
+    pub space: Option<Space>,
+    /// Episodes to fit on and to score on (1-based, in the results
+    /// directory's order).
+    pub selection: RunSelection,
+    /// Output folder.
+    pub out: PathBuf,
+    /// Parallel evaluations.
+    pub jobs: usize,
+    /// Levenberg-Marquardt iterations per round at most.
+    pub max_iterations: usize,
+}
+
+/// Progress of a tune, reported after every evaluation.
+#[derive(Debug, Clone)]
+pub struct RecordingsProgress {
+    /// Evaluations done (each replays every training episode).
+    pub evaluations: usize,
+    /// What the tune is doing.
+    pub phase: String,
+    /// The best training RMS so far, degrees.
+    pub best_rms_deg: f64,
+}
+
+/// A fitted parameter.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FittedParam {
+    /// The key, as in a parameters file.
+    pub key: String,
+    /// Its value before tuning (the engine's, from the URDF and the known
+    /// parameters).
+    pub start: f64,
+    /// The fitted value.
+    pub value: f64,
+    /// Its 95 % interval, when the data give one.
+    pub interval: Option<(f64, f64)>,
+    /// The space's bounds.
+    pub bounds: (f64, f64),
+    /// True when the fit ended on a bound.
+    pub at_bound: bool,
+}
+
+/// One scored source on one set of episodes.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SetScore {
+    /// RMS over all joints and samples of the set, degrees.
+    pub rms_deg: f64,
+    /// Its 95 % bootstrap interval over episodes (none from one episode).
+    pub interval_deg: Option<(f64, f64)>,
+    /// Per episode (id, RMS degrees).
+    pub episodes: Vec<(String, f64)>,
+    /// Per joint RMS, degrees.
+    pub per_joint_deg: Vec<f64>,
+}
+
+/// A source's scores on the training and the held-out episodes.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SourceScores {
+    /// The source.
+    pub source: String,
+    /// On the training episodes.
+    pub train: Option<SetScore>,
+    /// On the held-out episodes (when any is held out).
+    pub holdout: Option<SetScore>,
+}
+
+/// Identifiability: what the data cannot tell.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Identifiability {
+    /// Parameters whose 95 % interval spans their whole range, or that
+    /// have no effect at all on the joint angles.
+    pub unseen: Vec<String>,
+    /// Pairs of parameters whose estimates are correlated beyond 0.95
+    /// (key, key, correlation).
+    pub trading: Vec<(String, String, f64)>,
+    /// Lag-1 autocorrelation of the residuals at the optimum.
+    pub residual_autocorrelation: f64,
+    /// Residuals, and the independent ones they count as.
+    pub residuals: (usize, f64),
+}
+
+/// `summary.json`.
+#[derive(Debug, Clone, Serialize)]
+pub struct RecordingsSummary {
+    /// Engine name and version.
+    pub engine: String,
+    /// The robot's name.
+    pub robot: String,
+    /// The recordings' folder.
+    pub recordings: PathBuf,
+    /// Training episodes (ids).
+    pub train: Vec<String>,
+    /// Held-out episodes (ids).
+    pub holdout: Vec<String>,
+    /// The known parameters' keys (fixed, never searched).
+    pub known: Vec<String>,
+    /// The fitted parameters.
+    pub params: Vec<FittedParam>,
+    /// The identifiability report.
+    pub identifiability: Identifiability,
+    /// Scores: the engine untuned and tuned, the physics-free model.
+    pub scores: Vec<SourceScores>,
+    /// Residual evaluations (each replays every training episode).
+    pub evaluations: usize,
+    /// Levenberg-Marquardt iterations, all rounds.
+    pub iterations: usize,
+    /// Why the last fit stopped.
+    pub reason: String,
+    /// Wall time, s.
+    pub wall_time_s: f64,
+    /// The answer in words: does the tuned engine beat the physics-free
+    /// model on the held-out episodes?
+    pub verdict: String,
+}
+
+/// The result of a tune.
+pub struct RecordingsResult {
+    /// The summary (also in `summary.json`).
+    pub summary: RecordingsSummary,
+    /// Files written.
+    pub files: Vec<PathBuf>,
+}
+
+/// The parameter space of a robot the project has never seen, from its
+/// URDF: per moving joint, viscous damping, armature and dry friction,
+/// and the replay servo's gains (`kp` for position commands, `kv`), then
+/// the command delay; less the keys `known` sets and the keys `engine`
+/// cannot honour. Bounds scale with each joint's effort limit (100 N m
+/// where the URDF gives none); starts are the untuned values (the URDF's
+/// damping and friction, no armature, the replay's default gains, no
+/// delay).
+pub fn default_space(
+    prepared: &Prepared,
+    engine: &dyn Engine,
+    known: &PhysicalParams,
+) -> Result<Space> {
+    let supported: Vec<ParamKey> = engine.param_support().iter().map(|s| s.key).collect();
+    let honours = |k: ParamKey| k.is_core() || supported.contains(&k);
+    let kind = prepared
+        .episodes
+        .first()
+        .and_then(|e| e.real.commands.as_ref())
+        .map(|c| c.kind);
+    let mut dims = Vec::new();
+    for (j, &ji) in prepared.robot.actuated_joints().iter().enumerate() {
+        let joint = &prepared.robot.joints[ji];
+        let name = &joint.name;
+        let given = known.joints.get(name);
+        let effort = joint
+            .limits
+            .as_ref()
+            .map(|l| l.effort)
+            .filter(|e| e.is_finite() && *e > 0.0 && *e < 1e5)
+            .unwrap_or(100.0);
+        let actuator = prepared.scene.actuators.get(j);
+        let kv0 = given
+            .and_then(|g| g.kv)
+            .or(actuator.map(|a| a.kv))
+            .unwrap_or(effort);
+        let kp0 = given.and_then(|g| g.kp).unwrap_or(effort / 0.05);
+        let mut push =
+            |field: &str, key: ParamKey, low: f64, high: f64, scale: Scale, start: f64| {
+                let set = match field {
+                    "damping" => given.and_then(|g| g.damping).is_some(),
+                    "armature" => given.and_then(|g| g.armature).is_some(),
+                    "frictionloss" => given.and_then(|g| g.frictionloss).is_some(),
+                    "kp" => given.and_then(|g| g.kp).is_some(),
+                    "kv" => given.and_then(|g| g.kv).is_some(),
+                    _ => false,
+                };
+                if set || !honours(key) {
+                    return;
+                }
+                dims.push(Dim {
+                    key: format!("joints.{name}.{field}"),
+                    low,
+                    high,
+                    scale,
+                    start: start.clamp(low, high),
+                });
+            };
+        push(
+            "damping",
+            ParamKey::JointDamping,
+            0.0,
+            (0.1 * effort).max(10.0 * joint.damping),
+            Scale::Linear,
+            joint.damping,
+        );
+        push(
+            "armature",
+            ParamKey::JointArmature,
+            0.0,
+            (0.005 * effort).max(0.5),
+            Scale::Linear,
+            0.0,
+        );
+        push(
+            "frictionloss",
+            ParamKey::JointFrictionloss,
+            0.0,
+            (0.05 * effort).max(10.0 * joint.friction),
+            Scale::Linear,
+            joint.friction,
+        );
+        if kind == Some(CommandKind::Position) {
+            push(
+                "kp",
+                ParamKey::JointKp,
+                kp0 / 30.0,
+                kp0 * 3.0,
+                Scale::Log,
+                kp0,
+            );
+        }
+        if kind != Some(CommandKind::Effort) {
+            push(
+                "kv",
+                ParamKey::JointKv,
+                kv0 / 30.0,
+                kv0 * 3.0,
+                Scale::Log,
+                kv0,
+            );
+        }
+    }
+    if known.controller.delay_s.is_none() && kind != Some(CommandKind::Effort) {
+        dims.push(Dim {
+            key: DELAY_KEY.into(),
+            low: 0.0,
+            high: 0.1,
+            scale: Scale::Linear,
+            start: 0.0,
+        });
+    }
+    if dims.is_empty() {
+        bail!(
+            "nothing to fit: the known parameters fix every parameter engine {} honours",
+            engine.name()
+        );
+    }
+    Ok(Space {
+        source: PathBuf::from(format!("<built from the URDF of {}>", prepared.robot.name)),
+        dims,
+        settings: Default::default(),
+        registration: None,
+    })
+}
+
+/// The space as a TOML file a user can edit and pass back with `--space`.
+pub fn space_toml(space: &Space, robot: &str, engine: &str) -> String {
+    let mut s = format!(
+        "# Parameter space of `realitygap tune --recordings` for robot '{robot}' in {engine}\n\
+         # (built from the URDF; edit the bounds and pass this file back with --space).\n\
+         # `start` is the untuned value; controller.delay_s is scanned over its range first.\n\n[params]\n"
+    );
+    for d in &space.dims {
+        let scale = match d.scale {
+            Scale::Linear => String::new(),
+            Scale::Log => ", scale = \"log\"".into(),
+        };
+        let _ = writeln!(
+            s,
+            "{:?} = {{ low = {:?}, high = {:?}{scale}, start = {:?} }}",
+            d.key, d.low, d.high, d.start
+        );
+    }
+    s
+}
+
+/// The keys `known` sets, as written in a parameters file.
+pub fn known_keys(known: &PhysicalParams) -> Vec<String> {
+    known
+        .set_keys()
+        .iter()
+        .map(|(k, name)| {
+            let parts: Vec<&str> = k.pattern().split('.').collect();
+            match (name, parts.as_slice()) {
+                (Some(n), [section, _, field]) => format!("{section}.{n}.{field}"),
+                _ => k.pattern().to_string(),
+            }
+        })
+        .collect()
+}
+
+/// Sets `key` (a space key) to `value` in `params`.
+fn set_key(params: &mut PhysicalParams, key: &str, value: f64) -> Result<(), String> {
+    let parsed = params_of(std::iter::once((key, value)))?;
+    for (name, j) in parsed.joints {
+        let t = params.joints.entry(name).or_default();
+        macro_rules! over {
+            ($($f:ident),*) => { $( if j.$f.is_some() { t.$f = j.$f; } )* };
+        }
+        over!(
+            damping,
+            armature,
+            frictionloss,
+            kv,
+            kp,
+            force_limit,
+            offset_deg
+        );
+    }
+    for (name, l) in parsed.links {
+        let t = params.links.entry(name).or_default();
+        if l.mass_scale.is_some() {
+            t.mass_scale = l.mass_scale;
+        }
+    }
+    for (name, o) in parsed.objects {
+        let t = params.objects.entry(name).or_default();
+        if o.mass_kg.is_some() {
+            t.mass_kg = o.mass_kg;
+        }
+        if o.friction.is_some() {
+            t.friction = o.friction;
+        }
+        if o.restitution.is_some() {
+            t.restitution = o.restitution;
+        }
+    }
+    let c = parsed.contact;
+    if c.time_constant_s.is_some() {
+        params.contact.time_constant_s = c.time_constant_s;
+    }
+    if c.damping_ratio.is_some() {
+        params.contact.damping_ratio = c.damping_ratio;
+    }
+    let c = parsed.controller;
+    if c.delay_s.is_some() {
+        params.controller.delay_s = c.delay_s;
+    }
+    if c.gain_per_s.is_some() {
+        params.controller.gain_per_s = c.gain_per_s;
+    }
+    if c.max_speed_deg_s.is_some() {
+        params.controller.max_speed_deg_s = c.max_speed_deg_s;
+    }
+    if c.max_accel_deg_s2.is_some() {
+        params.controller.max_accel_deg_s2 = c.max_accel_deg_s2;
+    }
+    Ok(())
+}
+
+/// The problem: which dims are continuous, the delay grid, the episodes.
+struct Problem<'a> {
+    spec: &'a RecordingsSpec<'a>,
+    space: Space,
+    /// Indices (into `space.dims`) of the coordinates (every parameter).
+    continuous: Vec<usize>,
+    /// The delay's dim, when it is searched (scanned first).
+    delay: Option<Dim>,
+    /// The engine's timestep, s.
+    dt: f64,
+    train: Vec<usize>,
+    holdout: Vec<usize>,
+    evaluations: Mutex<usize>,
+    best: Mutex<f64>,
+    history: Mutex<std::fs::File>,
+    samples: usize,
+    progress: &'a (dyn Fn(RecordingsProgress) + Sync),
+    phase: Mutex<String>,
+}
+
+impl Problem<'_> {
+    /// The parameters at coordinates `u`.
+    fn params(&self, u: &[f64]) -> Result<PhysicalParams, String> {
+        let mut p = self.spec.known.clone();
+        for (&i, &x) in self.continuous.iter().zip(u) {
+            let d = &self.space.dims[i];
+            set_key(&mut p, &d.key, d.value(x))?;
+        }
+        Ok(p)
+    }
+
+    /// Replays one episode with `params`.
+    fn replay(&self, episode: &Episode, params: &PhysicalParams) -> Result<Trajectory, String> {
+        let engine = self.spec.engine;
+        let prepared = self.spec.prepared;
+        let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            replay_one(engine, prepared, episode, params)
+        }))
+        .map_err(|p| {
+            let what = p
+                .downcast_ref::<String>()
+                .cloned()
+                .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
+                .unwrap_or_else(|| "a panic".into());
+            format!("engine {} panicked: {what}", engine.name())
+        })?;
+        let (trajectory, status, _) = outcome?;
+        if let RunStatus::Diverged { t_s, reason } = status {
+            return Err(format!(
+                "episode '{}' diverged at {t_s:.3} s: {reason}",
+                episode.id
+            ));
+        }
+        Ok(trajectory)
+    }
+
+    /// Joint-angle residuals (degrees) of the training episodes.
+    fn residuals(&self, params: &PhysicalParams) -> Result<Vec<f64>, String> {
+        let mut r = Vec::with_capacity(self.samples);
+        let result = (|| {
+            for &k in &self.train {
+                let e = &self.spec.prepared.episodes[k];
+                let sim = self.replay(e, params)?;
+                push_residuals(&e.real, &sim, &mut r)
+                    .map_err(|m| format!("episode '{}': {m}", e.id))?;
+            }
+            Ok(())
+        })();
+        let n = {
+            let mut n = self.evaluations.lock().unwrap_or_else(|p| p.into_inner());
+            *n += 1;
+            *n
+        };
+        (self.progress)(RecordingsProgress {
+            evaluations: n,
+            phase: self.phase.lock().map(|p| p.clone()).unwrap_or_default(),
+            best_rms_deg: *self.best.lock().unwrap_or_else(|p| p.into_inner()),
+        });
+        result.map(|()| r)
+    }
+
+    /// Appends a point of the fit (not the Jacobian's columns) to
+    /// `history.csv`.
+    fn record(&self, phase: &str, values: &[f64], cost: f64) {
+        let rms = (cost / self.samples.max(1) as f64).sqrt();
+        let n = *self.evaluations.lock().unwrap_or_else(|p| p.into_inner());
+        {
+            let mut b = self.best.lock().unwrap_or_else(|p| p.into_inner());
+            if rms < *b {
+                *b = rms;
+            }
+        }
+        let mut line = format!("{n},{phase},{rms:?}");
+        for v in values {
+            let _ = write!(line, ",{v:?}");
+        }
+        let mut f = self.history.lock().unwrap_or_else(|p| p.into_inner());
+        let _ = writeln!(f, "{line}");
+    }
+
+    fn values(&self, u: &[f64]) -> Vec<f64> {
+        self.continuous
+            .iter()
+            .zip(u)
+            .map(|(&i, &x)| self.space.dims[i].value(x))
+            .collect()
+    }
+
+    fn set_phase(&self, phase: String) {
+        if let Ok(mut p) = self.phase.lock() {
+            *p = phase;
+        }
+    }
+}
+
+/// Appends the joint-angle differences (degrees) of `sim` against `real`,
+/// sample by sample and joint by joint.
+fn push_residuals(real: &Trajectory, sim: &Trajectory, out: &mut Vec<f64>) -> Result<(), String> {
+    let (Some(rq), Some(sq)) = (&real.joint_angles_rad, &sim.joint_angles_rad) else {
+        return Err("no joint angles".into());
+    };
+    if sq.len() != rq.len() {
+        return Err(format!(
+            "the replay has {} samples, the recording {}",
+            sq.len(),
+            rq.len()
+        ));
+    }
+    for (a, b) in sq.iter().zip(rq) {
+        for (x, y) in a.iter().zip(b) {
+            out.push((x - y).to_degrees());
+        }
+    }
+    Ok(())
+}
+
+/// Scores of `runs` (episode index, trajectory) against the recordings.
+fn set_score(prepared: &Prepared, runs: &[(usize, Trajectory)]) -> Option<SetScore> {
+    let joints = prepared.robot.actuated_joints().len();
+    let mut per_joint = vec![0.0; joints];
+    let mut n = 0usize;
+    let mut episodes = Vec::new();
+    let mut sums = Vec::new();
+    for (k, sim) in runs {
+        let e = &prepared.episodes[*k];
+        let (Some(rq), Some(sq)) = (&e.real.joint_angles_rad, &sim.joint_angles_rad) else {
+            continue;
+        };
+        let len = rq.len().min(sq.len());
+        if len == 0 {
+            continue;
+        }
+        let mut s = 0.0;
+        for i in 0..len {
+            for j in 0..joints {
+                let d = (sq[i][j] - rq[i][j]).to_degrees();
+                per_joint[j] += d * d;
+                s += d * d;
+            }
+        }
+        n += len;
+        episodes.push((e.id.clone(), (s / (len * joints) as f64).sqrt()));
+        sums.push((s, len * joints));
+    }
+    if n == 0 {
+        return None;
+    }
+    let total: f64 = sums.iter().map(|s| s.0).sum();
+    let count: usize = sums.iter().map(|s| s.1).sum();
+    let interval = (sums.len() > 1).then(|| {
+        let mut rng = SplitMix64::new(2019);
+        let reps: Vec<f64> = (0..1000)
+            .map(|_| {
+                let (mut s, mut c) = (0.0, 0usize);
+                for _ in 0..sums.len() {
+                    let k = ((rng.uniform() * sums.len() as f64) as usize).min(sums.len() - 1);
+                    s += sums[k].0;
+                    c += sums[k].1;
+                }
+                (s / c as f64).sqrt()
+            })
+            .collect();
+        percentile_interval(&reps, 0.95).map(|i| (i.low_m, i.high_m))
+    });
+    Some(SetScore {
+        rms_deg: (total / count as f64).sqrt(),
+        interval_deg: interval.flatten(),
+        episodes,
+        per_joint_deg: per_joint.iter().map(|s| (s / n as f64).sqrt()).collect(),
+    })
+}
+
+/// The episodes to fit on and to score on: the selection's, or (without
+/// `--holdout` and `--runs`) the last quarter of the episodes held out.
+fn split(selection: &RunSelection, count: usize) -> Result<(Vec<usize>, Vec<usize>)> {
+    if selection.runs.is_none() && selection.holdout.is_none() {
+        if count < 2 {
+            return Ok(((0..count).collect(), Vec::new()));
+        }
+        let held = count.div_ceil(4);
+        return Ok(((0..count - held).collect(), (count - held..count).collect()));
+    }
+    let s = selection
+        .select("recordings", count)
+        .map_err(|e| anyhow!("{}", e.message))?;
+    if selection.holdout.is_some() {
+        Ok((s.fit, s.score))
+    } else {
+        Ok((s.fit, Vec::new()))
+    }
+}
+
+/// Runs the tune: writes `OUT/space.toml`, `OUT/history.csv`,
+/// `OUT/tuned.toml`, `OUT/summary.md` and `OUT/summary.json`.
+pub fn tune_recordings(
+    spec: &RecordingsSpec,
+    progress: &(dyn Fn(RecordingsProgress) + Sync),
+) -> Result<RecordingsResult> {
+    let started = Instant::now();
+    let prepared = spec.prepared;
+    let engine = spec.engine;
+    let space = match &spec.space {
+        Some(s) => {
+            // The known parameters are fixed: never searched.
+            let fixed = known_keys(spec.known);
+            let mut s = s.clone();
+            s.dims.retain(|d| !fixed.contains(&d.key));
+            if s.dims.is_empty() {
+                bail!(
+                    "{}: nothing to fit: the known parameters fix every key of the space",
+                    s.source.display()
+                );
+            }
+            s
+        }
+        None => default_space(prepared, engine, spec.known)?,
+    };
+    let (train, holdout) = split(&spec.selection, prepared.episodes.len())?;
+    std::fs::create_dir_all(&spec.out)
+        .with_context(|| format!("creating {}", spec.out.display()))?;
+    let mut files = Vec::new();
+    let space_path = spec.out.join("space.toml");
+    std::fs::write(
+        &space_path,
+        space_toml(&space, &prepared.robot.name, engine.name()),
+    )
+    .with_context(|| format!("writing {}", space_path.display()))?;
+    files.push(space_path);
+
+    let settings = prepared
+        .scene
+        .engine_settings
+        .get(engine.name())
+        .cloned()
+        .unwrap_or_default();
+    let dt = engine
+        .check_settings(&settings)
+        .map_err(|e| anyhow!("{e}"))?;
+    let continuous: Vec<usize> = (0..space.dims.len()).collect();
+    let delay = space.dims.iter().find(|d| d.key == DELAY_KEY).cloned();
+    let samples: usize = train
+        .iter()
+        .map(|&k| {
+            prepared.episodes[k]
+                .real
+                .joint_angles_rad
+                .as_ref()
+                .map_or(0, |q| q.len() * prepared.robot.actuated_joints().len())
+        })
+        .sum();
+    let history_path = spec.out.join("history.csv");
+    let mut history = std::fs::File::create(&history_path)
+        .with_context(|| format!("writing {}", history_path.display()))?;
+    // One row per point of the fit: `evaluation` is the count of training
+    // replays so far (the Jacobians' included).
+    let mut header = String::from("evaluation,phase,train_rms_deg");
+    for &i in &continuous {
+        let _ = write!(header, ",{}", space.dims[i].key);
+    }
+    writeln!(history, "{header}")?;
+    files.push(history_path);
+    let problem = Problem {
+        spec,
+        continuous,
+        delay,
+        dt,
+        train,
+        holdout,
+        evaluations: Mutex::new(0),
+        best: Mutex::new(f64::INFINITY),
+        history: Mutex::new(history),
+        samples,
+        progress,
+        phase: Mutex::new("start".into()),
+        space,
+    };
+    let p = &problem;
+    // The untuned start: every key at its start value.
+    let mut u: Vec<f64> = p
+        .continuous
+        .iter()
+        .map(|&i| p.space.dims[i].unit(p.space.dims[i].start))
+        .collect();
+    let start_params = p.params(&u).map_err(|m| anyhow!(m))?;
+    // Fail early, with the engine's own message, when the start cannot run.
+    p.residuals(&start_params)
+        .map_err(|m| anyhow!("the untuned engine cannot replay the training episodes: {m}"))?;
+    // The delay first, over its whole range at the untuned parameters: a
+    // gradient search from a delay far from the truth can settle where a
+    // wrong delay and wrong damping make up for each other.
+    if let Some(d) = &p.delay {
+        let c = p
+            .continuous
+            .iter()
+            .position(|&i| p.space.dims[i].key == DELAY_KEY)
+            .ok_or_else(|| anyhow!("the delay is not a coordinate"))?;
+        let grid = delay_grid(d, p.dt);
+        p.set_phase(format!("the delay over {} values", grid.len()));
+        let costs = delay_costs(p, &u, c, &grid)?;
+        if let Some((best, _)) = grid
+            .iter()
+            .zip(&costs)
+            .filter_map(|(g, k)| k.map(|k| (*g, k)))
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+        {
+            u[c] = d.unit(best);
+        }
+    }
+    p.set_phase("Levenberg-Marquardt".into());
+    let f = |x: &[f64]| -> Result<Vec<f64>, String> {
+        let params = p.params(x)?;
+        p.residuals(&params)
+    };
+    let fit = least_squares::levenberg_marquardt(
+        &f,
+        &u,
+        FitOptions {
+            max_iterations: spec.max_iterations,
+            jobs: spec.jobs,
+            ..FitOptions::default()
+        },
+        &|phase, x, cost| p.record(phase, &p.values(x), cost),
+    )
+    .map_err(|m| anyhow!("the fit failed: {m}"))?;
+    let mut iterations = fit.iterations;
+    let mut reason = fit.reason.clone();
+    u.clone_from(&fit.u);
+    let mut fit = fit;
+    // The delay's profile: a wrong delay and wrong damping and inertia can
+    // make up for each other (a valley the gradient search may stop in).
+    // At whole engine steps around the fitted delay, every other
+    // parameter is fitted again; the search walks downhill from the
+    // nearest step and stops where the cost rises. The best is polished
+    // with the delay free again.
+    if let Some(d) = &p.delay {
+        let c = p
+            .continuous
+            .iter()
+            .position(|&i| p.space.dims[i].key == DELAY_KEY)
+            .ok_or_else(|| anyhow!("the delay is not a coordinate"))?;
+        let insert = |x: &[f64], delay: f64| -> Vec<f64> {
+            let mut v = x.to_vec();
+            v.insert(c, d.unit(delay));
+            v
+        };
+        let others = |x: &[f64]| -> Vec<f64> {
+            let mut v = x.to_vec();
+            v.remove(c);
+            v
+        };
+        let mut profile: Vec<(i64, f64, Vec<f64>)> = Vec::new();
+        let mut at = |k: i64, from: &[f64]| -> Result<Option<(f64, Vec<f64>)>> {
+            let delay = k as f64 * p.dt;
+            if delay < d.low - 1e-12 || delay > d.high + 1e-12 {
+                return Ok(None);
+            }
+            if let Some((_, cost, x)) = profile.iter().find(|e| e.0 == k) {
+                return Ok(Some((*cost, x.clone())));
+            }
+            p.set_phase(format!("the delay's profile: {:.1} ms", delay * 1e3));
+            let g = |x: &[f64]| -> Result<Vec<f64>, String> {
+                let params = p.params(&insert(x, delay))?;
+                p.residuals(&params)
+            };
+            let fk = least_squares::levenberg_marquardt(
+                &g,
+                &others(from),
+                FitOptions {
+                    max_iterations: spec.max_iterations.min(10),
+                    jobs: spec.jobs,
+                    ..FitOptions::default()
+                },
+                &|phase, x, cost| {
+                    p.record(
+                        &format!("profile {phase}"),
+                        &p.values(&insert(x, delay)),
+                        cost,
+                    )
+                },
+            );
+            match fk {
+                Ok(fk) => {
+                    let x = insert(&fk.u, delay);
+                    profile.push((k, fk.cost, x.clone()));
+                    Ok(Some((fk.cost, x)))
+                }
+                Err(_) => Ok(None),
+            }
+        };
+        let centre = (d.value(u[c]) / p.dt).round() as i64;
+        let mut best = match at(centre, &u)? {
+            Some((cost, x)) => (centre, cost, x),
+            None => (centre, f64::INFINITY, u.clone()),
+        };
+        for dir in [-1i64, 1] {
+            let mut k = centre;
+            loop {
+                k += dir;
+                let from = best.2.clone();
+                match at(k, &from)? {
+                    Some((cost, x)) if cost < best.1 => best = (k, cost, x),
+                    _ => break,
+                }
+            }
+        }
+        if best.1 < fit.cost {
+            p.set_phase("Levenberg-Marquardt from the profile's best delay".into());
+            let polished = least_squares::levenberg_marquardt(
+                &f,
+                &best.2,
+                FitOptions {
+                    max_iterations: spec.max_iterations,
+                    jobs: spec.jobs,
+                    ..FitOptions::default()
+                },
+                &|phase, x, cost| p.record(phase, &p.values(x), cost),
+            )
+            .map_err(|m| anyhow!("the fit failed: {m}"))?;
+            iterations += polished.iterations;
+            reason.clone_from(&polished.reason);
+            u.clone_from(&polished.u);
+            fit = polished;
+        }
+    }
+    // The Jacobian at the optimum, for the intervals.
+    p.set_phase("intervals".into());
+    let r = fit.residuals.clone();
+    let jac = match fit.jacobian {
+        Some(j) => j,
+        None => least_squares::jacobian(&f, &u, &r, FitOptions::default().step, spec.jobs)
+            .map_err(|m| anyhow!("the Jacobian at the optimum: {m}"))?,
+    };
+    let spread = least_squares::spread(&jac, &r);
+    let mut params_out = Vec::new();
+    for (c, &i) in p.continuous.iter().enumerate() {
+        let d = &p.space.dims[i];
+        let value = d.value(u[c]);
+        let sd = spread.sd_u[c];
+        let interval = sd.is_finite().then(|| {
+            let lo = d.value((u[c] - 1.96 * sd).max(0.0));
+            let hi = d.value((u[c] + 1.96 * sd).min(1.0));
+            (lo, hi)
+        });
+        params_out.push(FittedParam {
+            key: d.key.clone(),
+            start: d.start,
+            value,
+            interval,
+            bounds: (d.low, d.high),
+            at_bound: u[c] <= 1e-6 || u[c] >= 1.0 - 1e-6,
+        });
+    }
+    let keys: Vec<String> = p
+        .continuous
+        .iter()
+        .map(|&i| p.space.dims[i].key.clone())
+        .collect();
+    let mut unseen = Vec::new();
+    for (c, k) in keys.iter().enumerate() {
+        let col = jac.column(c).norm();
+        let width = 2.0 * 1.96 * spread.sd_u[c];
+        if col == 0.0 || !width.is_finite() || width >= 1.0 {
+            unseen.push(k.clone());
+        }
+    }
+    let mut trading = Vec::new();
+    for a in 0..keys.len() {
+        for b in a + 1..keys.len() {
+            let c = spread.correlation[a][b];
+            if c.is_finite() && c.abs() > 0.95 {
+                trading.push((keys[a].clone(), keys[b].clone(), c));
+            }
+        }
+    }
+    let identifiability = Identifiability {
+        unseen,
+        trading,
+        residual_autocorrelation: spread.rho,
+        residuals: (spread.n, spread.n_eff),
+    };
+
+    // Scores: untuned, tuned, the physics-free model.
+    p.set_phase("scoring".into());
+    let tuned = p.params(&u).map_err(|m| anyhow!(m))?;
+    let delay_s = tuned.controller.delay_s.filter(|_| p.delay.is_some());
+    let all: Vec<usize> = p.train.iter().chain(&p.holdout).copied().collect();
+    let score_engine = |params: &PhysicalParams| -> Vec<(usize, Trajectory)> {
+        all.iter()
+            .filter_map(|&k| p.replay(&prepared.episodes[k], params).ok().map(|t| (k, t)))
+            .collect()
+    };
+    let link = prepared
+        .robot
+        .link_by_name(&prepared.link)
+        .ok_or_else(|| anyhow!("the robot has no link {}", prepared.link))?;
+    let kin = |delay: f64| -> Vec<(usize, Trajectory)> {
+        all.iter()
+            .filter_map(|&k| {
+                kinematic_run(&prepared.episodes[k], &prepared.robot, link, delay).map(|t| (k, t))
+            })
+            .collect()
+    };
+    let sets = |runs: Vec<(usize, Trajectory)>, source: String| -> SourceScores {
+        let pick = |which: &[usize]| {
+            let chosen: Vec<(usize, Trajectory)> = runs
+                .iter()
+                .filter(|(k, _)| which.contains(k))
+                .cloned()
+                .collect();
+            set_score(prepared, &chosen)
+        };
+        SourceScores {
+            source,
+            train: pick(&p.train),
+            holdout: if p.holdout.is_empty() {
+                None
+            } else {
+                pick(&p.holdout)
+            },
+        }
+    };
+    let name = engine.name();
+    let mut scores = vec![
+        sets(score_engine(&start_params), format!("{name} untuned")),
+        sets(score_engine(&tuned), format!("{name} tuned")),
+        sets(kin(0.0), "physics-free (perfect tracking)".into()),
+    ];
+    if let Some(d) = delay_s.filter(|d| *d > 0.0) {
+        scores.push(sets(
+            kin(d),
+            format!("physics-free, delayed {:.0} ms", d * 1e3),
+        ));
+    }
+    let verdict = verdict(&scores);
+    let evaluations = *p.evaluations.lock().unwrap_or_else(|e| e.into_inner());
+    let summary = RecordingsSummary {
+        engine: format!("{} {}", engine.name(), engine.version()),
+        robot: prepared.robot.name.clone(),
+        recordings: PathBuf::new(),
+        train: p
+            .train
+            .iter()
+            .map(|&k| prepared.episodes[k].id.clone())
+            .collect(),
+        holdout: p
+            .holdout
+            .iter()
+            .map(|&k| prepared.episodes[k].id.clone())
+            .collect(),
+        known: known_keys(spec.known),
+        params: params_out,
+        identifiability,
+        scores,
+        evaluations,
+        iterations,
+        reason,
+        wall_time_s: started.elapsed().as_secs_f64(),
+        verdict,
+    };
+    let tuned_path = spec.out.join("tuned.toml");
+    let mut tuned_file = tuned.clone();
+    tuned_file.source = None;
+    std::fs::write(
+        &tuned_path,
+        format!(
+            "# Tuned by `realitygap tune --recordings` ({}, robot '{}'): the known\n# parameters and the fitted ones; pass it to `realitygap replay --params`.\n{}",
+            summary.engine,
+            summary.robot,
+            tuned_file.to_toml_string()
+        ),
+    )
+    .with_context(|| format!("writing {}", tuned_path.display()))?;
+    files.push(tuned_path);
+    Ok(RecordingsResult { summary, files })
+}
+
+/// The delays of the first scan: the range in about 20 steps, on the
+/// engine-step grid.
+fn delay_grid(d: &Dim, dt: f64) -> Vec<f64> {
+    let snap = |x: f64| (x / dt).round() * dt;
+    let (lo, hi) = (snap(d.low).max(d.low), snap(d.high).min(d.high));
+    let step = snap(((hi - lo) / 20.0).max(dt)).max(dt);
+    let mut grid = Vec::new();
+    let mut x = lo;
+    while x <= hi + 1e-12 {
+        grid.push(snap(x).clamp(d.low, d.high));
+        x += step;
+    }
+    grid.dedup_by(|a, b| (*a - *b).abs() < 1e-12);
+    grid
+}
+
+/// The training cost at `u` with coordinate `c` (the delay) at each of
+/// `grid`, in parallel; `None` where the replay failed.
+fn delay_costs(p: &Problem, u: &[f64], c: usize, grid: &[f64]) -> Result<Vec<Option<f64>>> {
+    use rayon::prelude::*;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(p.spec.jobs.max(1))
+        .build()
+        .context("starting the evaluation threads")?;
+    let d = &p.space.dims[p.continuous[c]];
+    Ok(pool.install(|| {
+        grid.par_iter()
+            .map(|&delay| {
+                let mut x = u.to_vec();
+                x[c] = d.unit(delay);
+                let params = p.params(&x).ok()?;
+                match p.residuals(&params) {
+                    Ok(r) => {
+                        let cost: f64 = r.iter().map(|v| v * v).sum();
+                        p.record("delay scan", &p.values(&x), cost);
+                        Some(cost)
+                    }
+                    Err(_) => {
+                        p.record("delay scan failed", &p.values(&x), f64::INFINITY);
+                        None
+                    }
+                }
+            })
+            .collect()
+    }))
+}
+
+fn verdict(scores: &[SourceScores]) -> String {
+    let get = |i: usize| {
+        scores.get(i).and_then(|s| {
+            s.holdout
+                .as_ref()
+                .or(s.train.as_ref())
+                .map(|x| (x.rms_deg, x.interval_deg))
+        })
+    };
+    let on = if scores.iter().any(|s| s.holdout.is_some()) {
+        "on the held-out episodes"
+    } else {
+        "on the training episodes (none held out)"
+    };
+    let (Some(untuned), Some(tuned), Some(kin)) = (get(0), get(1), get(2)) else {
+        return "no score: the engine could not replay the episodes".into();
+    };
+    let best_kin = scores
+        .iter()
+        .skip(2)
+        .filter_map(|s| {
+            s.holdout
+                .as_ref()
+                .or(s.train.as_ref())
+                .map(|x| (s.source.clone(), x.rms_deg))
+        })
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .unwrap_or(("physics-free".into(), kin.0));
+    let beats = tuned.0 < best_kin.1;
+    format!(
+        "{on}, the tuned engine's joint RMS is {:.3} deg (untuned {:.3}, {:.1}x lower); it {} the best physics-free model ({}, {:.3} deg).",
+        tuned.0,
+        untuned.0,
+        untuned.0 / tuned.0.max(1e-12),
+        if beats { "beats" } else { "does not beat" },
+        best_kin.0,
+        best_kin.1
+    )
+}
+
+fn fmt_interval(i: Option<(f64, f64)>, digits: usize) -> String {
+    match i {
+        Some((a, b)) => format!("[{a:.digits$}, {b:.digits$}]"),
+        None => "n/a".into(),
+    }
+}
+
+/// `summary.md`.
+pub fn summary_markdown(s: &RecordingsSummary) -> String {
+    let mut m = format!(
+        "# Tune of {} against the recordings of robot '{}'\n\n{}\n\nTraining episodes: {}. Held out: {}. Known and fixed: {}.\n\n",
+        s.engine,
+        s.robot,
+        s.verdict,
+        s.train.join(", "),
+        if s.holdout.is_empty() {
+            "none".into()
+        } else {
+            s.holdout.join(", ")
+        },
+        if s.known.is_empty() {
+            "nothing".into()
+        } else {
+            s.known.join(", ")
+        }
+    );
+    m.push_str("## Joint-space RMS (degrees, 95 % bootstrap interval over episodes)\n\n| source | training | held out |\n|---|---:|---:|\n");
+    for sc in &s.scores {
+        let cell = |x: &Option<SetScore>| match x {
+            Some(x) => format!("{:.4} {}", x.rms_deg, fmt_interval(x.interval_deg, 4)),
+            None => "n/a".into(),
+        };
+        let _ = writeln!(
+            m,
+            "| {} | {} | {} |",
+            sc.source,
+            cell(&sc.train),
+            cell(&sc.holdout)
+        );
+    }
+    m.push_str("\n## Parameters (95 % intervals from the Jacobian at the optimum)\n\n| key | untuned | fitted | interval | bounds |\n|---|---:|---:|---|---|\n");
+    for p in &s.params {
+        let _ = writeln!(
+            m,
+            "| {} | {:.6} | {:.6} | {} | [{}, {}]{} |",
+            p.key,
+            p.start,
+            p.value,
+            fmt_interval(p.interval, 6),
+            p.bounds.0,
+            p.bounds.1,
+            if p.at_bound { " (at a bound)" } else { "" }
+        );
+    }
+    let i = &s.identifiability;
+    m.push_str("\n## What the data cannot tell\n\n");
+    if i.unseen.is_empty() && i.trading.is_empty() {
+        m.push_str("Every fitted parameter is pinned by the data (no interval spans its range, no pair correlates beyond 0.95).\n");
+    }
+    if !i.unseen.is_empty() {
+        let _ = writeln!(
+            m,
+            "- Not seen by the data (interval spans the whole range): {}.",
+            i.unseen.join(", ")
+        );
+    }
+    for (a, b, c) in &i.trading {
+        let _ = writeln!(
+            m,
+            "- {a} and {b} trade against each other (correlation {c:.3})."
+        );
+    }
+    let _ = writeln!(
+        m,
+        "\nResiduals: {} (joint-angle samples), lag-1 autocorrelation {:.4}, counted as {:.0} independent ones for the intervals.\n\n{} evaluations (each replays every training episode), {} Levenberg-Marquardt iterations, {:.1} s; the last fit stopped at {}.",
+        i.residuals.0, i.residual_autocorrelation, i.residuals.1, s.evaluations, s.iterations, s.wall_time_s, s.reason
+    );
+    m
+}
+
+/// Writes `summary.md` and `summary.json` for `result`, with the
+/// recordings' folder.
+pub fn write_summary(out: &Path, recordings: &Path, result: &mut RecordingsResult) -> Result<()> {
+    result.summary.recordings = recordings.to_path_buf();
+    let md = out.join("summary.md");
+    std::fs::write(&md, summary_markdown(&result.summary))
+        .with_context(|| format!("writing {}", md.display()))?;
+    let js = out.join("summary.json");
+    std::fs::write(&js, serde_json::to_string_pretty(&result.summary)? + "\n")
+        .with_context(|| format!("writing {}", js.display()))?;
+    result.files.push(md);
+    result.files.push(js);
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_delay_grid_lies_on_engine_steps_within_bounds() {
+        let d = Dim {
+            key: DELAY_KEY.into(),
+            low: 0.0,
+            high: 0.1,
+            scale: Scale::Linear,
+            start: 0.0,
+        };
+        let grid = delay_grid(&d, 1e-3);
+        assert_eq!(grid.len(), 21);
+        assert!((grid[1] - 0.005).abs() < 1e-12);
+        for x in grid {
+            assert!(((x / 1e-3).round() * 1e-3 - x).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn the_default_split_holds_out_the_last_quarter() {
+        let none = RunSelection {
+            runs: None,
+            holdout: None,
+        };
+        assert_eq!(split(&none, 4).unwrap(), (vec![0, 1, 2], vec![3]));
+        assert_eq!(
+            split(&none, 8).unwrap(),
+            (vec![0, 1, 2, 3, 4, 5], vec![6, 7])
+        );
+        assert_eq!(split(&none, 1).unwrap(), (vec![0], vec![]));
+        let h = RunSelection {
+            runs: None,
+            holdout: Some(
+                realitygap_analysis::selection::RunRange::parse("3-4", "--holdout").unwrap(),
+            ),
+        };
+        assert_eq!(split(&h, 4).unwrap(), (vec![0, 1], vec![2, 3]));
+        let bad = RunSelection {
+            runs: None,
+            holdout: Some(
+                realitygap_analysis::selection::RunRange::parse("9", "--holdout").unwrap(),
+            ),
+        };
+        let e = split(&bad, 4).unwrap_err().to_string();
+        assert!(e.contains("--holdout") && e.contains("9"), "{e}");
+    }
+
+    #[test]
+    fn set_key_overrides_only_the_given_field() {
+        let mut p = PhysicalParams::none();
+        p.joints.entry("j1".into()).or_default().kp = Some(700.0);
+        set_key(&mut p, "joints.j1.damping", 2.0).unwrap();
+        set_key(&mut p, "controller.delay_s", 0.02).unwrap();
+        assert_eq!(p.joints["j1"].kp, Some(700.0));
+        assert_eq!(p.joints["j1"].damping, Some(2.0));
+        assert_eq!(p.controller.delay_s, Some(0.02));
+        assert!(set_key(&mut p, "joints.j1.nosuch", 1.0).is_err());
+    }
+}
