@@ -78,7 +78,13 @@ fn obj_and_collada_meshes_push_the_box_where_stl_does_in_every_engine() {
                 b.y,
                 b.z
             );
-            assert!(d < 2e-3, "{engine} with {variant}: {a:?} vs {b:?}");
+            // The geometry is the same to 1e-5 m (core's fixture test);
+            // contacts amplify the last bits of a vertex or the order of
+            // triangles: measured 9.6 mm in ODE (triangle-mesh contacts),
+            // 5.4 mm in MuJoCo and 2.4 mm in PhysX (convex hulls), under
+            // 0.1 mm in Bullet and Rapier. Meshes read in the wrong unit
+            // moved the box 50-250 mm.
+            assert!(d < 15e-3, "{engine} with {variant}: {a:?} vs {b:?}");
         }
     }
     // The push happened: the box moved along -y.

@@ -382,6 +382,12 @@ impl RobotWriter<'_> {
                         path.display()
                     ))
                 })?;
+                if ext != "msh" {
+                    // MuJoCo's own readers accept some damaged files (an
+                    // OBJ face naming a missing vertex): checked here.
+                    realitygap_core::robot::stl::TriangleMesh::read(path)
+                        .map_err(|e| MjcfError(format!("link \"{link}\": mesh \"{uri}\": {e}")))?;
+                }
                 self.mesh_count += 1;
                 writeln!(
                     self.assets,

@@ -127,7 +127,7 @@ pub fn geometry(
                     positive(&format!("mesh \"{uri}\": scale {axis}"), s)?;
                 }
                 let key = MeshKey::File(path.clone());
-                let mesh = cooked(sdk, locked, key, || stl_points(path, uri))?;
+                let mesh = cooked(sdk, locked, key, || mesh_points(path, uri))?;
                 (convex(mesh, *scale), Pose::IDENTITY)
             }
         }
@@ -174,8 +174,9 @@ fn cylinder_points(radius: f32, length: f32) -> Vec<PxVec3> {
     points
 }
 
-/// The vertices of an STL file, or an error naming the file.
-fn stl_points(path: &Path, uri: &str) -> Result<Vec<PxVec3>, String> {
+/// The vertices of a mesh file (STL, OBJ, COLLADA), or an error naming
+/// the file.
+fn mesh_points(path: &Path, uri: &str) -> Result<Vec<PxVec3>, String> {
     realitygap_core::robot::stl::require_mesh_format(path, uri, "PhysX")?;
     let mesh = TriangleMesh::read(path).map_err(|e| format!("mesh \"{uri}\": {e}"))?;
     let points: Vec<PxVec3> = mesh
@@ -259,12 +260,12 @@ mod tests {
     }
 
     #[test]
-    fn non_stl_meshes_are_refused_naming_the_file() {
-        let Err(e) = stl_points(Path::new("/x/arm.dae"), "package://p/arm.dae") else {
-            panic!("a DAE file was read");
+    fn unknown_mesh_formats_are_refused_naming_the_file() {
+        let Err(e) = mesh_points(Path::new("/x/arm.ply"), "package://p/arm.ply") else {
+            panic!("a PLY file was read");
         };
         assert!(
-            e.contains("package://p/arm.dae") && e.contains("STL"),
+            e.contains("package://p/arm.ply") && e.contains("STL, OBJ, COLLADA .dae"),
             "{e}"
         );
     }

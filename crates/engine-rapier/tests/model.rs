@@ -222,7 +222,7 @@ fn replace_first_collision(text: String, link: &str, geometry: &str) -> String {
 fn bad_meshes_are_load_errors_naming_link_and_file() {
     let tmp = TempUrdf::new("meshes");
     let s = scene("scene1_single_joint");
-    // A mesh format the engine does not read.
+    // A COLLADA file that is not one.
     std::fs::write(tmp.path("hand.dae"), "<COLLADA/>").unwrap();
     let robot = tmp.mico2_with(|t| {
         replace_first_collision(t, "m1n6s300_link_6", "<mesh filename=\"hand.dae\"/>")
@@ -232,7 +232,7 @@ fn bad_meshes_are_load_errors_naming_link_and_file() {
         e.contains("engine rapier: cannot load the scene")
             && e.contains("m1n6s300_link_6")
             && e.contains("hand.dae")
-            && e.contains("STL"),
+            && e.contains("not a valid COLLADA mesh"),
         "{e}"
     );
     // An STL file that is not one.

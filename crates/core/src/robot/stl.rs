@@ -396,3 +396,47 @@ mod tests {
         assert!(e.to_string().contains("/nonexistent/x.stl"), "{e}");
     }
 }
+
+/// The independent writer's OBJ and COLLADA copies of the iiwa's STL
+/// meshes (`scripts/make-fixtures`, trimesh) read as the same triangles.
+#[cfg(test)]
+mod fixture_tests {
+    use super::*;
+
+    #[test]
+    fn the_writers_obj_and_collada_copies_are_the_stl_meshes() {
+        let dir = crate::testing::workspace().join("third_party/fixtures/meshes");
+        let info: String = std::fs::read_to_string(dir.join("meshes.json"))
+            .unwrap_or_else(|e| panic!("{}: {e}: run scripts/setup --tests", dir.display()));
+        let names: Vec<String> = info
+            .lines()
+            .filter_map(|l| l.trim().strip_prefix("\"stl\": \""))
+            .map(|l| l.trim_end_matches("\",").to_string())
+            .collect();
+        assert_eq!(names.len(), 8, "{info}");
+        for stl in names {
+            let stl = Path::new(&stl);
+            let stem = stl.file_stem().unwrap().to_str().unwrap();
+            let a = TriangleMesh::read(stl).unwrap();
+            for other in [
+                dir.join(format!("obj/{stem}.obj")),
+                dir.join(format!("dae/{stem}.dae")),
+            ] {
+                let b = TriangleMesh::read(&other).unwrap();
+                assert_eq!(a.triangles.len(), b.triangles.len(), "{}", other.display());
+                let (x, y) = (a.aabb().unwrap(), b.aabb().unwrap());
+                let d = (x.min - y.min).norm().max((x.max - y.max).norm());
+                assert!(d < 1e-5, "{}: bounds {x:?} vs {y:?}", other.display());
+            }
+        }
+        for (bad, want) in [
+            ("truncated.dae", "not a valid COLLADA mesh"),
+            ("not_xml.dae", "not a valid COLLADA mesh"),
+            ("bad_index.obj", "face index out of bounds"),
+        ] {
+            let path = dir.join("bad").join(bad);
+            let e = TriangleMesh::read(&path).unwrap_err().to_string();
+            assert!(e.contains(bad) && e.contains(want), "{e}");
+        }
+    }
+}
