@@ -43,6 +43,16 @@ pub struct Args {
     /// one (engine settings, actuators), as for `replay --scene`.
     #[arg(long, value_name = "FILE")]
     pub scene: Option<PathBuf>,
+    /// With --recordings: fit the recorded efforts too (the servo's effort
+    /// in the replay, `kv (v_target - qd)` at the engine's state, against
+    /// the recorded one), which tells joint damping from the servo's kv.
+    /// Meant for a scene whose servo the engine integrates explicitly (the
+    /// recorded effort is the one applied over the next control period):
+    /// MuJoCo's implicitfast integrates the servo implicitly, so the torque
+    /// it applies is not the one computed from the state (use --scene with
+    /// integrator = "Euler").
+    #[arg(long)]
+    pub efforts: bool,
     /// With --recordings: Levenberg-Marquardt iterations at most.
     #[arg(long, default_value_t = 30, value_name = "N")]
     pub iterations: usize,
@@ -118,6 +128,7 @@ pub fn run(args: Args) -> Result<()> {
     for (given, flag) in [
         (args.params.is_some(), "--params"),
         (args.scene.is_some(), "--scene"),
+        (args.efforts, "--efforts"),
     ] {
         if given {
             anyhow::bail!("{flag} belongs to a tune against recordings: give --recordings DIR");
@@ -261,6 +272,7 @@ fn run_recordings(args: Args, recordings: &std::path::Path) -> Result<()> {
             .jobs
             .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),
         max_iterations: args.iterations,
+        use_efforts: args.efforts,
     };
     eprintln!(
         "tuning {} against {} recorded episodes of robot '{}' in joint space",

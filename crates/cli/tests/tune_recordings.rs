@@ -126,25 +126,32 @@ fn mujoco_recovers_the_writers_parameters_with_the_gains_known() {
 }
 
 #[test]
-fn without_known_gains_the_summary_names_what_angles_cannot_separate() {
+fn recorded_efforts_separate_damping_from_the_servo_gain_and_angles_alone_cannot() {
     let dir = scratch("tune-recordings-tests", "unknown-gains");
     let real = import_bags(&dir, 2);
-    // Known: everything but damping and kv of every joint; angles alone
-    // cannot tell the joint's damping from the servo's kv (both multiply
-    // its velocity).
-    let known = truth_params(&dir, &["damping", "kv"]);
-    let space = dir.join("space.toml");
+    // Searched: damping and kv of the first two joints; everything else
+    // from the truth. From angles alone the joint's damping and the
+    // servo's kv trade against each other (both multiply its velocity);
+    // the recorded effort (the servo's, without the damping) tells them
+    // apart.
     let t = truth();
+    let names: Vec<String> = t["joints"]
+        .as_object()
+        .unwrap()
+        .keys()
+        .take(2)
+        .cloned()
+        .collect();
+    let space = dir.join("space.toml");
     let mut toml = String::from("[params]\n");
-    for name in t["joints"].as_object().unwrap().keys().take(2) {
+    for name in &names {
         toml.push_str(&format!(
-            "\"joints.{name}.damping\" = {{ low = 0.0, high = 10.0, start = 0.0 }}\n\"joints.{name}.kv\" = {{ low = 5.0, high = 60.0, start = 40.0 }}\n"
+            "\"joints.{name}.damping\" = {{ low = 0.0, high = 10.0, start = 0.5 }}\n\"joints.{name}.kv\" = {{ low = 5.0, high = 60.0, start = 40.0 }}\n"
         ));
     }
     std::fs::write(&space, toml).unwrap();
-    // The other joints' gains come from the truth; only two joints' pairs
-    // are searched, on one episode, briefly.
-    let mut known_text = std::fs::read_to_string(&known).unwrap();
+    // Known: the truth, less the damping and kv of the first two joints.
+    let mut known_text = std::fs::read_to_string(truth_params(&dir, &["damping", "kv"])).unwrap();
     for (name, j) in t["joints"].as_object().unwrap().iter().skip(2) {
         known_text = known_text.replace(
             &format!("[joints.{name}]\n"),
@@ -154,34 +161,37 @@ fn without_known_gains_the_summary_names_what_angles_cannot_separate() {
             ),
         );
     }
+    let known = dir.join("known.toml");
     std::fs::write(&known, known_text).unwrap();
-    let out = dir.join("tune");
-    let run = realitygap(&[
-        "tune",
-        "--recordings",
-        &path(&real),
-        "--engine",
-        "mujoco",
-        "--params",
-        &path(&known),
-        "--space",
-        &path(&space),
-        "--iterations",
-        "4",
-        "--out",
-        &path(&out),
-    ]);
-    let stdout = text(&run.stdout);
-    assert!(run.status.success(), "{stdout}{}", text(&run.stderr));
-    let s = summary(&out);
+    let tune = |out: &str, extra: &[&str]| {
+        let out = dir.join(out);
+        let mut args = vec![
+            "tune".to_string(),
+            "--recordings".into(),
+            path(&real),
+            "--engine".into(),
+            "mujoco".into(),
+            "--params".into(),
+            path(&known),
+            "--space".into(),
+            path(&space),
+            "--runs".into(),
+            "1".into(),
+            "--holdout".into(),
+            "2".into(),
+            "--out".into(),
+            path(&out),
+        ];
+        args.extend(extra.iter().map(|x| x.to_string()));
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let run = realitygap(&args);
+        let stdout = text(&run.stdout);
+        assert!(run.status.success(), "{stdout}{}", text(&run.stderr));
+        (summary(&out), stdout)
+    };
+    // From the angles alone: each joint's pair is named.
+    let (s, stdout) = tune("angles-only", &["--iterations", "4"]);
     let trading = s["identifiability"]["trading"].as_array().unwrap();
-    let names: Vec<String> = t["joints"]
-        .as_object()
-        .unwrap()
-        .keys()
-        .take(2)
-        .cloned()
-        .collect();
     for name in &names {
         assert!(
             trading.iter().any(|p| {
@@ -191,6 +201,46 @@ fn without_known_gains_the_summary_names_what_angles_cannot_separate() {
         );
     }
     assert!(stdout.contains("trade against each other"), "{stdout}");
+    // With the efforts, in a scene whose servo MuJoCo integrates
+    // explicitly (Euler, like the writer's PD): both found, nothing trades.
+    let generated = std::fs::read_to_string(dir.join("angles-only/replay.toml")).unwrap();
+    assert!(
+        generated.contains("integrator = \"implicitfast\""),
+        "{generated}"
+    );
+    let euler = dir.join("euler.toml");
+    std::fs::write(
+        &euler,
+        generated.replace("integrator = \"implicitfast\"", "integrator = \"Euler\""),
+    )
+    .unwrap();
+    let (s, stdout) = tune("with-efforts", &["--efforts", "--scene", &path(&euler)]);
+    assert!(
+        s["objective"]
+            .as_str()
+            .unwrap()
+            .contains("recorded efforts"),
+        "{stdout}"
+    );
+    for name in &names {
+        for (field, theirs) in [("damping", "damping"), ("kv", "kd")] {
+            let want = t["joints"][name][theirs].as_f64().unwrap();
+            let got = param(&s, &format!("joints.{name}.{field}"))["value"]
+                .as_f64()
+                .unwrap();
+            assert!(
+                (got - want).abs() < 0.1 * want,
+                "{name}.{field}: {got} vs {want}\n{stdout}"
+            );
+        }
+    }
+    assert!(
+        s["identifiability"]["trading"]
+            .as_array()
+            .unwrap()
+            .is_empty(),
+        "{stdout}"
+    );
 }
 
 #[test]

@@ -45,6 +45,9 @@ pub struct ReplayPlan {
     /// Velocity gain of each joint's servo (the scene's `kv`: the PD
     /// servo's `kd`), N m s/rad.
     pub kv: Vec<f64>,
+    /// Each joint's actuator torque limit, N m (infinite: none); the
+    /// efforts recorded are clamped to it as the servo's are.
+    pub force_limit_nm: Vec<f64>,
     /// Time from a command's timestamp to its reaching the servo, s.
     pub delay_s: f64,
     /// Roles of the simulation's tracked bodies, in order.
@@ -83,6 +86,14 @@ impl ReplayPlan {
                 j + 1,
                 self.kp[j],
                 self.kv[j]
+            ));
+        }
+        if self.force_limit_nm.len() != joints
+            || self.force_limit_nm.iter().any(|f| f.is_nan() || *f < 0.0)
+        {
+            return Err(format!(
+                "force limits {:?} for {joints} joints: expected one number >= 0 per joint",
+                self.force_limit_nm
             ));
         }
         if !(self.delay_s.is_finite() && self.delay_s >= 0.0) {
@@ -146,8 +157,12 @@ impl ReplayPlan {
 }
 
 /// Replays `plan` on a freshly loaded `sim`: the trajectory at the plan's
-/// sample times (tracked poses, joint angles, and the velocity targets in
-/// force as the commands sent), until the end or until the run diverges.
+/// sample times (tracked poses, joint angles and velocities, the velocity
+/// targets in force as the commands sent, and the servo's effort `kv
+/// (v_target - qd)` clamped to the force limit: for position commands the
+/// PD law's `kp (q_cmd - q) - kv qd` at the engine's state, the commanded
+/// effort that ros2_control reports), until the end or until the run
+/// diverges.
 pub fn replay(sim: &mut dyn Simulation, plan: &ReplayPlan) -> Result<RunOutcome, RunError> {
     let joints = sim.joint_count();
     let usage = |message: String| EngineError::Usage {
@@ -187,6 +202,8 @@ pub fn replay(sim: &mut dyn Simulation, plan: &ReplayPlan) -> Result<RunOutcome,
     let mut trajectory = Trajectory::with_bodies(&plan.roles);
     let mut angle_rows = Vec::with_capacity(plan.sample_times_s.len());
     let mut target_rows = Vec::with_capacity(plan.sample_times_s.len());
+    let mut velocity_rows = Vec::with_capacity(plan.sample_times_s.len());
+    let mut effort_rows = Vec::with_capacity(plan.sample_times_s.len());
     let mut angles = vec![0.0; joints];
     let mut poses = vec![Pose::IDENTITY; plan.roles.len()];
     let mut status = RunStatus::Completed;
@@ -207,12 +224,21 @@ pub fn replay(sim: &mut dyn Simulation, plan: &ReplayPlan) -> Result<RunOutcome,
                 status = RunStatus::Diverged { t_s, reason };
                 break;
             }
+            let velocities = sim.state()?.joint_velocities_rad_s;
+            let efforts: Vec<f64> = (0..joints)
+                .map(|j| {
+                    let limit = plan.force_limit_nm[j];
+                    (plan.kv[j] * (targets[j] - velocities[j])).clamp(-limit, limit)
+                })
+                .collect();
             trajectory.time_s.push(plan.sample_times_s[next_sample]);
             for (track, pose) in trajectory.bodies.iter_mut().zip(&poses) {
                 track.poses.push(Some(*pose));
             }
             angle_rows.push(angles.clone());
             target_rows.push(targets.clone());
+            velocity_rows.push(velocities);
+            effort_rows.push(efforts);
             next_sample += 1;
         }
         if !matches!(status, RunStatus::Completed) || next_sample == plan.sample_times_s.len() {
@@ -236,6 +262,8 @@ pub fn replay(sim: &mut dyn Simulation, plan: &ReplayPlan) -> Result<RunOutcome,
     }
     trajectory.joint_angles_rad = Some(angle_rows);
     trajectory.joint_velocity_commands_rad_s = Some(target_rows);
+    trajectory.joint_velocities_rad_s = Some(velocity_rows);
+    trajectory.joint_efforts_nm = Some(effort_rows);
     Ok(RunOutcome {
         trajectory,
         status,
@@ -349,6 +377,7 @@ mod tests {
             initial_velocities_rad_s: vec![0.0; 2],
             kp: vec![10.0; 2],
             kv: vec![1.0; 2],
+            force_limit_nm: vec![f64::INFINITY; 2],
             delay_s,
             roles: vec![],
             divergence_bound_m: 10.0,
@@ -378,6 +407,7 @@ mod tests {
             initial_velocities_rad_s: vec![0.0; 2],
             kp: vec![10.0; 2],
             kv: vec![1.0; 2],
+            force_limit_nm: vec![f64::INFINITY; 2],
             delay_s: 0.0,
             roles: vec![],
             divergence_bound_m: 10.0,

@@ -274,11 +274,20 @@ pub fn plan_for(episode: &Episode, scene: &Scene, params: &PhysicalParams) -> Re
         .unwrap_or_else(|| vec![0.0; angles.len()]);
     let mut kp = Vec::new();
     let mut kv = Vec::new();
+    let mut force_limit_nm = Vec::new();
     for a in &scene.actuators {
         let given = params.joints.get(&a.joint);
         let (default_kp, _) = default_gains(a.force_limit);
         kp.push(given.and_then(|g| g.kp).unwrap_or(default_kp));
         kv.push(given.and_then(|g| g.kv).unwrap_or(a.kv));
+        let limit = given.and_then(|g| g.force_limit).unwrap_or(a.force_limit);
+        force_limit_nm.push(if limit.is_finite() && limit > 0.0 {
+            limit
+        } else if limit == 0.0 {
+            0.0
+        } else {
+            f64::INFINITY
+        });
     }
     Ok(ReplayPlan {
         commands,
@@ -287,6 +296,7 @@ pub fn plan_for(episode: &Episode, scene: &Scene, params: &PhysicalParams) -> Re
         initial_velocities_rad_s: velocities,
         kp,
         kv,
+        force_limit_nm,
         delay_s: params.delay_s(),
         roles: scene.tracked.iter().map(|t| t.role.clone()).collect(),
         divergence_bound_m: RunOptions::default().divergence_bound_m,

@@ -13,7 +13,16 @@
 //!   space used is written to `OUT/space.toml` to edit and pass back.
 //! - **Objective.** The joint angles of every training episode replayed
 //!   in the engine ([`realitygap_study::replay`]) against the recorded
-//!   ones, degrees, sample by sample: a least-squares problem.
+//!   ones, degrees, sample by sample: a least-squares problem. With
+//!   [`RecordingsSpec::use_efforts`] (where every training episode
+//!   recorded efforts), the replay's servo efforts against them too, each
+//!   joint's weighted so that its spread counts like the angles': from
+//!   angles alone joint damping and the servo's `kv` cannot be told apart
+//!   (both multiply the joint velocity); the recorded effort (the servo's,
+//!   without the joint's damping) separates them. The replay's effort is
+//!   `kv (v_target - qd)` at the step's start, the torque an explicitly
+//!   integrated servo applies; an implicit one (MuJoCo's implicitfast)
+//!   applies another, so efforts are for explicit-servo scenes.
 //! - **Search.** The command delay first, scanned over its range at the
 //!   untuned parameters (a gradient search from a delay far from the truth
 //!   can settle where a wrong delay and wrong damping make up for each
@@ -71,8 +80,11 @@ pub struct RecordingsSpec<'a> {
     pub out: PathBuf,
     /// Parallel evaluations.
     pub jobs: usize,
-    /// Levenberg-Marquardt iterations per round at most.
+    /// Levenberg-Marquardt iterations at most.
     pub max_iterations: usize,
+    /// Fit the recorded efforts too, where every training episode has
+    /// them (else the joint angles alone).
+    pub use_efforts: bool,
 }
 
 /// Progress of a tune, reported after every evaluation.
@@ -158,6 +170,8 @@ pub struct RecordingsSummary {
     pub holdout: Vec<String>,
     /// The known parameters' keys (fixed, never searched).
     pub known: Vec<String>,
+    /// What the objective compares, in words.
+    pub objective: String,
     /// The fitted parameters.
     pub params: Vec<FittedParam>,
     /// The identifiability report.
@@ -422,6 +436,9 @@ struct Problem<'a> {
     best: Mutex<f64>,
     history: Mutex<std::fs::File>,
     samples: usize,
+    /// Per joint, the weight of an effort residual (deg per N m), when
+    /// efforts are fitted.
+    effort_weights: Option<Vec<f64>>,
     progress: &'a (dyn Fn(RecordingsProgress) + Sync),
     phase: Mutex<String>,
 }
@@ -469,7 +486,7 @@ impl Problem<'_> {
             for &k in &self.train {
                 let e = &self.spec.prepared.episodes[k];
                 let sim = self.replay(e, params)?;
-                push_residuals(&e.real, &sim, &mut r)
+                push_residuals(&e.real, &sim, self.effort_weights.as_deref(), &mut r)
                     .map_err(|m| format!("episode '{}': {m}", e.id))?;
             }
             Ok(())
@@ -522,8 +539,14 @@ impl Problem<'_> {
 }
 
 /// Appends the joint-angle differences (degrees) of `sim` against `real`,
-/// sample by sample and joint by joint.
-fn push_residuals(real: &Trajectory, sim: &Trajectory, out: &mut Vec<f64>) -> Result<(), String> {
+/// sample by sample and joint by joint, then, with `effort_weights`, the
+/// effort differences (N m) times each joint's weight.
+fn push_residuals(
+    real: &Trajectory,
+    sim: &Trajectory,
+    effort_weights: Option<&[f64]>,
+    out: &mut Vec<f64>,
+) -> Result<(), String> {
     let (Some(rq), Some(sq)) = (&real.joint_angles_rad, &sim.joint_angles_rad) else {
         return Err("no joint angles".into());
     };
@@ -539,7 +562,50 @@ fn push_residuals(real: &Trajectory, sim: &Trajectory, out: &mut Vec<f64>) -> Re
             out.push((x - y).to_degrees());
         }
     }
+    if let Some(w) = effort_weights {
+        let (Some(re), Some(se)) = (&real.joint_efforts_nm, &sim.joint_efforts_nm) else {
+            return Err("no efforts to compare".into());
+        };
+        for (a, b) in se.iter().zip(re) {
+            for ((x, y), w) in a.iter().zip(b).zip(w) {
+                out.push((x - y) * w);
+            }
+        }
+    }
     Ok(())
+}
+
+/// Per joint, the weight that makes an effort residual (N m) count like an
+/// angle residual (deg) of the same share of the recorded motion: the
+/// spread of all recorded angles (deg, about each joint's mean) over the
+/// spread of the joint's recorded effort. `None` when some episode has no
+/// efforts or an effort never varies.
+fn effort_weights(episodes: &[&Episode], joints: usize) -> Option<Vec<f64>> {
+    let spread = |rows: Vec<&Vec<f64>>, j: usize| -> f64 {
+        let n = rows.len().max(1) as f64;
+        let mean = rows.iter().map(|r| r[j]).sum::<f64>() / n;
+        (rows.iter().map(|r| (r[j] - mean).powi(2)).sum::<f64>() / n).sqrt()
+    };
+    let mut angles = Vec::new();
+    let mut efforts = Vec::new();
+    for e in episodes {
+        angles.extend(e.real.joint_angles_rad.as_ref()?.iter());
+        efforts.extend(e.real.joint_efforts_nm.as_ref()?.iter());
+    }
+    let s_q = ((0..joints)
+        .map(|j| spread(angles.clone(), j).to_degrees().powi(2))
+        .sum::<f64>()
+        / joints as f64)
+        .sqrt();
+    let mut w = Vec::new();
+    for j in 0..joints {
+        let s_t = spread(efforts.clone(), j);
+        if !(s_t > 0.0 && s_t.is_finite()) {
+            return None;
+        }
+        w.push(s_q / s_t);
+    }
+    Some(w)
 }
 
 /// Scores of `runs` (episode index, trajectory) against the recordings.
@@ -676,6 +742,22 @@ pub fn tune_recordings(
                 .map_or(0, |q| q.len() * prepared.robot.actuated_joints().len())
         })
         .sum();
+    let joints = prepared.robot.actuated_joints().len();
+    let weights = if spec.use_efforts {
+        let chosen: Vec<&Episode> = train.iter().map(|&k| &prepared.episodes[k]).collect();
+        effort_weights(&chosen, joints)
+    } else {
+        None
+    };
+    let samples = samples * if weights.is_some() { 2 } else { 1 };
+    let objective = match &weights {
+        Some(w) => format!(
+            "joint angles (deg) and recorded efforts (N m, weighted {} deg per N m by joint, so that each counts like the angles' spread)",
+            w.iter().map(|x| format!("{x:.3}")).collect::<Vec<_>>().join(" / ")
+        ),
+        None if spec.use_efforts => "joint angles (deg); the training episodes hold no usable efforts".into(),
+        None => "joint angles (deg) (recorded efforts are fitted with --efforts)".into(),
+    };
     let history_path = spec.out.join("history.csv");
     let mut history = std::fs::File::create(&history_path)
         .with_context(|| format!("writing {}", history_path.display()))?;
@@ -698,6 +780,7 @@ pub fn tune_recordings(
         best: Mutex::new(f64::INFINITY),
         history: Mutex::new(history),
         samples,
+        effort_weights: weights,
         progress,
         phase: Mutex::new("start".into()),
         space,
@@ -976,6 +1059,7 @@ pub fn tune_recordings(
             .map(|&k| prepared.episodes[k].id.clone())
             .collect(),
         known: known_keys(spec.known),
+        objective,
         params: params_out,
         identifiability,
         scores,
@@ -1115,6 +1199,7 @@ pub fn summary_markdown(s: &RecordingsSummary) -> String {
             s.known.join(", ")
         }
     );
+    let _ = writeln!(m, "Objective: {}.\n", s.objective);
     m.push_str("## Joint-space RMS (degrees, 95 % bootstrap interval over episodes)\n\n| source | training | held out |\n|---|---:|---:|\n");
     for sc in &s.scores {
         let cell = |x: &Option<SetScore>| match x {
