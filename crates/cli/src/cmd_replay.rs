@@ -94,6 +94,7 @@ pub fn run(args: Args) -> Result<()> {
         })
         .collect();
     rows.extend(joint_space_row(KINEMATIC, &prepared, &kin));
+    let mut sources = vec![(KINEMATIC.to_string(), kin.clone())];
     let mut failed = 0;
     for engine in &engines {
         let mine: Vec<_> = runs
@@ -108,6 +109,7 @@ pub fn run(args: Args) -> Result<()> {
             })
             .collect();
         rows.extend(joint_space_row(engine.name(), &prepared, &mine));
+        sources.push((engine.name().to_string(), mine));
     }
     let names: Vec<String> = prepared
         .robot
@@ -121,15 +123,31 @@ pub fn run(args: Args) -> Result<()> {
         args.out.join("joint_space.json"),
         serde_json::to_string_pretty(&rows)? + "\n",
     )?;
+    let report = args.out.join("report");
+    realitygap_report::joint_space::write_joint_space_report(
+        &report,
+        &format!("Replay of the recordings of robot '{}'", prepared.robot.name),
+        &[format!(
+            "{} episodes from {} replayed in {}, beside the physics-free model (the commands with perfect tracking). The table compares every episode; the figures show the first, {}.",
+            prepared.episodes.len(),
+            args.real.display(),
+            engines.iter().map(|e| e.name()).collect::<Vec<_>>().join(", "),
+            prepared.episodes.first().map_or("", |e| e.id.as_str())
+        )],
+        &table,
+        &realitygap_study::replay::joint_figures(&prepared, &sources),
+    )
+    .map_err(|m| anyhow::anyhow!("the report in {}: {m}", report.display()))?;
     let reused = runs.iter().filter(|r| r.reused).count();
     println!("{table}");
     println!(
-        "replayed {} episodes of robot '{}' in {} engines ({} runs, {reused} kept from an earlier batch, {failed} failed); the physics-free model on {kinematic} episodes; {}",
+        "replayed {} episodes of robot '{}' in {} engines ({} runs, {reused} kept from an earlier batch, {failed} failed); the physics-free model on {kinematic} episodes; {}; the report {}",
         prepared.episodes.len(),
         prepared.robot.name,
         engines.len(),
         runs.len(),
-        args.out.join("joint_space.md").display()
+        args.out.join("joint_space.md").display(),
+        report.join("index.html").display()
     );
     if failed > 0 {
         bail!(

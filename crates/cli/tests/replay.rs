@@ -84,6 +84,16 @@ fn with_the_writers_parameters_the_engines_reproduce_the_recording() {
         "{kin}"
     );
     assert!(out.join("replay.toml").is_file() && out.join("joint_space.md").is_file());
+    // The report: the table and a figure per joint, inlined.
+    let html = std::fs::read_to_string(out.join("report/index.html")).unwrap();
+    assert!(
+        html.contains("<th>kinematic</th>") && html.contains("<th>mujoco</th>"),
+        "{html}"
+    );
+    assert_eq!(html.matches("<svg role=\"img\"").count(), 7, "{html}");
+    assert!(out
+        .join("report/episode_000_lbr_iiwa_joint_7.png")
+        .is_file());
     let store = RunStore::open(&out.join("mujoco")).unwrap();
     assert_eq!(store.runs().len(), 2);
     // A rerun simulates nothing again.

@@ -593,6 +593,50 @@ pub fn joint_space_markdown(rows: &[JointSpaceRow], joint_names: &[String]) -> S
     s
 }
 
+/// The report's figures: per moving joint, the first episode's recorded
+/// angle and each source's (`sources`: name, runs by episode id), degrees.
+pub fn joint_figures(
+    prepared: &Prepared,
+    sources: &[(String, Vec<(String, Trajectory)>)],
+) -> Vec<realitygap_report::joint_space::JointFigure> {
+    use realitygap_report::joint_space::{AngleSeries, JointFigure};
+    let Some(episode) = prepared.episodes.first() else {
+        return Vec::new();
+    };
+    let series = |source: &str, t: &Trajectory, j: usize| -> Option<AngleSeries> {
+        let q = t.joint_angles_rad.as_ref()?;
+        Some(AngleSeries {
+            source: source.to_string(),
+            points: t
+                .time_s
+                .iter()
+                .zip(q)
+                .filter_map(|(&time, row)| row.get(j).map(|a| (time, a.to_degrees())))
+                .collect(),
+        })
+    };
+    prepared
+        .robot
+        .actuated_joints()
+        .iter()
+        .enumerate()
+        .map(|(j, &ji)| {
+            let mut all: Vec<AngleSeries> =
+                series("recorded", &episode.real, j).into_iter().collect();
+            for (name, runs) in sources {
+                if let Some((_, t)) = runs.iter().find(|(id, _)| id == &episode.id) {
+                    all.extend(series(name, t, j));
+                }
+            }
+            JointFigure {
+                joint: prepared.robot.joints[ji].name.clone(),
+                episode: episode.id.clone(),
+                series: all,
+            }
+        })
+        .collect()
+}
+
 /// Replays every episode in every engine, in parallel over the machine's
 /// cores, storing each run as it finishes (an interrupted batch loses no
 /// finished run; a rerun skips runs already stored). `done` is told of
