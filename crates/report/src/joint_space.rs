@@ -54,10 +54,10 @@ impl JointFigure {
                 }
             }
         }
-        if !(x.0 < x.1) {
+        if x.0.partial_cmp(&x.1) != Some(std::cmp::Ordering::Less) {
             x = (0.0, 1.0);
         }
-        if !(y.0 < y.1) {
+        if y.0.partial_cmp(&y.1) != Some(std::cmp::Ordering::Less) {
             y = (y.0.min(0.0) - 1.0, y.1.max(0.0) + 1.0);
         }
         let pad = 0.05 * (y.1 - y.0);
