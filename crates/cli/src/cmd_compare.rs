@@ -75,8 +75,13 @@ impl MeasureArgs {
 /// Arguments of `realitygap compare`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// A study file (TOML).
+    /// A study file (TOML), or the output folder of `realitygap replay`
+    /// (the joint-space comparison of a robot's own recordings).
     pub study: PathBuf,
+    /// With a replay's folder: the link whose position error is measured by
+    /// forward kinematics (default: the replay's end effector).
+    #[arg(long, value_name = "NAME")]
+    pub link: Option<String>,
     /// Folder that the study's file patterns are relative to: `builtin`
     /// (the default: the study's recordings built into the project,
     /// unpacked once into ~/.cache/realitygap or $REALITYGAP_CACHE_DIR), a
@@ -105,6 +110,16 @@ pub struct Args {
 /// Runs the command.
 pub fn run(args: Args) -> Result<()> {
     let format: Format = args.format.parse().map_err(anyhow::Error::msg)?;
+    if args
+        .study
+        .join(realitygap_study::replay::RECORD_FILE)
+        .is_file()
+    {
+        return joint_space(&args, format);
+    }
+    if args.link.is_some() {
+        anyhow::bail!("--link belongs to the comparison of a replay's folder (the output of `realitygap replay`)");
+    }
     let (study, roots) = load_study(&args.study, &args.data, args.results)?;
     let reports = evaluate_measured(&args.study, &study, &roots, &args.measure.measure())?;
     let text = if format == Format::Json && args.series {
@@ -115,6 +130,41 @@ pub fn run(args: Args) -> Result<()> {
     match args.output {
         Some(p) => {
             std::fs::write(&p, text).with_context(|| format!("cannot write {}", p.display()))?
+        }
+        None => print!("{text}"),
+    }
+    Ok(())
+}
+
+/// `compare OUT` of a replay: the joint-space table of every source.
+fn joint_space(args: &Args, format: Format) -> Result<()> {
+    use realitygap_study::replay::{
+        compare_replay, joint_space_csv, joint_space_json, joint_space_markdown,
+    };
+    let (rows, names) = compare_replay(&args.study, args.link.as_deref())?;
+    let link = match &args.link {
+        Some(l) => l.clone(),
+        None => {
+            let record: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(
+                args.study.join(realitygap_study::replay::RECORD_FILE),
+            )?)?;
+            record["link"].as_str().unwrap_or("").to_string()
+        }
+    };
+    let text = match format {
+        Format::Markdown => joint_space_markdown(&rows, &names),
+        Format::Csv => joint_space_csv(&rows, &names),
+        Format::Json => {
+            serde_json::to_string_pretty(&joint_space_json(&rows, &names, &link))? + "\n"
+        }
+        other => anyhow::bail!(
+            "--format {}: the joint-space comparison is written as md, csv or json",
+            format!("{other:?}").to_lowercase()
+        ),
+    };
+    match &args.output {
+        Some(p) => {
+            std::fs::write(p, text).with_context(|| format!("cannot write {}", p.display()))?
         }
         None => print!("{text}"),
     }

@@ -35,7 +35,8 @@ pub struct Args {
     #[arg(long, value_name = "FILE")]
     scene: Option<PathBuf>,
     /// Output folder: OUT/<engine>/ and OUT/kinematic/ results directories,
-    /// OUT/replay.toml, OUT/joint_space.md, .json.
+    /// OUT/replay.toml, OUT/replay.json (what was replayed: `compare OUT`
+    /// measures it again), OUT/joint_space.md, .json, OUT/report/.
     #[arg(long)]
     out: PathBuf,
 }
@@ -59,14 +60,16 @@ pub fn run(args: Args) -> Result<()> {
     if engines.is_empty() {
         bail!("no physics engine is compiled into this binary");
     }
-    let prepared = prepare_replay(&ReplayRequest {
+    let request = ReplayRequest {
         real_dir: &args.real,
         urdf: args.robot.as_deref(),
         packages: &args.packages,
         params: &params,
         scene: args.scene.as_deref(),
         out: &args.out,
-    })?;
+    };
+    let prepared = prepare_replay(&request)?;
+    realitygap_study::replay::write_record(&request, &prepared)?;
     let kinematic = store_kinematic(&args.out, &prepared, params.delay_s())?;
     let total = engines.len() * prepared.episodes.len();
     let bar = ProgressBar::new(total as u64);

@@ -84,6 +84,60 @@ fn with_the_writers_parameters_the_engines_reproduce_the_recording() {
         "{kin}"
     );
     assert!(out.join("replay.toml").is_file() && out.join("joint_space.md").is_file());
+    // `compare OUT` measures the replay again: the same table, per source
+    // and joint in JSON, another link by --link, bad requests named.
+    let cmp = realitygap(&["compare", &path(&out), "--format", "json"]);
+    assert!(cmp.status.success(), "{}", text(&cmp.stderr));
+    let js: Value = serde_json::from_str(&text(&cmp.stdout)).unwrap();
+    let sources = js["sources"].as_array().unwrap();
+    assert_eq!(sources[0]["source"], "kinematic");
+    for r in &rows {
+        let s = sources.iter().find(|s| s["source"] == r["source"]).unwrap();
+        assert!(
+            (s["rms_all_deg"].as_f64().unwrap() - r["rms_all_deg"].as_f64().unwrap()).abs() < 1e-12
+        );
+        assert_eq!(s["joints"].as_array().unwrap().len(), 7);
+        assert!(s["joints"][1]["accumulated_deg"].as_f64().unwrap() > 0.0);
+    }
+    let ee = |link: Option<&str>| -> f64 {
+        let mut a = vec![
+            "compare".to_string(),
+            path(&out),
+            "--format".into(),
+            "json".into(),
+        ];
+        if let Some(l) = link {
+            a.extend(["--link".into(), l.into()]);
+        }
+        let a: Vec<&str> = a.iter().map(String::as_str).collect();
+        let c = realitygap(&a);
+        assert!(c.status.success(), "{}", text(&c.stderr));
+        let v: Value = serde_json::from_str(&text(&c.stdout)).unwrap();
+        v["sources"][0]["end_effector_rms_mm"].as_f64().unwrap()
+    };
+    // Nearer the base, the physics-free model's position error is smaller.
+    assert!(
+        ee(Some("lbr_iiwa_link_3")) < ee(None),
+        "{} {}",
+        ee(Some("lbr_iiwa_link_3")),
+        ee(None)
+    );
+    let bad = realitygap(&["compare", &path(&out), "--link", "nosuch"]);
+    assert!(!bad.status.success());
+    assert!(
+        text(&bad.stderr).contains("--link nosuch")
+            && text(&bad.stderr).contains("lbr_iiwa_link_7"),
+        "{}",
+        text(&bad.stderr)
+    );
+    let bad = realitygap(&["compare", &path(&out), "--format", "latex"]);
+    assert!(
+        !bad.status.success() && text(&bad.stderr).contains("md, csv or json"),
+        "{}",
+        text(&bad.stderr)
+    );
+    let csv = realitygap(&["compare", &path(&out), "--format", "csv"]);
+    assert_eq!(text(&csv.stdout).lines().count(), 1 + 7 * rows.len());
     // The report: the table and a figure per joint, inlined.
     let html = std::fs::read_to_string(out.join("report/index.html")).unwrap();
     assert!(

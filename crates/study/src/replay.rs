@@ -25,6 +25,9 @@ use std::path::{Path, PathBuf};
 
 /// Name of the scene written into the output folder.
 pub const SCENE_FILE: &str = "replay.toml";
+/// What a replay was of (the recordings, the robot), written into the
+/// output folder so that `compare OUT` can measure it again.
+pub const RECORD_FILE: &str = "replay.json";
 /// Source name of the physics-free model.
 pub const KINEMATIC: &str = "kinematic";
 /// Engine timestep of the generated scene, s (every engine).
@@ -423,6 +426,9 @@ pub struct JointSpaceRow {
     pub rms_deg: Vec<f64>,
     /// Per joint: largest absolute angle error, deg.
     pub max_deg: Vec<f64>,
+    /// Per joint: the accumulated error, the absolute angle error summed
+    /// over the samples of an episode, averaged over the episodes, deg.
+    pub accumulated_deg: Vec<f64>,
     /// RMS over all joints and samples, deg.
     pub rms_all_deg: f64,
     /// The per-episode all-joint RMS, smallest and largest, deg.
@@ -474,6 +480,7 @@ pub fn joint_space_row(
 ) -> Option<JointSpaceRow> {
     let joints = prepared.robot.actuated_joints().len();
     let mut sum = vec![0.0; joints];
+    let mut abs_sum = vec![0.0; joints];
     let mut max = vec![0.0f64; joints];
     let mut n = 0usize;
     let mut ee_sum = 0.0;
@@ -506,6 +513,7 @@ pub fn joint_space_row(
             for j in 0..joints {
                 let d = (sim_q[i][j] - real_q[i][j]).to_degrees();
                 sum[j] += d * d;
+                abs_sum[j] += d.abs();
                 ep_sum += d * d;
                 max[j] = max[j].max(d.abs());
             }
@@ -536,6 +544,10 @@ pub fn joint_space_row(
         episodes: per_episode.len(),
         rms_deg,
         max_deg: max,
+        accumulated_deg: abs_sum
+            .iter()
+            .map(|s| s / per_episode.len() as f64)
+            .collect(),
         rms_all_deg,
         episode_range_deg: (lo, hi),
         end_effector_rms_mm: if ee_n > 0 {
@@ -591,6 +603,171 @@ pub fn joint_space_markdown(rows: &[JointSpaceRow], joint_names: &[String]) -> S
         s.push('\n');
     }
     s
+}
+
+/// Writes `OUT/replay.json`: the recordings' folder, the URDF and the ROS
+/// packages, as absolute paths.
+pub fn write_record(req: &ReplayRequest, prepared: &Prepared) -> Result<()> {
+    let abs = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf());
+    let record = json!({
+        "recordings": abs(req.real_dir),
+        "urdf": abs(&prepared.robot.source),
+        "packages": req.packages,
+        "link": prepared.link,
+    });
+    let path = req.out.join(RECORD_FILE);
+    std::fs::write(&path, serde_json::to_string_pretty(&record)? + "\n")
+        .with_context(|| format!("writing {}", path.display()))
+}
+
+/// The joint-space comparison of a replay's output folder (`OUT` of
+/// `realitygap replay`): every results directory in it (the engines and
+/// the physics-free model) against the recordings, with the end effector
+/// taken as `link` (default: the replay's), and the joint names.
+pub fn compare_replay(dir: &Path, link: Option<&str>) -> Result<(Vec<JointSpaceRow>, Vec<String>)> {
+    let record_path = dir.join(RECORD_FILE);
+    let text = std::fs::read_to_string(&record_path).with_context(|| {
+        format!(
+            "{}: not the output of `realitygap replay` (no {RECORD_FILE})",
+            dir.display()
+        )
+    })?;
+    let record: Value = serde_json::from_str(&text)
+        .with_context(|| format!("{}: not valid JSON", record_path.display()))?;
+    let field = |k: &str| -> Result<PathBuf> {
+        record
+            .get(k)
+            .and_then(Value::as_str)
+            .map(PathBuf::from)
+            .ok_or_else(|| anyhow!("{}: no \"{k}\"", record_path.display()))
+    };
+    let packages: Vec<String> = record
+        .get("packages")
+        .and_then(Value::as_array)
+        .map(|a| {
+            a.iter()
+                .filter_map(|v| v.as_str().map(String::from))
+                .collect()
+        })
+        .unwrap_or_default();
+    let real_dir = field("recordings")?;
+    let urdf = field("urdf")?;
+    let scene = dir.join(SCENE_FILE);
+    let params = PhysicalParams::none();
+    let mut prepared = prepare_replay(&ReplayRequest {
+        real_dir: &real_dir,
+        urdf: Some(&urdf),
+        packages: &packages,
+        params: &params,
+        scene: scene.is_file().then_some(scene.as_path()),
+        out: dir,
+    })?;
+    let link_name = link
+        .map(String::from)
+        .unwrap_or_else(|| prepared.link.clone());
+    let link_index = prepared.robot.link_by_name(&link_name).ok_or_else(|| {
+        anyhow!(
+            "--link {link_name}: robot '{}' has no such link (its links: {})",
+            prepared.robot.name,
+            prepared
+                .robot
+                .links
+                .iter()
+                .map(|l| l.name.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
+        )
+    })?;
+    let with_link = |t: &mut Trajectory, robot: &RobotModel| {
+        if let Some(q) = &t.joint_angles_rad {
+            t.bodies = vec![BodyTrack {
+                role: WRIST.into(),
+                poses: robot.link_poses_from_actuated(&Pose::IDENTITY, q, link_index),
+            }];
+        }
+    };
+    let robot = prepared.robot.clone();
+    for e in &mut prepared.episodes {
+        with_link(&mut e.real, &robot);
+    }
+    prepared.link = link_name;
+    let mut sources: Vec<PathBuf> = std::fs::read_dir(dir)
+        .with_context(|| format!("reading {}", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.join("manifest.json").is_file())
+        .collect();
+    sources.sort();
+    // The physics-free model first, as replay prints it.
+    sources.sort_by_key(|p| p.file_name().map(|n| n != KINEMATIC));
+    let mut rows = Vec::new();
+    for source in sources {
+        let store = RunStore::open(&source)?;
+        let mut runs = Vec::new();
+        for r in store.runs() {
+            if r.status != StoredStatus::Ok {
+                continue;
+            }
+            let mut t = store.read_run(&r.id)?;
+            with_link(&mut t, &robot);
+            runs.push((r.id.clone(), t));
+        }
+        let name = source
+            .file_name()
+            .map(|n| n.to_string_lossy().to_string())
+            .unwrap_or_default();
+        rows.extend(joint_space_row(&name, &prepared, &runs));
+    }
+    let names = robot
+        .actuated_joints()
+        .iter()
+        .map(|&j| robot.joints[j].name.clone())
+        .collect();
+    Ok((rows, names))
+}
+
+/// The joint-space table as CSV: one row per source and joint.
+pub fn joint_space_csv(rows: &[JointSpaceRow], joint_names: &[String]) -> String {
+    let mut s = String::from(
+        "source,joint,episodes,rms_deg,max_deg,accumulated_deg,delay_ms,end_effector_rms_mm\n",
+    );
+    for r in rows {
+        for (j, name) in joint_names.iter().enumerate() {
+            let _ = writeln!(
+                s,
+                "{},{},{},{:?},{:?},{:?},{:?},{:?}",
+                realitygap_analysis::table::csv_field(&r.source),
+                realitygap_analysis::table::csv_field(name),
+                r.episodes,
+                r.rms_deg[j],
+                r.max_deg[j],
+                r.accumulated_deg[j],
+                r.delay_ms[j],
+                r.end_effector_rms_mm
+            );
+        }
+    }
+    s
+}
+
+/// The joint-space rows as JSON: per source, per joint by name.
+pub fn joint_space_json(rows: &[JointSpaceRow], joint_names: &[String], link: &str) -> Value {
+    json!({
+        "end_effector_link": link,
+        "sources": rows.iter().map(|r| json!({
+            "source": r.source,
+            "episodes": r.episodes,
+            "rms_all_deg": r.rms_all_deg,
+            "episode_range_deg": [r.episode_range_deg.0, r.episode_range_deg.1],
+            "end_effector_rms_mm": r.end_effector_rms_mm,
+            "joints": joint_names.iter().enumerate().map(|(j, n)| json!({
+                "joint": n,
+                "rms_deg": r.rms_deg[j],
+                "max_deg": r.max_deg[j],
+                "accumulated_deg": r.accumulated_deg[j],
+                "delay_ms": r.delay_ms[j],
+            })).collect::<Vec<_>>(),
+        })).collect::<Vec<_>>(),
+    })
 }
 
 /// The report's figures: per moving joint, the first episode's recorded
