@@ -93,6 +93,30 @@ fn mujoco_recovers_the_writers_parameters_with_the_gains_known() {
         );
     }
     println!("worst relative error of damping and armature: {worst:?}");
+    // Every 95 % interval covers the truth (the armature's shifted by
+    // dt kv, as its value): with the residuals' autocorrelation counted,
+    // the intervals are as wide as the remaining model error.
+    for p in s["params"].as_array().unwrap() {
+        let key = p["key"].as_str().unwrap();
+        let (want, shift) = match key.split('.').collect::<Vec<_>>().as_slice() {
+            ["controller", "delay_s"] => (t["delay_s"].as_f64().unwrap(), 0.0),
+            ["joints", name, field] => (
+                t["joints"][name][field].as_f64().unwrap(),
+                if *field == "armature" {
+                    dt * t["joints"][name]["kd"].as_f64().unwrap()
+                } else {
+                    0.0
+                },
+            ),
+            _ => panic!("unexpected key {key}"),
+        };
+        let lo = p["interval"][0].as_f64().unwrap() + shift;
+        let hi = p["interval"][1].as_f64().unwrap() + shift;
+        assert!(
+            lo <= want && want <= hi,
+            "{key}: [{lo}, {hi}] misses {want}"
+        );
+    }
     // The delay within one joint-state sample (5 ms).
     let delay = param(&s, "controller.delay_s");
     let got = delay["value"].as_f64().unwrap();

@@ -283,7 +283,7 @@ pub fn levenberg_marquardt(
 pub struct Spread {
     /// Residuals.
     pub n: usize,
-    /// Lag-1 autocorrelation of the residuals.
+    /// Autocorrelation of the residuals, from one sample to the next.
     pub rho: f64,
     /// Effective number of independent residuals.
     pub n_eff: f64,
@@ -297,9 +297,12 @@ pub struct Spread {
     pub correlation: Vec<Vec<f64>>,
 }
 
-/// Lag-1 autocorrelation of `r`.
-pub fn lag1_autocorrelation(r: &[f64]) -> f64 {
-    if r.len() < 3 {
+/// Autocorrelation of `r` at lag `lag` (for residuals that interleave
+/// several series, such as joints sample by sample, `lag` is the number of
+/// series: each series' lag-1 autocorrelation, pooled).
+pub fn autocorrelation(r: &[f64], lag: usize) -> f64 {
+    let lag = lag.max(1);
+    if r.len() < lag + 2 {
         return 0.0;
     }
     let mean = r.iter().sum::<f64>() / r.len() as f64;
@@ -307,15 +310,20 @@ pub fn lag1_autocorrelation(r: &[f64]) -> f64 {
     if var <= 0.0 {
         return 0.0;
     }
-    let cov: f64 = r.windows(2).map(|w| (w[0] - mean) * (w[1] - mean)).sum();
+    let cov: f64 = r
+        .iter()
+        .zip(&r[lag..])
+        .map(|(a, b)| (a - mean) * (b - mean))
+        .sum();
     (cov / var).clamp(-0.999, 0.999)
 }
 
-/// The spread of a fit with residuals `r` and Jacobian `j` there.
-pub fn spread(j: &DMatrix<f64>, r: &[f64]) -> Spread {
+/// The spread of a fit with residuals `r` and Jacobian `j` there; `lag` as
+/// for [`autocorrelation`].
+pub fn spread(j: &DMatrix<f64>, r: &[f64], lag: usize) -> Spread {
     let n = r.len();
     let p = j.ncols();
-    let rho = lag1_autocorrelation(r).max(0.0);
+    let rho = autocorrelation(r, lag).max(0.0);
     let n_eff = (n as f64 * (1.0 - rho) / (1.0 + rho)).max(p as f64 + 1.0);
     let variance = cost_of(r) / (n_eff - p as f64).max(1.0);
     // Covariance of the coordinates: variance * (J^T J)^-1, with the
@@ -419,7 +427,7 @@ mod tests {
         assert!(fit.cost < fit.start_cost * 1e-3, "{fit:?}");
         let r = f(&fit.u).unwrap();
         let j = jacobian(&f, &fit.u, &r, 1e-6, 1).unwrap();
-        let s = spread(&j, &r);
+        let s = spread(&j, &r, 1);
         for (i, want) in truth.iter().enumerate() {
             assert!(
                 (fit.u[i] - want).abs() < 3.0 * s.sd_u[i] + 1e-4,
@@ -447,7 +455,7 @@ mod tests {
         assert!((fit.u[0] + fit.u[1] - 0.8).abs() < 1e-3, "{fit:?}");
         let r = f(&fit.u).unwrap();
         let j = jacobian(&f, &fit.u, &r, 1e-4, 1).unwrap();
-        let s = spread(&j, &r);
+        let s = spread(&j, &r, 1);
         assert!(s.correlation[0][1] < -0.99, "{s:?}");
         assert!(s.sd_u.iter().all(|x| x.is_infinite()), "{s:?}");
     }

@@ -149,7 +149,8 @@ pub struct Identifiability {
     /// Pairs of parameters whose estimates are correlated beyond 0.95
     /// (key, key, correlation).
     pub trading: Vec<(String, String, f64)>,
-    /// Lag-1 autocorrelation of the residuals at the optimum.
+    /// Autocorrelation of the residuals at the optimum, from one sample
+    /// to the next of each joint.
     pub residual_autocorrelation: f64,
     /// Residuals, and the independent ones they count as.
     pub residuals: (usize, f64),
@@ -941,7 +942,7 @@ pub fn tune_recordings(
         None => least_squares::jacobian(&f, &u, &r, FitOptions::default().step, spec.jobs)
             .map_err(|m| anyhow!("the Jacobian at the optimum: {m}"))?,
     };
-    let spread = least_squares::spread(&jac, &r);
+    let spread = least_squares::spread(&jac, &r, joints);
     let mut params_out = Vec::new();
     for (c, &i) in p.continuous.iter().enumerate() {
         let d = &p.space.dims[i];
@@ -1248,7 +1249,7 @@ pub fn summary_markdown(s: &RecordingsSummary) -> String {
     }
     let _ = writeln!(
         m,
-        "\nResiduals: {} (joint-angle samples), lag-1 autocorrelation {:.4}, counted as {:.0} independent ones for the intervals.\n\n{} evaluations (each replays every training episode), {} Levenberg-Marquardt iterations, {:.1} s; the last fit stopped at {}.",
+        "\nResiduals: {} (one per joint and sample), autocorrelated {:.4} from one sample to the next, counted as {:.0} independent ones for the intervals.\n\n{} evaluations (each replays every training episode), {} Levenberg-Marquardt iterations, {:.1} s; the last fit stopped at {}.",
         i.residuals.0, i.residual_autocorrelation, i.residuals.1, s.evaluations, s.iterations, s.wall_time_s, s.reason
     );
     m
