@@ -344,3 +344,73 @@ fn bad_requests_are_named() {
     assert!(!run.status.success());
     assert!(stderr.contains("--holdout \"5\""), "{stderr}");
 }
+
+#[test]
+fn a_rerun_resumes_from_the_best_point_of_its_history() {
+    let dir = scratch("tune-recordings-tests", "resume");
+    let real = import_bags(&dir, 1);
+    let t = truth();
+    let names: Vec<String> = t["joints"]
+        .as_object()
+        .unwrap()
+        .keys()
+        .take(2)
+        .cloned()
+        .collect();
+    let mut known_text = std::fs::read_to_string(truth_params(&dir, &["damping"])).unwrap();
+    for (name, j) in t["joints"].as_object().unwrap().iter().skip(2) {
+        known_text = known_text.replace(
+            &format!("[joints.{name}]\n"),
+            &format!("[joints.{name}]\ndamping = {}\n", j["damping"]),
+        );
+    }
+    let known = dir.join("known.toml");
+    std::fs::write(&known, known_text).unwrap();
+    let space = dir.join("space.toml");
+    let mut toml = String::from("[params]\n");
+    for name in &names {
+        toml.push_str(&format!(
+            "\"joints.{name}.damping\" = {{ low = 0.0, high = 10.0, start = 0.5 }}\n"
+        ));
+    }
+    std::fs::write(&space, toml).unwrap();
+    let out = dir.join("tune");
+    let tune = || {
+        let run = realitygap(&[
+            "tune",
+            "--recordings",
+            &path(&real),
+            "--engine",
+            "mujoco",
+            "--params",
+            &path(&known),
+            "--space",
+            &path(&space),
+            "--iterations",
+            "1",
+            "--out",
+            &path(&out),
+        ]);
+        assert!(run.status.success(), "{}", text(&run.stderr));
+        let s = summary(&out);
+        s["scores"][1]["train"]["rms_deg"].as_f64().unwrap()
+    };
+    let first = tune();
+    let history = std::fs::read_to_string(out.join("history.csv")).unwrap();
+    assert!(!history.contains("# resumed"), "{history}");
+    let second = tune();
+    let history = std::fs::read_to_string(out.join("history.csv")).unwrap();
+    assert!(history.contains("# resumed"), "{history}");
+    assert!(second <= first, "resumed {second}, first {first}");
+    // Another space starts afresh.
+    std::fs::write(
+        &space,
+        std::fs::read_to_string(&space)
+            .unwrap()
+            .replace("high = 10.0", "high = 9.0"),
+    )
+    .unwrap();
+    tune();
+    let history = std::fs::read_to_string(out.join("history.csv")).unwrap();
+    assert!(!history.contains("# resumed"), "{history}");
+}

@@ -686,7 +686,9 @@ fn split(selection: &RunSelection, count: usize) -> Result<(Vec<usize>, Vec<usiz
 }
 
 /// Runs the tune: writes `OUT/space.toml`, `OUT/history.csv`,
-/// `OUT/tuned.toml`, `OUT/summary.md` and `OUT/summary.json`.
+/// `OUT/tune.json`, `OUT/tuned.toml` (`summary.md` and `summary.json` by
+/// [`write_summary`]). A rerun whose `tune.json` matches resumes from the
+/// best point of `history.csv`.
 pub fn tune_recordings(
     spec: &RecordingsSpec,
     progress: &(dyn Fn(RecordingsProgress) + Sync),
@@ -760,15 +762,50 @@ pub fn tune_recordings(
         None => "joint angles (deg) (recorded efforts are fitted with --efforts)".into(),
     };
     let history_path = spec.out.join("history.csv");
-    let mut history = std::fs::File::create(&history_path)
-        .with_context(|| format!("writing {}", history_path.display()))?;
     // One row per point of the fit: `evaluation` is the count of training
     // replays so far (the Jacobians' included).
     let mut header = String::from("evaluation,phase,train_rms_deg");
-    for &i in &continuous {
-        let _ = write!(header, ",{}", space.dims[i].key);
+    for d in &space.dims {
+        let _ = write!(header, ",{}", d.key);
     }
-    writeln!(history, "{header}")?;
+    // A rerun of the same tune (same engine, space, episodes, known
+    // parameters, objective, scene) resumes from the best point of its
+    // history; anything else starts afresh.
+    let state = serde_json::json!({
+        "engine": engine.name(),
+        "space": serde_json::to_value(&space)?,
+        "train": train,
+        "holdout": holdout,
+        "known": spec.known.to_toml_string(),
+        "efforts": spec.use_efforts,
+        "scene": format!("{:?}", prepared.scene.engine_settings),
+        "samples": samples,
+    });
+    let state_path = spec.out.join("tune.json");
+    let resumed = match std::fs::read_to_string(&state_path) {
+        Ok(text)
+            if serde_json::from_str::<serde_json::Value>(&text).ok() == Some(state.clone()) =>
+        {
+            best_of_history(&history_path, &header, space.dims.len())
+        }
+        _ => None,
+    };
+    std::fs::write(&state_path, serde_json::to_string_pretty(&state)? + "\n")
+        .with_context(|| format!("writing {}", state_path.display()))?;
+    let mut history = if resumed.is_some() {
+        std::fs::OpenOptions::new()
+            .append(true)
+            .open(&history_path)
+            .with_context(|| format!("appending to {}", history_path.display()))?
+    } else {
+        let mut f = std::fs::File::create(&history_path)
+            .with_context(|| format!("writing {}", history_path.display()))?;
+        writeln!(f, "{header}")?;
+        f
+    };
+    if resumed.is_some() {
+        writeln!(history, "# resumed from the best point above")?;
+    }
     files.push(history_path);
     let problem = Problem {
         spec,
@@ -799,8 +836,17 @@ pub fn tune_recordings(
         .map_err(|m| anyhow!("the untuned engine cannot replay the training episodes: {m}"))?;
     // The delay first, over its whole range at the untuned parameters: a
     // gradient search from a delay far from the truth can settle where a
-    // wrong delay and wrong damping make up for each other.
-    if let Some(d) = &p.delay {
+    // wrong delay and wrong damping make up for each other. A resumed tune
+    // starts from its best point instead.
+    if let Some(values) = &resumed {
+        u = p
+            .continuous
+            .iter()
+            .zip(values)
+            .map(|(&i, &v)| p.space.dims[i].unit(v))
+            .collect();
+        p.set_phase("resumed from the history's best point".into());
+    } else if let Some(d) = &p.delay {
         let c = p
             .continuous
             .iter()
@@ -1085,6 +1131,32 @@ pub fn tune_recordings(
     .with_context(|| format!("writing {}", tuned_path.display()))?;
     files.push(tuned_path);
     Ok(RecordingsResult { summary, files })
+}
+
+/// The values of the best point of a tune's `history.csv` (written with
+/// `header`), when it has one.
+fn best_of_history(path: &Path, header: &str, dims: usize) -> Option<Vec<f64>> {
+    let text = std::fs::read_to_string(path).ok()?;
+    let mut lines = text.lines();
+    if lines.next()? != header {
+        return None;
+    }
+    lines
+        .filter(|l| !l.starts_with('#'))
+        .filter_map(|l| {
+            let cells: Vec<&str> = l.split(',').collect();
+            let rms: f64 = cells.get(2)?.parse().ok()?;
+            let values: Vec<f64> = cells
+                .get(3..)?
+                .iter()
+                .map(|c| c.parse::<f64>())
+                .collect::<Result<_, _>>()
+                .ok()?;
+            (values.len() == dims && rms.is_finite() && !cells[1].contains("failed"))
+                .then_some((rms, values))
+        })
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|b| b.1)
 }
 
 /// The delays of the first scan: the range in about 20 steps, on the
