@@ -150,6 +150,31 @@ fn with_the_writers_parameters_the_engines_reproduce_the_recording() {
         .is_file());
     let store = RunStore::open(&out.join("mujoco")).unwrap();
     assert_eq!(store.runs().len(), 2);
+    // The replays keep the engines' joint velocities and the servo's
+    // efforts, which match the recording's (read through each engine's
+    // own joint_velocities_rad_s).
+    let recorded = RunStore::open(&real).unwrap();
+    let id = recorded.runs()[0].id.clone();
+    let want = recorded.read_run(&id).unwrap();
+    for e in ["mujoco", "rapier", "ode"] {
+        let got = RunStore::open(&out.join(e)).unwrap().read_run(&id).unwrap();
+        let rms = |a: &Option<Vec<Vec<f64>>>, b: &Option<Vec<Vec<f64>>>| {
+            let (a, b) = (a.as_ref().unwrap(), b.as_ref().unwrap());
+            let (mut s, mut n) = (0.0, 0);
+            for (x, y) in a.iter().zip(b) {
+                for (p, q) in x.iter().zip(y) {
+                    s += (p - q) * (p - q);
+                    n += 1;
+                }
+            }
+            (s / n as f64).sqrt()
+        };
+        let v = rms(&got.joint_velocities_rad_s, &want.joint_velocities_rad_s);
+        let t = rms(&got.joint_efforts_nm, &want.joint_efforts_nm);
+        println!("{e}: velocities {v:.2e} rad/s, efforts {t:.3} N m RMS from the recording");
+        assert!(v < 0.01, "{e}: velocities {v} rad/s RMS");
+        assert!(t < 1.0, "{e}: efforts {t} N m RMS");
+    }
     // A rerun simulates nothing again.
     let again = realitygap(&args);
     assert!(again.status.success());

@@ -561,6 +561,17 @@ pub trait Simulation: Send {
     /// Writes the controlled joints' angles, rad, into `out`
     /// (`out.len() == joint_count()`).
     fn joint_angles_rad(&self, out: &mut [f64]);
+    /// Writes the controlled joints' velocities, rad/s, into `out`
+    /// (`out.len() == joint_count()`). The default reads them from
+    /// [`Simulation::state`]; an engine whose state is costly to read (a
+    /// native copy) reads them directly.
+    fn joint_velocities_rad_s(&self, out: &mut [f64]) -> Result<(), EngineError> {
+        let state = self.state()?;
+        for (o, v) in out.iter_mut().zip(&state.joint_velocities_rad_s) {
+            *o = *v;
+        }
+        Ok(())
+    }
     /// Writes the tracked bodies' world poses into `out`
     /// (`out.len() == tracked_count()`).
     fn tracked_poses(&self, out: &mut [Pose]);

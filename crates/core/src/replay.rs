@@ -224,7 +224,8 @@ pub fn replay(sim: &mut dyn Simulation, plan: &ReplayPlan) -> Result<RunOutcome,
                 status = RunStatus::Diverged { t_s, reason };
                 break;
             }
-            let velocities = sim.state()?.joint_velocities_rad_s;
+            let mut velocities = vec![0.0; joints];
+            sim.joint_velocities_rad_s(&mut velocities)?;
             let efforts: Vec<f64> = (0..joints)
                 .map(|j| {
                     let limit = plan.force_limit_nm[j];

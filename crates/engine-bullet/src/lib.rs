@@ -1081,6 +1081,13 @@ impl Simulation for BulletSimulation {
         out.copy_from_slice(&self.angles_rad[..out.len()]);
     }
 
+    fn joint_velocities_rad_s(&self, out: &mut [f64]) -> Result<(), EngineError> {
+        // The rates read after each step: `state` also reads the native
+        // state.
+        out.copy_from_slice(&self.velocities_rad_s[..out.len()]);
+        Ok(())
+    }
+
     fn tracked_poses(&self, out: &mut [Pose]) {
         out.copy_from_slice(&self.poses[..out.len()]);
     }

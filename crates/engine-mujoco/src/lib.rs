@@ -653,6 +653,16 @@ impl Simulation for MujocoSimulation {
         }
     }
 
+    fn joint_velocities_rad_s(&self, out: &mut [f64]) -> Result<(), EngineError> {
+        // Directly from qvel: `state` would copy MuJoCo's whole native
+        // state.
+        let qvel = self.data.qvel();
+        for (o, &a) in out.iter_mut().zip(&self.dof_adr) {
+            *o = qvel[a];
+        }
+        Ok(())
+    }
+
     fn tracked_poses(&self, out: &mut [Pose]) {
         for (o, &b) in out.iter_mut().zip(&self.tracked_body) {
             *o = self.body_pose_by_index(b);

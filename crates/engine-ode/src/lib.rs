@@ -379,6 +379,14 @@ impl Simulation for OdeSimulation {
         }
     }
 
+    fn joint_velocities_rad_s(&self, out: &mut [f64]) -> Result<(), EngineError> {
+        // The hinges' rates directly: `state` also copies the native state.
+        for (i, o) in out.iter_mut().enumerate() {
+            *o = self.world.hinge_rate(i);
+        }
+        Ok(())
+    }
+
     fn tracked_poses(&self, out: &mut [Pose]) {
         for (o, t) in out.iter_mut().zip(&self.plan.tracked) {
             *o = match *t {

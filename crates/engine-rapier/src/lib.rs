@@ -389,6 +389,16 @@ impl Simulation for RapierSimulation {
         }
     }
 
+    fn joint_velocities_rad_s(&self, out: &mut [f64]) -> Result<(), EngineError> {
+        // The multibody's generalized velocity directly: `state` also
+        // serializes the native state.
+        let qd = self.generalized_velocity();
+        for (o, j) in out.iter_mut().zip(&self.joints) {
+            *o = qd.get(j.dof).map_or(f64::NAN, |&v| v as f64);
+        }
+        Ok(())
+    }
+
     fn tracked_poses(&self, out: &mut [Pose]) {
         for (o, frame) in out.iter_mut().zip(&self.tracked) {
             *o = self.frame_pose(frame);

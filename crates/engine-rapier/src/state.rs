@@ -133,7 +133,7 @@ impl RapierSimulation {
             .collect()
     }
 
-    fn generalized_velocity(&self) -> Vec<f32> {
+    pub(crate) fn generalized_velocity(&self) -> Vec<f32> {
         self.joints
             .first()
             .and_then(|j| self.world.multibody_joints.get(j.handle))

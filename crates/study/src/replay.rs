@@ -284,13 +284,9 @@ pub fn plan_for(episode: &Episode, scene: &Scene, params: &PhysicalParams) -> Re
         kp.push(given.and_then(|g| g.kp).unwrap_or(default_kp));
         kv.push(given.and_then(|g| g.kv).unwrap_or(a.kv));
         let limit = given.and_then(|g| g.force_limit).unwrap_or(a.force_limit);
-        force_limit_nm.push(if limit.is_finite() && limit > 0.0 {
-            limit
-        } else if limit == 0.0 {
-            0.0
-        } else {
-            f64::INFINITY
-        });
+        // 0 switches the servo off; a limit that is not a number >= 0 is
+        // none.
+        force_limit_nm.push(if limit >= 0.0 { limit } else { f64::INFINITY });
     }
     Ok(ReplayPlan {
         commands,

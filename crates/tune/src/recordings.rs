@@ -582,7 +582,7 @@ fn push_residuals(
 /// spread of the joint's recorded effort. `None` when some episode has no
 /// efforts or an effort never varies.
 fn effort_weights(episodes: &[&Episode], joints: usize) -> Option<Vec<f64>> {
-    let spread = |rows: Vec<&Vec<f64>>, j: usize| -> f64 {
+    let spread = |rows: &[&Vec<f64>], j: usize| -> f64 {
         let n = rows.len().max(1) as f64;
         let mean = rows.iter().map(|r| r[j]).sum::<f64>() / n;
         (rows.iter().map(|r| (r[j] - mean).powi(2)).sum::<f64>() / n).sqrt()
@@ -594,13 +594,13 @@ fn effort_weights(episodes: &[&Episode], joints: usize) -> Option<Vec<f64>> {
         efforts.extend(e.real.joint_efforts_nm.as_ref()?.iter());
     }
     let s_q = ((0..joints)
-        .map(|j| spread(angles.clone(), j).to_degrees().powi(2))
+        .map(|j| spread(&angles, j).to_degrees().powi(2))
         .sum::<f64>()
         / joints as f64)
         .sqrt();
     let mut w = Vec::new();
     for j in 0..joints {
-        let s_t = spread(efforts.clone(), j);
+        let s_t = spread(&efforts, j);
         if !(s_t > 0.0 && s_t.is_finite()) {
             return None;
         }
