@@ -141,16 +141,7 @@ fn joint_space(args: &Args, format: Format) -> Result<()> {
     use realitygap_study::replay::{
         compare_replay, joint_space_csv, joint_space_json, joint_space_markdown,
     };
-    let (rows, names) = compare_replay(&args.study, args.link.as_deref())?;
-    let link = match &args.link {
-        Some(l) => l.clone(),
-        None => {
-            let record: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(
-                args.study.join(realitygap_study::replay::RECORD_FILE),
-            )?)?;
-            record["link"].as_str().unwrap_or("").to_string()
-        }
-    };
+    let (rows, names, link) = compare_replay(&args.study, args.link.as_deref())?;
     let text = match format {
         Format::Markdown => joint_space_markdown(&rows, &names),
         Format::Csv => joint_space_csv(&rows, &names),

@@ -619,8 +619,12 @@ pub fn write_record(req: &ReplayRequest, prepared: &Prepared) -> Result<()> {
 /// The joint-space comparison of a replay's output folder (`OUT` of
 /// `realitygap replay`): every results directory in it (the engines and
 /// the physics-free model) against the recordings, with the end effector
-/// taken as `link` (default: the replay's), and the joint names.
-pub fn compare_replay(dir: &Path, link: Option<&str>) -> Result<(Vec<JointSpaceRow>, Vec<String>)> {
+/// taken as `link` (default: the replay's); the rows, the joint names and
+/// the link measured.
+pub fn compare_replay(
+    dir: &Path,
+    link: Option<&str>,
+) -> Result<(Vec<JointSpaceRow>, Vec<String>, String)> {
     let record_path = dir.join(RECORD_FILE);
     let text = std::fs::read_to_string(&record_path).with_context(|| {
         format!(
@@ -718,7 +722,7 @@ pub fn compare_replay(dir: &Path, link: Option<&str>) -> Result<(Vec<JointSpaceR
         .iter()
         .map(|&j| robot.joints[j].name.clone())
         .collect();
-    Ok((rows, names))
+    Ok((rows, names, prepared.link))
 }
 
 /// The joint-space table as CSV: one row per source and joint.
