@@ -16,6 +16,11 @@ pub struct Args {
     /// honours and what each becomes in the engine.
     #[arg(long)]
     pub params: bool,
+    /// Also list, per engine, how its servos take each kind of joint
+    /// command (velocity targets, position targets with the PD law,
+    /// efforts): the engine's own mechanism.
+    #[arg(long)]
+    pub commands: bool,
 }
 
 /// Every engine compiled in (cargo features of this crate), by name
@@ -59,6 +64,16 @@ pub fn run(args: Args) -> Result<()> {
         if args.params {
             for (key, mapping) in param_table(e.as_ref()) {
                 println!("{:<width$}    {:<30} {}", "", key.pattern(), mapping);
+            }
+        }
+        if args.commands {
+            for c in e.command_support() {
+                println!(
+                    "{:<width$}    {:<17} {}",
+                    "",
+                    format!("{} ({})", c.kind.name(), c.kind.unit()),
+                    c.mechanism
+                );
             }
         }
     }

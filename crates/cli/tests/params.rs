@@ -209,3 +209,28 @@ fn engines_lists_every_parameter_key_per_engine() {
         );
     }
 }
+
+/// `engines --commands`: every compiled engine says how it takes each kind
+/// of joint command.
+#[test]
+fn every_engine_lists_its_mechanism_for_each_command_kind() {
+    let list = realitygap(&["engines", "--commands"]);
+    assert!(list.status.success());
+    let table = String::from_utf8_lossy(&list.stdout).to_string();
+    let engines: Vec<&str> = table
+        .lines()
+        .filter(|l| !l.starts_with(' '))
+        .filter_map(|l| l.split_whitespace().next())
+        .collect();
+    assert!(!engines.is_empty(), "{table}");
+    for kind in ["velocity (rad/s)", "position (rad)", "effort (N m)"] {
+        assert_eq!(
+            table
+                .lines()
+                .filter(|l| l.trim_start().starts_with(kind))
+                .count(),
+            engines.len(),
+            "one {kind} line per engine:\n{table}"
+        );
+    }
+}

@@ -15,6 +15,8 @@
 //! | an unsupported parameter is an error naming engine and key | [`unsupported_key_error`] |
 //! | gravity comes from the scene | [`gravity_effect_rad`] |
 //! | a diverging setting ends the run as diverged | [`diverges`] |
+//! | each kind of joint command (velocity, position, effort) against the analytic response of one joint | [`step_response`] |
+//! | commands of every kind survive a state round trip, and switching back to velocity targets | [`command_round_trip`] |
 
 use crate::controller::{
     load_prepared, prepare, ControlParams, ControllerLoop, RunOptions, RunOutcome, RunStatus,
@@ -314,4 +316,225 @@ pub fn diverges(engine: &dyn Engine, settings: &EngineSettings) -> RunOutcome {
         ..RunOptions::default()
     };
     crate::controller::simulate(engine, &scene, &robot, settings, &options).unwrap()
+}
+
+/// The rotor of the step-response checks: one revolute joint about the
+/// vertical (so gravity exerts no torque on it), a disc of known inertia.
+const ROTOR_URDF: &str = r#"<?xml version="1.0"?>
+<robot name="rotor">
+  <link name="base">
+    <inertial><mass value="1.0"/><inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial>
+  </link>
+  <joint name="spin" type="revolute">
+    <parent link="base"/><child link="disc"/>
+    <origin xyz="0 0 0.5" rpy="0 0 0"/><axis xyz="0 0 1"/>
+    <limit lower="-3.0" upper="3.0" effort="50" velocity="100"/>
+  </joint>
+  <link name="disc">
+    <inertial><origin xyz="0 0 0"/><mass value="2.0"/><inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><origin xyz="0 0 0"/><geometry><box size="0.1 0.1 0.02"/></geometry></collision>
+  </link>
+</robot>
+"#;
+
+/// The rotor's inertia about its axis, kg m^2.
+pub const ROTOR_INERTIA_KG_M2: f64 = 0.01;
+/// The rotor servo's velocity gain, N m s/rad (time constant I/kv = 0.1 s).
+pub const ROTOR_KV: f64 = 0.1;
+/// The rotor servo's position gain, N m/rad (with kv: natural frequency
+/// 10 rad/s, damping ratio 0.5).
+pub const ROTOR_KP: f64 = 1.0;
+
+/// The rotor scene and robot (files in a temporary folder of this process).
+pub fn rotor() -> (Scene, RobotModel) {
+    let dir = std::env::temp_dir().join(format!("realitygap-rotor-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let urdf = dir.join("rotor.urdf");
+    if !urdf.is_file() {
+        let tmp = dir.join(format!("rotor.urdf.{:?}", std::thread::current().id()));
+        std::fs::write(&tmp, ROTOR_URDF).unwrap();
+        std::fs::rename(&tmp, &urdf).unwrap();
+    }
+    let text = format!(
+        r#"
+name = "rotor"
+description = "one joint about the vertical, for the servo step responses"
+duration_s = 1.0
+[robot]
+urdf = "rotor.urdf"
+base_position_m = [0.0, 0.0, 0.0]
+[controller]
+gain_per_s = 1.0
+max_speed_deg_s = 1.0
+period_s = 0.01
+[[actuator]]
+joint = "spin"
+kv = {ROTOR_KV:?}
+kp = {ROTOR_KP:?}
+force_limit = 50.0
+[[schedule]]
+t_s = 0.0
+targets_deg = {{}}
+[[track]]
+role = "disc"
+link = "disc"
+"#
+    );
+    let scene = Scene::from_toml_str(&text, &dir.join("rotor.toml")).unwrap();
+    let robot = RobotModel::from_urdf_file(&urdf, &crate::robot::PackageResolver::new()).unwrap();
+    (scene, robot)
+}
+
+/// The rotor's analytic angle at `t_s` under a step command of `kind`
+/// from rest at 0 (see [`step_response`]), rad.
+pub fn rotor_analytic_rad(kind: crate::trajectory::CommandKind, t_s: f64) -> f64 {
+    use crate::trajectory::CommandKind;
+    let i = ROTOR_INERTIA_KG_M2;
+    match kind {
+        CommandKind::Velocity => {
+            // I v' = kv (v* - v): v = v* (1 - e^(-t/T)), T = I / kv.
+            let tau = i / ROTOR_KV;
+            STEP_VELOCITY_RAD_S * (t_s - tau * (1.0 - (-t_s / tau).exp()))
+        }
+        CommandKind::Position => {
+            // I q'' = kp (q* - q) - kv q', under-damped.
+            let w = (ROTOR_KP / i).sqrt();
+            let z = ROTOR_KV / (2.0 * (ROTOR_KP * i).sqrt());
+            let wd = w * (1.0 - z * z).sqrt();
+            STEP_POSITION_RAD
+                * (1.0
+                    - (-z * w * t_s).exp()
+                        * ((wd * t_s).cos() + z / (1.0 - z * z).sqrt() * (wd * t_s).sin()))
+        }
+        CommandKind::Effort => STEP_EFFORT_NM * t_s * t_s / (2.0 * i),
+    }
+}
+
+/// The velocity step of [`step_response`], rad/s.
+pub const STEP_VELOCITY_RAD_S: f64 = 1.0;
+/// The position step, rad.
+pub const STEP_POSITION_RAD: f64 = 0.5;
+/// The effort step, N m (the rotor turns 1 rad in 1 s).
+pub const STEP_EFFORT_NM: f64 = 0.02;
+
+/// What [`step_response`] measured.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepResponse {
+    /// The largest gap between the engine's angle and the analytic one
+    /// over the second, rad.
+    pub max_error_rad: f64,
+    /// The gap at the end of the second, rad.
+    pub final_error_rad: f64,
+    /// The analytic angle at the end of the second, rad (the scale).
+    pub final_rad: f64,
+}
+
+/// The rotor ([`rotor`]) from rest at 0 under one step command of `kind`
+/// for 1 s ([`STEP_VELOCITY_RAD_S`], [`STEP_POSITION_RAD`] or
+/// [`STEP_EFFORT_NM`]) through [`Simulation::set_joint_commands`], against
+/// the analytic response of the law ([`rotor_analytic_rad`]).
+pub fn step_response(subject: Subject<'_>, kind: crate::trajectory::CommandKind) -> StepResponse {
+    use crate::engine::ServoCommand;
+    use crate::trajectory::CommandKind;
+    let (scene, robot) = rotor();
+    let (_, mut sim) = load(subject, &scene, &robot, &PhysicalParams::none());
+    let command = match kind {
+        CommandKind::Velocity => ServoCommand::velocity(STEP_VELOCITY_RAD_S),
+        CommandKind::Position => ServoCommand::position(STEP_POSITION_RAD),
+        CommandKind::Effort => ServoCommand::effort(STEP_EFFORT_NM),
+    };
+    sim.set_joint_commands(&[command]).unwrap();
+    let dt = sim.timestep_s();
+    let steps = (1.0 / dt).round() as u64;
+    let mut q = [0.0];
+    let mut max_error: f64 = 0.0;
+    let mut last = 0.0;
+    for k in 1..=steps {
+        sim.step().unwrap();
+        sim.joint_angles_rad(&mut q);
+        last = (q[0] - rotor_analytic_rad(kind, k as f64 * dt)).abs();
+
+        max_error = max_error.max(last);
+    }
+    StepResponse {
+        max_error_rad: max_error,
+        final_error_rad: last,
+        final_rad: rotor_analytic_rad(kind, steps as f64 * dt),
+    }
+}
+
+/// The rotor under a position command for 0.3 s, then its state (with the
+/// commands in force) taken and loaded into a fresh simulation (the whole
+/// state, or only its portable part when `portable`), both continued 0.3
+/// s; then both switched to an effort command for 0.2 s, and both back to
+/// a velocity target of 0 for 0.2 s. Returns the largest gap between the
+/// two angles over the continuation, rad, and asserts the state reports
+/// the position command.
+pub fn command_round_trip(subject: Subject<'_>, portable: bool) -> f64 {
+    use crate::engine::ServoCommand;
+    use crate::trajectory::CommandKind;
+    let (scene, robot) = rotor();
+    let (_, mut a) = load(subject, &scene, &robot, &PhysicalParams::none());
+    a.set_joint_commands(&[ServoCommand::position(STEP_POSITION_RAD)])
+        .unwrap();
+    let dt = a.timestep_s();
+    let steps = |s: f64| (s / dt).round() as u64;
+    a.step_n(steps(0.3)).unwrap();
+    let mut state = a.state().unwrap();
+    assert_eq!(
+        state.servo_commands,
+        vec![ServoCommand::position(STEP_POSITION_RAD)],
+        "the state carries the command in force"
+    );
+    if portable {
+        state = state.portable();
+    }
+    let (_, mut b) = load(subject, &scene, &robot, &PhysicalParams::none());
+    b.set_state(&state).unwrap();
+    let mut gap: f64 = 0.0;
+    let (mut qa, mut qb) = ([0.0], [0.0]);
+    let mut phase = |a: &mut Box<dyn Simulation>, b: &mut Box<dyn Simulation>, n: u64| {
+        for _ in 0..n {
+            a.step().unwrap();
+            b.step().unwrap();
+            a.joint_angles_rad(&mut qa);
+            b.joint_angles_rad(&mut qb);
+            gap = gap.max((qa[0] - qb[0]).abs());
+        }
+    };
+    phase(&mut a, &mut b, steps(0.3));
+    for sim in [&mut a, &mut b] {
+        sim.set_joint_commands(&[ServoCommand::effort(-STEP_EFFORT_NM)])
+            .unwrap();
+        assert_eq!(
+            sim.state().unwrap().servo_commands[0].kind,
+            CommandKind::Effort
+        );
+    }
+    phase(&mut a, &mut b, steps(0.2));
+    for sim in [&mut a, &mut b] {
+        sim.set_joint_velocity_targets(&[0.0]);
+        assert!(
+            sim.state().unwrap().servo_commands.is_empty(),
+            "velocity targets again: no other commands in the state"
+        );
+    }
+    phase(&mut a, &mut b, steps(0.2));
+    gap
+}
+
+/// A position command to a joint without a position gain, and a command
+/// of the wrong count: the errors the engine gives (both must be errors).
+pub fn bad_commands(subject: Subject<'_>) -> (EngineError, EngineError) {
+    use crate::engine::ServoCommand;
+    let (mut scene, robot) = rotor();
+    scene.actuators[0].kp = None;
+    let (_, mut sim) = load(subject, &scene, &robot, &PhysicalParams::none());
+    let no_gain = sim
+        .set_joint_commands(&[ServoCommand::position(0.1)])
+        .expect_err("a position command without kp is an error");
+    let count = sim
+        .set_joint_commands(&[ServoCommand::effort(0.1), ServoCommand::effort(0.1)])
+        .expect_err("two commands for one joint is an error");
+    (no_gain, count)
 }

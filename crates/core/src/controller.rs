@@ -886,6 +886,22 @@ link = "l2"
         fn set_joint_velocity_targets(&mut self, rad_s: &[f64]) {
             self.v.copy_from_slice(rad_s);
         }
+        fn set_joint_commands(
+            &mut self,
+            commands: &[crate::engine::ServoCommand],
+        ) -> Result<(), EngineError> {
+            // A perfect velocity servo takes velocity commands only.
+            for (v, c) in self.v.iter_mut().zip(commands) {
+                if c.kind != crate::trajectory::CommandKind::Velocity {
+                    return Err(EngineError::Usage {
+                        engine: "toy".into(),
+                        message: "velocity commands only".into(),
+                    });
+                }
+                *v = c.value;
+            }
+            Ok(())
+        }
         fn step(&mut self) -> Result<(), EngineError> {
             for (q, v) in self.q.iter_mut().zip(&self.v) {
                 *q += v * self.dt;
@@ -910,6 +926,7 @@ link = "l2"
                 joint_angles_rad: self.q.clone(),
                 joint_velocities_rad_s: self.v.clone(),
                 joint_velocity_targets_rad_s: self.v.clone(),
+                servo_commands: vec![],
                 objects: Vec::new(),
                 native: None,
             })

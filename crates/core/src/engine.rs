@@ -1,6 +1,8 @@
 //! The interface every physics engine implements: [`Engine`] loads a
-//! [`Scene`] into a [`Simulation`], which takes joint velocity targets,
-//! steps, and reports joint angles and the poses of the tracked bodies.
+//! [`Scene`] into a [`Simulation`], which takes joint commands (velocity
+//! targets for the study's controller; position targets or efforts for a
+//! recording's replay), steps, and reports joint angles and the poses of
+//! the tracked bodies.
 //!
 //! That is all an engine does. The controller, the recording and the
 //! divergence checks live in [`crate::controller`], identical for every
@@ -25,6 +27,7 @@ use crate::params::{ParamSupport, PhysicalParams};
 use crate::pose::{Pose, Vec3};
 use crate::robot::RobotModel;
 use crate::scene::Scene;
+pub use crate::trajectory::CommandKind;
 use std::collections::BTreeMap;
 use std::fmt;
 
@@ -377,6 +380,12 @@ pub trait Engine: Send + Sync {
     /// applies them). A key set in a parameters file and absent here is an
     /// error ([`PhysicalParams::check_support`]).
     fn param_support(&self) -> Vec<ParamSupport>;
+    /// How this engine's servos take each kind of joint command
+    /// ([`Simulation::set_joint_commands`]): one entry per kind, saying the
+    /// engine's own mechanism (e.g. MuJoCo's `<position>` actuator law),
+    /// for `realitygap engines` and the documentation. Every engine takes
+    /// every kind.
+    fn command_support(&self) -> Vec<CommandSupport>;
     /// Builds a simulation of `scene` with `robot` (already validated against
     /// the scene), configured by `settings`, changed by `variation`, with the
     /// engine-mapped physical parameters of `params` applied (armature,
@@ -404,6 +413,96 @@ pub trait Engine: Send + Sync {
     ) -> Result<Box<dyn Simulation>, EngineError> {
         self.load_with(scene, robot, settings, variation, &PhysicalParams::none())
     }
+}
+
+/// One joint's servo command: what it asks ([`CommandKind`]) and the value,
+/// in the kind's unit for a revolute joint (rad, rad/s, N m).
+///
+/// - `Velocity`: the velocity servo, `tau = kv (value - qd)`;
+/// - `Position`: the PD servo, `tau = kp (value - q) - kv qd` (the scene
+///   actuator's `kp` and `kv`);
+/// - `Effort`: `tau = value`.
+///
+/// Every law is limited to the actuator's force limit.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ServoCommand {
+    /// What the servo is asked to do.
+    pub kind: CommandKind,
+    /// The target or effort.
+    pub value: f64,
+}
+
+impl ServoCommand {
+    /// A velocity target, rad/s.
+    pub fn velocity(rad_s: f64) -> ServoCommand {
+        ServoCommand {
+            kind: CommandKind::Velocity,
+            value: rad_s,
+        }
+    }
+    /// A position target, rad.
+    pub fn position(rad: f64) -> ServoCommand {
+        ServoCommand {
+            kind: CommandKind::Position,
+            value: rad,
+        }
+    }
+    /// An effort, N m.
+    pub fn effort(nm: f64) -> ServoCommand {
+        ServoCommand {
+            kind: CommandKind::Effort,
+            value: nm,
+        }
+    }
+}
+
+/// How an engine honours one kind of joint command
+/// ([`Engine::command_support`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CommandSupport {
+    /// The kind.
+    pub kind: CommandKind,
+    /// The engine's mechanism, e.g. `<velocity kv> actuator (gain kv, bias -kv qd)`.
+    pub mechanism: &'static str,
+}
+
+/// Checks servo commands against the scene's actuators before an engine
+/// applies them: one per controlled joint, finite values, and a position
+/// gain `kp` on every joint given a position command. The error names the
+/// engine, the joint and the reason.
+pub fn check_servo_commands(
+    engine: &str,
+    scene: &Scene,
+    commands: &[ServoCommand],
+) -> Result<(), EngineError> {
+    let usage = |message: String| EngineError::Usage {
+        engine: engine.to_string(),
+        message,
+    };
+    if commands.len() != scene.actuators.len() {
+        return Err(usage(format!(
+            "{} servo commands for {} controlled joints",
+            commands.len(),
+            scene.actuators.len()
+        )));
+    }
+    for (c, a) in commands.iter().zip(&scene.actuators) {
+        if !c.value.is_finite() {
+            return Err(usage(format!(
+                "the {} command of joint \"{}\" is {}",
+                c.kind.name(),
+                a.joint,
+                c.value
+            )));
+        }
+        if c.kind == CommandKind::Position && a.kp.is_none() {
+            return Err(usage(format!(
+                "joint \"{}\" takes a position command but its actuator has no position gain: set kp in the scene's [[actuator]] or joints.{}.kp in the parameters",
+                a.joint, a.joint
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// The dynamic state of one scene object: pose and twist, world frame.
@@ -442,6 +541,11 @@ pub struct SimState {
     pub joint_velocities_rad_s: Vec<f64>,
     /// The servo velocity targets in force, rad/s, same order.
     pub joint_velocity_targets_rad_s: Vec<f64>,
+    /// The servo commands in force when some joint's servo is not a
+    /// velocity servo (a position or effort command), same order; empty
+    /// when every servo runs on the velocity targets above.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub servo_commands: Vec<ServoCommand>,
     /// Every scene object, in the scene's order.
     pub objects: Vec<ObjectState>,
     /// The engine's own complete state, when it has one.
@@ -478,6 +582,21 @@ impl SimState {
             }
             if let Some(i) = v.iter().position(|x| !x.is_finite()) {
                 return Err(format!("{name}[{i}] is not finite"));
+            }
+        }
+        if !self.servo_commands.is_empty() {
+            if self.servo_commands.len() != joints {
+                return Err(format!(
+                    "servo_commands has {} values, the simulation {joints} joints",
+                    self.servo_commands.len()
+                ));
+            }
+            if let Some(i) = self
+                .servo_commands
+                .iter()
+                .position(|c| !c.value.is_finite())
+            {
+                return Err(format!("servo_commands[{i}] is not finite"));
             }
         }
         if !self.time_s.is_finite() || self.time_s < 0.0 {
@@ -547,8 +666,15 @@ pub trait Simulation: Send {
     /// state is updated.
     fn set_joint_angles_rad(&mut self, rad: &[f64]) -> Result<(), EngineError>;
     /// Sets the velocity targets of the controlled joints' servos, rad/s;
-    /// they hold until set again.
+    /// they hold until set again. Every servo becomes a velocity servo.
     fn set_joint_velocity_targets(&mut self, rad_s: &[f64]);
+    /// Sets one command per controlled joint, each of its own kind (see
+    /// [`ServoCommand`]), through the engine's own mechanism for that kind
+    /// ([`Engine::command_support`]); they hold until set again, and a
+    /// joint's servo switches kind with its command. Checked with
+    /// [`check_servo_commands`]: a wrong count, a non-finite value or a
+    /// position command to a joint without `kp` is an error.
+    fn set_joint_commands(&mut self, commands: &[ServoCommand]) -> Result<(), EngineError>;
     /// Advances one timestep.
     fn step(&mut self) -> Result<(), EngineError>;
     /// Advances `n` timesteps (engines may check for trouble once per call).

@@ -285,7 +285,7 @@ impl ParamKey {
                 Some("commands reach the servos delay_s after they are computed, at the next engine step")
             }
             ParamKey::JointKp => Some(
-                "the replay's PD servo: the engine's velocity servo (gain kv) with the target (kp/kv)(q_cmd - q), set at every engine step",
+                "written into the scene's actuator: the gain of the PD servo that position commands drive (tau = kp (q_cmd - q) - kv qd), each engine's own mechanism (`realitygap engines` lists them)",
             ),
             ParamKey::ControllerGain => Some("replaces the scene's controller gain"),
             ParamKey::ControllerMaxSpeed => Some("replaces the scene's command clamp"),
@@ -788,7 +788,7 @@ impl PhysicalParams {
 
     /// Writes the parameters that live in the scene and the robot model
     /// into copies of them: servo `kv` and `force_limit` into the scene's
-    /// actuators, joint `damping` and `frictionloss` and link `mass_scale`
+    /// actuators (and `kp`), joint `damping` and `frictionloss` and link `mass_scale`
     /// into the robot, object `mass_kg` and `friction` into the scene's
     /// objects, and the controller's gain and clamp into the scene's
     /// controller. Names that the robot or scene lacks are errors.
@@ -817,11 +817,17 @@ impl PhysicalParams {
                 joint.friction = f;
             }
             let actuator = scene.actuators.iter_mut().find(|a| &a.joint == name);
-            let servo_keys = j.kv.is_some() || j.force_limit.is_some() || j.offset_deg.is_some();
+            let servo_keys = j.kv.is_some()
+                || j.kp.is_some()
+                || j.force_limit.is_some()
+                || j.offset_deg.is_some();
             match actuator {
                 Some(a) => {
                     if let Some(kv) = j.kv {
                         a.kv = kv;
+                    }
+                    if let Some(kp) = j.kp {
+                        a.kp = Some(kp);
                     }
                     if let Some(f) = j.force_limit {
                         a.force_limit = f;
@@ -831,7 +837,7 @@ impl PhysicalParams {
                     return Err(self.name_error(
                         &format!("joints.{name}"),
                         format!(
-                            "joints.{name}: kv, force_limit and offset_deg need a controlled joint, and the scene {} has no [[actuator]] for it",
+                            "joints.{name}: kv, kp, force_limit and offset_deg need a controlled joint, and the scene {} has no [[actuator]] for it",
                             scene.name
                         ),
                     ));

@@ -6,24 +6,21 @@
 //! velocities). At every engine step the command in force `delay_s` earlier
 //! (zero-order hold; before the first command, the first joint state is
 //! held; a delay between two engine steps blends the two, see
-//! `ReplayPlan::targets`) drives each joint through its servo:
+//! `ReplayPlan::commands_at`) goes to each joint's servo as a command of
+//! the recording's kind ([`Simulation::set_joint_commands`]), which every
+//! engine honours with its own mechanism:
 //!
-//! - **position** commands: a PD servo, `tau = kp (q_cmd - q) - kv qd`,
-//!   limited to the actuator's force limit. It runs on the engine's own
-//!   velocity servo (`tau = kv (v_target - qd)`, each engine's native and,
-//!   where the engine has it, implicit mechanism) with the target
-//!   `v_target = (kp / kv) (q_cmd - q)` set again at every engine step:
-//!   the same torque law.
-//! - **velocity** commands: the velocity servo's target is the command.
-//! - **effort** commands: not yet: the engines' joint interface takes
-//!   velocity targets only, so such a plan is refused with that reason.
+//! - **position** commands: the PD servo, `tau = kp (q_cmd - q) - kv qd`
+//!   (the scene actuator's gains), limited to the force limit;
+//! - **velocity** commands: the velocity servo, `tau = kv (v_cmd - qd)`;
+//! - **effort** commands: the effort itself, limited to the force limit.
 //!
 //! Joints without a command hold their first recorded angle through the
-//! same PD servo. The samples are recorded at the recording's own times, at
-//! the engine step nearest to each (at most half a timestep away).
+//! PD servo. The samples are recorded at the recording's own times, at the
+//! engine step nearest to each (at most half a timestep away).
 
 use crate::controller::{RunError, RunOutcome, RunStatus};
-use crate::engine::{EngineError, Simulation};
+use crate::engine::{EngineError, ServoCommand, Simulation};
 use crate::pose::Pose;
 use crate::trajectory::{CommandKind, JointCommands, Trajectory};
 use std::time::Instant;
@@ -40,10 +37,11 @@ pub struct ReplayPlan {
     pub initial_angles_rad: Vec<f64>,
     /// The first recorded joint velocities, rad/s (zeros when unknown).
     pub initial_velocities_rad_s: Vec<f64>,
-    /// Position gain of each joint's PD servo, N m/rad.
+    /// Position gain of each joint's PD servo, N m/rad: the simulation's
+    /// (its scene actuators' `kp`), used here for the efforts recorded.
     pub kp: Vec<f64>,
     /// Velocity gain of each joint's servo (the scene's `kv`: the PD
-    /// servo's `kd`), N m s/rad.
+    /// servo's `kd`), N m s/rad, likewise.
     pub kv: Vec<f64>,
     /// Each joint's actuator torque limit, N m (infinite: none); the
     /// efforts recorded are clamped to it as the servo's are.
@@ -60,12 +58,6 @@ impl ReplayPlan {
     /// Why this plan cannot be replayed in a simulation of `joints`
     /// controlled joints, if it cannot.
     pub fn check(&self, joints: usize) -> Result<(), String> {
-        if self.commands.kind == CommandKind::Effort {
-            return Err(
-                "effort commands cannot be replayed yet: the engines' joint interface takes velocity targets only"
-                    .into(),
-            );
-        }
         self.commands.validate(joints).map_err(|e| e.to_string())?;
         for (what, v) in [
             ("initial angles", &self.initial_angles_rad),
@@ -113,56 +105,74 @@ impl ReplayPlan {
         Ok(())
     }
 
-    /// The velocity targets at `angles` for the commands `held` (none yet:
-    /// every joint holds its first angle).
-    fn targets_for(&self, held: Option<&[f64]>, angles: &[f64], out: &mut [f64]) {
+    /// The servo commands for the commands `held` (none yet: every joint
+    /// holds its first angle).
+    fn commands_for(&self, held: Option<&[f64]>, out: &mut [ServoCommand]) {
         // Every joint holds its first angle unless commanded.
-        for (j, o) in out.iter_mut().enumerate() {
-            *o = self.kp[j] / self.kv[j] * (self.initial_angles_rad[j] - angles[j]);
+        for (o, &q0) in out.iter_mut().zip(&self.initial_angles_rad) {
+            *o = ServoCommand::position(q0);
         }
         let Some(values) = held else { return };
         for (&j, &v) in self.commands.joints.iter().zip(values) {
-            out[j] = match self.commands.kind {
-                CommandKind::Position => self.kp[j] / self.kv[j] * (v - angles[j]),
-                CommandKind::Velocity | CommandKind::Effort => v,
+            out[j] = ServoCommand {
+                kind: self.commands.kind,
+                value: v,
             };
         }
     }
 
-    /// The velocity targets for the joints at `angles`, at the engine step
-    /// starting at `t_s` (steps of `dt_s`): the commands in force `delay_s`
-    /// earlier. A delay of whole steps is exactly that; a delay `(m + phi)`
-    /// steps, `0 < phi < 1`, blends the targets of `m` and `m + 1` steps
-    /// (`1 - phi` and `phi`), so that a replay is continuous in the delay
-    /// (which `tune --recordings` fits by its gradient) and exact on the
-    /// engine-step grid. `scratch` holds one value per joint.
-    fn targets(&self, t_s: f64, dt_s: f64, angles: &[f64], out: &mut [f64], scratch: &mut [f64]) {
+    /// The servo commands at the engine step starting at `t_s` (steps of
+    /// `dt_s`): the commands in force `delay_s` earlier. A delay of whole
+    /// steps is exactly that; a delay `(m + phi)` steps, `0 < phi < 1`,
+    /// blends the values of `m` and `m + 1` steps (`1 - phi` and `phi`;
+    /// every servo law is linear in its command), so that a replay is
+    /// continuous in the delay (which `tune --recordings` fits by its
+    /// gradient) and exact on the engine-step grid. Where the two differ
+    /// in kind (the first command arriving), the later one is taken.
+    /// `scratch` holds one command per joint.
+    fn commands_at(
+        &self,
+        t_s: f64,
+        dt_s: f64,
+        out: &mut [ServoCommand],
+        scratch: &mut [ServoCommand],
+    ) {
         let steps = self.delay_s / dt_s;
         let whole = (steps + 1e-9).floor();
         let phi = steps - whole;
         if phi <= 1e-9 {
-            self.targets_for(self.commands.held_at(t_s - self.delay_s), angles, out);
+            self.commands_for(self.commands.held_at(t_s - self.delay_s), out);
             return;
         }
-        self.targets_for(self.commands.held_at(t_s - whole * dt_s), angles, out);
-        self.targets_for(
-            self.commands.held_at(t_s - (whole + 1.0) * dt_s),
-            angles,
-            scratch,
-        );
+        self.commands_for(self.commands.held_at(t_s - whole * dt_s), out);
+        self.commands_for(self.commands.held_at(t_s - (whole + 1.0) * dt_s), scratch);
         for (o, s) in out.iter_mut().zip(scratch.iter()) {
-            *o = (1.0 - phi) * *o + phi * s;
+            if o.kind == s.kind {
+                o.value = (1.0 - phi) * o.value + phi * s.value;
+            }
         }
+    }
+
+    /// The effort of joint `j`'s servo law at the state `(q, qd)` under
+    /// `command`, limited to the force limit (N m): what ros2_control
+    /// reports as the commanded effort.
+    pub fn servo_effort(&self, j: usize, command: ServoCommand, q: f64, qd: f64) -> f64 {
+        let limit = self.force_limit_nm[j];
+        let tau = match command.kind {
+            CommandKind::Position => self.kp[j] * (command.value - q) - self.kv[j] * qd,
+            CommandKind::Velocity => self.kv[j] * (command.value - qd),
+            CommandKind::Effort => command.value,
+        };
+        tau.clamp(-limit, limit)
     }
 }
 
 /// Replays `plan` on a freshly loaded `sim`: the trajectory at the plan's
-/// sample times (tracked poses, joint angles and velocities, the velocity
-/// targets in force as the commands sent, and the servo's effort `kv
-/// (v_target - qd)` clamped to the force limit: for position commands the
-/// PD law's `kp (q_cmd - q) - kv qd` at the engine's state, the commanded
-/// effort that ros2_control reports), until the end or until the run
-/// diverges.
+/// sample times (tracked poses, joint angles and velocities, for velocity
+/// commands the targets in force as the commands sent, and each servo's
+/// effort by its law at the engine's state, limited to the force limit
+/// ([`ReplayPlan::servo_effort`]: the commanded effort that ros2_control
+/// reports), until the end or until the run diverges.
 pub fn replay(sim: &mut dyn Simulation, plan: &ReplayPlan) -> Result<RunOutcome, RunError> {
     let joints = sim.joint_count();
     let usage = |message: String| EngineError::Usage {
@@ -180,43 +190,39 @@ pub fn replay(sim: &mut dyn Simulation, plan: &ReplayPlan) -> Result<RunOutcome,
     }
     let started = Instant::now();
     let dt = sim.timestep_s();
+    let mut commands = vec![ServoCommand::velocity(0.0); joints];
+    let mut scratch = commands.clone();
+    plan.commands_at(0.0, dt, &mut commands, &mut scratch);
     let mut state = sim.state()?;
     state.joint_angles_rad.clone_from(&plan.initial_angles_rad);
     state
         .joint_velocities_rad_s
         .clone_from(&plan.initial_velocities_rad_s);
-    let mut targets = vec![0.0; joints];
-    let mut scratch = vec![0.0; joints];
-    plan.targets(
-        0.0,
-        dt,
-        &plan.initial_angles_rad,
-        &mut targets,
-        &mut scratch,
-    );
-    state.joint_velocity_targets_rad_s.clone_from(&targets);
+    state.joint_velocity_targets_rad_s = vec![0.0; joints];
+    state.servo_commands.clone_from(&commands);
     state.time_s = 0.0;
     state.native = None;
     sim.set_state(&state)?;
+    let mut in_force = commands.clone();
 
+    let velocity_kind = plan.commands.kind == CommandKind::Velocity;
     let mut trajectory = Trajectory::with_bodies(&plan.roles);
-    let mut angle_rows = Vec::with_capacity(plan.sample_times_s.len());
-    let mut target_rows = Vec::with_capacity(plan.sample_times_s.len());
-    let mut velocity_rows = Vec::with_capacity(plan.sample_times_s.len());
-    let mut effort_rows = Vec::with_capacity(plan.sample_times_s.len());
+    let rows = plan.sample_times_s.len();
+    let mut angle_rows = Vec::with_capacity(rows);
+    let mut target_rows = Vec::with_capacity(rows);
+    let mut velocity_rows = Vec::with_capacity(rows);
+    let mut effort_rows = Vec::with_capacity(rows);
     let mut angles = vec![0.0; joints];
     let mut poses = vec![Pose::IDENTITY; plan.roles.len()];
     let mut status = RunStatus::Completed;
     let mut steps = 0u64;
     let mut next_sample = 0usize;
-    while next_sample < plan.sample_times_s.len() {
+    while next_sample < rows {
         let t_s = steps as f64 * dt;
-        sim.joint_angles_rad(&mut angles);
-        plan.targets(t_s, dt, &angles, &mut targets, &mut scratch);
+        plan.commands_at(t_s, dt, &mut commands, &mut scratch);
         // Record every sample whose nearest engine step is this one.
-        while next_sample < plan.sample_times_s.len()
-            && plan.sample_times_s[next_sample] < t_s + 0.5 * dt
-        {
+        while next_sample < rows && plan.sample_times_s[next_sample] < t_s + 0.5 * dt {
+            sim.joint_angles_rad(&mut angles);
             sim.tracked_poses(&mut poses);
             if let Some(reason) =
                 crate::controller::divergence(&angles, &poses, &plan.roles, plan.divergence_bound_m)
@@ -227,25 +233,27 @@ pub fn replay(sim: &mut dyn Simulation, plan: &ReplayPlan) -> Result<RunOutcome,
             let mut velocities = vec![0.0; joints];
             sim.joint_velocities_rad_s(&mut velocities)?;
             let efforts: Vec<f64> = (0..joints)
-                .map(|j| {
-                    let limit = plan.force_limit_nm[j];
-                    (plan.kv[j] * (targets[j] - velocities[j])).clamp(-limit, limit)
-                })
+                .map(|j| plan.servo_effort(j, commands[j], angles[j], velocities[j]))
                 .collect();
             trajectory.time_s.push(plan.sample_times_s[next_sample]);
             for (track, pose) in trajectory.bodies.iter_mut().zip(&poses) {
                 track.poses.push(Some(*pose));
             }
             angle_rows.push(angles.clone());
-            target_rows.push(targets.clone());
+            if velocity_kind {
+                target_rows.push(commands.iter().map(|c| c.value).collect::<Vec<f64>>());
+            }
             velocity_rows.push(velocities);
             effort_rows.push(efforts);
             next_sample += 1;
         }
-        if !matches!(status, RunStatus::Completed) || next_sample == plan.sample_times_s.len() {
+        if !matches!(status, RunStatus::Completed) || next_sample == rows {
             break;
         }
-        sim.set_joint_velocity_targets(&targets);
+        if commands != in_force {
+            sim.set_joint_commands(&commands)?;
+            in_force.clone_from(&commands);
+        }
         match sim.step() {
             Ok(()) => steps += 1,
             Err(EngineError::Unstable {
@@ -262,7 +270,7 @@ pub fn replay(sim: &mut dyn Simulation, plan: &ReplayPlan) -> Result<RunOutcome,
         }
     }
     trajectory.joint_angles_rad = Some(angle_rows);
-    trajectory.joint_velocity_commands_rad_s = Some(target_rows);
+    trajectory.joint_velocity_commands_rad_s = velocity_kind.then_some(target_rows);
     trajectory.joint_velocities_rad_s = Some(velocity_rows);
     trajectory.joint_efforts_nm = Some(effort_rows);
     Ok(RunOutcome {
@@ -384,9 +392,14 @@ mod tests {
             divergence_bound_m: 10.0,
         };
         let target = |delay_s: f64, t_s: f64| {
-            let (mut out, mut scratch) = (vec![0.0; 2], vec![0.0; 2]);
-            plan(delay_s).targets(t_s, 0.01, &[0.0; 2], &mut out, &mut scratch);
-            out[1]
+            let (mut out, mut scratch) = (
+                vec![ServoCommand::effort(9.0); 2],
+                vec![ServoCommand::effort(9.0); 2],
+            );
+            plan(delay_s).commands_at(t_s, 0.01, &mut out, &mut scratch);
+            assert_eq!(out[0], ServoCommand::position(0.0), "joint 1 holds");
+            assert_eq!(out[1].kind, CommandKind::Velocity);
+            out[1].value
         };
         // The command switches from 0.5 to -0.5 at 1 s: with 20 ms of delay
         // the step at 1.02 s has the new one, the step at 1.01 s the old.
@@ -417,12 +430,27 @@ mod tests {
         let mut bad = plan.clone();
         bad.kv[0] = 0.0;
         assert!(bad.check(2).unwrap_err().contains("kv > 0"));
-        let mut bad = plan.clone();
-        bad.commands.kind = CommandKind::Effort;
-        assert!(bad
-            .check(2)
-            .unwrap_err()
-            .contains("effort commands cannot be replayed yet"));
+        let mut effort = plan.clone();
+        effort.commands.kind = CommandKind::Effort;
+        assert_eq!(effort.check(2), Ok(()));
+        assert_eq!(
+            effort.servo_effort(1, ServoCommand::effort(-3.0), 0.0, 0.0),
+            -3.0
+        );
+        let mut limited = effort.clone();
+        limited.force_limit_nm[1] = 2.0;
+        assert_eq!(
+            limited.servo_effort(1, ServoCommand::effort(-3.0), 0.0, 0.0),
+            -2.0
+        );
+        assert_eq!(
+            plan.servo_effort(0, ServoCommand::position(0.5), 0.25, 1.0),
+            10.0 * 0.25 - 1.0
+        );
+        assert_eq!(
+            plan.servo_effort(0, ServoCommand::velocity(0.5), 0.25, 1.0),
+            -0.5
+        );
         let mut bad = plan.clone();
         bad.kp[1] = f64::NAN;
         assert!(bad.check(2).unwrap_err().contains("kp of joint 2 is NaN"));

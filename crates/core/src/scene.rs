@@ -53,6 +53,7 @@
 //! joint = "m1n6s300_joint_1"
 //! kv = 10.0                # N m s/rad
 //! force_limit = 2000.0     # N m
+//! # kp = 700.0             # optional: N m/rad, the PD servo of position commands
 //!
 //! [[schedule]]             # joints not named target 0
 //! t_s = 0.0
@@ -210,8 +211,13 @@ pub struct ControllerSpec {
 pub struct ActuatorSpec {
     /// The joint's name in the URDF.
     pub joint: String,
-    /// Velocity gain, N m s/rad.
+    /// Velocity gain, N m s/rad (the PD servo's `kd` for position
+    /// commands).
     pub kv: f64,
+    /// Position gain of the servo's PD law for position commands
+    /// (`tau = kp (q_target - q) - kv qd`), N m/rad; `None`: the joint
+    /// takes no position commands.
+    pub kp: Option<f64>,
     /// Largest torque, N m (infinite = unlimited).
     pub force_limit: f64,
 }
@@ -366,6 +372,7 @@ struct FileController {
 struct FileActuator {
     joint: Spanned<String>,
     kv: Spanned<f64>,
+    kp: Option<Spanned<f64>>,
     force_limit: Option<Spanned<f64>>,
 }
 
@@ -738,9 +745,14 @@ impl Builder<'_> {
                 }
                 None => f64::INFINITY,
             };
+            let kp = match &a.kp {
+                Some(k) => Some(self.non_negative(&f("kp"), k)?),
+                None => None,
+            };
             actuators.push(ActuatorSpec {
                 joint,
                 kv,
+                kp,
                 force_limit,
             });
         }

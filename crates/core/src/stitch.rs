@@ -556,6 +556,22 @@ mod tests {
         fn set_joint_velocity_targets(&mut self, rad_s: &[f64]) {
             self.v.copy_from_slice(rad_s);
         }
+        fn set_joint_commands(
+            &mut self,
+            commands: &[crate::engine::ServoCommand],
+        ) -> Result<(), EngineError> {
+            // A perfect velocity servo takes velocity commands only.
+            for (v, c) in self.v.iter_mut().zip(commands) {
+                if c.kind != crate::trajectory::CommandKind::Velocity {
+                    return Err(EngineError::Usage {
+                        engine: "toy".into(),
+                        message: "velocity commands only".into(),
+                    });
+                }
+                *v = c.value;
+            }
+            Ok(())
+        }
         fn step(&mut self) -> Result<(), EngineError> {
             for (q, v) in self.q.iter_mut().zip(&self.v) {
                 *q += v * 0.01;
@@ -579,6 +595,7 @@ mod tests {
                 joint_angles_rad: self.q.clone(),
                 joint_velocities_rad_s: self.v.clone(),
                 joint_velocity_targets_rad_s: self.v.clone(),
+                servo_commands: vec![],
                 objects: vec![ObjectState {
                     name: "cube".into(),
                     pose: self.cube,
@@ -696,6 +713,7 @@ mod tests {
             joint_angles_rad: vec![0.0; 6],
             joint_velocities_rad_s: vec![0.0; 6],
             joint_velocity_targets_rad_s: vec![0.0; 6],
+            servo_commands: vec![],
             objects: vec![cube(0.0375 - 1e-4, Quat::IDENTITY, -0.02)],
             native: None,
         };

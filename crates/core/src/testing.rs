@@ -4,6 +4,7 @@
 //! error, as tests want.
 
 pub mod bench;
+pub mod kit;
 
 use crate::controller::RunOutcome;
 use crate::robot::{PackageResolver, RobotModel};

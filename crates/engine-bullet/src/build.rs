@@ -286,6 +286,8 @@ pub(crate) fn motor_joints(
                 UNLIMITED_FORCE_N_M
             },
             friction: params::motor_friction(a, own)?,
+            kp: a.kp.unwrap_or(0.0),
+            kv: a.kv,
         });
     }
     Ok(joints)

@@ -24,11 +24,12 @@ pub(crate) use rubullet_sys::{
     b3GetStatusCollisionShapeUniqueId, b3GetStatusPhysicsSimulationParameters, b3GetStatusType,
     b3InitChangeDynamicsInfo, b3InitPhysicsParamCommand, b3InitRequestContactPointInformation,
     b3InitRequestPhysicsParamCommand, b3InitStepSimulationCommand, b3JointControlCommandInit2,
-    b3JointControlSetDesiredPosition, b3JointControlSetDesiredVelocity, b3JointControlSetKd,
-    b3JointControlSetKp, b3JointControlSetMaximumForce, b3JointInfo, b3LinkState,
-    b3LoadStateCommandInit, b3LoadStateSetFileName, b3LoadUrdfCommandInit,
-    b3LoadUrdfCommandSetFlags, b3LoadUrdfCommandSetStartOrientation,
-    b3LoadUrdfCommandSetStartPosition, b3LoadUrdfCommandSetUseFixedBase, b3PhysicsClientHandle,
+    b3JointControlSetDesiredForceTorque, b3JointControlSetDesiredPosition,
+    b3JointControlSetDesiredVelocity, b3JointControlSetKd, b3JointControlSetKp,
+    b3JointControlSetMaximumForce, b3JointInfo, b3LinkState, b3LoadStateCommandInit,
+    b3LoadStateSetFileName, b3LoadUrdfCommandInit, b3LoadUrdfCommandSetFlags,
+    b3LoadUrdfCommandSetStartOrientation, b3LoadUrdfCommandSetStartPosition,
+    b3LoadUrdfCommandSetUseFixedBase, b3PhysicsClientHandle,
     b3PhysicsParamSetContactBreakingThreshold, b3PhysicsParamSetDefaultContactERP,
     b3PhysicsParamSetDefaultFrictionERP, b3PhysicsParamSetDefaultGlobalCFM,
     b3PhysicsParamSetDefaultNonContactERP, b3PhysicsParamSetEnableConeFriction,
@@ -71,8 +72,15 @@ pub(crate) const CMD_RESTORE_STATE_COMPLETED: c_int = Status::CMD_RESTORE_STATE_
 // `struct b3LinkState`; not exported by rubullet-sys).
 /// `CONTROL_MODE_VELOCITY`: a velocity motor (PyBullet's VELOCITY_CONTROL).
 pub(crate) const CONTROL_MODE_VELOCITY: c_int = 0;
+/// `CONTROL_MODE_TORQUE`: PyBullet's TORQUE_CONTROL (a joint torque for
+/// the next step).
+pub(crate) const CONTROL_MODE_TORQUE: c_int = 1;
 /// `CONTROL_MODE_POSITION_VELOCITY_PD`: PyBullet's POSITION_CONTROL.
 pub(crate) const CONTROL_MODE_POSITION_VELOCITY_PD: c_int = 2;
+/// `CONTROL_MODE_PD`: PyBullet's PD_CONTROL, the explicit PD law of the
+/// pdControl plugin (`kp (q_d - q) + kd (v_d - v)`, clamped to the maximum
+/// force, applied before every step).
+pub(crate) const CONTROL_MODE_PD: c_int = 3;
 
 // Joint types (SharedMemoryPublic.h, enum JointType; not exported).
 /// `eRevoluteType`.

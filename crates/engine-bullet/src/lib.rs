@@ -103,7 +103,8 @@ use build::{
 };
 
 use realitygap_core::engine::{
-    Engine, EngineError, EngineSettings, ModelVariation, SettingInfo, SimState, Simulation,
+    check_servo_commands, CommandKind, CommandSupport, Engine, EngineError, EngineSettings,
+    ModelVariation, ServoCommand, SettingInfo, SimState, Simulation,
 };
 use realitygap_core::params::{ParamSupport, PhysicalParams};
 use realitygap_core::pose::{Pose, Quat, Vec3};
@@ -171,6 +172,10 @@ impl Engine for BulletEngine {
         params::SUPPORT.to_vec()
     }
 
+    fn command_support(&self) -> Vec<CommandSupport> {
+        COMMAND_SUPPORT.to_vec()
+    }
+
     fn load_with(
         &self,
         scene: &Scene,
@@ -215,6 +220,23 @@ pub struct PhysicsParameters {
     pub cone_friction: bool,
 }
 
+/// How Bullet takes each kind of joint command, through PyBullet's own
+/// control modes.
+pub const COMMAND_SUPPORT: [CommandSupport; 3] = [
+    CommandSupport {
+        kind: CommandKind::Velocity,
+        mechanism: "VELOCITY_CONTROL motor (a velocity constraint, gain velocity_gain; kv unused), max force = the limit",
+    },
+    CommandSupport {
+        kind: CommandKind::Position,
+        mechanism: "PD_CONTROL (pdControl plugin): explicit kp (q - angle) - kv qd, clamped to the limit, before every step; the velocity motor off",
+    },
+    CommandSupport {
+        kind: CommandKind::Effort,
+        mechanism: "TORQUE_CONTROL (clamped effort) sent before every step; the velocity motor off",
+    },
+];
+
 /// A controlled joint: its Bullet indices and motor force.
 #[derive(Debug, Clone)]
 pub(crate) struct MotorJoint {
@@ -229,6 +251,10 @@ pub(crate) struct MotorJoint {
     /// Dry friction, N m (or N), when the servo is off and a `frictionloss`
     /// parameter is set: the motor then holds velocity 0 with this force.
     friction: Option<f64>,
+    /// The PD law's position gain for position commands, N m/rad.
+    kp: f64,
+    /// The PD law's damping gain (the scene's `kv`), N m s/rad.
+    kv: f64,
 }
 
 /// What a tracked body is in Bullet.
@@ -266,6 +292,13 @@ pub struct BulletSimulation {
     tracked: Vec<Tracked>,
     targets_rad_s: Vec<f64>,
     targets_pending: bool,
+    /// The commands in force when some joint's are not velocity targets;
+    /// empty otherwise.
+    commands: Vec<ServoCommand>,
+    /// True while a joint may have a PD law of the pdControl plugin.
+    pd_active: bool,
+    /// The scene, for checking commands.
+    scene: Scene,
     // The state after the last step (or reset).
     angles_rad: Vec<f64>,
     velocities_rad_s: Vec<f64>,
@@ -413,6 +446,9 @@ impl BulletSimulation {
             tracked,
             targets_rad_s: vec![0.0; n],
             targets_pending: true,
+            commands: Vec::new(),
+            pd_active: false,
+            scene: scene.clone(),
             angles_rad: vec![0.0; n],
             velocities_rad_s: vec![0.0; n],
             object_states: vec![(Pose::IDENTITY, Vec3::ZERO, Vec3::ZERO); scene.objects.len()],
@@ -434,20 +470,63 @@ impl BulletSimulation {
         Ok(sim)
     }
 
-    /// Sends the velocity targets to the motors (a joint with a dry
-    /// friction instead of a servo holds velocity 0 with the friction
-    /// force). Needs the Bullet lock (`lock`). A failure means the simulation can
-    /// no longer be driven: [`EngineError::Unstable`].
+    /// Sends the commands to the joints (see [`COMMAND_SUPPORT`]): the
+    /// velocity targets to the motors (a joint with a dry friction instead
+    /// of a servo holds velocity 0 with the friction force; a joint with a
+    /// position or effort command has its motor off), and the PD laws of
+    /// position commands to the pdControl plugin (removed from the other
+    /// joints). Needs the Bullet lock (`lock`). A failure means the
+    /// simulation can no longer be driven: [`EngineError::Unstable`].
     fn send_targets(&mut self, lock: &ffi::BulletLock) -> Result<(), EngineError> {
         let h = self.client.handle(lock);
+        let kind_of = |i: usize| {
+            self.commands
+                .get(i)
+                .map_or(CommandKind::Velocity, |c: &ServoCommand| c.kind)
+        };
+        if self.pd_active || !self.commands.is_empty() {
+            // SAFETY: the command is created on this client and submitted
+            // once, with the lock held.
+            let kind = unsafe {
+                let cmd = ffi::b3JointControlCommandInit2(h, self.robot, ffi::CONTROL_MODE_PD);
+                for (i, joint) in self.joints.iter().enumerate() {
+                    if kind_of(i) == CommandKind::Position {
+                        ffi::b3JointControlSetDesiredPosition(
+                            cmd,
+                            joint.q_index as c_int,
+                            self.commands[i].value,
+                        );
+                        ffi::b3JointControlSetKp(cmd, joint.u_index, joint.kp);
+                        ffi::b3JointControlSetKd(cmd, joint.u_index, joint.kv);
+                        ffi::b3JointControlSetMaximumForce(cmd, joint.u_index, joint.max_force);
+                    } else {
+                        // A zero maximum force removes the joint's PD law.
+                        ffi::b3JointControlSetDesiredVelocity(cmd, joint.u_index, 0.0);
+                        ffi::b3JointControlSetMaximumForce(cmd, joint.u_index, 0.0);
+                    }
+                }
+                self.client.submit(lock, cmd).kind
+            };
+            check_status(
+                kind,
+                ffi::CMD_DESIRED_STATE_RECEIVED_COMPLETED,
+                "sending the PD laws",
+            )
+            .map_err(|m| self.unstable(m))?;
+            self.pd_active = self
+                .commands
+                .iter()
+                .any(|c| c.kind == CommandKind::Position);
+        }
         // SAFETY: the command is created on this client and
         // submitted once, with the lock held.
         let kind = unsafe {
             let cmd = ffi::b3JointControlCommandInit2(h, self.robot, ffi::CONTROL_MODE_VELOCITY);
-            for (joint, &v) in self.joints.iter().zip(&self.targets_rad_s) {
-                let (target, gain, force) = match joint.friction {
-                    Some(f) => (0.0, 1.0, f),
-                    None => (v, self.velocity_gain, joint.max_force),
+            for (i, (joint, &v)) in self.joints.iter().zip(&self.targets_rad_s).enumerate() {
+                let (target, gain, force) = match (kind_of(i), joint.friction) {
+                    (CommandKind::Position | CommandKind::Effort, _) => (0.0, 1.0, 0.0),
+                    (CommandKind::Velocity, Some(f)) => (0.0, 1.0, f),
+                    (CommandKind::Velocity, None) => (v, self.velocity_gain, joint.max_force),
                 };
                 ffi::b3JointControlSetDesiredVelocity(cmd, joint.u_index, target);
                 ffi::b3JointControlSetKd(cmd, joint.u_index, gain);
@@ -599,7 +678,39 @@ impl BulletSimulation {
         Ok(())
     }
 
+    /// Sends the effort commands as joint torques for the next step
+    /// (Bullet clears them after each). Needs the Bullet lock (`lock`).
+    fn send_efforts(&mut self, lock: &ffi::BulletLock) -> Result<(), EngineError> {
+        if !self.commands.iter().any(|c| c.kind == CommandKind::Effort) {
+            return Ok(());
+        }
+        let h = self.client.handle(lock);
+        // SAFETY: the command is created on this client and submitted once,
+        // with the Bullet lock held (`lock`).
+        let kind = unsafe {
+            let cmd = ffi::b3JointControlCommandInit2(h, self.robot, ffi::CONTROL_MODE_TORQUE);
+            for (joint, c) in self.joints.iter().zip(&self.commands) {
+                if c.kind == CommandKind::Effort {
+                    let limit = joint.max_force;
+                    ffi::b3JointControlSetDesiredForceTorque(
+                        cmd,
+                        joint.u_index,
+                        c.value.clamp(-limit, limit),
+                    );
+                }
+            }
+            self.client.submit(lock, cmd).kind
+        };
+        check_status(
+            kind,
+            ffi::CMD_DESIRED_STATE_RECEIVED_COMPLETED,
+            "sending the joint torques",
+        )
+        .map_err(|m| self.unstable(m))
+    }
+
     fn step_once(&mut self, lock: &ffi::BulletLock) -> Result<(), EngineError> {
+        self.send_efforts(lock)?;
         // SAFETY: the command is created on this client and submitted once,
         // with the Bullet lock held (`lock`).
         let kind = unsafe {
@@ -1058,7 +1169,30 @@ impl Simulation for BulletSimulation {
         for (t, &v) in self.targets_rad_s.iter_mut().zip(rad_s) {
             *t = v;
         }
+        self.commands.clear();
         self.targets_pending = true;
+    }
+
+    fn set_joint_commands(&mut self, commands: &[ServoCommand]) -> Result<(), EngineError> {
+        check_servo_commands(ENGINE_NAME, &self.scene, commands)?;
+        if commands.iter().all(|c| c.kind == CommandKind::Velocity) {
+            let v: Vec<f64> = commands.iter().map(|c| c.value).collect();
+            self.set_joint_velocity_targets(&v);
+            return Ok(());
+        }
+        self.targets_rad_s = commands
+            .iter()
+            .map(|c| {
+                if c.kind == CommandKind::Velocity {
+                    c.value
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        self.commands = commands.to_vec();
+        self.targets_pending = true;
+        Ok(())
     }
 
     fn step(&mut self) -> Result<(), EngineError> {

@@ -121,6 +121,7 @@ impl BulletSimulation {
             joint_angles_rad: self.angles_rad.clone(),
             joint_velocities_rad_s: self.velocities_rad_s.clone(),
             joint_velocity_targets_rad_s: self.targets_rad_s.clone(),
+            servo_commands: self.commands.clone(),
             objects,
             native: Some(self.native(lock)?),
         })
@@ -177,6 +178,9 @@ impl BulletSimulation {
             Some(n) if n.engine == ENGINE_NAME => self.put_native(lock, &n.data)?,
             _ => self.put_portable(lock, state)?,
         }
+        self.commands.clone_from(&state.servo_commands);
+        // The pdControl plugin's laws are not part of the saved world.
+        self.pd_active = true;
         self.send_targets(lock)?;
         self.refresh(lock)?;
         self.check_stability()

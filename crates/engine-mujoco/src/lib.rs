@@ -52,8 +52,8 @@ use model_params::ModelSource;
 use mujoco_rs::mujoco_c;
 use mujoco_rs::prelude::*;
 use realitygap_core::engine::{
-    Engine, EngineError, EngineSettings, ModelVariation, SettingInfo, SimState, Simulation,
-    StabilityIssue,
+    check_servo_commands, CommandKind, CommandSupport, Engine, EngineError, EngineSettings,
+    ModelVariation, ServoCommand, SettingInfo, SimState, Simulation, StabilityIssue,
 };
 use realitygap_core::params::{ParamSupport, PhysicalParams};
 use realitygap_core::pose::{Pose, Quat, Vec3};
@@ -160,6 +160,10 @@ impl Engine for MujocoEngine {
         model_params::param_support()
     }
 
+    fn command_support(&self) -> Vec<CommandSupport> {
+        COMMAND_SUPPORT.to_vec()
+    }
+
     fn load_with(
         &self,
         scene: &Scene,
@@ -172,6 +176,42 @@ impl Engine for MujocoEngine {
             scene, robot, settings, variation, params,
         )?))
     }
+}
+
+/// How MuJoCo takes each kind of joint command: the joint's actuator is
+/// switched between the laws of MuJoCo's own `<velocity>`, `<position>`
+/// and `<motor>` actuators by its gain and bias parameters (so that the
+/// implicit integrators treat the damping term `-kv qd` implicitly, as
+/// they do for those actuators), its force range kept.
+pub const COMMAND_SUPPORT: [CommandSupport; 3] = [
+    CommandSupport {
+        kind: CommandKind::Velocity,
+        mechanism: "<velocity> actuator law: ctrl = v, gainprm[0] = kv, biasprm = [0, 0, -kv]",
+    },
+    CommandSupport {
+        kind: CommandKind::Position,
+        mechanism: "<position> actuator law with damping: ctrl = q, gainprm[0] = kp, biasprm = [0, -kp, -kv]",
+    },
+    CommandSupport {
+        kind: CommandKind::Effort,
+        mechanism: "<motor> actuator law: ctrl = tau, gainprm[0] = 1, biasprm = 0",
+    },
+];
+
+/// The servo law of one controlled joint's actuator, for switching it
+/// between command kinds.
+#[derive(Debug, Clone, Copy)]
+struct ServoLaw {
+    /// The actuator's velocity gain (its `kv` when it is a velocity servo,
+    /// else the scene's), N m s/rad.
+    kv: f64,
+    /// The scene's position gain, N m/rad.
+    kp: f64,
+    /// The actuator's own gain, bias and control limit, restored for
+    /// velocity commands.
+    gain: [f64; 3],
+    bias: [f64; 3],
+    ctrllimited: bool,
 }
 
 /// A scene object's body in the model and its free joint's addresses.
@@ -211,6 +251,12 @@ pub struct MujocoSimulation {
     warnings_seen: [i32; 3],
     /// The pre-run stability check's findings ([`stability::check`]).
     stability: Vec<StabilityIssue>,
+    /// Each controlled joint's servo laws.
+    laws: Vec<ServoLaw>,
+    /// The kind of command each controlled joint's actuator now takes.
+    kinds: Vec<CommandKind>,
+    /// The scene, for checking commands (its actuators' gains).
+    scene: Scene,
 }
 
 const INSTABILITY_WARNINGS: [(mujoco_c::mjtWarning, &str); 3] = [
@@ -440,6 +486,24 @@ impl MujocoSimulation {
                 mujoco_c::mj_setConst(m, d);
             }
         }
+        let laws = ctrl_index
+            .iter()
+            .zip(&scene.actuators)
+            .map(|(&u, a)| {
+                let model = data.model();
+                let g = model.actuator_gainprm()[u];
+                let b = model.actuator_biasprm()[u];
+                let velocity_servo = b[0] == 0.0 && b[1] == 0.0 && b[2] == -g[0] && g[0] > 0.0;
+                ServoLaw {
+                    kv: if velocity_servo { g[0] } else { a.kv },
+                    kp: a.kp.unwrap_or(0.0),
+                    gain: [g[0], g[1], g[2]],
+                    bias: [b[0], b[1], b[2]],
+                    ctrllimited: model.actuator_ctrllimited()[u],
+                }
+            })
+            .collect();
+        let kinds = vec![CommandKind::Velocity; ctrl_index.len()];
         let mut sim = MujocoSimulation {
             data,
             qpos_adr,
@@ -450,6 +514,9 @@ impl MujocoSimulation {
             held,
             warnings_seen: [0; 3],
             stability: Vec::new(),
+            laws,
+            kinds,
+            scene: scene.clone(),
         };
         sim.place_held_joints();
         sim.data.forward();
@@ -510,6 +577,52 @@ impl MujocoSimulation {
         for _ in 0..n {
             self.data.step();
         }
+    }
+
+    /// Switches the actuator of controlled joint `i` to the law of `kind`.
+    fn switch_law(&mut self, i: usize, kind: CommandKind) {
+        if self.kinds[i] == kind {
+            return;
+        }
+        let u = self.ctrl_index[i];
+        let law = self.laws[i];
+        let (gain, bias, ctrllimited) = match kind {
+            CommandKind::Velocity => (law.gain, law.bias, law.ctrllimited),
+            CommandKind::Position => ([law.kp, 0.0, 0.0], [0.0, -law.kp, -law.kv], false),
+            CommandKind::Effort => ([1.0, 0.0, 0.0], [0.0; 3], false),
+        };
+        // SAFETY: only parameter values of this simulation's own model
+        // change (not the gain or bias type, nor any index MuJoCo reads
+        // unchecked), between steps.
+        let model = unsafe { self.data.model_mut() };
+        {
+            // SAFETY: as above.
+            let g = unsafe { model.actuator_gainprm_mut() };
+            g[u] = [0.0; 10];
+            g[u][..3].copy_from_slice(&gain);
+        }
+        let b = model.actuator_biasprm_mut();
+        b[u] = [0.0; 10];
+        b[u][..3].copy_from_slice(&bias);
+        model.actuator_ctrllimited_mut()[u] = ctrllimited;
+        self.kinds[i] = kind;
+    }
+
+    /// The commands in force, for a state: empty while every actuator
+    /// takes velocity commands.
+    pub(crate) fn servo_commands(&self) -> Vec<ServoCommand> {
+        if self.kinds.iter().all(|&k| k == CommandKind::Velocity) {
+            return Vec::new();
+        }
+        let ctrl = self.data.ctrl();
+        self.kinds
+            .iter()
+            .zip(&self.ctrl_index)
+            .map(|(&kind, &u)| ServoCommand {
+                kind,
+                value: ctrl[u],
+            })
+            .collect()
     }
 
     /// Sets the controls of the controlled joints' servos directly, rad/s.
@@ -615,7 +728,20 @@ impl Simulation for MujocoSimulation {
     }
 
     fn set_joint_velocity_targets(&mut self, rad_s: &[f64]) {
+        for i in 0..self.kinds.len() {
+            self.switch_law(i, CommandKind::Velocity);
+        }
         self.set_controls(rad_s);
+    }
+
+    fn set_joint_commands(&mut self, commands: &[ServoCommand]) -> Result<(), EngineError> {
+        check_servo_commands(ENGINE_NAME, &self.scene, commands)?;
+        for (i, c) in commands.iter().enumerate() {
+            self.switch_law(i, c.kind);
+            let u = self.ctrl_index[i];
+            self.data.ctrl_mut()[u] = c.value;
+        }
+        Ok(())
     }
 
     fn step(&mut self) -> Result<(), EngineError> {

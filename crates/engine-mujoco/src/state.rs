@@ -65,6 +65,7 @@ impl MujocoSimulation {
             joint_angles_rad: self.qpos_adr.iter().map(|&a| qpos[a]).collect(),
             joint_velocities_rad_s: self.dof_adr.iter().map(|&a| qvel[a]).collect(),
             joint_velocity_targets_rad_s: self.ctrl_index.iter().map(|&u| ctrl[u]).collect(),
+            servo_commands: self.servo_commands(),
             objects,
             native: Some(NativeState {
                 engine: ENGINE_NAME.to_string(),
@@ -94,15 +95,26 @@ impl MujocoSimulation {
     }
 
     /// Sets `state`: exactly from a MuJoCo native state, else from the
-    /// portable fields (see [`realitygap_core::Simulation::set_state`]).
+    /// portable fields (see [`realitygap_core::engine::Simulation::set_state`]).
     pub(crate) fn write_state(&mut self, state: &SimState) -> Result<(), EngineError> {
         state
             .check(self.qpos_adr.len(), &self.object_names())
             .map_err(state_error)?;
         match &state.native {
-            Some(n) if n.engine == ENGINE_NAME => self.restore_native(state, &n.data),
-            _ => self.load_portable(state),
+            Some(n) if n.engine == ENGINE_NAME => self.restore_native(state, &n.data)?,
+            _ => self.load_portable(state)?,
         }
+        // The actuators' laws are the model's, not the data's: set them
+        // (and the controls, to the same values) from the commands.
+        if state.servo_commands.is_empty() {
+            realitygap_core::engine::Simulation::set_joint_velocity_targets(
+                self,
+                &state.joint_velocity_targets_rad_s,
+            );
+        } else {
+            realitygap_core::engine::Simulation::set_joint_commands(self, &state.servo_commands)?;
+        }
+        Ok(())
     }
 
     fn restore_native(&mut self, state: &SimState, native: &[f64]) -> Result<(), EngineError> {

@@ -59,7 +59,8 @@ mod ffi {
 
 use plan::{ModelPlan, TrackedPlan};
 use realitygap_core::engine::{
-    Engine, EngineError, EngineSettings, ModelVariation, SettingInfo, SimState, Simulation,
+    check_servo_commands, CommandKind, CommandSupport, Engine, EngineError, EngineSettings,
+    ModelVariation, ServoCommand, SettingInfo, SimState, Simulation,
 };
 use realitygap_core::params::{ParamSupport, PhysicalParams};
 use realitygap_core::pose::{wrap_angle, Pose};
@@ -133,6 +134,10 @@ impl Engine for OdeEngine {
         params::PARAM_SUPPORT.to_vec()
     }
 
+    fn command_support(&self) -> Vec<CommandSupport> {
+        COMMAND_SUPPORT.to_vec()
+    }
+
     fn load_with(
         &self,
         scene: &Scene,
@@ -145,6 +150,37 @@ impl Engine for OdeEngine {
             scene, robot, settings, variation, params,
         )?))
     }
+}
+
+/// How ODE takes each kind of joint command. ODE's hinge has one actuator,
+/// a velocity motor with a torque bound; a spring-damper of its own exists
+/// only as a stop's ERP and CFM, which no force limit bounds, so position
+/// commands use the motor too.
+pub const COMMAND_SUPPORT: [CommandSupport; 3] = [
+    CommandSupport {
+        kind: CommandKind::Velocity,
+        mechanism: "hinge motor: dParamVel = v, dParamFMax = the limit (servo = \"kv\": dParamCFM = 1/kv)",
+    },
+    CommandSupport {
+        kind: CommandKind::Position,
+        mechanism: "hinge motor as the PD law: dParamCFM = 1/kv, dParamVel = (kp/kv)(q - angle) before every step, dParamFMax = the limit",
+    },
+    CommandSupport {
+        kind: CommandKind::Effort,
+        mechanism: "motor off (dParamFMax = 0); dJointAddHingeTorque(clamped effort) before every step",
+    },
+];
+
+/// Each controlled joint's servo gains and limit, for position and effort
+/// commands.
+#[derive(Debug, Clone, Copy)]
+struct HingeServo {
+    kp: f64,
+    kv: f64,
+    force_limit_nm: f64,
+    /// The motor's constraint force mixing and largest torque for
+    /// velocity commands (as built: the `servo` setting's).
+    velocity_motor: (f64, f64),
 }
 
 /// An ODE world of a scene and its state, driven through [`Simulation`].
@@ -164,6 +200,13 @@ pub struct OdeSimulation {
     time_origin_s: f64,
     /// Steps taken since `time_origin_s`.
     steps: u64,
+    /// The servo gains and limits.
+    servos: Vec<HingeServo>,
+    /// The commands in force when some joint's are not velocity targets;
+    /// empty otherwise.
+    commands: Vec<ServoCommand>,
+    /// The scene, for checking commands.
+    scene: Scene,
 }
 
 impl OdeSimulation {
@@ -213,7 +256,21 @@ impl OdeSimulation {
             OdeWorld::build(&plan, &options, &body_poses, &joint_frames)
                 .map_err(|e| load_error(format!("{}: {e}", robot.source.display())))?
         };
+        let servos = plan
+            .hinges
+            .iter()
+            .enumerate()
+            .map(|(i, h)| HingeServo {
+                kp: scene.actuators.get(i).and_then(|a| a.kp).unwrap_or(0.0),
+                kv: h.kv,
+                force_limit_nm: h.force_limit_nm,
+                velocity_motor: world.hinge_motor(i),
+            })
+            .collect();
         let mut sim = OdeSimulation {
+            servos,
+            commands: Vec::new(),
+            scene: scene.clone(),
             world,
             plan,
             robot: robot.clone(),
@@ -238,8 +295,37 @@ impl OdeSimulation {
         }
     }
 
+    /// The commands in force, for a state (empty: the velocity targets).
+    pub(crate) fn servo_commands(&self) -> Vec<ServoCommand> {
+        self.commands.clone()
+    }
+
+    /// Before a step: the PD law's velocity target at the current angle
+    /// for position commands, the torque for effort commands.
+    fn drive_servos(&mut self) {
+        for i in 0..self.commands.len() {
+            let (c, s) = (self.commands[i], self.servos[i]);
+            match c.kind {
+                CommandKind::Velocity => {}
+                CommandKind::Position => {
+                    let v = if s.kv > 0.0 {
+                        s.kp / s.kv * (c.value - self.angles_rad[i])
+                    } else {
+                        0.0
+                    };
+                    self.world.set_hinge_velocity(i, v);
+                }
+                CommandKind::Effort => {
+                    let limit = s.force_limit_nm;
+                    self.world.add_hinge_torque(i, c.value.clamp(-limit, limit));
+                }
+            }
+        }
+    }
+
     /// One step with the lock held, checked.
     fn step_locked(&mut self) -> Result<(), EngineError> {
+        self.drive_servos();
         let ok = self.world.step();
         self.steps += 1;
         self.update_angles();
@@ -355,9 +441,45 @@ impl Simulation for OdeSimulation {
     }
 
     fn set_joint_velocity_targets(&mut self, rad_s: &[f64]) {
+        if !self.commands.is_empty() {
+            self.commands.clear();
+            for (i, s) in self.servos.iter().enumerate() {
+                let (cfm, fmax) = s.velocity_motor;
+                self.world.set_hinge_motor(i, 0.0, fmax, Some(cfm));
+            }
+        }
         for (i, &v) in rad_s.iter().enumerate().take(self.world.hinge_count()) {
             self.world.set_hinge_velocity(i, v);
         }
+    }
+
+    fn set_joint_commands(&mut self, commands: &[ServoCommand]) -> Result<(), EngineError> {
+        check_servo_commands(ENGINE_NAME, &self.scene, commands)?;
+        if commands.iter().all(|c| c.kind == CommandKind::Velocity) {
+            let v: Vec<f64> = commands.iter().map(|c| c.value).collect();
+            self.set_joint_velocity_targets(&v);
+            return Ok(());
+        }
+        for (i, (c, s)) in commands.iter().zip(&self.servos).enumerate() {
+            match c.kind {
+                CommandKind::Velocity => {
+                    let (cfm, fmax) = s.velocity_motor;
+                    self.world.set_hinge_motor(i, c.value, fmax, Some(cfm))
+                }
+                CommandKind::Position if s.kv > 0.0 => {
+                    self.world
+                        .set_hinge_motor(i, 0.0, s.force_limit_nm, Some(1.0 / s.kv))
+                }
+                // A PD servo without damping gain cannot run on the motor:
+                // it is off (the check above refuses a missing kp; kv is
+                // positive in every scene).
+                CommandKind::Position | CommandKind::Effort => {
+                    self.world.set_hinge_motor(i, 0.0, 0.0, None)
+                }
+            }
+        }
+        self.commands = commands.to_vec();
+        Ok(())
     }
 
     fn step(&mut self) -> Result<(), EngineError> {

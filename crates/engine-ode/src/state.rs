@@ -167,6 +167,7 @@ impl OdeSimulation {
             joint_velocity_targets_rad_s: (0..n)
                 .map(|i| self.world.hinge_velocity_target(i))
                 .collect(),
+            servo_commands: self.servo_commands(),
             objects,
             native: Some(NativeState {
                 engine: ENGINE_NAME.to_string(),
@@ -184,12 +185,18 @@ impl OdeSimulation {
             .map_err(state_error)?;
         let _guard = ode_lock();
         match &state.native {
-            Some(native) if native.engine == ENGINE_NAME => self.load_native(&native.data),
-            _ => {
-                self.load_portable(state);
-                Ok(())
-            }
+            Some(native) if native.engine == ENGINE_NAME => self.load_native(&native.data)?,
+            _ => self.load_portable(state),
         }
+        if !state.servo_commands.is_empty() {
+            realitygap_core::engine::Simulation::set_joint_commands(self, &state.servo_commands)?;
+        } else if !self.commands.is_empty() {
+            realitygap_core::engine::Simulation::set_joint_velocity_targets(
+                self,
+                &state.joint_velocity_targets_rad_s,
+            );
+        }
+        Ok(())
     }
 
     fn load_native(&mut self, data: &[f64]) -> Result<(), EngineError> {

@@ -899,6 +899,41 @@ impl OdeWorld {
         unsafe { dJointSetHingeParam(self.hinges[i], dParamVel as c_int, rad_s) };
     }
 
+    /// Sets hinge `i`'s motor: target velocity (rad/s), largest torque
+    /// (N m; 0 switches it off) and, when given, its constraint force
+    /// mixing (`Some(1/kv)`: the implicit damper `kv (v_target - v_next)`).
+    pub fn set_hinge_motor(&mut self, i: usize, rad_s: f64, fmax_nm: f64, cfm: Option<f64>) {
+        let joint = self.hinges[i];
+        // SAFETY: the hinge belongs to this world; setting its parameters
+        // touches only that joint.
+        unsafe {
+            dJointSetHingeParam(joint, dParamVel as c_int, rad_s);
+            dJointSetHingeParam(joint, dParamFMax as c_int, fmax_nm);
+            if let Some(cfm) = cfm {
+                dJointSetHingeParam(joint, dParamCFM as c_int, cfm);
+            }
+        }
+    }
+
+    /// Hinge `i`'s motor's constraint force mixing and largest torque.
+    pub fn hinge_motor(&self, i: usize) -> (f64, f64) {
+        // SAFETY: reads parameters of this world's hinge.
+        unsafe {
+            (
+                dJointGetHingeParam(self.hinges[i], dParamCFM as c_int),
+                dJointGetHingeParam(self.hinges[i], dParamFMax as c_int),
+            )
+        }
+    }
+
+    /// Adds a torque about hinge `i`'s axis, N m (on the child body, and
+    /// the opposite on the parent), for the next step only.
+    pub fn add_hinge_torque(&mut self, i: usize, nm: f64) {
+        // SAFETY: the hinge belongs to this world; ODE adds the torque to
+        // its two bodies' accumulators.
+        unsafe { dJointAddHingeTorque(self.hinges[i], nm) };
+    }
+
     /// The hinge's angle as ODE measures it, in (-pi, pi], rad.
     pub fn hinge_angle(&self, i: usize) -> f64 {
         // SAFETY: reads the joint's bodies of this world.

@@ -35,7 +35,8 @@ pub(crate) mod world;
 
 use physx_sys::*;
 use realitygap_core::engine::{
-    Engine, EngineError, EngineSettings, ModelVariation, SettingInfo, SimState, Simulation,
+    check_servo_commands, CommandKind, CommandSupport, Engine, EngineError, EngineSettings,
+    ModelVariation, ServoCommand, SettingInfo, SimState, Simulation,
 };
 use realitygap_core::params::{ParamSupport, PhysicalParams};
 use realitygap_core::pose::Pose;
@@ -81,6 +82,10 @@ impl Engine for PhysxEngine {
         params::support()
     }
 
+    fn command_support(&self) -> Vec<CommandSupport> {
+        COMMAND_SUPPORT.to_vec()
+    }
+
     fn load_with(
         &self,
         scene: &Scene,
@@ -94,6 +99,26 @@ impl Engine for PhysxEngine {
         )?))
     }
 }
+
+/// How PhysX takes each kind of joint command: the joint's articulation
+/// drive (force type, solved implicitly) for velocity and position, and for
+/// efforts the articulation cache's joint force (`applyCache` with
+/// `eFORCE`, before every step), the drive then keeping only the joint's
+/// viscous damping.
+pub const COMMAND_SUPPORT: [CommandSupport; 3] = [
+    CommandSupport {
+        kind: CommandKind::Velocity,
+        mechanism: "articulation drive: stiffness 0, damping kv, target velocity v, max force = the limit",
+    },
+    CommandSupport {
+        kind: CommandKind::Position,
+        mechanism: "articulation drive: stiffness kp, damping kv, target q, target velocity 0, max force = the limit",
+    },
+    CommandSupport {
+        kind: CommandKind::Effort,
+        mechanism: "articulation cache jointForce (applyCache eFORCE before every step), clamped to the limit; drive stiffness and gain 0",
+    },
+];
 
 /// What a simulation was built from, kept to rebuild it
 /// ([`Simulation::set_state`] starts from a fresh world).
@@ -115,6 +140,12 @@ pub struct PhysxSimulation {
     steps: u64,
     /// The servo velocity targets in force, rad/s.
     targets: Vec<f64>,
+    /// The commands in force when some joint's are not velocity targets;
+    /// empty otherwise.
+    commands: Vec<ServoCommand>,
+    /// Each controlled joint's first degree of freedom in the
+    /// articulation cache (its child link's low-level order).
+    dof_start: Vec<usize>,
 }
 
 // SAFETY: the PhysX objects of a simulation belong to it alone (its own
@@ -161,6 +192,8 @@ impl PhysxSimulation {
         let world = Self::build(&inputs, &settings)?;
         let mut sim = PhysxSimulation {
             targets: vec![0.0; world.drives.len()],
+            commands: Vec::new(),
+            dof_start: Vec::new(),
             world,
             inputs,
             settings,
@@ -286,6 +319,116 @@ impl PhysxSimulation {
     }
 
     /// Recomputes the links' poses and velocities from the joint state.
+    /// The commands in force, for a state (empty: the velocity targets).
+    pub(crate) fn servo_commands(&self) -> Vec<ServoCommand> {
+        self.commands.clone()
+    }
+
+    /// Sets drive `i` for `command` (see [`COMMAND_SUPPORT`]): its
+    /// stiffness, damping and largest force, target and target velocity.
+    fn set_drive(&self, i: usize, command: ServoCommand) {
+        let d = &self.world.drives[i];
+        let (stiffness, damping, max_force) = match command.kind {
+            CommandKind::Velocity => (0.0, d.kv + d.damping, d.max_force),
+            CommandKind::Position => (d.kp, d.kv + d.damping, d.max_force),
+            CommandKind::Effort => (0.0, d.damping, f32::MAX as f64),
+        };
+        // With the servo off (limit 0) only the damping remains.
+        let (stiffness, damping, max_force) = if d.max_force > 0.0 {
+            (stiffness, damping, max_force)
+        } else {
+            (0.0, d.damping, f32::MAX as f64)
+        };
+        // SAFETY: the joint belongs to this simulation's articulation, in
+        // its scene, not simulating.
+        unsafe {
+            let drive = PxArticulationDrive_new_1(
+                stiffness as f32,
+                damping as f32,
+                max_force as f32,
+                PxArticulationDriveType::Force,
+            );
+            PxArticulationJointReducedCoordinate_setDriveParams_mut(d.joint, d.axis, &drive);
+            let (target, velocity) = match command.kind {
+                CommandKind::Velocity => (0.0, d.target(command.value)),
+                CommandKind::Position if d.max_force > 0.0 => (command.value as f32, 0.0),
+                _ => (0.0, 0.0),
+            };
+            PxArticulationJointReducedCoordinate_setDriveTarget_mut(d.joint, d.axis, target, true);
+            PxArticulationJointReducedCoordinate_setDriveVelocity_mut(
+                d.joint, d.axis, velocity, true,
+            );
+        }
+    }
+
+    /// Each controlled joint's first degree of freedom in the articulation
+    /// cache: the sum of the inbound joint DOFs of the links with lower
+    /// low-level indices (PhysX's cache indexing).
+    fn cache_dofs(&self) -> Vec<usize> {
+        // SAFETY: the articulation and its joints belong to this
+        // simulation's live world.
+        unsafe {
+            let a = self.world.articulation;
+            let n = PxArticulationReducedCoordinate_getNbLinks(a) as usize;
+            let mut links = vec![std::ptr::null_mut::<PxArticulationLink>(); n];
+            PxArticulationReducedCoordinate_getLinks(a, links.as_mut_ptr(), n as u32, 0);
+            let mut dofs = vec![0usize; n];
+            for &l in &links {
+                dofs[PxArticulationLink_getLinkIndex(l) as usize] =
+                    PxArticulationLink_getInboundJointDof(l) as usize;
+            }
+            self.world
+                .drives
+                .iter()
+                .map(|d| {
+                    let child =
+                        PxArticulationJointReducedCoordinate_getChildArticulationLink(d.joint);
+                    let index = PxArticulationLink_getLinkIndex(child) as usize;
+                    dofs[..index].iter().sum()
+                })
+                .collect()
+        }
+    }
+
+    /// Writes the effort commands into the articulation cache's joint
+    /// forces and applies them (every other DOF's force 0).
+    fn apply_efforts(&mut self) {
+        if !self.commands.iter().any(|c| c.kind == CommandKind::Effort) {
+            return;
+        }
+        // SAFETY: the articulation is in its scene and not simulating; the
+        // cache is this articulation's, its jointForce array holds
+        // getDofs() numbers, and every index written is below that.
+        unsafe {
+            let a = self.world.articulation;
+            if self.world.cache.is_null() {
+                self.world.cache = PxArticulationReducedCoordinate_createCache(a);
+                self.dof_start = self.cache_dofs();
+            }
+            let cache = self.world.cache;
+            let dofs = PxArticulationReducedCoordinate_getDofs(a) as usize;
+            let forces = std::slice::from_raw_parts_mut((*cache).jointForce, dofs);
+            forces.fill(0.0);
+            for ((c, d), &at) in self
+                .commands
+                .iter()
+                .zip(&self.world.drives)
+                .zip(&self.dof_start)
+            {
+                if c.kind == CommandKind::Effort && at < dofs {
+                    let limit = if d.max_force > 0.0 { d.max_force } else { 0.0 };
+                    forces[at] = c.value.clamp(-limit, limit) as f32;
+                }
+            }
+            PxArticulationReducedCoordinate_applyCache_mut(
+                a,
+                cache,
+                PxArticulationCacheFlags::Force,
+                true,
+            );
+        }
+    }
+
     fn update_kinematics(&mut self) {
         // SAFETY: the articulation is in its scene and not simulating.
         unsafe {
@@ -354,7 +497,37 @@ impl Simulation for PhysxSimulation {
         Ok(())
     }
 
+    fn set_joint_commands(&mut self, commands: &[ServoCommand]) -> Result<(), EngineError> {
+        check_servo_commands(ENGINE_NAME, &self.inputs.scene, commands)?;
+        if commands.iter().all(|c| c.kind == CommandKind::Velocity) {
+            let v: Vec<f64> = commands.iter().map(|c| c.value).collect();
+            self.set_joint_velocity_targets(&v);
+            return Ok(());
+        }
+        for (i, &c) in commands.iter().enumerate() {
+            self.set_drive(i, c);
+        }
+        self.targets = commands
+            .iter()
+            .map(|c| {
+                if c.kind == CommandKind::Velocity {
+                    c.value
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        self.commands = commands.to_vec();
+        Ok(())
+    }
+
     fn set_joint_velocity_targets(&mut self, rad_s: &[f64]) {
+        if !self.commands.is_empty() {
+            self.commands.clear();
+            for (i, &v) in rad_s.iter().enumerate().take(self.world.drives.len()) {
+                self.set_drive(i, ServoCommand::velocity(v));
+            }
+        }
         for ((t, d), &v) in self.targets.iter_mut().zip(&self.world.drives).zip(rad_s) {
             *t = v;
             // SAFETY: the joint belongs to this simulation's articulation.
@@ -370,6 +543,7 @@ impl Simulation for PhysxSimulation {
     }
 
     fn step(&mut self) -> Result<(), EngineError> {
+        self.apply_efforts();
         self.simulate();
         self.steps += 1;
         self.check_finite()
@@ -377,6 +551,7 @@ impl Simulation for PhysxSimulation {
 
     fn step_n(&mut self, n: u64) -> Result<(), EngineError> {
         for _ in 0..n {
+            self.apply_efforts();
             self.simulate();
             self.steps += 1;
         }

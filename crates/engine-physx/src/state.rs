@@ -46,6 +46,7 @@ impl PhysxSimulation {
             joint_angles_rad: (0..n).map(|i| self.joint_position(i)).collect(),
             joint_velocities_rad_s: (0..n).map(|i| self.joint_velocity(i)).collect(),
             joint_velocity_targets_rad_s: self.targets.clone(),
+            servo_commands: self.servo_commands(),
             objects,
             native: None,
         }
@@ -110,7 +111,12 @@ impl PhysxSimulation {
             }
         }
         self.targets = vec![0.0; self.world.drives.len()];
+        self.commands.clear();
+        self.dof_start.clear();
         self.set_joint_velocity_targets(&state.joint_velocity_targets_rad_s);
+        if !state.servo_commands.is_empty() {
+            self.set_joint_commands(&state.servo_commands)?;
+        }
         self.time_origin_s = state.time_s;
         self.steps = 0;
         self.update_kinematics();

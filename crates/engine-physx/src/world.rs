@@ -70,6 +70,11 @@ pub struct Drive {
     pub axis: PxArticulationAxis,
     /// The servo's velocity gain, N m s/rad.
     pub kv: f64,
+    /// The PD servo's position gain for position commands, N m/rad (0
+    /// when the scene gives none).
+    pub kp: f64,
+    /// The drive's largest force, N m (`f32::MAX` when unlimited).
+    pub max_force: f64,
     /// The joint's viscous damping folded into the drive, N m s/rad.
     pub damping: f64,
 }
@@ -111,6 +116,9 @@ pub struct World {
     pub links: HashMap<String, ActorFrame>,
     /// The scene objects' actors, in the scene's order.
     pub objects: Vec<*mut PxRigidDynamic>,
+    /// The articulation's cache, for joint forces (effort commands);
+    /// null until the first one.
+    pub cache: *mut PxArticulationCache,
     statics: Vec<*mut PxRigidStatic>,
     materials: Vec<*mut PxMaterial>,
 }
@@ -129,6 +137,9 @@ impl Drop for World {
             }
             for &s in &self.statics {
                 PxActor_release_mut(s as *mut PxActor);
+            }
+            if !self.cache.is_null() {
+                PxArticulationCache_release_mut(self.cache);
             }
             if !self.articulation.is_null() {
                 PxArticulationReducedCoordinate_release_mut(self.articulation);
@@ -266,6 +277,7 @@ fn empty_world(locked: &Locked<'_>, recipe: &Recipe<'_>) -> Result<World, String
             tracked: vec![],
             links: HashMap::new(),
             objects: vec![],
+            cache: std::ptr::null_mut(),
             statics: vec![],
             materials: vec![],
         };
@@ -590,17 +602,23 @@ impl Builder<'_, '_> {
             // With the servo off (limit 0) the drive is the damping alone,
             // towards rest: no gain, so no target velocity.
             let servo_on = spec.force_limit > 0.0;
+            let (stiffness_damping, max_force) = if servo_on {
+                (spec.kv + damping, spec.force_limit.min(f32::MAX as f64))
+            } else {
+                (damping, f32::MAX as f64)
+            };
             let drive = Drive {
                 name: spec.joint.clone(),
                 joint: px,
                 axis,
                 kv: if servo_on { spec.kv } else { 0.0 },
+                kp: if servo_on {
+                    spec.kp.unwrap_or(0.0)
+                } else {
+                    0.0
+                },
+                max_force: if servo_on { max_force } else { 0.0 },
                 damping,
-            };
-            let (stiffness_damping, max_force) = if servo_on {
-                (spec.kv + damping, spec.force_limit.min(f32::MAX as f64))
-            } else {
-                (damping, f32::MAX as f64)
             };
             let armature = self.recipe.params.armature(&joint.name).unwrap_or(0.0);
             // SAFETY: `px` is the valid inbound joint of `child`.
@@ -754,6 +772,8 @@ mod tests {
             joint: std::ptr::null_mut(),
             axis: PxArticulationAxis::Twist,
             kv: 10.0,
+            kp: 0.0,
+            max_force: 5.0,
             damping: 2.0,
         };
         // (kv + d) (t - w) == kv (v - w) - d w for every joint speed w.

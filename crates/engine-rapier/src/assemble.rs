@@ -69,9 +69,30 @@ pub struct ControlledJoint {
     pub coordinate: usize,
     /// The servo's velocity gain, N m s/rad (the motor's damping).
     pub kv: f32,
+    /// The PD servo's position gain for position commands, N m/rad (the
+    /// motor's stiffness); 0 when the scene gives none.
+    pub kp: f32,
+    /// The actuator's force limit, N m (or N), infinite when none.
+    pub force_limit: f64,
+    /// The bodies the joint connects: the parent's and the child's.
+    pub parent_body: RigidBodyHandle,
+    /// See `parent_body`.
+    pub child_body: RigidBodyHandle,
     /// Index of the joint's degree of freedom in the multibody's
     /// generalized velocity vector.
     pub dof: usize,
+}
+
+impl ControlledJoint {
+    /// The motor's largest force for the velocity and position servos: the
+    /// force limit (`f32::MAX` when unlimited).
+    pub fn max_motor_force(&self) -> f32 {
+        if self.force_limit.is_finite() {
+            self.force_limit as f32
+        } else {
+            f32::MAX
+        }
+    }
 }
 
 /// Where a frame sits: a body and the frame's pose in the body frame.
@@ -401,18 +422,26 @@ fn controlled_joints(
                 JointAxis::AngX
             };
             let handle = handles[&j];
-            let dof = world
+            let (mb, link_id) = world
                 .multibody_joints
                 .get(handle)
-                .and_then(|(mb, link)| mb.link(link))
-                .map_or(0, |l| l.assembly_id());
+                .expect("controlled joints exist");
+            let link = mb.link(link_id).expect("controlled joints have a link");
+            let parent = link
+                .parent_id()
+                .and_then(|p| mb.link(p))
+                .unwrap_or_else(|| mb.root());
             ControlledJoint {
                 name: a.joint.clone(),
                 handle,
                 axis,
                 coordinate: axis as usize,
                 kv: a.kv as f32,
-                dof,
+                kp: a.kp.unwrap_or(0.0) as f32,
+                force_limit: a.force_limit,
+                parent_body: parent.rigid_body_handle(),
+                child_body: link.rigid_body_handle(),
+                dof: link.assembly_id(),
             }
         })
         .collect()

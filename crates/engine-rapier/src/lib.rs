@@ -38,7 +38,8 @@ pub mod state;
 use assemble::{from_rapier_pose, Assembly, BodyFrame, ControlledJoint};
 use rapier3d::prelude::{PhysicsWorld, RigidBodyHandle};
 use realitygap_core::engine::{
-    Engine, EngineError, EngineSettings, ModelVariation, SettingInfo, SimState, Simulation,
+    check_servo_commands, CommandKind, CommandSupport, Engine, EngineError, EngineSettings,
+    ModelVariation, ServoCommand, SettingInfo, SimState, Simulation,
 };
 use realitygap_core::params::{ParamSupport, PhysicalParams};
 use realitygap_core::pose::Pose;
@@ -83,6 +84,10 @@ impl Engine for RapierEngine {
         params::support()
     }
 
+    fn command_support(&self) -> Vec<CommandSupport> {
+        COMMAND_SUPPORT.to_vec()
+    }
+
     fn load_with(
         &self,
         scene: &Scene,
@@ -96,6 +101,26 @@ impl Engine for RapierEngine {
         )?))
     }
 }
+
+/// How Rapier takes each kind of joint command: the force-based joint
+/// motor (solved implicitly with the contacts) for velocity and position,
+/// and for efforts an equal and opposite torque (a force, for a prismatic
+/// joint) on the two bodies the joint connects, set again before every
+/// step as the joint's axis turns.
+pub const COMMAND_SUPPORT: [CommandSupport; 3] = [
+    CommandSupport {
+        kind: CommandKind::Velocity,
+        mechanism: "force-based joint motor: set_motor_velocity(v, damping = kv), stiffness 0, max force = the limit",
+    },
+    CommandSupport {
+        kind: CommandKind::Position,
+        mechanism: "force-based joint motor: set_motor(q, 0, stiffness = kp, damping = kv), max force = the limit",
+    },
+    CommandSupport {
+        kind: CommandKind::Effort,
+        mechanism: "motor off; the effort (clamped to the limit) as a torque pair on the joint's two bodies about its world axis (add_torque), before every step",
+    },
+];
 
 /// A Rapier world of a scene, driven through [`Simulation`].
 pub struct RapierSimulation {
@@ -117,6 +142,11 @@ pub struct RapierSimulation {
     steps: u64,
     /// The servo velocity targets in force, rad/s.
     targets: Vec<f64>,
+    /// The commands in force when some joint's are not velocity targets;
+    /// empty otherwise.
+    commands: Vec<ServoCommand>,
+    /// The scene, for checking commands.
+    scene: Scene,
 }
 
 fn load_error(message: impl Into<String>) -> EngineError {
@@ -183,6 +213,8 @@ impl RapierSimulation {
         Ok(RapierSimulation {
             pristine: state::Pristine::of(&world),
             targets: vec![0.0; joints.len()],
+            commands: Vec::new(),
+            scene: scene.clone(),
             world,
             joints,
             tracked,
@@ -283,6 +315,58 @@ impl RapierSimulation {
         }
     }
 
+    /// The commands in force, for a state (empty: the velocity targets).
+    pub(crate) fn servo_commands(&self) -> Vec<ServoCommand> {
+        self.commands.clone()
+    }
+
+    /// Sets the effort commands as torque (or force) pairs on the joints'
+    /// bodies about their current world axes; clears the others' (every
+    /// user force on the arm's bodies is the efforts').
+    fn apply_efforts(&mut self) {
+        if self.commands.is_empty() {
+            return;
+        }
+        let bodies = &mut self.world.bodies;
+        for joint in &self.joints {
+            for h in [joint.parent_body, joint.child_body] {
+                if let Some(b) = bodies.get_mut(h) {
+                    b.reset_forces(false);
+                    b.reset_torques(false);
+                }
+            }
+        }
+        for (joint, c) in self.joints.iter().zip(&self.commands) {
+            if c.kind != CommandKind::Effort {
+                continue;
+            }
+            let effort = c.value.clamp(-joint.force_limit, joint.force_limit) as f32;
+            let Some((mb, link_id)) = self.world.multibody_joints.get(joint.handle) else {
+                continue;
+            };
+            let Some(link) = mb.link(link_id) else {
+                continue;
+            };
+            let frame2 = link.joint.data.local_frame2;
+            let Some(child) = bodies.get(joint.child_body) else {
+                continue;
+            };
+            let frame = *child.position() * frame2;
+            let axis = frame.rotation * rapier3d::math::Vector::X;
+            let anchor = frame.translation;
+            let revolute = joint.axis == rapier3d::dynamics::JointAxis::AngX;
+            for (h, sign) in [(joint.child_body, 1.0f32), (joint.parent_body, -1.0)] {
+                if let Some(b) = bodies.get_mut(h) {
+                    if revolute {
+                        b.add_torque(axis * (sign * effort), true);
+                    } else {
+                        b.add_force_at_point(axis * (sign * effort), anchor, true);
+                    }
+                }
+            }
+        }
+    }
+
     /// Unstable when Rapier quarantined anything during the last step.
     fn check_stability(&self) -> Result<(), EngineError> {
         let q = self.world.quarantine();
@@ -358,19 +442,76 @@ impl Simulation for RapierSimulation {
         for (t, &v) in self.targets.iter_mut().zip(rad_s) {
             *t = v;
         }
+        let switching = !self.commands.is_empty();
+        if switching {
+            // Back from other kinds: no effort torques remain.
+            self.commands = vec![ServoCommand::velocity(0.0); self.joints.len()];
+            self.apply_efforts();
+            self.commands.clear();
+        }
         let world = &mut self.world;
         for (joint, &v) in self.joints.iter().zip(rad_s) {
             if let Some((mb, link_id)) = world.multibody_joints.get_mut(joint.handle) {
                 if let Some(link) = mb.link_mut(link_id) {
-                    link.joint
-                        .data
-                        .set_motor_velocity(joint.axis, v as f32, joint.kv);
+                    let data = &mut link.joint.data;
+                    if switching {
+                        data.set_motor(joint.axis, 0.0, v as f32, 0.0, joint.kv);
+                        data.set_motor_max_force(joint.axis, joint.max_motor_force());
+                    } else {
+                        data.set_motor_velocity(joint.axis, v as f32, joint.kv);
+                    }
                 }
             }
         }
     }
 
+    fn set_joint_commands(&mut self, commands: &[ServoCommand]) -> Result<(), EngineError> {
+        check_servo_commands(ENGINE_NAME, &self.scene, commands)?;
+        if commands.iter().all(|c| c.kind == CommandKind::Velocity) {
+            let v: Vec<f64> = commands.iter().map(|c| c.value).collect();
+            self.set_joint_velocity_targets(&v);
+            return Ok(());
+        }
+        let world = &mut self.world;
+        for (joint, c) in self.joints.iter().zip(commands) {
+            let Some((mb, link_id)) = world.multibody_joints.get_mut(joint.handle) else {
+                continue;
+            };
+            let Some(link) = mb.link_mut(link_id) else {
+                continue;
+            };
+            let data = &mut link.joint.data;
+            let value = c.value as f32;
+            // An effort's motor is off (no force at all); the others' at
+            // most the force limit.
+            let max_force = match c.kind {
+                CommandKind::Effort => 0.0,
+                _ => joint.max_motor_force(),
+            };
+            match c.kind {
+                CommandKind::Velocity => data.set_motor(joint.axis, 0.0, value, 0.0, joint.kv),
+                CommandKind::Position => data.set_motor(joint.axis, value, 0.0, joint.kp, joint.kv),
+                CommandKind::Effort => data.set_motor(joint.axis, 0.0, 0.0, 0.0, 0.0),
+            };
+            data.set_motor_max_force(joint.axis, max_force);
+        }
+        self.targets = commands
+            .iter()
+            .map(|c| {
+                if c.kind == CommandKind::Velocity {
+                    c.value
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        self.commands = commands.to_vec();
+        self.apply_efforts();
+        Ok(())
+    }
+
     fn step(&mut self) -> Result<(), EngineError> {
+        self.apply_efforts();
         self.world.step();
         self.steps += 1;
         self.check_stability()

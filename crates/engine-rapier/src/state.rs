@@ -169,6 +169,7 @@ impl RapierSimulation {
             joint_angles_rad: angles,
             joint_velocities_rad_s: velocities,
             joint_velocity_targets_rad_s: self.targets.clone(),
+            servo_commands: self.servo_commands(),
             objects,
             native: Some(NativeState {
                 engine: ENGINE_NAME.to_string(),
@@ -292,10 +293,14 @@ impl RapierSimulation {
         }
         self.time_origin_s = state.time_s;
         self.steps = 0;
+        self.commands.clear();
         realitygap_core::engine::Simulation::set_joint_velocity_targets(
             self,
             &state.joint_velocity_targets_rad_s,
         );
+        if !state.servo_commands.is_empty() {
+            realitygap_core::engine::Simulation::set_joint_commands(self, &state.servo_commands)?;
+        }
         Ok(())
     }
 

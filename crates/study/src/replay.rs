@@ -88,9 +88,10 @@ pub fn scene_toml(robot: &RobotModel, urdf: &Path, link: &str, duration_s: f64) 
     let _ = writeln!(
         s,
         "# The scene of `realitygap replay`: robot {} ({}), every moving joint\n\
-         # servoed, the end effector {link} tracked. Gains: kv here is the servo's\n\
-         # velocity gain (N m s/rad); the position gain kp is a parameter\n\
-         # (joints.<joint>.kp, default in the comment of each actuator).",
+         # servoed, the end effector {link} tracked. Gains: kv is the servo's\n\
+         # velocity gain (N m s/rad) and kp the position gain of its PD law\n\
+         # for position commands (N m/rad): defaults from each joint's effort\n\
+         # limit; joints.<joint>.kp and .kv in --params replace them.",
         robot.name,
         urdf.display()
     );
@@ -118,7 +119,7 @@ pub fn scene_toml(robot: &RobotModel, urdf: &Path, link: &str, duration_s: f64) 
         let (kp, kv) = default_gains(force);
         let _ = writeln!(
             s,
-            "[[actuator]]  # default kp = {kp:?} N m/rad\njoint = {:?}\nkv = {kv:?}\nforce_limit = {force:?}\n",
+            "[[actuator]]\njoint = {:?}\nkv = {kv:?}\nkp = {kp:?}\nforce_limit = {force:?}\n",
             joint.name
         );
     }
@@ -248,6 +249,13 @@ pub fn prepare_replay(req: &ReplayRequest) -> Result<Prepared> {
         }
     };
     scene.validate(&robot)?;
+    // A joint without a position gain (a scene of the user's) gets the
+    // default one: joints without a command hold their first angle
+    // through the PD servo.
+    let mut scene = scene;
+    for a in scene.actuators.iter_mut().filter(|a| a.kp.is_none()) {
+        a.kp = Some(default_gains(a.force_limit).0);
+    }
     Ok(Prepared {
         robot,
         scene,
@@ -280,7 +288,7 @@ pub fn plan_for(episode: &Episode, scene: &Scene, params: &PhysicalParams) -> Re
     let mut force_limit_nm = Vec::new();
     for a in &scene.actuators {
         let given = params.joints.get(&a.joint);
-        let (default_kp, _) = default_gains(a.force_limit);
+        let default_kp = a.kp.unwrap_or_else(|| default_gains(a.force_limit).0);
         kp.push(given.and_then(|g| g.kp).unwrap_or(default_kp));
         kv.push(given.and_then(|g| g.kv).unwrap_or(a.kv));
         let limit = given.and_then(|g| g.force_limit).unwrap_or(a.force_limit);

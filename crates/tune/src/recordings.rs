@@ -236,7 +236,10 @@ pub fn default_space(
             .and_then(|g| g.kv)
             .or(actuator.map(|a| a.kv))
             .unwrap_or(effort);
-        let kp0 = given.and_then(|g| g.kp).unwrap_or(effort / 0.05);
+        let kp0 = given
+            .and_then(|g| g.kp)
+            .or(actuator.and_then(|a| a.kp))
+            .unwrap_or(effort / 0.05);
         let mut push =
             |field: &str, key: ParamKey, low: f64, high: f64, scale: Scale, start: f64| {
                 let set = match field {
@@ -303,7 +306,8 @@ pub fn default_space(
             );
         }
     }
-    if known.controller.delay_s.is_none() && kind != Some(CommandKind::Effort) {
+    // Every kind of command can arrive late, efforts too.
+    if known.controller.delay_s.is_none() {
         dims.push(Dim {
             key: DELAY_KEY.into(),
             low: 0.0,
