@@ -215,10 +215,11 @@ fn every_engine_replays_at_its_defaults_and_refusals_are_named() {
     ]);
     let stderr = text(&run.stderr);
     assert!(!run.status.success());
+    // The run fails in its child process with the located message.
     assert!(
-        stderr.contains(
-            "in physx: failed: engine physx: parameter `joints.lbr_iiwa_joint_1.frictionloss`"
-        ),
+        stderr.contains("in physx: failed:")
+            && stderr.contains("engine physx: parameter `joints.lbr_iiwa_joint_1.frictionloss`: ")
+            && stderr.contains(".toml:6:16"),
         "{stderr}"
     );
 }

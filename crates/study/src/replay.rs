@@ -14,11 +14,16 @@
 
 use anyhow::{anyhow, bail, Context, Result};
 use realitygap_core::controller::{load_prepared, prepare, refuse_unstable, RunOptions, RunStatus};
-use realitygap_core::replay::{kinematic_angles, replay, ReplayPlan};
+use realitygap_core::replay::{
+    default_gains, fill_default_gains, kinematic_angles, replay, ReplayPlan,
+};
 use realitygap_core::robot::RobotModel;
 use realitygap_core::trajectory::WRIST;
 use realitygap_core::{BodyTrack, Engine, PhysicalParams, Pose, Scene, Trajectory};
 use realitygap_data::{EngineInfo, RunEntry, RunStatus as StoredStatus, RunStore, SourceKind};
+use realitygap_runner::protocol::{Job, ReplayJob};
+use realitygap_runner::slurm::SlurmOptions;
+use realitygap_runner::{run_child, ChildEnd, Launcher};
 use serde_json::{json, Value};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -67,19 +72,15 @@ pub struct Prepared {
     pub episodes: Vec<Episode>,
     /// The end-effector link's name.
     pub link: String,
-}
-
-/// The default gains of a joint whose gains the parameters do not give:
-/// full effort at 0.05 rad of error (kp; effort 100 N m when the URDF gives
-/// none or no finite one), and kv = kp * 0.1 s. Printed in the scene file.
-fn default_gains(effort_limit: f64) -> (f64, f64) {
-    let effort = if effort_limit.is_finite() && effort_limit > 0.0 && effort_limit < 1e5 {
-        effort_limit
-    } else {
-        100.0
-    };
-    let kp = effort / 0.05;
-    (kp, kp * 0.1)
+    /// The scene's file (the generated `OUT/replay.toml` or `--scene`),
+    /// absolute: what the child processes read.
+    pub scene_file: PathBuf,
+    /// The robot's URDF, absolute.
+    pub urdf: PathBuf,
+    /// `NAME=DIR` ROS package locations.
+    pub packages: Vec<String>,
+    /// The recorded episodes' results directory, absolute.
+    pub real_dir: PathBuf,
 }
 
 /// The TOML of the generated replay scene.
@@ -238,14 +239,15 @@ pub fn prepare_replay(req: &ReplayRequest) -> Result<Prepared> {
         .fold(0.0, f64::max);
     let duration_s = ((duration / TIMESTEP_S).ceil().max(1.0)) * TIMESTEP_S;
     std::fs::create_dir_all(req.out).with_context(|| format!("creating {}", req.out.display()))?;
-    let scene = match req.scene {
-        Some(path) => Scene::from_file(path)?,
+    let absolute = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf());
+    let abs_urdf = absolute(&urdf);
+    let (scene, scene_file) = match req.scene {
+        Some(path) => (Scene::from_file(path)?, absolute(path)),
         None => {
-            let abs_urdf = std::fs::canonicalize(&urdf).unwrap_or(urdf.clone());
             let text = scene_toml(&robot, &abs_urdf, &link, duration_s);
             let path = req.out.join(SCENE_FILE);
             std::fs::write(&path, &text).with_context(|| format!("writing {}", path.display()))?;
-            Scene::from_toml_str(&text, &path)?
+            (Scene::from_toml_str(&text, &path)?, absolute(&path))
         }
     };
     scene.validate(&robot)?;
@@ -253,61 +255,24 @@ pub fn prepare_replay(req: &ReplayRequest) -> Result<Prepared> {
     // default one: joints without a command hold their first angle
     // through the PD servo.
     let mut scene = scene;
-    for a in scene.actuators.iter_mut().filter(|a| a.kp.is_none()) {
-        a.kp = Some(default_gains(a.force_limit).0);
-    }
+    fill_default_gains(&mut scene);
     Ok(Prepared {
         robot,
         scene,
         episodes,
         link,
+        scene_file,
+        urdf: abs_urdf,
+        packages: req.packages.to_vec(),
+        real_dir: absolute(req.real_dir),
     })
 }
 
-/// The replay plan of one episode in `scene` with `params`.
+/// The replay plan of one episode in `scene` (its actuators carrying
+/// `params` and a position gain) with `params`.
 pub fn plan_for(episode: &Episode, scene: &Scene, params: &PhysicalParams) -> Result<ReplayPlan> {
-    let real = &episode.real;
-    let commands = real
-        .commands
-        .clone()
-        .ok_or_else(|| anyhow!("run '{}' has no commands", episode.id))?;
-    let angles = real
-        .joint_angles_rad
-        .as_ref()
-        .and_then(|r| r.first())
-        .cloned()
-        .ok_or_else(|| anyhow!("run '{}' has no joint angles", episode.id))?;
-    let velocities = real
-        .joint_velocities_rad_s
-        .as_ref()
-        .and_then(|r| r.first())
-        .cloned()
-        .unwrap_or_else(|| vec![0.0; angles.len()]);
-    let mut kp = Vec::new();
-    let mut kv = Vec::new();
-    let mut force_limit_nm = Vec::new();
-    for a in &scene.actuators {
-        let given = params.joints.get(&a.joint);
-        let default_kp = a.kp.unwrap_or_else(|| default_gains(a.force_limit).0);
-        kp.push(given.and_then(|g| g.kp).unwrap_or(default_kp));
-        kv.push(given.and_then(|g| g.kv).unwrap_or(a.kv));
-        let limit = given.and_then(|g| g.force_limit).unwrap_or(a.force_limit);
-        // 0 switches the servo off; a limit that is not a number >= 0 is
-        // none.
-        force_limit_nm.push(if limit >= 0.0 { limit } else { f64::INFINITY });
-    }
-    Ok(ReplayPlan {
-        commands,
-        sample_times_s: real.time_s.clone(),
-        initial_angles_rad: angles,
-        initial_velocities_rad_s: velocities,
-        kp,
-        kv,
-        force_limit_nm,
-        delay_s: params.delay_s(),
-        roles: scene.tracked.iter().map(|t| t.role.clone()).collect(),
-        divergence_bound_m: RunOptions::default().divergence_bound_m,
-    })
+    ReplayPlan::for_recording(&episode.real, scene, params)
+        .map_err(|e| anyhow!("run '{}': {e}", episode.id))
 }
 
 /// The physics-free model of an episode: the commands with perfect tracking
@@ -825,54 +790,169 @@ pub fn joint_figures(
 /// Replays every episode in every engine, in parallel over the machine's
 /// cores, storing each run as it finishes (an interrupted batch loses no
 /// finished run; a rerun skips runs already stored). `done` is told of
-/// each run, stored or kept.
+/// Where `replay_all` runs the replays: every one in a child process of
+/// `launcher` (the `realitygap` binary's `__run-one`), so that an engine
+/// that aborts fails only its run.
+pub enum ReplayExecutor<'a> {
+    /// Child processes on this machine, `jobs` at a time.
+    Local {
+        /// How to start a child.
+        launcher: &'a Launcher,
+        /// Child processes at once (at least 1).
+        jobs: usize,
+    },
+    /// One Slurm job array (`OUT/slurm/`): the results directory must be on
+    /// a filesystem the compute nodes share.
+    Slurm {
+        /// How a task starts the binary.
+        launcher: &'a Launcher,
+        /// `sbatch` options.
+        options: &'a SlurmOptions,
+    },
+}
+
+/// The child job of one episode in one engine.
+fn replay_job(engine: &str, prepared: &Prepared, params: &PhysicalParams, episode: &str) -> Job {
+    // A file's parameters travel as the file (its errors name file, line
+    // and column); built ones as text.
+    let (file, text) = match &params.source {
+        Some(f) => (Some(std::fs::canonicalize(f).unwrap_or(f.clone())), None),
+        None if *params == PhysicalParams::none() => (None, None),
+        None => (None, Some(params.to_toml_string())),
+    };
+    Job {
+        scene_file: prepared.scene_file.clone(),
+        engine: engine.to_string(),
+        robot: Some(prepared.urdf.display().to_string()),
+        packages: prepared.packages.clone(),
+        set: Vec::new(),
+        perturb: Vec::new(),
+        seed: 0,
+        params: file,
+        params_text: text,
+        check_only: false,
+        stitch: None,
+        allow_unstable: false,
+        replay: Some(ReplayJob {
+            real_dir: prepared.real_dir.clone(),
+            episode: episode.to_string(),
+        }),
+    }
+}
+
+/// What a child's end says of the replayed run.
+fn replayed_result(end: ChildEnd) -> Result<(Trajectory, RunStatus, f64), String> {
+    match end {
+        ChildEnd::Done(r) => {
+            let trajectory = r.trajectory().map_err(|e| e.to_string())?;
+            let status = match &r.diverged {
+                Some((t_s, reason)) => RunStatus::Diverged {
+                    t_s: *t_s,
+                    reason: reason.clone(),
+                },
+                None => RunStatus::Completed,
+            };
+            Ok((trajectory, status, r.wall_time_s))
+        }
+        ChildEnd::Failed(m) => Err(m),
+    }
+}
+
+/// Replays every episode in every engine (each in a child process, see
+/// [`ReplayExecutor`]), storing each run in `OUT/<engine>/` as it ends; a
+/// run already stored is kept (resume). `done` is called for every run.
 pub fn replay_all(
     engines: &[Box<dyn Engine>],
     prepared: &Prepared,
     params: &PhysicalParams,
     out: &Path,
+    executor: &ReplayExecutor<'_>,
     done: &(dyn Fn(&Replayed) + Sync),
 ) -> Result<Vec<Replayed>> {
-    use rayon::prelude::*;
-    let finished = |engine: &dyn Engine, id: &str| {
-        RunStore::open(&out.join(engine.name()))
-            .map(|s| s.has_finished_run(id))
-            .unwrap_or(false)
-    };
-    let jobs: Vec<(usize, usize)> = (0..engines.len())
-        .flat_map(|e| (0..prepared.episodes.len()).map(move |k| (e, k)))
-        .collect();
-    let lock = std::sync::Mutex::new(());
-    let results: Vec<Result<Replayed>> = jobs
-        .par_iter()
+    let mut runs = Vec::new();
+    let mut todo: Vec<(usize, usize)> = Vec::new();
+    for (e, engine) in engines.iter().enumerate() {
+        let store = RunStore::open(&out.join(engine.name())).ok();
+        for (k, episode) in prepared.episodes.iter().enumerate() {
+            match &store {
+                Some(s) if s.has_finished_run(&episode.id) => {
+                    let run = Replayed {
+                        id: episode.id.clone(),
+                        engine: engine.name().to_string(),
+                        result: Ok((s.read_run(&episode.id)?, RunStatus::Completed, 0.0)),
+                        reused: true,
+                    };
+                    done(&run);
+                    runs.push(run);
+                }
+                _ => todo.push((e, k)),
+            }
+        }
+    }
+    let jobs: Vec<((usize, usize), Job)> = todo
+        .iter()
         .map(|&(e, k)| {
-            let engine = engines[e].as_ref();
-            let episode = &prepared.episodes[k];
-            if finished(engine, &episode.id) {
-                let store = RunStore::open(&out.join(engine.name()))?;
-                let trajectory = store.read_run(&episode.id)?;
-                let run = Replayed {
-                    id: episode.id.clone(),
-                    engine: engine.name().to_string(),
-                    result: Ok((trajectory, RunStatus::Completed, 0.0)),
-                    reused: true,
-                };
-                done(&run);
-                return Ok(run);
-            }
-            let run = Replayed {
-                id: episode.id.clone(),
-                engine: engine.name().to_string(),
-                result: replay_one(engine, prepared, episode, params),
-                reused: false,
-            };
-            {
-                let _guard = lock.lock().unwrap_or_else(|p| p.into_inner());
-                store_replayed(out, engine, &run)?;
-            }
-            done(&run);
-            Ok(run)
+            let job = replay_job(
+                engines[e].name(),
+                prepared,
+                params,
+                &prepared.episodes[k].id,
+            );
+            ((e, k), job)
         })
         .collect();
-    results.into_iter().collect()
+    let finished = std::sync::Mutex::new(Vec::new());
+    let mut keep = |(e, k): (usize, usize), end: ChildEnd| -> Result<()> {
+        let engine = engines[e].as_ref();
+        let run = Replayed {
+            id: prepared.episodes[k].id.clone(),
+            engine: engine.name().to_string(),
+            result: replayed_result(end),
+            reused: false,
+        };
+        // The parent alone writes the results directories, run by run, so
+        // that an interrupted batch keeps every finished run.
+        let mut f = finished.lock().unwrap_or_else(|p| p.into_inner());
+        store_replayed(out, engine, &run)?;
+        done(&run);
+        f.push(run);
+        Ok(())
+    };
+    match executor {
+        ReplayExecutor::Local { launcher, jobs: n } => {
+            let queue = std::sync::Mutex::new(jobs.into_iter());
+            let keep = std::sync::Mutex::new(&mut keep);
+            let errors = std::sync::Mutex::new(Vec::new());
+            std::thread::scope(|scope| {
+                for _ in 0..(*n).max(1) {
+                    scope.spawn(|| loop {
+                        let next = queue.lock().unwrap_or_else(|p| p.into_inner()).next();
+                        let Some((key, job)) = next else { break };
+                        let end = run_child(launcher, &job, None);
+                        let keep = keep.lock().unwrap_or_else(|p| p.into_inner());
+                        if let Err(e) = (*keep)(key, end) {
+                            errors.lock().unwrap_or_else(|p| p.into_inner()).push(e);
+                            break;
+                        }
+                    });
+                }
+            });
+            if let Some(e) = errors.into_inner().unwrap_or_default().into_iter().next() {
+                return Err(e);
+            }
+        }
+        ReplayExecutor::Slurm { launcher, options } => {
+            if !jobs.is_empty() {
+                realitygap_runner::slurm::run_array(
+                    jobs,
+                    &out.join("slurm"),
+                    launcher,
+                    options,
+                    &mut |key, end, _| keep(key, end),
+                )?;
+            }
+        }
+    }
+    runs.extend(finished.into_inner().unwrap_or_default());
+    Ok(runs)
 }
