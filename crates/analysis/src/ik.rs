@@ -454,7 +454,14 @@ fn prior_per_frame(
     times
         .iter()
         .map(|&t| {
-            let tick = ((t - t0) / period_s).max(0.0);
+            if t < t0 {
+                // Before the commanded motion: at rest where it starts.
+                return Prior {
+                    angles_rad: track.first().cloned().unwrap_or_default(),
+                    scale_rad: scale(0),
+                };
+            }
+            let tick = (t - t0) / period_s;
             let i = tick.floor() as usize;
             if i + 1 >= track.len() {
                 return Prior {

@@ -118,7 +118,7 @@ pub fn run(args: Args) -> Result<()> {
         .iter()
         .filter_map(|e| {
             let link = prepared.robot.link_by_name(&prepared.link)?;
-            realitygap_study::replay::kinematic_run(e, &prepared.robot, link, params.delay_s())
+            realitygap_study::replay::kinematic_run(e, &prepared, link, params.delay_s())
                 .map(|t| (e.id.clone(), t))
         })
         .collect();
@@ -141,8 +141,7 @@ pub fn run(args: Args) -> Result<()> {
         sources.push((engine.name().to_string(), mine));
     }
     let names: Vec<String> = prepared
-        .robot
-        .actuated_joints()
+        .replayed_joints()
         .iter()
         .map(|&j| prepared.robot.joints[j].name.clone())
         .collect();

@@ -6,8 +6,16 @@
 //! (by default the first three quarters by run id, as the study's runs
 //! 1-15 of 20), then every frame of every run is solved with them. Each
 //! run is stored again with its joint angles (the run CSV's `q<j>_rad`
-//! columns) and its residual in its manifest entry (`extra.ik`); the fit in
-//! the manifest's settings (`ik`).
+//! columns) and its residual in its manifest entry (`extra.ik`); the fit
+//! is in the manifest's settings (`ik`), with the robot's URDF, the joints
+//! and the tracked link.
+//!
+//! The study's velocity commands are not reconstructed from the solved
+//! angles: the controller's gain (10 per second) turns the angles' error
+//! where the pose barely determines them (a few degrees at the upright
+//! pose) into saturated commands. The study is compared in joint space
+//! with the scenes run under their own controller (`compare
+//! --joint-space`).
 
 use anyhow::{anyhow, bail, Context, Result};
 use realitygap_analysis::ik::{fit, solve_run, CaptureRun, IkFit, SKIP_FRAMES};
@@ -157,6 +165,23 @@ pub fn solve_import(
     }
     let mut settings = store.manifest().settings.clone();
     if let Value::Object(map) = &mut settings {
+        // What `replay` and `tune --recordings` read of an import.
+        if robot.source.is_file() {
+            let urdf = std::fs::canonicalize(&robot.source).unwrap_or(robot.source.clone());
+            map.insert("urdf".into(), json!(urdf.display().to_string()));
+        }
+        map.insert("joints".into(), json!(scene.controlled_joints()));
+        if let Some(link) = scene
+            .tracked
+            .iter()
+            .find(|t| t.role == WRIST)
+            .and_then(|t| match &t.target {
+                realitygap_core::scene::TrackTarget::Link(l) => Some(l.clone()),
+                realitygap_core::scene::TrackTarget::Object(_) => None,
+            })
+        {
+            map.insert("end_effector_link".into(), json!(link));
+        }
         map.insert(
             "ik".into(),
             json!({

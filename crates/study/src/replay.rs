@@ -83,6 +83,40 @@ pub struct Prepared {
     pub real_dir: PathBuf,
 }
 
+impl Prepared {
+    /// The robot's joints the replay drives, in the scene's actuator
+    /// order: every moving joint for the generated scene, the controlled
+    /// joints of a scene of the user's.
+    pub fn replayed_joints(&self) -> Vec<usize> {
+        self.scene
+            .controlled_joints()
+            .iter()
+            .filter_map(|name| self.robot.joint_by_name(name))
+            .collect()
+    }
+
+    /// World poses of `link` for rows of the replayed joints' angles (rad):
+    /// forward kinematics from the scene's base, its held joints at their
+    /// angles.
+    pub fn link_poses(&self, rows: &[Vec<f64>], link: usize) -> Vec<Option<Pose>> {
+        let mut full = vec![0.0; self.robot.joints.len()];
+        for (name, &a) in &self.scene.robot.held_joints_rad {
+            if let Some(j) = self.robot.joint_by_name(name) {
+                full[j] = a;
+            }
+        }
+        let joints = self.replayed_joints();
+        rows.iter()
+            .map(|row| {
+                for (&j, &q) in joints.iter().zip(row) {
+                    full[j] = q;
+                }
+                self.robot.link_pose(&self.scene.robot.base, &full, link)
+            })
+            .collect()
+    }
+}
+
 /// The TOML of the generated replay scene.
 pub fn scene_toml(robot: &RobotModel, urdf: &Path, link: &str, duration_s: f64) -> String {
     let mut s = String::new();
@@ -178,18 +212,37 @@ pub fn prepare_replay(req: &ReplayRequest) -> Result<Prepared> {
                 .collect()
         })
         .unwrap_or_default();
-    let moving: Vec<String> = robot
-        .actuated_joints()
-        .iter()
-        .map(|&j| robot.joints[j].name.clone())
-        .collect();
+    // The joints replayed: the user's scene's controlled joints (the rest
+    // of the robot held as the scene says), else every moving joint.
+    let user_scene = match req.scene {
+        Some(path) => Some(Scene::from_file(path)?),
+        None => None,
+    };
+    let moving: Vec<String> = match &user_scene {
+        Some(s) => s
+            .controlled_joints()
+            .iter()
+            .map(|j| j.to_string())
+            .collect(),
+        None => robot
+            .actuated_joints()
+            .iter()
+            .map(|&j| robot.joints[j].name.clone())
+            .collect(),
+    };
     if !recorded.is_empty() && recorded != moving {
         bail!(
-            "{}: the episodes are of the joints {}, robot '{}' ({}) has the moving joints {}",
+            "{}: the episodes are of the joints {}, {} {}",
             req.real_dir.display(),
             recorded.join(", "),
-            robot.name,
-            urdf.display(),
+            match req.scene {
+                Some(p) => format!("the scene {} controls the joints", p.display()),
+                None => format!(
+                    "robot '{}' ({}) has the moving joints",
+                    robot.name,
+                    urdf.display()
+                ),
+            },
             moving.join(", ")
         );
     }
@@ -217,7 +270,7 @@ pub fn prepare_replay(req: &ReplayRequest) -> Result<Prepared> {
         }
         if real.joint_count() != moving.len() {
             bail!(
-                "{}: run '{}' has {} joints, robot '{}' {}",
+                "{}: run '{}' has {} joints, robot '{}' (or the scene) {}",
                 req.real_dir.display(),
                 run.id,
                 real.joint_count(),
@@ -241,9 +294,9 @@ pub fn prepare_replay(req: &ReplayRequest) -> Result<Prepared> {
     std::fs::create_dir_all(req.out).with_context(|| format!("creating {}", req.out.display()))?;
     let absolute = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf());
     let abs_urdf = absolute(&urdf);
-    let (scene, scene_file) = match req.scene {
-        Some(path) => (Scene::from_file(path)?, absolute(path)),
-        None => {
+    let (scene, scene_file) = match (req.scene, user_scene) {
+        (Some(path), Some(scene)) => (scene, absolute(path)),
+        _ => {
             let text = scene_toml(&robot, &abs_urdf, &link, duration_s);
             let path = req.out.join(SCENE_FILE);
             std::fs::write(&path, &text).with_context(|| format!("writing {}", path.display()))?;
@@ -256,16 +309,31 @@ pub fn prepare_replay(req: &ReplayRequest) -> Result<Prepared> {
     // through the PD servo.
     let mut scene = scene;
     fill_default_gains(&mut scene);
-    Ok(Prepared {
+    let mut prepared = Prepared {
         robot,
         scene,
-        episodes,
+        episodes: Vec::new(),
         link,
         scene_file,
         urdf: abs_urdf,
         packages: req.packages.to_vec(),
         real_dir: absolute(req.real_dir),
-    })
+    };
+    // The recorded end effector by forward kinematics of the recorded
+    // angles in the scene's world (a motion capture's own bodies are in
+    // the capture's frame).
+    let link_index = prepared.robot.link_by_name(&prepared.link);
+    for mut e in episodes {
+        if let (Some(l), Some(q)) = (link_index, &e.real.joint_angles_rad) {
+            let poses = prepared.link_poses(q, l);
+            e.real.bodies = vec![BodyTrack {
+                role: WRIST.into(),
+                poses,
+            }];
+        }
+        prepared.episodes.push(e);
+    }
+    Ok(prepared)
 }
 
 /// The replay plan of one episode in `scene` (its actuators carrying
@@ -279,7 +347,7 @@ pub fn plan_for(episode: &Episode, scene: &Scene, params: &PhysicalParams) -> Re
 /// through forward kinematics (`None` for effort commands).
 pub fn kinematic_run(
     episode: &Episode,
-    robot: &RobotModel,
+    prepared: &Prepared,
     link: usize,
     delay_s: f64,
 ) -> Option<Trajectory> {
@@ -287,7 +355,7 @@ pub fn kinematic_run(
     let commands = real.commands.as_ref()?;
     let first = real.joint_angles_rad.as_ref()?.first()?;
     let angles = kinematic_angles(commands, first, &real.time_s, delay_s)?;
-    let poses = robot.link_poses_from_actuated(&Pose::IDENTITY, &angles, link);
+    let poses = prepared.link_poses(&angles, link);
     Some(Trajectory {
         time_s: real.time_s.clone(),
         bodies: vec![BodyTrack {
@@ -376,7 +444,7 @@ pub fn store_kinematic(out: &Path, prepared: &Prepared, delay_s: f64) -> Result<
     store.set_settings(json!({"model": "the recorded commands with perfect tracking, through forward kinematics", "delay_s": delay_s}))?;
     let mut count = 0;
     for e in &prepared.episodes {
-        if let Some(t) = kinematic_run(e, &prepared.robot, link, delay_s) {
+        if let Some(t) = kinematic_run(e, prepared, link, delay_s) {
             store.write_run(RunEntry::new(&e.id), &t)?;
             count += 1;
         }
@@ -447,7 +515,7 @@ pub fn joint_space_row(
     prepared: &Prepared,
     runs: &[(String, Trajectory)],
 ) -> Option<JointSpaceRow> {
-    let joints = prepared.robot.actuated_joints().len();
+    let joints = prepared.replayed_joints().len();
     let mut sum = vec![0.0; joints];
     let mut abs_sum = vec![0.0; joints];
     let mut max = vec![0.0f64; joints];
@@ -581,6 +649,7 @@ pub fn write_record(req: &ReplayRequest, prepared: &Prepared) -> Result<()> {
     let record = json!({
         "recordings": abs(req.real_dir),
         "urdf": abs(&prepared.robot.source),
+        "scene": prepared.scene_file,
         "packages": req.packages,
         "link": prepared.link,
     });
@@ -625,7 +694,14 @@ pub fn compare_replay(
         .unwrap_or_default();
     let real_dir = field("recordings")?;
     let urdf = field("urdf")?;
-    let scene = dir.join(SCENE_FILE);
+    // The replay's scene: the one it recorded (a scene of the user's),
+    // else the generated one in the folder.
+    let scene = record
+        .get("scene")
+        .and_then(Value::as_str)
+        .map(PathBuf::from)
+        .filter(|p| p.is_file())
+        .unwrap_or_else(|| dir.join(SCENE_FILE));
     let params = PhysicalParams::none();
     let mut prepared = prepare_replay(&ReplayRequest {
         real_dir: &real_dir,
@@ -651,18 +727,19 @@ pub fn compare_replay(
                 .join(", ")
         )
     })?;
-    let with_link = |t: &mut Trajectory, robot: &RobotModel| {
+    let with_link = |t: &mut Trajectory, prepared: &Prepared| {
         if let Some(q) = &t.joint_angles_rad {
             t.bodies = vec![BodyTrack {
                 role: WRIST.into(),
-                poses: robot.link_poses_from_actuated(&Pose::IDENTITY, q, link_index),
+                poses: prepared.link_poses(q, link_index),
             }];
         }
     };
-    let robot = prepared.robot.clone();
-    for e in &mut prepared.episodes {
-        with_link(&mut e.real, &robot);
+    let mut episodes = std::mem::take(&mut prepared.episodes);
+    for e in &mut episodes {
+        with_link(&mut e.real, &prepared);
     }
+    prepared.episodes = episodes;
     prepared.link = link_name;
     let mut sources: Vec<PathBuf> = std::fs::read_dir(dir)
         .with_context(|| format!("reading {}", dir.display()))?
@@ -681,7 +758,7 @@ pub fn compare_replay(
                 continue;
             }
             let mut t = store.read_run(&r.id)?;
-            with_link(&mut t, &robot);
+            with_link(&mut t, &prepared);
             runs.push((r.id.clone(), t));
         }
         let name = source
@@ -690,10 +767,10 @@ pub fn compare_replay(
             .unwrap_or_default();
         rows.extend(joint_space_row(&name, &prepared, &runs));
     }
-    let names = robot
-        .actuated_joints()
+    let names = prepared
+        .replayed_joints()
         .iter()
-        .map(|&j| robot.joints[j].name.clone())
+        .map(|&j| prepared.robot.joints[j].name.clone())
         .collect();
     Ok((rows, names, prepared.link))
 }
@@ -766,8 +843,7 @@ pub fn joint_figures(
         })
     };
     prepared
-        .robot
-        .actuated_joints()
+        .replayed_joints()
         .iter()
         .enumerate()
         .map(|(j, &ji)| {
