@@ -26,7 +26,19 @@ pub fn compiled_engines() -> Vec<Box<dyn Engine>> {
     engines.push(Box::new(realitygap_engine_bullet::BulletEngine));
     #[cfg(feature = "physx")]
     engines.push(Box::new(realitygap_engine_physx::PhysxEngine));
+    #[cfg(feature = "ideal")]
+    engines.push(Box::new(realitygap_engine_ideal::IdealEngine));
     engines
+}
+
+/// The compiled-in engines that simulate physics: every one but the
+/// physics-free model (`ideal`), which has no dynamics to hand over, no
+/// contact and no forces (for the checks of physical effects).
+pub fn physics_engines() -> Vec<Box<dyn Engine>> {
+    compiled_engines()
+        .into_iter()
+        .filter(|e| e.name() != realitygap_core::engine::PHYSICS_FREE_ENGINE)
+        .collect()
 }
 
 /// The study's recordings (with `kinova_description`), for tests and

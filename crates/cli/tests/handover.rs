@@ -8,7 +8,7 @@ use realitygap_core::engine::Engine;
 use realitygap_core::testing;
 
 fn engines() -> Vec<Box<dyn Engine>> {
-    realitygap::compiled_engines()
+    realitygap::physics_engines()
 }
 
 #[test]

@@ -40,7 +40,7 @@ fn push(dir: &Path, urdf: &Path) -> Vec<(String, Vec3)> {
         text(&out.stdout),
         text(&out.stderr)
     );
-    realitygap::compiled_engines()
+    realitygap::physics_engines()
         .iter()
         .map(|e| {
             // `<engine>-<robot>` when --robot replaces the scene's robot.
@@ -103,7 +103,7 @@ fn damaged_obj_and_collada_meshes_are_errors_naming_the_file() {
         ("model_bad_index_obj.urdf", "bad_index.obj"),
     ] {
         let dir = scratch("mesh-tests", urdf);
-        for engine in realitygap::compiled_engines() {
+        for engine in realitygap::physics_engines() {
             let out = realitygap(&[
                 "run",
                 &path(&scene),

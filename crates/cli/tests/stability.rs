@@ -65,7 +65,7 @@ fn the_run(dir: &Path) -> (serde_json::Value, Trajectory) {
 }
 
 fn engines_compiled() -> Vec<&'static str> {
-    realitygap::compiled_engines()
+    realitygap::physics_engines()
         .iter()
         .map(|e| e.name())
         .collect()

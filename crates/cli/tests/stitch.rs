@@ -16,7 +16,7 @@ use std::path::Path;
 use std::process::Command;
 
 fn engines() -> Vec<Box<dyn Engine>> {
-    realitygap::compiled_engines()
+    realitygap::physics_engines()
 }
 
 fn engine(name: &str) -> Option<Box<dyn Engine>> {

@@ -394,6 +394,9 @@ pub enum PositionLaw {
     /// `POSITION_CONTROL` motor with positionGain `kp dt / kv`): first
     /// order, time constant `kv / kp`.
     FirstOrder,
+    /// Perfect tracking: the joint is at the target at once (the
+    /// physics-free model).
+    Instant,
 }
 
 /// The rotor's angle at `t_s` under the position step through a servo of
@@ -402,6 +405,7 @@ pub fn rotor_position_rad(law: PositionLaw, t_s: f64) -> f64 {
     match law {
         PositionLaw::Pd => rotor_analytic_rad(crate::trajectory::CommandKind::Position, t_s),
         PositionLaw::FirstOrder => STEP_POSITION_RAD * (1.0 - (-t_s * ROTOR_KP / ROTOR_KV).exp()),
+        PositionLaw::Instant => STEP_POSITION_RAD,
     }
 }
 
@@ -504,6 +508,12 @@ pub fn step_response_with(
 /// two angles over the continuation, rad, and asserts the state reports
 /// the position command.
 pub fn command_round_trip(subject: Subject<'_>, portable: bool) -> f64 {
+    command_round_trip_with(subject, portable, true)
+}
+
+/// [`command_round_trip`]; without `efforts` the middle phase is a
+/// velocity command (for an engine that takes no efforts).
+pub fn command_round_trip_with(subject: Subject<'_>, portable: bool, efforts: bool) -> f64 {
     use crate::engine::ServoCommand;
     use crate::trajectory::CommandKind;
     let (scene, robot) = rotor();
@@ -537,12 +547,17 @@ pub fn command_round_trip(subject: Subject<'_>, portable: bool) -> f64 {
     };
     phase(&mut a, &mut b, steps(0.3));
     for sim in [&mut a, &mut b] {
-        sim.set_joint_commands(&[ServoCommand::effort(-STEP_EFFORT_NM)])
-            .unwrap();
-        assert_eq!(
-            sim.state().unwrap().servo_commands[0].kind,
-            CommandKind::Effort
-        );
+        if efforts {
+            sim.set_joint_commands(&[ServoCommand::effort(-STEP_EFFORT_NM)])
+                .unwrap();
+            assert_eq!(
+                sim.state().unwrap().servo_commands[0].kind,
+                CommandKind::Effort
+            );
+        } else {
+            sim.set_joint_commands(&[ServoCommand::velocity(-STEP_VELOCITY_RAD_S)])
+                .unwrap();
+        }
     }
     phase(&mut a, &mut b, steps(0.2));
     for sim in [&mut a, &mut b] {

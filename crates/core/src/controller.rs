@@ -24,6 +24,7 @@
 //! that reports itself unstable. The run then ends as
 //! [`RunStatus::Diverged`] with the samples recorded so far.
 
+use crate::actuator::{ActuatorStage, StageParams, StageUnit};
 use crate::engine::{Engine, EngineError, EngineSettings, ModelVariation, Simulation};
 use crate::params::PhysicalParams;
 use crate::pose::Pose;
@@ -380,6 +381,8 @@ pub struct ControllerLoop {
     pending: VecDeque<(f64, Vec<f64>)>,
     /// The servo targets in force, rad/s.
     in_force: Vec<f64>,
+    /// The actuator stage from `in_force` to the servos' targets.
+    stage: ActuatorStage,
     tick: usize,
     trajectory: Trajectory,
     angle_rows: Vec<Vec<f64>>,
@@ -400,6 +403,9 @@ pub struct ControlParams {
     pub delay_s: f64,
     /// Acceleration limit of the velocity loop, rad/s^2 (`None`: none).
     pub max_accel_rad_s2: Option<f64>,
+    /// The actuator stage between the command in force and the servo's
+    /// target ([`crate::actuator`]).
+    pub stage: StageParams,
 }
 
 impl ControlParams {
@@ -409,6 +415,7 @@ impl ControlParams {
             offsets_rad: params.offsets_rad(scene),
             delay_s: params.delay_s(),
             max_accel_rad_s2: Some(params.max_accel_rad_s2()).filter(|a| a.is_finite()),
+            stage: StageParams::from_params(params),
         }
     }
 }
@@ -454,6 +461,7 @@ impl ControllerLoop {
                 .map_or(f64::INFINITY, |a| a * period_s),
             pending: VecDeque::new(),
             in_force: vec![0.0; joints],
+            stage: ActuatorStage::new(control.stage, StageUnit::Velocity, &vec![0.0; joints]),
             tick: 0,
             trajectory: Trajectory::with_bodies(&roles),
             roles,
@@ -599,13 +607,14 @@ impl ControllerLoop {
             let command = self.command(t_s, &angles);
             self.pending.push_back((t_s + self.delay_s, command));
             self.release_due(t_s);
-            sim.set_joint_velocity_targets(&self.in_force);
+            let targets = self.targets(0.0);
+            sim.set_joint_velocity_targets(&targets);
             self.trajectory.time_s.push(t_s);
             for (track, pose) in self.trajectory.bodies.iter_mut().zip(&poses) {
                 track.poses.push(Some(*pose));
             }
             self.angle_rows.push(angles.clone());
-            self.command_rows.push(self.in_force.clone());
+            self.command_rows.push(targets);
             self.tick += 1;
             if let Some(status) = self.step_period(sim, t_s, steps_per_period)? {
                 self.status = Some(status);
@@ -629,17 +638,38 @@ impl ControllerLoop {
         steps: u64,
     ) -> Result<Option<RunStatus>, RunError> {
         let dt = sim.timestep_s();
+        let dynamic = self.stage.params().is_dynamic(StageUnit::Velocity);
+        // A moving stage is integrated, and its target set, about every
+        // millisecond (at least every engine step).
+        let chunk = if dynamic {
+            ((1e-3 / dt).round() as u64).max(1)
+        } else {
+            steps
+        };
         let mut done = 0u64;
         while done < steps {
-            if done > 0 && self.release_due(t_s + done as f64 * dt) {
-                sim.set_joint_velocity_targets(&self.in_force);
+            if done > 0 {
+                let released = self.release_due(t_s + done as f64 * dt);
+                if released && !dynamic {
+                    let targets = self.targets(0.0);
+                    sim.set_joint_velocity_targets(&targets);
+                }
             }
-            // Step up to the engine step where the next command falls due.
+            // Step up to the engine step where the next command falls due
+            // (or the stage's next update).
             let next = match self.pending.front() {
                 Some((due, _)) => ((due - t_s) / dt - 1e-9).ceil().max(0.0) as u64,
                 None => steps,
             }
+            .min(done + chunk)
             .clamp(done + 1, steps);
+            if dynamic {
+                // The stage moves over the steps now taken.
+                self.stage
+                    .advance(&self.in_force, (next - done) as f64 * dt);
+                let targets = self.stage.targets().to_vec();
+                sim.set_joint_velocity_targets(&targets);
+            }
             match sim.step_n(next - done) {
                 Ok(()) => self.engine_steps += next - done,
                 Err(EngineError::Unstable {
@@ -658,6 +688,21 @@ impl ControllerLoop {
             done = next;
         }
         Ok(None)
+    }
+
+    /// The servos' targets from the commands in force through the actuator
+    /// stage, advanced by `h_s` (0 for a stage without dynamics, which
+    /// then only applies its deadband and limit; a dynamic stage reports
+    /// its current targets and is advanced in [`Self::step_period`]).
+    fn targets(&mut self, h_s: f64) -> Vec<f64> {
+        let params = *self.stage.params();
+        if params.is_identity() {
+            return self.in_force.clone();
+        }
+        if params.is_dynamic(StageUnit::Velocity) {
+            return self.stage.targets().to_vec();
+        }
+        self.stage.advance(&self.in_force, h_s).to_vec()
     }
 
     /// Ends the run: the samples recorded, how it ended, the steps taken
@@ -1080,6 +1125,53 @@ link = "l2"
                 assert!((b - a).abs().to_degrees() <= 5.0 + 1e-9);
             }
         }
+    }
+
+    #[test]
+    fn the_actuator_stage_gives_the_servo_a_second_order_response() {
+        let scene = scene();
+        // The real arm's loop (METHOD.md): w = 19 rad/s, zeta = 0.5.
+        let control = ControlParams {
+            stage: StageParams {
+                frequency_rad_s: Some(19.0),
+                damping_ratio: 0.5,
+                ..StageParams::default()
+            },
+            ..Default::default()
+        };
+        let free = run_scene(&mut ideal(0.001), &scene, &RunOptions::default()).unwrap();
+        let out =
+            run_scene_with(&mut ideal(0.001), &scene, &RunOptions::default(), &control).unwrap();
+        let sent = out.trajectory.joint_velocity_commands_rad_s.unwrap();
+        // The target overshoots the command's clamp of 30 deg/s...
+        let fastest = sent
+            .iter()
+            .map(|r| r[0].to_degrees().abs())
+            .fold(0.0, f64::max);
+        assert!(fastest > 31.0 && fastest < 36.0, "{fastest}");
+        // ... and joint 1 overshoots its -10 degree target, and 0 on the
+        // way back (sent back to 0 at 0.5 s).
+        let q: Vec<f64> = out
+            .trajectory
+            .joint_angles_rad
+            .unwrap()
+            .iter()
+            .map(|r| r[0].to_degrees())
+            .collect();
+        let lowest = q.iter().copied().fold(f64::INFINITY, f64::min);
+        assert!(lowest < -10.5, "{lowest}");
+        assert!(q[q.len() - 1] > 0.5, "{}", q[q.len() - 1]);
+        let q_free: Vec<f64> = free
+            .trajectory
+            .joint_angles_rad
+            .unwrap()
+            .iter()
+            .map(|r| r[0].to_degrees())
+            .collect();
+        assert!(
+            q_free.iter().all(|&a| (-10.0 - 1e-9..=1e-9).contains(&a)),
+            "no stage, no overshoot: {q_free:?}"
+        );
     }
 
     #[test]

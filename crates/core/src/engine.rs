@@ -31,6 +31,11 @@ pub use crate::trajectory::CommandKind;
 use std::collections::BTreeMap;
 use std::fmt;
 
+/// The name of the physics-free model's engine (perfect tracking, the
+/// `realitygap-engine-ideal` crate): a baseline source, left out where
+/// engines are compared as physics (stitching plans, handovers).
+pub const PHYSICS_FREE_ENGINE: &str = "ideal";
+
 /// Engine settings by key, as written in a scene's `[engine.NAME]` table or
 /// given on the command line (`--set key=value`). The engine checks them.
 pub type EngineSettings = BTreeMap<String, SettingValue>;

@@ -25,6 +25,7 @@
 
 #![forbid(unsafe_code)]
 
+pub mod actuator;
 pub mod conformance;
 pub mod controller;
 pub mod engine;

@@ -29,6 +29,12 @@
 //! max_speed_deg_s = 30.0
 //! max_accel_deg_s2 = 120.0    # acceleration limit of the velocity loop
 //!
+//! [actuator]                  # the actuator stage between command and servo
+//! frequency_rad_s = 19.0      # second-order response of the velocity loop
+//! damping_ratio = 0.5
+//! max_velocity_deg_s = 40.0   # the servo target's largest speed
+//! deadband_deg_s = 0.5        # commands smaller than this do not move the joint
+//!
 //! [engine.mujoco]             # engine settings, as in a scene's [engine.NAME]
 //! timestep_s = 0.002
 //! ```
@@ -143,6 +149,35 @@ pub struct ControllerParams {
     pub max_accel_deg_s2: Option<f64>,
 }
 
+/// The actuator stage: how the command in force (after the controller's
+/// delay and acceleration limit) becomes the target the engine's servo
+/// tracks, the same for every engine (see [`crate::controller`]). For
+/// velocity commands (the study's controller, a replay of velocity
+/// commands) the stage acts on the velocity target; for a replay's
+/// position commands on the position target (the deadband does not
+/// apply).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ActuatorParams {
+    /// Natural frequency of a second-order response of the target to the
+    /// command, rad/s (`target'' = w^2 (command - target) - 2 zeta w
+    /// target'`); absent: the target is the command.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub frequency_rad_s: Option<f64>,
+    /// Damping ratio of that response (default 1, critically damped).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub damping_ratio: Option<f64>,
+    /// Largest speed of the target, degrees/s (of the velocity target's
+    /// value for velocity commands, of the position target's rate for
+    /// position commands).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_velocity_deg_s: Option<f64>,
+    /// Velocity commands smaller than this are 0, degrees/s (a motor's
+    /// stiction).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub deadband_deg_s: Option<f64>,
+}
+
 /// The typed physical parameters of a run (see the module documentation).
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct PhysicalParams {
@@ -164,6 +199,9 @@ pub struct PhysicalParams {
     /// Controller and velocity loop.
     #[serde(skip_serializing_if = "is_default")]
     pub controller: ControllerParams,
+    /// The actuator stage.
+    #[serde(skip_serializing_if = "is_default")]
+    pub actuator: ActuatorParams,
     /// Engine settings by engine name (`[engine.mujoco]`), applied over the
     /// scene's; `--set` on the command line still wins.
     #[serde(skip)]
@@ -213,11 +251,19 @@ pub enum ParamKey {
     ControllerMaxSpeed,
     /// `controller.max_accel_deg_s2`
     ControllerMaxAccel,
+    /// `actuator.frequency_rad_s`
+    ActuatorFrequency,
+    /// `actuator.damping_ratio`
+    ActuatorDamping,
+    /// `actuator.max_velocity_deg_s`
+    ActuatorMaxVelocity,
+    /// `actuator.deadband_deg_s`
+    ActuatorDeadband,
 }
 
 impl ParamKey {
     /// Every key, in the file's order.
-    pub const ALL: [ParamKey; 17] = [
+    pub const ALL: [ParamKey; 21] = [
         ParamKey::JointDamping,
         ParamKey::JointArmature,
         ParamKey::JointFrictionloss,
@@ -235,6 +281,10 @@ impl ParamKey {
         ParamKey::ControllerGain,
         ParamKey::ControllerMaxSpeed,
         ParamKey::ControllerMaxAccel,
+        ParamKey::ActuatorFrequency,
+        ParamKey::ActuatorDamping,
+        ParamKey::ActuatorMaxVelocity,
+        ParamKey::ActuatorDeadband,
     ];
 
     /// The key as written in a file, with `<joint>`, `<link>`, `<object>`
@@ -258,6 +308,10 @@ impl ParamKey {
             ParamKey::ControllerGain => "controller.gain_per_s",
             ParamKey::ControllerMaxSpeed => "controller.max_speed_deg_s",
             ParamKey::ControllerMaxAccel => "controller.max_accel_deg_s2",
+            ParamKey::ActuatorFrequency => "actuator.frequency_rad_s",
+            ParamKey::ActuatorDamping => "actuator.damping_ratio",
+            ParamKey::ActuatorMaxVelocity => "actuator.max_velocity_deg_s",
+            ParamKey::ActuatorDeadband => "actuator.deadband_deg_s",
         }
     }
 
@@ -272,6 +326,10 @@ impl ParamKey {
                 | ParamKey::ControllerGain
                 | ParamKey::ControllerMaxSpeed
                 | ParamKey::ControllerMaxAccel
+                | ParamKey::ActuatorFrequency
+                | ParamKey::ActuatorDamping
+                | ParamKey::ActuatorMaxVelocity
+                | ParamKey::ActuatorDeadband
         )
     }
 
@@ -292,6 +350,16 @@ impl ParamKey {
             ParamKey::ControllerMaxAccel => Some(
                 "the velocity target in force moves toward each new command by at most max_accel x the control period",
             ),
+            ParamKey::ActuatorFrequency => Some(
+                "the actuator stage: the servo's target follows the command in force through a second-order response of this natural frequency, integrated every millisecond",
+            ),
+            ParamKey::ActuatorDamping => Some("the actuator stage: that response's damping ratio"),
+            ParamKey::ActuatorMaxVelocity => {
+                Some("the actuator stage: the servo's target at most this fast")
+            }
+            ParamKey::ActuatorDeadband => {
+                Some("the actuator stage: velocity commands smaller than this are 0")
+            }
             _ => None,
         }
     }
@@ -356,6 +424,8 @@ struct FileParams {
     #[serde(default)]
     controller: Option<FileController>,
     #[serde(default)]
+    actuator: Option<FileActuator>,
+    #[serde(default)]
     engine: BTreeMap<String, BTreeMap<String, Spanned<toml::Value>>>,
 }
 
@@ -401,6 +471,15 @@ struct FileController {
     gain_per_s: Num,
     max_speed_deg_s: Num,
     max_accel_deg_s2: Num,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FileActuator {
+    frequency_rad_s: Num,
+    damping_ratio: Num,
+    max_velocity_deg_s: Num,
+    deadband_deg_s: Num,
 }
 
 /// The allowed range of a value.
@@ -567,6 +646,30 @@ impl PhysicalParams {
                 )?,
             };
         }
+        if let Some(a) = &file.actuator {
+            p.actuator = ActuatorParams {
+                frequency_rad_s: r.value(
+                    "actuator.frequency_rad_s",
+                    &a.frequency_rad_s,
+                    Range::Positive,
+                )?,
+                damping_ratio: r.value(
+                    "actuator.damping_ratio",
+                    &a.damping_ratio,
+                    Range::Positive,
+                )?,
+                max_velocity_deg_s: r.value(
+                    "actuator.max_velocity_deg_s",
+                    &a.max_velocity_deg_s,
+                    Range::Positive,
+                )?,
+                deadband_deg_s: r.value(
+                    "actuator.deadband_deg_s",
+                    &a.deadband_deg_s,
+                    Range::NonNegative,
+                )?,
+            };
+        }
         for (engine, table) in &file.engine {
             let mut settings = EngineSettings::new();
             for (key, value) in table {
@@ -652,6 +755,15 @@ impl PhysicalParams {
                     ("max_accel_deg_s2", self.controller.max_accel_deg_s2),
                 ],
             ),
+            (
+                "actuator",
+                vec![
+                    ("frequency_rad_s", self.actuator.frequency_rad_s),
+                    ("damping_ratio", self.actuator.damping_ratio),
+                    ("max_velocity_deg_s", self.actuator.max_velocity_deg_s),
+                    ("deadband_deg_s", self.actuator.deadband_deg_s),
+                ],
+            ),
         ];
         for (section, fields) in sections {
             if fields.iter().any(|(_, v)| v.is_some()) {
@@ -729,6 +841,13 @@ impl PhysicalParams {
                 ParamKey::ControllerMaxAccel,
                 self.controller.max_accel_deg_s2,
             ),
+            (ParamKey::ActuatorFrequency, self.actuator.frequency_rad_s),
+            (ParamKey::ActuatorDamping, self.actuator.damping_ratio),
+            (
+                ParamKey::ActuatorMaxVelocity,
+                self.actuator.max_velocity_deg_s,
+            ),
+            (ParamKey::ActuatorDeadband, self.actuator.deadband_deg_s),
         ] {
             if v.is_some() {
                 keys.push((k, None));

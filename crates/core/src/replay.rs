@@ -19,6 +19,7 @@
 //! PD servo. The samples are recorded at the recording's own times, at the
 //! engine step nearest to each (at most half a timestep away).
 
+use crate::actuator::{ActuatorStage, StageUnit};
 use crate::controller::{RunError, RunOptions, RunOutcome, RunStatus};
 use crate::engine::{EngineError, ServoCommand, Simulation};
 use crate::params::PhysicalParams;
@@ -54,6 +55,9 @@ pub struct ReplayPlan {
     pub roles: Vec<String>,
     /// A tracked body farther than this from the origin means divergence, m.
     pub divergence_bound_m: f64,
+    /// The actuator stage between the recorded commands and the servos
+    /// (position and velocity commands; efforts pass as they are).
+    pub stage: crate::actuator::StageParams,
 }
 
 impl ReplayPlan {
@@ -240,6 +244,7 @@ impl ReplayPlan {
             delay_s: params.delay_s(),
             roles: scene.tracked.iter().map(|t| t.role.clone()).collect(),
             divergence_bound_m: RunOptions::default().divergence_bound_m,
+            stage: crate::actuator::StageParams::from_params(params),
         })
     }
 }
@@ -280,6 +285,20 @@ pub fn replay(sim: &mut dyn Simulation, plan: &ReplayPlan) -> Result<RunOutcome,
     state.time_s = 0.0;
     state.native = None;
     sim.set_state(&state)?;
+    // The actuator stage, on the joints commanded with the recording's kind
+    // (position or velocity).
+    let kind = plan.commands.kind;
+    let staged = !plan.stage.is_identity() && kind != CommandKind::Effort;
+    let unit = match kind {
+        CommandKind::Position => StageUnit::Position,
+        _ => StageUnit::Velocity,
+    };
+    let initial: Vec<f64> = commands
+        .iter()
+        .map(|c| if c.kind == kind { c.value } else { 0.0 })
+        .collect();
+    let mut stage = ActuatorStage::new(plan.stage, unit, &initial);
+    let mut input = initial;
     let mut in_force = commands.clone();
 
     let velocity_kind = plan.commands.kind == CommandKind::Velocity;
@@ -297,6 +316,19 @@ pub fn replay(sim: &mut dyn Simulation, plan: &ReplayPlan) -> Result<RunOutcome,
     while next_sample < rows {
         let t_s = steps as f64 * dt;
         plan.commands_at(t_s, dt, &mut commands, &mut scratch);
+        if staged {
+            // The stage's targets over this step, from the commands in
+            // force (the first step starts from the first commands).
+            for (i, c) in input.iter_mut().zip(&commands) {
+                *i = if c.kind == kind { c.value } else { 0.0 };
+            }
+            let out = stage.advance(&input, if steps == 0 { 0.0 } else { dt });
+            for (c, &v) in commands.iter_mut().zip(out) {
+                if c.kind == kind {
+                    c.value = v;
+                }
+            }
+        }
         // Record every sample whose nearest engine step is this one.
         while next_sample < rows && plan.sample_times_s[next_sample] < t_s + 0.5 * dt {
             sim.joint_angles_rad(&mut angles);
@@ -467,6 +499,7 @@ mod tests {
             delay_s,
             roles: vec![],
             divergence_bound_m: 10.0,
+            stage: Default::default(),
         };
         let target = |delay_s: f64, t_s: f64| {
             let (mut out, mut scratch) = (
@@ -502,6 +535,7 @@ mod tests {
             delay_s: 0.0,
             roles: vec![],
             divergence_bound_m: 10.0,
+            stage: Default::default(),
         };
         assert_eq!(plan.check(2), Ok(()));
         let mut bad = plan.clone();

@@ -8,6 +8,7 @@ const SPEC: KitSpec = KitSpec {
     rotor_settings: &["timestep_s=0.001"],
     step_tolerance_rad: [5e-4, 4e-3, 2e-3],
     position_law: PositionLaw::Pd,
+    takes_efforts: true,
     command_round_trip_rad: [0.0, 0.0],
 };
 

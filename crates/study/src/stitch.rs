@@ -338,7 +338,12 @@ fn scene_files(study: &Study, path: &Path) -> Result<Vec<StudySceneFile>> {
 fn engines_taking_part(registry: Registry, opts: &StitchOptions) -> Result<Vec<String>> {
     let known = engine_names(registry);
     let engines = if opts.engines.is_empty() {
-        known.clone()
+        // The physics-free model is a baseline, not a phase's engine.
+        known
+            .iter()
+            .filter(|e| *e != realitygap_core::engine::PHYSICS_FREE_ENGINE)
+            .cloned()
+            .collect()
     } else {
         opts.engines.clone()
     };

@@ -422,6 +422,19 @@ fn set_key(params: &mut PhysicalParams, key: &str, value: f64) -> Result<(), Str
     if c.max_accel_deg_s2.is_some() {
         params.controller.max_accel_deg_s2 = c.max_accel_deg_s2;
     }
+    let a = parsed.actuator;
+    if a.frequency_rad_s.is_some() {
+        params.actuator.frequency_rad_s = a.frequency_rad_s;
+    }
+    if a.damping_ratio.is_some() {
+        params.actuator.damping_ratio = a.damping_ratio;
+    }
+    if a.max_velocity_deg_s.is_some() {
+        params.actuator.max_velocity_deg_s = a.max_velocity_deg_s;
+    }
+    if a.deadband_deg_s.is_some() {
+        params.actuator.deadband_deg_s = a.deadband_deg_s;
+    }
     Ok(())
 }
 

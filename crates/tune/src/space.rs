@@ -375,10 +375,10 @@ pub fn params_of<'a>(
             [section @ ("joints" | "links" | "objects"), name, field] if !name.is_empty() => {
                 (format!("{section}.{}", quote(name)), *field)
             }
-            [section @ ("contact" | "controller"), field] => (section.to_string(), *field),
+            [section @ ("contact" | "controller" | "actuator"), field] => (section.to_string(), *field),
             _ => {
                 return Err(format!(
-                    "`{key}` is not a parameter key: expected joints.<joint>.<field>, links.<link>.<field>, objects.<object>.<field>, contact.<field> or controller.<field>"
+                    "`{key}` is not a parameter key: expected joints.<joint>.<field>, links.<link>.<field>, objects.<object>.<field>, contact.<field>, controller.<field> or actuator.<field>"
                 ))
             }
         };

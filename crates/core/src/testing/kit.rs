@@ -34,6 +34,10 @@ pub struct KitSpec {
     /// The law the engine's position servo follows at its default
     /// settings.
     pub position_law: PositionLaw,
+    /// Whether the engine takes effort commands (the physics-free model
+    /// does not: the kit then checks that an effort is refused, not
+    /// ignored).
+    pub takes_efforts: bool,
 }
 
 /// Settings from `key=value` pairs (values as on the command line).
@@ -61,6 +65,18 @@ pub fn report(engine: &dyn Engine, check: &str, value: f64, tolerance: f64) {
 /// ([`conformance::step_response`]), within the spec's tolerance.
 pub fn step_response(engine: &dyn Engine, spec: &KitSpec, kind: CommandKind) {
     let settings = settings(spec.rotor_settings);
+    if kind == CommandKind::Effort && !spec.takes_efforts {
+        let (scene, robot) = conformance::rotor();
+        let mut sim = engine
+            .load(&scene, &robot, &settings, &Default::default())
+            .unwrap();
+        let e = sim
+            .set_joint_commands(&[crate::engine::ServoCommand::effort(0.1)])
+            .expect_err("an engine that takes no efforts refuses them");
+        report(engine, "step_response_effort_refused", 0.0, 0.0);
+        eprintln!("{}: {e}", engine.name());
+        return;
+    }
     let r = conformance::step_response_with(
         Subject {
             engine,
@@ -109,7 +125,7 @@ pub fn command_round_trip(engine: &dyn Engine, spec: &KitSpec) {
         (false, spec.command_round_trip_rad[0], "native"),
         (true, spec.command_round_trip_rad[1], "portable"),
     ] {
-        let gap = conformance::command_round_trip(subject, portable);
+        let gap = conformance::command_round_trip_with(subject, portable, spec.takes_efforts);
         report(
             engine,
             &format!("command_round_trip_{what}"),

@@ -1,0 +1,18 @@
+//! The engine test kit (realitygap_core::testing::kit) on the physics-free
+//! model.
+
+use realitygap_core::conformance::PositionLaw;
+use realitygap_core::testing::kit::KitSpec;
+
+/// Tolerances: perfect tracking leads the kv servo's velocity response by
+/// I/kv x 1 rad/s = 0.1 rad (as Bullet's stiff motor does); the position
+/// step is at its target at once, exactly; efforts are refused.
+const SPEC: KitSpec = KitSpec {
+    rotor_settings: &["timestep_s=0.001"],
+    step_tolerance_rad: [0.1001, 1e-12, 0.0],
+    position_law: PositionLaw::Instant,
+    takes_efforts: false,
+    command_round_trip_rad: [0.0, 0.0],
+};
+
+realitygap_core::engine_test_kit!(realitygap_engine_ideal::IdealEngine, SPEC);
