@@ -13,6 +13,7 @@
 
 #include "realitygap-engine-dart/shim/dart_shim.h"
 
+#include <algorithm>
 #include <cmath>
 #include <iostream>
 #include <limits>
@@ -587,6 +588,15 @@ void World::add_mesh(
     // An aiScene of one mesh, allocated as assimp's own importer does:
     // MeshShape releases it with aiReleaseImport, which deletes a scene
     // that no importer owns (and with it its meshes, faces and nodes).
+    //
+    // DART 6.12's ODE collision detector (OdeMesh::fillArrays) copies the
+    // mesh's per-vertex normals (mNormals, which it requires) and hands
+    // them to ODE as per-TRIANGLE normals (dGeomTriMeshDataBuildDouble1):
+    // ODE reads one normal per triangle from an array of one per vertex.
+    // So the mesh gets at least as many vertices as triangles (padded with
+    // copies of vertex 0, which change no bound) and vertex k's normal is
+    // triangle k's normal: ODE then reads the right normals, in bounds.
+    const std::size_t slots = std::max(nv, nf);
     auto* scene = new aiScene();
     auto* mesh = new aiMesh();
     scene->mNumMeshes = 1;
@@ -598,20 +608,40 @@ void World::add_mesh(
     scene->mRootNode->mMeshes = new unsigned int[1]{0};
     mesh->mPrimitiveTypes = aiPrimitiveType_TRIANGLE;
     mesh->mMaterialIndex = 0;
-    mesh->mNumVertices = static_cast<unsigned int>(nv);
-    mesh->mVertices = new aiVector3D[nv];
-    for (std::size_t i = 0; i < nv; ++i)
+    mesh->mNumVertices = static_cast<unsigned int>(slots);
+    mesh->mVertices = new aiVector3D[slots];
+    mesh->mNormals = new aiVector3D[slots];
+    for (std::size_t i = 0; i < slots; ++i)
+    {
+      const std::size_t k = i < nv ? i : 0;
       mesh->mVertices[i] = aiVector3D(
-          static_cast<ai_real>(vertices[3 * i]),
-          static_cast<ai_real>(vertices[3 * i + 1]),
-          static_cast<ai_real>(vertices[3 * i + 2]));
+          static_cast<ai_real>(vertices[3 * k]),
+          static_cast<ai_real>(vertices[3 * k + 1]),
+          static_cast<ai_real>(vertices[3 * k + 2]));
+      mesh->mNormals[i] = aiVector3D(0, 0, 1);
+    }
     mesh->mNumFaces = static_cast<unsigned int>(nf);
     mesh->mFaces = new aiFace[nf];
     for (std::size_t f = 0; f < nf; ++f)
     {
+      const unsigned int a = indices[3 * f];
+      const unsigned int b = indices[3 * f + 1];
+      const unsigned int c = indices[3 * f + 2];
       mesh->mFaces[f].mNumIndices = 3;
-      mesh->mFaces[f].mIndices = new unsigned int[3]{
-          indices[3 * f], indices[3 * f + 1], indices[3 * f + 2]};
+      mesh->mFaces[f].mIndices = new unsigned int[3]{a, b, c};
+      const Eigen::Vector3d pa(
+          vertices[3 * a], vertices[3 * a + 1], vertices[3 * a + 2]);
+      const Eigen::Vector3d pb(
+          vertices[3 * b], vertices[3 * b + 1], vertices[3 * b + 2]);
+      const Eigen::Vector3d pc(
+          vertices[3 * c], vertices[3 * c + 1], vertices[3 * c + 2]);
+      Eigen::Vector3d n = (pb - pa).cross(pc - pa);
+      if (n.norm() > 0.0)
+        n.normalize();
+      mesh->mNormals[f] = aiVector3D(
+          static_cast<ai_real>(n.x()),
+          static_cast<ai_real>(n.y()),
+          static_cast<ai_real>(n.z()));
     }
     auto shape = std::make_shared<dart::dynamics::MeshShape>(
         Eigen::Vector3d::Ones(), scene);
