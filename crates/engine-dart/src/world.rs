@@ -52,6 +52,13 @@ use std::collections::HashMap;
 /// scene gives none (DART's default coefficient).
 pub const DEFAULT_FRICTION: f64 = 1.0;
 
+/// The lightest moving body DART is given, kg. Debian's DART 6.12 keeps
+/// its assertions: the constraint solver asserts that its LCP matrix is
+/// symmetric to an absolute 1e-6, and the matrix of a contact on a body of
+/// 1e-300 kg (entries of 1/mass) fails that from rounding and aborts the
+/// process. Lighter bodies are refused before DART sees them.
+pub const MIN_MASS_KG: f64 = 1e-6;
+
 /// A controlled joint's servo and passive terms.
 #[derive(Debug, Clone)]
 pub struct JointModel {
@@ -378,6 +385,14 @@ pub fn build(recipe: &Recipe<'_>) -> Result<World, String> {
                 ))
             }
         };
+        if g > 0 && mass < MIN_MASS_KG {
+            return Err(format!(
+                "link \"{top}\" and the links fixed to it weigh {mass:e} kg, below the {MIN_MASS_KG:e} kg DART is \
+                 given (its constraint solver's symmetry assertion aborts the process on lighter bodies; check the \
+                 <inertial> masses in {} and links.<link>.mass_scale)",
+                robot.source.display()
+            ));
+        }
         if g > 0 && !(mass.is_finite() && mass > 0.0 && shared::is_positive_definite(&inertia)) {
             return Err(format!(
                 "link \"{top}\" and the links fixed to it: mass {mass} kg and inertia {inertia:?} kg m^2 are not a \
@@ -533,6 +548,12 @@ pub fn build(recipe: &Recipe<'_>) -> Result<World, String> {
         let ObjectShape::Box { size_m } = o.shape;
         let context = |e: String| format!("object \"{}\": {e}", o.name);
         let mass = positive("mass", o.mass_kg * mass_scale).map_err(context)?;
+        if mass < MIN_MASS_KG {
+            return Err(context(format!(
+                "mass {mass:e} kg is below the {MIN_MASS_KG:e} kg DART is given (its constraint solver's symmetry \
+                 assertion aborts the process on lighter bodies; objects.<object>.mass_kg)"
+            )));
+        }
         let (x, y, z) = (size_m.x, size_m.y, size_m.z);
         let inertia = Vec3::new(y * y + z * z, x * x + z * z, x * x + y * y).scale(mass / 12.0);
         let i = world
