@@ -31,6 +31,7 @@
 #include <dart/collision/dart/DARTCollisionDetector.hpp>
 #include <dart/collision/fcl/FCLCollisionDetector.hpp>
 #include <dart/collision/ode/OdeCollisionDetector.hpp>
+#include <dart/common/Console.hpp>
 #include <dart/config.hpp>
 #include <dart/constraint/BoxedLcpConstraintSolver.hpp>
 #include <dart/constraint/DantzigBoxedLcpSolver.hpp>
@@ -298,6 +299,17 @@ World::~World()
 rust::String dart_version()
 {
   return rust::String(DART_VERSION);
+}
+
+void say(rust::Str text)
+{
+  Capture capture;
+  const std::string t(text);
+  dtmsg << t << "\n";
+  dtwarn << t << "\n";
+  dterr << t << "\n";
+  std::cout << t << std::endl;
+  std::clog << t << std::endl;
 }
 
 rust::String take_messages()

@@ -17,6 +17,7 @@ class World;
 
 rust::String dart_version();
 rust::String take_messages();
+void say(rust::Str text);
 
 std::unique_ptr<World> new_world(
     double timestep_s,

@@ -154,6 +154,11 @@ mod bridge {
         /// Contact points of the last step.
         fn contact_count(self: &World) -> usize;
 
+        /// Prints `text` through DART's `dtmsg`, `dtwarn` and `dterr` and
+        /// to std::cout and std::clog, as DART would (for the tests of the
+        /// capture).
+        fn say(text: &str);
+
         /// What DART printed on this thread since the last call.
         fn take_messages() -> String;
     }

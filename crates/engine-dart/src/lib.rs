@@ -63,6 +63,16 @@ pub fn dart_version() -> String {
     ffi::dart_version()
 }
 
+/// Prints `text` the ways DART prints (its `dtmsg`, `dtwarn`, `dterr`
+/// macros and std::cout and std::clog) inside the shim, which captures it
+/// like any DART message: it goes to the `log` crate and is returned, and
+/// reaches no stream. For the tests of that capture.
+#[doc(hidden)]
+pub fn say_through_dart(text: &str) -> String {
+    ffi::say(text);
+    forward_messages()
+}
+
 /// The DART engine.
 #[derive(Debug, Default, Clone, Copy)]
 pub struct DartEngine;

@@ -23,7 +23,7 @@ pub const SETTINGS: &[SettingInfo] = &[
     },
     SettingInfo {
         key: "collision_detector",
-        help: "ode (DART's OdeCollisionDetector, Gazebo's choice) | fcl (DART's own default; primitives as meshes) | bullet | dart (DART's own, boxes and spheres only); default ode",
+        help: "ode (DART's OdeCollisionDetector, Gazebo's choice) | fcl (DART's own default; primitives as meshes) | bullet | dart (DART's own: boxes only, other shapes are refused); default ode",
     },
     SettingInfo {
         key: "lcp_solver",

@@ -217,8 +217,25 @@ pub fn ode_guard(uses_ode: bool) -> Option<realitygap_engine_ode::world::OdeGuar
 /// Passes what DART printed on this thread to the `log` crate, and returns
 /// it.
 pub fn forward_messages() -> String {
-    let said = ffi::take_messages();
-    let said = said.trim();
+    let raw = ffi::take_messages();
+    if raw.is_empty() {
+        return String::new();
+    }
+    // DART colours its messages with ANSI escapes (ESC [ ... m).
+    let mut plain = String::with_capacity(raw.len());
+    let mut chars = raw.chars();
+    while let Some(c) = chars.next() {
+        if c == '\u{1b}' {
+            for d in chars.by_ref() {
+                if d.is_ascii_alphabetic() {
+                    break;
+                }
+            }
+        } else {
+            plain.push(c);
+        }
+    }
+    let said = plain.trim();
     if !said.is_empty() {
         log::warn!("DART: {said}");
     }
@@ -442,6 +459,16 @@ pub fn build(recipe: &Recipe<'_>) -> Result<World, String> {
                 let context = |e: String| format!("link \"{}\", collision {}: {e}", link.name, c + 1);
                 let mu = DEFAULT_FRICTION * friction_scale;
                 let primitive = |kind: u8, dims: Vec<f64>| (kind, dims);
+                if settings.detector == Detector::Dart
+                    && !matches!(collision.geometry, Geometry::Box { .. })
+                {
+                    return Err(context(
+                        "DART's own collision detector (collision_detector = \"dart\") collides boxes only \
+                         (it ignores spheres, cylinders, capsules and meshes, saying so at every step); use \
+                         ode, fcl or bullet"
+                            .to_string(),
+                    ));
+                }
                 let shape = match &collision.geometry {
                     Geometry::Box { size_m } => primitive(
                         0,
