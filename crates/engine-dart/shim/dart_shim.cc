@@ -12,6 +12,7 @@
 //   threads.
 
 #include "realitygap-engine-dart/shim/dart_shim.h"
+#include "realitygap-engine-dart/src/ffi.rs.h"
 
 #include <algorithm>
 #include <cmath>
@@ -210,6 +211,7 @@ void writePose(const Eigen::Isometry3d& t, rust::Slice<double> out)
 }
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
+constexpr double kInfMax = std::numeric_limits<double>::max();
 
 // Gives a joint of one degree of freedom the FORCE actuator with no bound
 // of DART's own (the Rust side clamps every law to the force limit).
@@ -513,18 +515,30 @@ void World::set_drives(
   guarded("setting the drives", [&] {
     auto& m = *mImpl;
     const std::size_t n = m.joints.size();
-    needLength(command, n, "the commands");
-    needLength(damping, n, "the damping coefficients");
-    needLength(stiffness, n, "the spring stiffnesses");
-    needLength(rest, n, "the spring rest positions");
+    need(
+        command.size() == n && damping.size() == n && stiffness.size() == n
+            && rest.size() == n,
+        "one drive per controlled joint is needed");
     for (std::size_t i = 0; i < n; ++i)
     {
-      need(damping[i] >= 0.0 && stiffness[i] >= 0.0, "a negative gain");
+      // Finite, and gains >= 0 (NaN fails too).
+      need(
+          std::isfinite(command[i]) && std::isfinite(rest[i])
+              && damping[i] >= 0.0 && damping[i] <= kInfMax
+              && stiffness[i] >= 0.0 && stiffness[i] <= kInfMax,
+          "a drive is not finite or has a negative gain");
+      // Only what changed: DART's setters notify the skeleton, and within
+      // a control period the laws' drives mostly stay the same (the world
+      // steps without resetting the commands, see step()).
       Joint* j = m.joints[i];
-      j->setCommand(0, command[i]);
-      j->setDampingCoefficient(0, damping[i]);
-      j->setSpringStiffness(0, stiffness[i]);
-      j->setRestPosition(0, rest[i]);
+      if (j->getCommand(0) != command[i])
+        j->setCommand(0, command[i]);
+      if (j->getDampingCoefficient(0) != damping[i])
+        j->setDampingCoefficient(0, damping[i]);
+      if (j->getSpringStiffness(0) != stiffness[i])
+        j->setSpringStiffness(0, stiffness[i]);
+      if (j->getRestPosition(0) != rest[i])
+        j->setRestPosition(0, rest[i]);
     }
   });
 }
@@ -730,7 +744,40 @@ void World::finish()
 
 void World::step()
 {
-  guarded("stepping", [&] { mImpl->world->step(); });
+  // Commands are not reset after the step: the Rust side sets every
+  // joint's drive before every step (set_drives), and only what changed.
+  guarded("stepping", [&] { mImpl->world->step(false); });
+}
+
+StepReport World::advance(
+    rust::Slice<const double> command,
+    rust::Slice<const double> damping,
+    rust::Slice<const double> stiffness,
+    rust::Slice<const double> rest,
+    rust::Slice<double> positions,
+    rust::Slice<double> velocities)
+{
+  set_drives(command, damping, stiffness, rest);
+  const std::size_t before = tMessages.size();
+  step();
+  joint_state(positions, velocities);
+  StepReport report{};
+  report.objects_finite = true;
+  for (std::size_t i = 0; i < mImpl->objects.size(); ++i)
+  {
+    // A free joint's coordinates: rotation vector and translation, then
+    // angular and linear velocity in the body frame (norms as in the
+    // world).
+    const auto* j = mImpl->freeJoint(i);
+    const auto& q = j->getPositionsStatic();
+    const auto& v = j->getVelocitiesStatic();
+    if (!q.allFinite() || !v.allFinite())
+      report.objects_finite = false;
+    report.max_spin = std::max(report.max_spin, v.head<3>().norm());
+    report.max_speed = std::max(report.max_speed, v.tail<3>().norm());
+  }
+  report.said = tMessages.size() != before;
+  return report;
 }
 
 void World::step_raw(std::uint64_t n)

@@ -14,6 +14,7 @@
 namespace rgdart {
 
 class World;
+struct StepReport;
 
 rust::String dart_version();
 rust::String take_messages();
@@ -73,6 +74,13 @@ public:
   void finish();
   void step();
   void step_raw(std::uint64_t n);
+  StepReport advance(
+      rust::Slice<const double> command,
+      rust::Slice<const double> damping,
+      rust::Slice<const double> stiffness,
+      rust::Slice<const double> rest,
+      rust::Slice<double> positions,
+      rust::Slice<double> velocities);
   void joint_state(
       rust::Slice<double> positions, rust::Slice<double> velocities) const;
   void set_joint_state(

@@ -9,6 +9,19 @@
 #[cxx::bridge(namespace = "rgdart")]
 #[allow(clippy::too_many_arguments)]
 mod bridge {
+    /// What one [`World::advance`] reports beside the joint state.
+    #[derive(Debug, Clone, Copy, Default)]
+    struct StepReport {
+        /// Whether every object's free-joint coordinates are finite.
+        objects_finite: bool,
+        /// The largest object speed, m/s.
+        max_speed: f64,
+        /// The largest object spin, rad/s.
+        max_spin: f64,
+        /// Whether DART printed something during the step.
+        said: bool,
+    }
+
     unsafe extern "C++" {
         include!("realitygap-engine-dart/shim/dart_shim.h");
 
@@ -121,6 +134,19 @@ mod bridge {
 
         /// One `World::step`.
         fn step(self: Pin<&mut World>) -> Result<()>;
+
+        /// One step in one call: sets the drives (as `set_drives`), steps,
+        /// writes the joints' positions and velocities, and reports on the
+        /// objects and on DART's printing.
+        fn advance(
+            self: Pin<&mut World>,
+            command: &[f64],
+            damping: &[f64],
+            stiffness: &[f64],
+            rest: &[f64],
+            positions: &mut [f64],
+            velocities: &mut [f64],
+        ) -> Result<StepReport>;
 
         /// `n` steps with the drives as set (the benchmark's raw loop).
         fn step_raw(self: Pin<&mut World>, n: u64) -> Result<()>;

@@ -245,9 +245,8 @@ impl DartSimulation {
         self.world.raw().joint_state(&mut self.q, &mut self.v);
     }
 
-    /// Computes every joint's drive from its command and the current state
-    /// and hands them to DART.
-    fn apply_drives(&mut self) -> Result<(), EngineError> {
+    /// Computes every joint's drive from its command and the current state.
+    fn compute_drives(&mut self) {
         let h = self.settings.timestep_s;
         for (i, j) in self.world.joints.iter().enumerate() {
             let d = j.drive(
@@ -262,11 +261,6 @@ impl DartSimulation {
             self.drives[2][i] = d.stiffness;
             self.drives[3][i] = d.rest;
         }
-        let [c, d, k, r] = &self.drives;
-        self.world
-            .raw_mut()
-            .set_drives(c, d, k, r)
-            .map_err(|e| self.unstable(e.what().to_string()))
     }
 
     fn unstable(&self, message: String) -> EngineError {
@@ -277,66 +271,84 @@ impl DartSimulation {
         }
     }
 
-    /// One step (the lock, when needed, is held by the caller).
+    /// One step (the lock, when needed, is held by the caller): the drives,
+    /// DART's step and the joint state in one call to the shim.
     fn step_once(&mut self) -> Result<(), EngineError> {
-        self.apply_drives()?;
-        let stepped = self.world.raw_mut().step();
+        self.compute_drives();
+        let [c, d, k, r] = &self.drives;
+        let stepped = self
+            .world
+            .raw_mut()
+            .advance(c, d, k, r, &mut self.q, &mut self.v);
         self.steps += 1;
-        self.read_joints();
-        if let Err(e) = stepped {
-            return Err(self.unstable(format!("DART failed: {}", e.what())));
+        match stepped {
+            Err(e) => {
+                self.read_joints();
+                let message = format!("DART failed: {}", e.what());
+                forward_messages();
+                Err(self.unstable(message))
+            }
+            Ok(report) => self.check_state(&report),
         }
-        self.check_state()
     }
 
     /// Unstable when the state is not finite or moves impossibly fast.
-    fn check_state(&self) -> Result<(), EngineError> {
-        let mut problem = None;
+    fn check_state(&self, report: &ffi::StepReport) -> Result<(), EngineError> {
+        let said = if report.said {
+            forward_messages()
+        } else {
+            String::new()
+        };
+        let joints_fine = self
+            .v
+            .iter()
+            .zip(&self.q)
+            .all(|(v, q)| q.is_finite() && v.abs() <= MAX_JOINT_SPEED);
+        let objects_fine = report.objects_finite
+            && report.max_speed <= MAX_SPEED_M_S
+            && report.max_spin <= MAX_SPIN_RAD_S;
+        if joints_fine && objects_fine {
+            return Ok(());
+        }
+        let mut message = self.describe_trouble();
+        if !said.is_empty() {
+            message.push_str(&format!(" (DART said: {said})"));
+        }
+        Err(self.unstable(message))
+    }
+
+    /// What is wrong with the state (after a step found it so).
+    fn describe_trouble(&self) -> String {
         for (i, (q, v)) in self.q.iter().zip(&self.v).enumerate() {
             let name = &self.world.joints[i].name;
             if !(q.is_finite() && v.is_finite()) {
-                problem = Some(format!("joint \"{name}\" is not finite (angle {q}, rate {v})"));
-                break;
+                return format!("joint \"{name}\" is not finite (angle {q}, rate {v})");
             }
             if v.abs() > MAX_JOINT_SPEED {
-                problem = Some(format!(
+                return format!(
                     "joint \"{name}\" turns at {v:.4e} rad/s, past {MAX_JOINT_SPEED} rad/s"
-                ));
-                break;
+                );
             }
         }
-        if problem.is_none() {
-            for (i, name) in self.world.objects.iter().enumerate() {
-                let (pose, lin, ang) = self.world.object_state(i);
-                let finite = pose.is_finite() && lin.is_finite() && ang.is_finite();
-                if !finite {
-                    problem = Some(format!("object \"{name}\" has a non-finite pose or twist"));
-                } else if lin.norm() > MAX_SPEED_M_S {
-                    problem = Some(format!(
-                        "object \"{name}\" moves at {:.4e} m/s, past {MAX_SPEED_M_S} m/s",
-                        lin.norm()
-                    ));
-                } else if ang.norm() > MAX_SPIN_RAD_S {
-                    problem = Some(format!(
-                        "object \"{name}\" spins at {:.4e} rad/s, past {MAX_SPIN_RAD_S} rad/s",
-                        ang.norm()
-                    ));
-                }
-                if problem.is_some() {
-                    break;
-                }
+        for (i, name) in self.world.objects.iter().enumerate() {
+            let (pose, lin, ang) = self.world.object_state(i);
+            if !(pose.is_finite() && lin.is_finite() && ang.is_finite()) {
+                return format!("object \"{name}\" has a non-finite pose or twist");
+            }
+            if lin.norm() > MAX_SPEED_M_S {
+                return format!(
+                    "object \"{name}\" moves at {:.4e} m/s, past {MAX_SPEED_M_S} m/s",
+                    lin.norm()
+                );
+            }
+            if ang.norm() > MAX_SPIN_RAD_S {
+                return format!(
+                    "object \"{name}\" spins at {:.4e} rad/s, past {MAX_SPIN_RAD_S} rad/s",
+                    ang.norm()
+                );
             }
         }
-        let said = forward_messages();
-        match problem {
-            None => Ok(()),
-            Some(mut message) => {
-                if !said.is_empty() {
-                    message.push_str(&format!(" (DART said: {said})"));
-                }
-                Err(self.unstable(message))
-            }
-        }
+        "the state is not finite".to_string()
     }
 
     /// Steps `n` times with the drives as last set and nothing else: no
@@ -344,7 +356,11 @@ impl DartSimulation {
     /// benchmark.
     pub fn step_raw(&mut self, n: u64) {
         let _guard = ode_guard(self.world.uses_ode);
-        if self.apply_drives().is_ok() && self.world.raw_mut().step_raw(n).is_ok() {
+        self.compute_drives();
+        let [c, d, k, r] = &self.drives;
+        if self.world.raw_mut().set_drives(c, d, k, r).is_ok()
+            && self.world.raw_mut().step_raw(n).is_ok()
+        {
             self.steps += n;
         }
         self.read_joints();
