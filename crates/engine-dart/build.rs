@@ -8,7 +8,10 @@
 //! benchmarks, which compare against the MuJoCo engine.
 
 fn probe(name: &str, version: &str, package: &str) -> pkg_config::Library {
-    match pkg_config::Config::new().atleast_version(version).probe(name) {
+    match pkg_config::Config::new()
+        .atleast_version(version)
+        .probe(name)
+    {
         Ok(library) => library,
         Err(e) => {
             eprintln!(

@@ -62,8 +62,12 @@ mod bridge {
 
         /// Position limits of controlled joint `joint` (enforced by DART's
         /// joint limit constraint); infinite bounds are free.
-        fn set_joint_limits(self: Pin<&mut World>, joint: usize, lower: f64, upper: f64)
-            -> Result<()>;
+        fn set_joint_limits(
+            self: Pin<&mut World>,
+            joint: usize,
+            lower: f64,
+            upper: f64,
+        ) -> Result<()>;
 
         /// Coulomb friction torque of controlled joint `joint` (DART's
         /// joint Coulomb friction constraint), N m.
@@ -126,8 +130,12 @@ mod bridge {
         ) -> Result<usize>;
 
         /// The ground: a static box whose top face is at `height` (m).
-        fn add_ground(self: Pin<&mut World>, height: f64, friction: f64, restitution: f64)
-            -> Result<()>;
+        fn add_ground(
+            self: Pin<&mut World>,
+            height: f64,
+            friction: f64,
+            restitution: f64,
+        ) -> Result<()>;
 
         /// Adds the skeletons to the world (after every body and shape).
         fn finish(self: Pin<&mut World>) -> Result<()>;
@@ -155,8 +163,11 @@ mod bridge {
         fn joint_state(self: &World, positions: &mut [f64], velocities: &mut [f64]);
 
         /// Sets the controlled joints' positions and velocities.
-        fn set_joint_state(self: Pin<&mut World>, positions: &[f64], velocities: &[f64])
-            -> Result<()>;
+        fn set_joint_state(
+            self: Pin<&mut World>,
+            positions: &[f64],
+            velocities: &[f64],
+        ) -> Result<()>;
 
         /// The world pose (7) of robot body `body`'s frame.
         fn body_pose(self: &World, body: usize, out: &mut [f64]);
@@ -171,8 +182,7 @@ mod bridge {
         fn object_coordinates(self: &World, i: usize, out: &mut [f64]);
 
         /// Sets them exactly.
-        fn set_object_coordinates(self: Pin<&mut World>, i: usize, values: &[f64])
-            -> Result<()>;
+        fn set_object_coordinates(self: Pin<&mut World>, i: usize, values: &[f64]) -> Result<()>;
 
         /// Sets DART's clock, s.
         fn set_time(self: Pin<&mut World>, t_s: f64);

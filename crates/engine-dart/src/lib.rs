@@ -529,6 +529,10 @@ mod tests {
 
     #[test]
     fn version_names_dart_6_12() {
-        assert!(DartEngine.version().starts_with("DART 6.12"), "{}", DartEngine.version());
+        assert!(
+            DartEngine.version().starts_with("DART 6.12"),
+            "{}",
+            DartEngine.version()
+        );
     }
 }

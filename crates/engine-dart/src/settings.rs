@@ -140,7 +140,10 @@ impl DartSettings {
                 )?
                 .unwrap_or(d.detector),
             lcp: r
-                .choice("lcp_solver", &[("dantzig", Lcp::Dantzig), ("pgs", Lcp::Pgs)])?
+                .choice(
+                    "lcp_solver",
+                    &[("dantzig", Lcp::Dantzig), ("pgs", Lcp::Pgs)],
+                )?
                 .unwrap_or(d.lcp),
             servo: r
                 .choice("servo", &[("kv", Servo::Kv), ("servo", Servo::Servo)])?
@@ -167,7 +170,10 @@ mod tests {
         let s = parse(&[]).unwrap();
         assert_eq!(s, DartSettings::default());
         assert_eq!(s.timestep_s, 0.001);
-        assert_eq!((s.detector, s.lcp, s.servo), (Detector::Ode, Lcp::Dantzig, Servo::Kv));
+        assert_eq!(
+            (s.detector, s.lcp, s.servo),
+            (Detector::Ode, Lcp::Dantzig, Servo::Kv)
+        );
     }
 
     #[test]
@@ -194,7 +200,11 @@ mod tests {
         let cases: &[(&str, &str, &str)] = &[
             ("timestep_s", "0", "must be greater than 0 s"),
             ("timestep_s", "-1e-3", "must be greater than 0 s"),
-            ("timestep_s", "inf", "greater than 0 s and finite, found inf"),
+            (
+                "timestep_s",
+                "inf",
+                "greater than 0 s and finite, found inf",
+            ),
             ("timestep_s", "fast", "expected a number"),
             (
                 "collision_detector",

@@ -107,9 +107,7 @@ impl DartSimulation {
     /// portable fields (see the module documentation).
     pub fn write_state(&mut self, state: &SimState) -> Result<(), EngineError> {
         let names: Vec<&str> = self.world.objects.iter().map(|o| o.as_str()).collect();
-        state
-            .check(self.q.len(), &names)
-            .map_err(state_error)?;
+        state.check(self.q.len(), &names).map_err(state_error)?;
         if state
             .objects
             .iter()

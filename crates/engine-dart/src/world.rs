@@ -1,5 +1,5 @@
 //! Assembly: a [`Scene`] and its [`RobotModel`] become a DART world, built
-//! through the C++ shim ([`crate::ffi`]).
+//! through the C++ shim (`shim/dart_shim.cc`, bridged in `src/ffi.rs`).
 //!
 //! 1. **Groups.** Core's shared planning ([`realitygap_core::robot::plan`])
 //!    splits the robot's links into rigid groups: a group starts at the
@@ -113,7 +113,14 @@ impl JointModel {
     /// `servo_actuator`: the joint has DART's SERVO actuator (velocity
     /// commands with `servo = "servo"`): the command is the target
     /// velocity.
-    pub fn drive(&self, command: ServoCommand, q: f64, v: f64, h: f64, servo_actuator: bool) -> Drive {
+    pub fn drive(
+        &self,
+        command: ServoCommand,
+        q: f64,
+        v: f64,
+        h: f64,
+        servo_actuator: bool,
+    ) -> Drive {
         let limit = self.force_limit;
         let mut d = Drive {
             command: 0.0,
@@ -426,7 +433,10 @@ pub fn build(recipe: &Recipe<'_>) -> Result<World, String> {
                     JointKind::Revolute | JointKind::Continuous => 1,
                     JointKind::Prismatic => 2,
                     JointKind::Fixed => {
-                        return Err(format!("joint \"{}\" is fixed and cannot be driven", joint.name))
+                        return Err(format!(
+                            "joint \"{}\" is fixed and cannot be driven",
+                            joint.name
+                        ))
                     }
                 };
                 let at = groups.link_in_group[joint.parent].compose(&joint.origin);
@@ -456,7 +466,8 @@ pub fn build(recipe: &Recipe<'_>) -> Result<World, String> {
             let link = &robot.links[l];
             for (c, collision) in link.collisions.iter().enumerate() {
                 let at = pose7(&groups.link_in_group[l].compose(&collision.origin));
-                let context = |e: String| format!("link \"{}\", collision {}: {e}", link.name, c + 1);
+                let context =
+                    |e: String| format!("link \"{}\", collision {}: {e}", link.name, c + 1);
                 let mu = DEFAULT_FRICTION * friction_scale;
                 let primitive = |kind: u8, dims: Vec<f64>| (kind, dims);
                 if settings.detector == Detector::Dart
@@ -529,8 +540,16 @@ pub fn build(recipe: &Recipe<'_>) -> Result<World, String> {
         )
         .map_err(context)?;
         if let Some(l) = joint.limits.filter(|_| joint.kind != JointKind::Continuous) {
-            let lower = if l.lower.is_finite() { l.lower } else { f64::NEG_INFINITY };
-            let upper = if l.upper.is_finite() { l.upper } else { f64::INFINITY };
+            let lower = if l.lower.is_finite() {
+                l.lower
+            } else {
+                f64::NEG_INFINITY
+            };
+            let upper = if l.upper.is_finite() {
+                l.upper
+            } else {
+                f64::INFINITY
+            };
             if lower.is_finite() || upper.is_finite() {
                 world
                     .world
@@ -695,7 +714,10 @@ mod tests {
     fn position_and_effort_laws() {
         let j = joint();
         let d = j.drive(ServoCommand::position(0.01), 0.0, 0.0, 1e-3, false);
-        assert_eq!((d.command, d.stiffness, d.rest, d.damping), (0.0, 100.0, 0.01, 10.5));
+        assert_eq!(
+            (d.command, d.stiffness, d.rest, d.damping),
+            (0.0, 100.0, 0.01, 10.5)
+        );
         let d = j.drive(ServoCommand::position(1.0), 0.0, 0.0, 1e-3, false);
         assert_eq!((d.command, d.stiffness), (5.0, 0.0));
         let d = j.drive(ServoCommand::effort(-9.0), 0.0, 0.0, 1e-3, false);

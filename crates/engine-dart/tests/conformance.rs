@@ -80,8 +80,15 @@ fn handover_with_mujoco_both_ways() {
             engine: &realitygap_engine_mujoco::MujocoEngine,
             settings: &mujoco_settings,
         };
-        let k = if name == "scene1_single_joint" { 40 } else { 240 };
-        for (label, from, to) in [("dart_to_mujoco", dart, mujoco), ("mujoco_to_dart", mujoco, dart)] {
+        let k = if name == "scene1_single_joint" {
+            40
+        } else {
+            240
+        };
+        for (label, from, to) in [
+            ("dart_to_mujoco", dart, mujoco),
+            ("mujoco_to_dart", mujoco, dart),
+        ] {
             let (gap, angles) = conformance::handover_gap(from, to, &s, &mico2(), k);
             report(&format!("handover_{name}_{label}_m"), gap, "1e-6");
             report(&format!("handover_{name}_{label}_rad"), angles, "1e-9");
@@ -99,7 +106,10 @@ fn damping_slows_the_falling_joint() {
     report("falling_angle_damping0_rad", free, "> 0.05");
     report("falling_angle_damping5_rad", damped, "< 0.9 free");
     assert!(free > 0.05, "joint 2 fell only {free} rad without damping");
-    assert!(damped < free * 0.9, "damping 5: {damped} rad, none: {free} rad");
+    assert!(
+        damped < free * 0.9,
+        "damping 5: {damped} rad, none: {free} rad"
+    );
 }
 
 #[test]
@@ -142,7 +152,14 @@ fn load_error(params: &PhysicalParams, settings: &EngineSettings) -> EngineError
         Err(realitygap_core::controller::RunError::Engine(e)) => return e,
         Err(e) => panic!("{e}"),
     };
-    match load_prepared(&DartEngine, &s, &robot, settings, params, &RunOptions::default()) {
+    match load_prepared(
+        &DartEngine,
+        &s,
+        &robot,
+        settings,
+        params,
+        &RunOptions::default(),
+    ) {
         Err(realitygap_core::controller::RunError::Engine(e)) => e,
         Err(e) => panic!("{e}"),
         Ok(_) => panic!("loaded"),
@@ -160,7 +177,11 @@ fn params(toml: &str) -> PhysicalParams {
 #[test]
 fn unsupported_and_meaningless_keys_are_errors() {
     let (key, e) = conformance::unsupported_key_error(&DartEngine).expect("an unsupported key");
-    report("unsupported_key", format!("{key}: {e}"), "names engine and key");
+    report(
+        "unsupported_key",
+        format!("{key}: {e}"),
+        "names engine and key",
+    );
     let text = e.to_string();
     assert!(text.contains("dart") && text.contains("contact."), "{text}");
     for (toml, key, settings) in [
@@ -186,7 +207,11 @@ fn unsupported_and_meaningless_keys_are_errors() {
         ),
     ] {
         let e = load_error(&params(toml), &settings);
-        report("meaningless_key_error", format!("{e}"), "names engine and key");
+        report(
+            "meaningless_key_error",
+            format!("{e}"),
+            "names engine and key",
+        );
         match &e {
             EngineError::Param { engine, key: k, .. } => {
                 assert_eq!(engine, "dart");
@@ -202,7 +227,10 @@ fn unsupported_and_meaningless_keys_are_errors() {
 fn bad_settings_are_errors() {
     for (pair, want) in [
         ("timestep_s=0", "must be greater than 0 s"),
-        ("collision_detector=physx", "is not one of ode, fcl, bullet, dart"),
+        (
+            "collision_detector=physx",
+            "is not one of ode, fcl, bullet, dart",
+        ),
         ("lcp_solver=lemke", "is not one of dantzig, pgs"),
         ("servo=pd", "is not one of kv, servo"),
         ("iterations=10", "unknown setting"),
@@ -267,7 +295,10 @@ fn extreme_values_are_errors_or_runs_never_crashes() {
                 Ok(o) => format!("{:?}", o.status),
                 Err(e) => {
                     let t = e.to_string();
-                    assert!(t.contains(field) || t.contains("dart"), "{table}.{field}={v}: {t}");
+                    assert!(
+                        t.contains(field) || t.contains("dart"),
+                        "{table}.{field}={v}: {t}"
+                    );
                     format!("error: {t}")
                 }
             };
@@ -304,10 +335,18 @@ fn divergence_is_reported() {
         "{e}"
     );
     let out = realitygap_core::controller::run_scene(&mut sim, &s, &RunOptions::default()).unwrap();
-    assert!(matches!(out.status, RunStatus::Diverged { .. }), "{:?}", out.status);
+    assert!(
+        matches!(out.status, RunStatus::Diverged { .. }),
+        "{:?}",
+        out.status
+    );
 
     let out = conformance::diverges(&DartEngine, &settings(&["timestep_s=0.05"]));
-    report("diverges_timestep_0.05", format!("{:?}", out.status), "Completed or Diverged");
+    report(
+        "diverges_timestep_0.05",
+        format!("{:?}", out.status),
+        "Completed or Diverged",
+    );
     assert!(matches!(
         out.status,
         RunStatus::Completed | RunStatus::Diverged { .. }
@@ -327,11 +366,19 @@ fn divergence_is_reported() {
 fn servo_actuator_is_stiff() {
     let set = settings(&["timestep_s=0.001", "servo=servo"]);
     let r = conformance::step_response(subject(&set), CommandKind::Velocity);
-    report("servo_actuator_step_velocity_rad", r.max_error_rad, "0.09..0.11");
+    report(
+        "servo_actuator_step_velocity_rad",
+        r.max_error_rad,
+        "0.09..0.11",
+    );
     assert!((0.09..0.11).contains(&r.max_error_rad), "{r:?}");
     for kind in [CommandKind::Position, CommandKind::Effort] {
         let r = conformance::step_response(subject(&set), kind);
-        report(&format!("servo_actuator_step_{}_rad", kind.name()), r.max_error_rad, "3e-3");
+        report(
+            &format!("servo_actuator_step_{}_rad", kind.name()),
+            r.max_error_rad,
+            "3e-3",
+        );
         assert!(r.max_error_rad < 3e-3, "{kind:?}: {r:?}");
     }
 }

@@ -19,8 +19,7 @@ fn report(check: &str, value: f64, tolerance: &str) {
 }
 
 fn load(s: &Scene, toml: &str) -> Box<dyn Simulation> {
-    let params =
-        PhysicalParams::from_toml_str(toml, Path::new("/params/params.toml")).unwrap();
+    let params = PhysicalParams::from_toml_str(toml, Path::new("/params/params.toml")).unwrap();
     let (s, robot) = prepare(&DartEngine, s, &mico2(), &params).unwrap();
     load_prepared(
         &DartEngine,
@@ -62,7 +61,10 @@ fn armature_is_reflected_inertia() {
     let heavy = fall_with("armature = 0.5\n");
     report("armature_fall_0_rad", plain, "> with armature");
     report("armature_fall_0.5_rad", heavy, "< 0.8 without");
-    assert!(heavy < plain * 0.8, "armature 0.5: {heavy} rad, none: {plain} rad");
+    assert!(
+        heavy < plain * 0.8,
+        "armature 0.5: {heavy} rad, none: {plain} rad"
+    );
 
     let (rotor, robot) = realitygap_core::conformance::rotor();
     let angle = |armature: f64| {
@@ -81,7 +83,8 @@ fn armature_is_reflected_inertia() {
             &RunOptions::default(),
         )
         .unwrap();
-        sim.set_joint_commands(&[ServoCommand::effort(0.02)]).unwrap();
+        sim.set_joint_commands(&[ServoCommand::effort(0.02)])
+            .unwrap();
         sim.step_n(1000).unwrap();
         let mut q = [0.0];
         sim.joint_angles_rad(&mut q);
@@ -147,8 +150,7 @@ fn restitution_makes_the_cube_bounce() {
 #[test]
 fn cube_mass_changes_the_push() {
     let push = |toml: &str| {
-        let params =
-            PhysicalParams::from_toml_str(toml, Path::new("/params/params.toml")).unwrap();
+        let params = PhysicalParams::from_toml_str(toml, Path::new("/params/params.toml")).unwrap();
         let out = realitygap_core::controller::simulate_with(
             &DartEngine,
             &scene("scene3_cube_push"),

@@ -51,7 +51,9 @@ fn child() {
     println!(
         "CHILD-LOGGED {} messages, {} probes",
         dart.len(),
-        dart.iter().map(|m| m.matches("probe-7f3a").count()).sum::<usize>()
+        dart.iter()
+            .map(|m| m.matches("probe-7f3a").count())
+            .sum::<usize>()
     );
 }
 
@@ -80,10 +82,16 @@ fn dart_printing_goes_to_the_log_not_the_streams() {
         .find_map(|l| l.split_once("CHILD-LOGGED ").map(|(_, r)| r))
         .expect("the child reports");
     eprintln!("DART said {line} (to the log)");
-    assert!(line.ends_with(" 5 probes"), "the probe did not reach the log: {line}");
+    assert!(
+        line.ends_with(" 5 probes"),
+        "the probe did not reach the log: {line}"
+    );
     for text in [&stdout, &stderr] {
         for word in ["probe-7f3a", "Warning", "Error [", "[Msg]"] {
-            assert!(!text.contains(word), "DART's \"{word}\" reached a stream:\n{text}");
+            assert!(
+                !text.contains(word),
+                "DART's \"{word}\" reached a stream:\n{text}"
+            );
         }
     }
 }

@@ -40,7 +40,11 @@ fn scene1_wrist_ends_where_mujoco_puts_it() {
             max * 1e3,
             dart.steps_per_second()
         );
-        assert!(last < 0.020, "{label}: final wrist {:.2} mm from MuJoCo", last * 1e3);
+        assert!(
+            last < 0.020,
+            "{label}: final wrist {:.2} mm from MuJoCo",
+            last * 1e3
+        );
         for j in 0..6 {
             assert!(
                 (q[j] - qm[j]).abs() < 0.2,
@@ -66,7 +70,10 @@ fn scene2_follows_mujoco_implicitfast() {
         );
         assert!(max < 0.005 && last < 0.002, "{label}: {max} {last}");
         let c = cube(&dart);
-        assert!(c.last().unwrap().distance(c[0]) < 1e-4, "{label}: the cube moved");
+        assert!(
+            c.last().unwrap().distance(c[0]) < 1e-4,
+            "{label}: the cube moved"
+        );
     }
 }
 
@@ -87,7 +94,10 @@ fn scene3_hand_pushes_the_cube() {
             dart.steps_per_second()
         );
         assert!(moved.x > 0.02, "{label}: the cube moved {moved:?}");
-        assert!(moved.z.abs() < 0.005, "{label}: the cube left the table {moved:?}");
+        assert!(
+            moved.z.abs() < 0.005,
+            "{label}: the cube left the table {moved:?}"
+        );
     }
 }
 
@@ -95,7 +105,11 @@ fn scene3_hand_pushes_the_cube() {
 /// the Mico2's shapes and both LCP solvers.
 #[test]
 fn every_scene_runs_with_every_detector() {
-    for name in ["scene1_single_joint", "scene2_two_joints", "scene3_cube_push"] {
+    for name in [
+        "scene1_single_joint",
+        "scene2_two_joints",
+        "scene3_cube_push",
+    ] {
         for detector in ["ode", "fcl", "bullet"] {
             for lcp in ["dantzig", "pgs"] {
                 let s = scene(name);
@@ -158,5 +172,8 @@ fn dart_detector_refuses_other_shapes() {
     .err()
     .expect("refused")
     .to_string();
-    assert!(e.contains("link \"") && e.contains("collides boxes only"), "{e}");
+    assert!(
+        e.contains("link \"") && e.contains("collides boxes only"),
+        "{e}"
+    );
 }
