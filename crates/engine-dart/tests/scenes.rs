@@ -177,3 +177,40 @@ fn dart_detector_refuses_other_shapes() {
         "{e}"
     );
 }
+
+/// The default timestep: the study's scenes at 10, 5, 2, 1 and 0.5 ms,
+/// against MuJoCo (scene 1: the scene's Euler at 0.1 ms; scene 2:
+/// implicitfast), and the cube's push. Every run completes; at the default
+/// 1 ms scene 1 ends within 0.01 mm of MuJoCo and scene 2 stays within
+/// 0.1 mm of it (the README's table).
+#[test]
+fn timestep_sweep() {
+    let robot = mico2();
+    let s1 = scene("scene1_single_joint");
+    let s2 = scene("scene2_two_joints");
+    let s3 = scene("scene3_cube_push");
+    let (m1, m2) = (mujoco(&s1, &robot, false), mujoco(&s2, &robot, true));
+    for dt in ["0.01", "0.005", "0.002", "0.001", "0.0005"] {
+        let set = settings(&[&format!("timestep_s={dt}")]);
+        let r1 = run_with_settings(&DartEngine, &s1, &robot, &set);
+        let r2 = run_with_settings(&DartEngine, &s2, &robot, &set);
+        let r3 = run_with_settings(&DartEngine, &s3, &robot, &set);
+        let (max1, last1) = wrist_gaps(&r1, &m1);
+        let (max2, _) = wrist_gaps(&r2, &m2);
+        let c = cube(&r3);
+        eprintln!(
+            "TIMESTEP {dt} s: scene 1 wrist vs MuJoCo final {:.3} mm (largest {:.2} mm); scene 2 largest {:.3} mm; \
+             scene 3 cube {:.4} m; {:.0} / {:.0} / {:.0} steps/s",
+            last1 * 1e3,
+            max1 * 1e3,
+            max2 * 1e3,
+            c.last().unwrap().x - c[0].x,
+            r1.steps_per_second(),
+            r2.steps_per_second(),
+            r3.steps_per_second()
+        );
+        if dt == "0.001" {
+            assert!(last1 < 1e-5 && max2 < 1e-4, "{last1} {max2}");
+        }
+    }
+}
