@@ -1080,7 +1080,11 @@ mod tests {
             .collect();
         let settled = (0..100).map(|k| k == 0 || k >= 60).collect();
         SceneSpec {
-            kinematic: Some(KinematicTrack { wrist_m, settled }),
+            kinematic: Some(KinematicTrack {
+                wrist_m,
+                settled,
+                angles_rad: Vec::new(),
+            }),
             ..spec()
         }
     }

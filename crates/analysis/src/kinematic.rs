@@ -22,6 +22,8 @@ pub struct KinematicTrack {
     /// Per step: true when no joint was commanded to move during the
     /// `settle_steps` steps before it (the arm is at rest in the model).
     pub settled: Vec<bool>,
+    /// Per step: the controlled joints' angles (scene actuator order), rad.
+    pub angles_rad: Vec<Vec<f64>>,
 }
 
 /// Steps of stillness (commanded speed zero) after which a step counts as
@@ -79,6 +81,7 @@ pub fn kinematic_track(
     let mut out = KinematicTrack {
         wrist_m: Vec::with_capacity(steps),
         settled: Vec::with_capacity(steps),
+        angles_rad: Vec::with_capacity(steps),
     };
     let mut still_for = usize::MAX / 2;
     for tick in 0..steps {
@@ -86,6 +89,7 @@ pub fn kinematic_track(
             .link_pose(&scene.robot.base, &q, link)
             .ok_or_else(|| format!("scene '{}': forward kinematics failed", scene.name))?;
         out.wrist_m.push(pose.position_m);
+        out.angles_rad.push(indices.iter().map(|&j| q[j]).collect());
         let targets = scene.targets_deg_at_tick(tick);
         let mut moving = false;
         for (&j, target) in indices.iter().zip(&targets) {

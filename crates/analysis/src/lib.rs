@@ -28,6 +28,7 @@ pub mod align;
 pub mod bootstrap;
 pub mod compare;
 pub mod health;
+pub mod ik;
 pub mod kinematic;
 pub mod metrics;
 pub mod registration;

@@ -1,9 +1,11 @@
-//! Replay overhead: `realitygap replay`'s loop (the PD target set again at
-//! every engine step, samples at the recording's times) against the raw
+//! Replay overhead: `realitygap replay`'s loop (the recorded position
+//! commands through each engine's own PD mechanism, set when they change;
+//! the state read at the recording's 200 Hz sample times) against the raw
 //! engine loop on the same simulation (the same number of `step` calls
-//! with one constant velocity target), per compiled engine, on the first
-//! episode of the independent writer's iiwa recordings (10 s at 1 ms:
-//! 10 000 steps). Thread CPU time, best of `REPEATS` (default 3).
+//! under one constant position command, the same mechanism), per compiled
+//! engine, on the first episode of the independent writer's iiwa
+//! recordings (10 s at 1 ms: 10 000 steps). Thread CPU time, best of
+//! `REPEATS` (default 3).
 //!
 //!     cargo bench -p realitygap --bench replay
 
@@ -88,9 +90,15 @@ fn main() {
             best_replay = best_replay.min(thread_cpu_s() - t0);
             steps = outcome.engine_steps;
             let mut sim = load();
-            let targets = vec![0.0; sim.joint_count()];
+            let hold: Vec<_> = plan
+                .initial_angles_rad
+                .iter()
+                .map(|&q| realitygap_core::engine::ServoCommand::position(q))
+                .collect();
+            // From the recording's first angles, as the replay starts.
+            sim.set_joint_angles_rad(&plan.initial_angles_rad).unwrap();
             let t0 = thread_cpu_s();
-            sim.set_joint_velocity_targets(&targets);
+            sim.set_joint_commands(&hold).unwrap();
             for _ in 0..steps {
                 sim.step().unwrap();
             }

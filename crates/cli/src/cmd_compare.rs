@@ -102,6 +102,13 @@ pub struct Args {
     /// Include per-step series in JSON output.
     #[arg(long)]
     pub series: bool,
+    /// Also compare in joint space: the real runs' joint angles by inverse
+    /// kinematics of the wrist capture (registration and marker offset
+    /// fitted on the fit runs), against every source that recorded joint
+    /// angles and the physics-free model; per scene, the RMS angle error per
+    /// joint (md and json).
+    #[arg(long)]
+    pub joint_space: bool,
     /// Write the output to this file instead of standard output.
     #[arg(long, short)]
     pub output: Option<PathBuf>,
@@ -121,11 +128,34 @@ pub fn run(args: Args) -> Result<()> {
         anyhow::bail!("--link belongs to the comparison of a replay's folder (the output of `realitygap replay`)");
     }
     let (study, roots) = load_study(&args.study, &args.data, args.results)?;
-    let reports = evaluate_measured(&args.study, &study, &roots, &args.measure.measure())?;
-    let text = if format == Format::Json && args.series {
-        serde_json::to_string_pretty(&table::to_json(&reports, true))? + "\n"
+    let measure = args.measure.measure();
+    let reports = evaluate_measured(&args.study, &study, &roots, &measure)?;
+    let joint = if args.joint_space {
+        Some(realitygap_study::joint_space::study_tables(
+            &study, &roots, &measure,
+        )?)
     } else {
-        table::render(&reports, format)
+        None
+    };
+    let text = match (&joint, format) {
+        (Some(tables), Format::Json) => {
+            let mut v = table::to_json(&reports, args.series);
+            v["joint_space"] = serde_json::to_value(tables)?;
+            serde_json::to_string_pretty(&v)? + "\n"
+        }
+        (Some(tables), Format::Markdown) => {
+            table::render(&reports, format)
+                + "\n"
+                + &realitygap_study::joint_space::markdown(tables)
+        }
+        (Some(_), other) => anyhow::bail!(
+            "--joint-space is written as md or json, not {}",
+            format!("{other:?}").to_lowercase()
+        ),
+        (None, _) if format == Format::Json && args.series => {
+            serde_json::to_string_pretty(&table::to_json(&reports, true))? + "\n"
+        }
+        (None, _) => table::render(&reports, format),
     };
     match args.output {
         Some(p) => {

@@ -3,7 +3,7 @@
 //! robot's own joint recordings (ROS 2 bags, CSV, LeRobot datasets), one run
 //! per episode.
 
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand, ValueEnum};
 use realitygap_core::{CommandKind, RobotModel};
 use realitygap_data::qualisys::{self, QualisysOptions};
@@ -178,6 +178,26 @@ pub struct QualisysArgs {
     /// Source name written into the manifest.
     #[arg(long, default_value = "real")]
     source: String,
+    /// Also solve every run in joint space: inverse kinematics of the
+    /// wrist body's 6D pose, with a capture registration (yaw and
+    /// translation) and the marker's offset on the tracked link fitted on
+    /// the training runs (--ik-fit); the joint angles are stored with the
+    /// poses and the residual is printed per run. `--scene` must then name
+    /// a scene file (or a scene of assets/scenes).
+    #[arg(long)]
+    ik: bool,
+    /// The robot for --ik: mico2, official or a URDF file [default: the
+    /// scene's].
+    #[arg(long, value_name = "ROBOT", requires = "ik")]
+    robot: Option<String>,
+    /// Where a ROS package is, for package:// URIs: NAME=DIR (repeatable).
+    #[arg(long = "package", value_name = "NAME=DIR", requires = "ik")]
+    packages: Vec<String>,
+    /// The runs the --ik registration is fitted on, by position among the
+    /// runs sorted by id: A-B (1-based), N (the first N) or all [default:
+    /// the first three quarters, the study's runs 1-15 of 20].
+    #[arg(long, value_name = "A-B|N|all", requires = "ik")]
+    ik_fit: Option<String>,
 }
 
 /// Quaternion order of a recorded file.
@@ -415,6 +435,25 @@ fn import_qualisys(args: QualisysArgs) -> Result<()> {
         kind: SourceKind::Real,
         scene: Some(&args.scene),
     };
+    // Everything --ik needs is checked before anything is imported.
+    let ik = if args.ik {
+        let file = realitygap_study::ik::scene_file(&args.scene)?;
+        let mut scene = realitygap_core::Scene::from_file(&file)?;
+        let resolver = realitygap_runner::prepare::resolver(&args.packages)?;
+        let robot =
+            match realitygap_runner::prepare::robot_override(args.robot.as_deref(), &resolver)? {
+                Some((robot, path, _)) => {
+                    scene.set_robot_urdf(path);
+                    robot
+                }
+                None => realitygap_core::RobotModel::from_urdf_file(&scene.robot.urdf, &resolver)
+                    .with_context(|| format!("the robot of scene {}", file.display()))?,
+            };
+        scene.validate(&robot)?;
+        Some((scene, robot))
+    } else {
+        None
+    };
     import_files(
         &args.files,
         &target,
@@ -422,7 +461,52 @@ fn import_qualisys(args: QualisysArgs) -> Result<()> {
         |f| qualisys::read(f, &opts),
         &|l| println!("{l}"),
         &|l| eprintln!("{l}"),
-    )
+    )?;
+    let Some((scene, robot)) = ik else {
+        return Ok(());
+    };
+    let started = std::time::Instant::now();
+    let solved =
+        realitygap_study::ik::solve_import(&args.out, &scene, &robot, args.ik_fit.as_deref())?;
+    let f = &solved.fit;
+    println!(
+        "inverse kinematics of {} runs with robot '{}' ({:.1} s): registration fitted on {} runs ({} frames: {:.2} mm, {:.2} deg RMS): yaw {:.2} deg, translation ({:.1}, {:.1}, {:.1}) mm; marker {:.1} mm from the link's origin",
+        solved.runs.len(),
+        robot.name,
+        started.elapsed().as_secs_f64(),
+        solved.training.len(),
+        f.frames,
+        f.fit_position_rms_mm,
+        f.fit_angle_rms_deg,
+        f.registration.yaw_rad.to_degrees(),
+        f.registration.translation_m.x * 1e3,
+        f.registration.translation_m.y * 1e3,
+        f.registration.translation_m.z * 1e3,
+        f.marker_in_link.position_m.norm() * 1e3
+    );
+    let (mut train, mut test) = (Vec::new(), Vec::new());
+    for (id, p, a) in &solved.runs {
+        println!("  {id}: residual {p:.2} mm, {a:.2} deg RMS");
+        if solved.training.contains(id) {
+            train.push((*p, *a));
+        } else {
+            test.push((*p, *a));
+        }
+    }
+    let mean = |v: &[(f64, f64)]| {
+        let n = v.len().max(1) as f64;
+        (
+            v.iter().map(|x| x.0).sum::<f64>() / n,
+            v.iter().map(|x| x.1).sum::<f64>() / n,
+        )
+    };
+    let (tp, ta) = mean(&train);
+    println!("  training runs: {tp:.2} mm, {ta:.2} deg RMS on average");
+    if !test.is_empty() {
+        let (hp, ha) = mean(&test);
+        println!("  other runs: {hp:.2} mm, {ha:.2} deg RMS on average");
+    }
+    Ok(())
 }
 
 fn import_recorded(args: RecordedArgs) -> Result<()> {

@@ -5,9 +5,11 @@
 use anyhow::{bail, Result};
 use clap::Args as ClapArgs;
 use indicatif::{ProgressBar, ProgressStyle};
+use realitygap_runner::slurm::Executor;
+use realitygap_runner::Launcher;
 use realitygap_study::replay::{
     joint_space_markdown, joint_space_row, prepare_replay, replay_all, store_kinematic,
-    ReplayRequest, KINEMATIC,
+    ReplayExecutor, ReplayRequest, KINEMATIC,
 };
 use std::path::PathBuf;
 
@@ -39,6 +41,13 @@ pub struct Args {
     /// measures it again), OUT/joint_space.md, .json, OUT/report/.
     #[arg(long)]
     out: PathBuf,
+    /// Replays at a time, each in a child process (default: the number of
+    /// cores).
+    #[arg(long, short = 'j', value_name = "N")]
+    jobs: Option<usize>,
+    /// Where the replays run.
+    #[command(flatten)]
+    executor: crate::cmd_run::ExecutorArgs,
 }
 
 /// `realitygap replay`.
@@ -79,7 +88,24 @@ pub fn run(args: Args) -> Result<()> {
         )
         .expect("a valid template"),
     );
-    let runs = replay_all(&engines, &prepared, &params, &args.out, &|r| {
+    let launcher = Launcher::this_executable();
+    let slurm;
+    let executor = match args.executor.executor()? {
+        Executor::Local => ReplayExecutor::Local {
+            launcher: &launcher,
+            jobs: args
+                .jobs
+                .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),
+        },
+        Executor::Slurm(options) => {
+            slurm = options;
+            ReplayExecutor::Slurm {
+                launcher: &launcher,
+                options: &slurm,
+            }
+        }
+    };
+    let runs = replay_all(&engines, &prepared, &params, &args.out, &executor, &|r| {
         bar.inc(1);
         if let Err(e) = &r.result {
             bar.suspend(|| eprintln!("{} in {}: failed: {e}", r.id, r.engine));
@@ -92,7 +118,7 @@ pub fn run(args: Args) -> Result<()> {
         .iter()
         .filter_map(|e| {
             let link = prepared.robot.link_by_name(&prepared.link)?;
-            realitygap_study::replay::kinematic_run(e, &prepared.robot, link, params.delay_s())
+            realitygap_study::replay::kinematic_run(e, &prepared, link, params.delay_s())
                 .map(|t| (e.id.clone(), t))
         })
         .collect();
@@ -115,8 +141,7 @@ pub fn run(args: Args) -> Result<()> {
         sources.push((engine.name().to_string(), mine));
     }
     let names: Vec<String> = prepared
-        .robot
-        .actuated_joints()
+        .replayed_joints()
         .iter()
         .map(|&j| prepared.robot.joints[j].name.clone())
         .collect();

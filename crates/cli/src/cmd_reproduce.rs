@@ -65,6 +65,21 @@ pub struct Args {
     /// the untuned rows.
     #[arg(long, value_name = "DIR")]
     pub tuned: Vec<PathBuf>,
+    /// Also compare in joint space (`compare --joint-space`): every
+    /// engine's joint angles against the real arm's, found by inverse
+    /// kinematics of its wrist capture; written to joint_space.md and
+    /// joint_space.json (needs the recordings). `--runs` and `--holdout`
+    /// choose the real runs the registration is fitted on and scored on.
+    #[arg(long)]
+    pub joint_space: bool,
+    /// With --joint-space: the real runs to fit the IK registration on,
+    /// e.g. 1-15 (default: all).
+    #[arg(long, value_name = "RANGE", requires = "joint_space")]
+    pub runs: Option<String>,
+    /// With --joint-space: the real runs to score on, never fitted on,
+    /// e.g. 16-20 (default: none held out).
+    #[arg(long, value_name = "RANGE", requires = "joint_space")]
+    pub holdout: Option<String>,
     /// Where the simulations run (as for `run`).
     #[command(flatten)]
     pub executor: cmd_run::ExecutorArgs,
@@ -134,6 +149,26 @@ pub fn run(args: Args) -> Result<()> {
     let reports = evaluate(&study, &roots, &opts)?;
     timings.push(("compare".into(), t.elapsed().as_secs_f64()));
     print!("{}", table::render(&reports, Format::Markdown));
+    if args.joint_space {
+        if data.is_none() {
+            bail!("--joint-space needs the real arm's recordings (leave --data out, or give a folder)");
+        }
+        let t = Instant::now();
+        let measure = realitygap_study::Measure {
+            runs: args.runs.clone(),
+            holdout: args.holdout.clone(),
+            ..realitygap_study::Measure::default()
+        };
+        let tables = realitygap_study::joint_space::study_tables(&study, &roots, &measure)?;
+        let md = realitygap_study::joint_space::markdown(&tables);
+        std::fs::write(args.out.join("joint_space.md"), &md)?;
+        std::fs::write(
+            args.out.join("joint_space.json"),
+            serde_json::to_string_pretty(&tables)? + "\n",
+        )?;
+        print!("\n{md}");
+        timings.push(("joint space".into(), t.elapsed().as_secs_f64()));
+    }
 
     eprintln!("[3/3] writing the report");
     let t = Instant::now();

@@ -517,3 +517,56 @@ fn study_mode_table_matches_the_readme() {
         .collect();
     assert_eq!(got, expected);
 }
+
+/// `compare --joint-space`: per scene, the real arm in joint space (IK of
+/// the wrist, registration fitted on runs 1-15, scored on 16-20) against
+/// the physics-free model (the study's recorded simulators carry no joint
+/// angles, so they have no row), in Markdown and JSON; csv is refused.
+#[test]
+fn joint_space_tables_of_the_study() {
+    let Some((json, _)) = compare(&[
+        "--joint-space",
+        "--runs",
+        "1-15",
+        "--holdout",
+        "16-20",
+        "--format",
+        "json",
+        "--bootstrap",
+        "0",
+    ]) else {
+        return;
+    };
+    let v: serde_json::Value = serde_json::from_str(&json).unwrap();
+    let tables = v["joint_space"].as_array().unwrap();
+    assert_eq!(tables.len(), 3);
+    for (t, scene) in tables.iter().zip(SCENES) {
+        assert_eq!(t["scene"], scene);
+        assert_eq!(t["scored_runs"].as_array().unwrap().len(), 5);
+        assert_eq!(t["fit_runs"].as_array().unwrap().len(), 15);
+        let (mm, deg) = (
+            t["ik_residual"][0].as_f64().unwrap(),
+            t["ik_residual"][1].as_f64().unwrap(),
+        );
+        assert!(
+            mm < 1.5 && deg < 2.0,
+            "{scene}: IK residual {mm} mm, {deg} deg"
+        );
+        let rows = t["rows"].as_array().unwrap();
+        assert_eq!(rows.len(), 1, "only the physics-free model: {rows:?}");
+        let all = rows[0]["rms_all_deg"].as_f64().unwrap();
+        assert!(all > 0.5 && all < 10.0, "{scene}: kinematic {all} deg");
+    }
+    let (md, _) = compare(&["--joint-space", "--bootstrap", "0"]).unwrap();
+    assert!(
+        md.contains("## Joint space") && md.contains("| kinematic (perfect tracking) | 1 |"),
+        "{md}"
+    );
+    let out = bin()
+        .args(["compare", "--joint-space", "--format", "csv"])
+        .arg(root().join("assets/studies/collins2019.toml"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--joint-space is written as md or json"));
+}

@@ -295,3 +295,87 @@ fn bad_arguments_are_refused() {
         text(&o.stderr)
     );
 }
+
+/// `import qualisys --ik`: scene 1's twenty captures solved in joint space
+/// (the registration fitted on the first fifteen), the angles stored with
+/// the poses, the residual printed and kept per run; bad requests refused
+/// before anything is imported.
+#[test]
+fn imports_real_captures_in_joint_space() {
+    let Some(data) = paper_data() else { return };
+    let dir = scratch("qualisys-ik");
+    let out = dir.join("real-scene1");
+    let files: Vec<String> = (1..=20)
+        .map(|i| {
+            data.join(format!("MotionCapture/Experiment1/Single{i:04}_6D.tsv"))
+                .display()
+                .to_string()
+        })
+        .collect();
+    let mut args = vec!["import", "qualisys"];
+    args.extend(files.iter().map(String::as_str));
+    args.extend([
+        "--scene",
+        "scene1_single_joint",
+        "--ik",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let o = realitygap(&args);
+    let stdout = text(&o.stdout);
+    assert!(o.status.success(), "{stdout}{}", text(&o.stderr));
+    assert!(
+        stdout.contains("registration fitted on 15 runs") && stdout.contains("other runs:"),
+        "{stdout}"
+    );
+    let store = RunStore::open(&out).unwrap();
+    let ik = &store.manifest().settings["ik"];
+    assert_eq!(ik["training_runs"].as_array().unwrap().len(), 15);
+    assert!(ik["fit_position_rms_mm"].as_f64().unwrap() < 1.0, "{ik}");
+    for run in store.runs() {
+        let residual = run.extra["ik"]["position_rms_mm"].as_f64().unwrap();
+        assert!(residual < 1.0, "{}: {residual} mm", run.id);
+        let t = store.read_run(&run.id).unwrap();
+        let q = t.joint_angles_rad.as_ref().expect("joint angles stored");
+        assert_eq!(q.len(), t.len());
+        assert_eq!(q[0].len(), 6);
+        // Joint 2 ends near its -100 degree target.
+        let last = q.last().unwrap()[1].to_degrees();
+        assert!(
+            (last + 100.0).abs() < 3.0,
+            "{}: joint 2 ends at {last}",
+            run.id
+        );
+    }
+    // A scene that is no file and no scene of the assets, and the IK's
+    // options without --ik, are refused before anything is imported.
+    let bad = dir.join("bad");
+    let mut a = vec!["import", "qualisys", files[0].as_str()];
+    a.extend([
+        "--scene",
+        "no_such_scene",
+        "--ik",
+        "--out",
+        bad.to_str().unwrap(),
+    ]);
+    let o = realitygap(&a);
+    assert!(!o.status.success());
+    assert!(
+        text(&o.stderr).contains("--scene no_such_scene"),
+        "{}",
+        text(&o.stderr)
+    );
+    assert!(!bad.exists(), "nothing imported");
+    let mut a = vec!["import", "qualisys", files[0].as_str()];
+    a.extend([
+        "--scene",
+        "scene1_single_joint",
+        "--robot",
+        "official",
+        "--out",
+        bad.to_str().unwrap(),
+    ]);
+    let o = realitygap(&a);
+    assert!(!o.status.success());
+    assert!(text(&o.stderr).contains("--ik"), "{}", text(&o.stderr));
+}

@@ -215,10 +215,11 @@ fn every_engine_replays_at_its_defaults_and_refusals_are_named() {
     ]);
     let stderr = text(&run.stderr);
     assert!(!run.status.success());
+    // The run fails in its child process with the located message.
     assert!(
-        stderr.contains(
-            "in physx: failed: engine physx: parameter `joints.lbr_iiwa_joint_1.frictionloss`"
-        ),
+        stderr.contains("in physx: failed:")
+            && stderr.contains("engine physx: parameter `joints.lbr_iiwa_joint_1.frictionloss`: ")
+            && stderr.contains(".toml:6:16"),
         "{stderr}"
     );
 }
@@ -371,4 +372,53 @@ fn recorded_efforts_replay_open_loop_in_every_engine() {
             );
         }
     }
+}
+
+/// A scene of the user's decides which joints are replayed: recordings of
+/// other joints are refused naming both lists.
+#[test]
+fn a_scene_that_controls_other_joints_is_refused_naming_both() {
+    let dir = scratch("replay-tests", "subset");
+    let real = import(&dir);
+    let first = dir.join("first");
+    let run = realitygap(&[
+        "replay",
+        &path(&real),
+        "--engine",
+        "ode",
+        "--out",
+        &path(&first),
+    ]);
+    assert!(run.status.success(), "{}", text(&run.stderr));
+    // The generated scene without joint 7's servo, the joint held at 0.
+    let scene = std::fs::read_to_string(first.join("replay.toml")).unwrap();
+    let cut = scene
+        .find("[[actuator]]\njoint = \"lbr_iiwa_joint_7\"")
+        .unwrap();
+    let end = cut + scene[cut..].find("\n\n").unwrap();
+    let mut six = format!("{}{}", &scene[..cut], &scene[end..]);
+    six = six.replace(
+        "base_rpy_deg = [0.0, 0.0, 0.0]\n",
+        "base_rpy_deg = [0.0, 0.0, 0.0]\n[robot.held_joints_deg]\nlbr_iiwa_joint_7 = 0.0\n",
+    );
+    let file = dir.join("six.toml");
+    std::fs::write(&file, six).unwrap();
+    let run = realitygap(&[
+        "replay",
+        &path(&real),
+        "--scene",
+        &path(&file),
+        "--engine",
+        "ode",
+        "--out",
+        &path(&dir.join("six")),
+    ]);
+    let stderr = text(&run.stderr);
+    assert!(!run.status.success());
+    assert!(
+        stderr.contains("the episodes are of the joints lbr_iiwa_joint_1")
+            && stderr.contains("six.toml controls the joints")
+            && !stderr.contains("panicked"),
+        "{stderr}"
+    );
 }

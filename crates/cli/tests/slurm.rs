@@ -450,3 +450,76 @@ fn a_results_directory_the_workers_cannot_write_is_a_clear_error() {
     }
     assert_ne!(tasks[0], tasks[1]);
 }
+
+/// `replay --executor slurm`: the independent writer's recorded episodes
+/// replayed in ODE and MuJoCo as a Slurm job array give the same runs,
+/// byte for byte, as the local pool of child processes.
+#[test]
+fn replay_through_slurm_gives_the_local_pools_runs() {
+    let tmp = std::env::temp_dir().join(format!("rg-slurm-replay-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&tmp);
+    std::fs::create_dir_all(&tmp).unwrap();
+    let fixtures = realitygap_core::testing::joint_recording_fixtures();
+    let real = tmp.join("real");
+    let o = realitygap(&[
+        "import",
+        "rosbag",
+        &fixtures.join("mcap/episode_000").display().to_string(),
+        &fixtures.join("mcap/episode_001").display().to_string(),
+        "--robot",
+        &realitygap_core::testing::iiwa_urdf().display().to_string(),
+        "--out",
+        &real.display().to_string(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let replay = |out: &Path, extra: &[&str]| {
+        let mut a = vec![
+            "replay".to_string(),
+            real.display().to_string(),
+            "--engine".into(),
+            "ode".into(),
+            "--engine".into(),
+            "mujoco".into(),
+            "--out".into(),
+            out.display().to_string(),
+        ];
+        a.extend(extra.iter().map(|s| s.to_string()));
+        let a: Vec<&str> = a.iter().map(String::as_str).collect();
+        let o = realitygap(&a);
+        assert!(
+            o.status.success(),
+            "{}{}",
+            String::from_utf8_lossy(&o.stdout),
+            String::from_utf8_lossy(&o.stderr)
+        );
+        String::from_utf8_lossy(&o.stdout).into_owned()
+    };
+    let local = tmp.join("local");
+    let slurm = tmp.join("slurm");
+    replay(&local, &[]);
+    let said = replay(&slurm, &["--executor", "slurm"]);
+    assert!(said.contains("4 runs, 0 kept"), "{said}");
+    assert!(slurm.join("slurm/submit.sh").is_file());
+    for engine in ["ode", "mujoco"] {
+        for e in ["episode_000", "episode_001"] {
+            let file = |d: &Path| {
+                let runs = d.join(engine).join("runs");
+                let name = std::fs::read_dir(&runs)
+                    .unwrap()
+                    .flatten()
+                    .map(|f| f.file_name().to_string_lossy().into_owned())
+                    .find(|n| n.starts_with(e) && n.ends_with(".csv") && !n.contains("commands"))
+                    .unwrap_or_else(|| panic!("no run {e} in {}", runs.display()));
+                std::fs::read(runs.join(name)).unwrap()
+            };
+            assert!(
+                file(&local) == file(&slurm),
+                "{engine} {e}: the Slurm run differs from the local one"
+            );
+        }
+    }
+    // A rerun keeps them all.
+    let again = replay(&slurm, &["--executor", "slurm"]);
+    assert!(again.contains("4 kept"), "{again}");
+    let _ = std::fs::remove_dir_all(&tmp);
+}

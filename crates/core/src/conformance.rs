@@ -385,6 +385,26 @@ link = "disc"
     (scene, robot)
 }
 
+/// The law an engine's position servo follows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PositionLaw {
+    /// The PD law `I q'' = kp (q* - q) - kv q'`.
+    Pd,
+    /// A velocity constraint `q' = (kp / kv)(q* - q)` (Bullet's
+    /// `POSITION_CONTROL` motor with positionGain `kp dt / kv`): first
+    /// order, time constant `kv / kp`.
+    FirstOrder,
+}
+
+/// The rotor's angle at `t_s` under the position step through a servo of
+/// `law`, rad.
+pub fn rotor_position_rad(law: PositionLaw, t_s: f64) -> f64 {
+    match law {
+        PositionLaw::Pd => rotor_analytic_rad(crate::trajectory::CommandKind::Position, t_s),
+        PositionLaw::FirstOrder => STEP_POSITION_RAD * (1.0 - (-t_s * ROTOR_KP / ROTOR_KV).exp()),
+    }
+}
+
 /// The rotor's analytic angle at `t_s` under a step command of `kind`
 /// from rest at 0 (see [`step_response`]), rad.
 pub fn rotor_analytic_rad(kind: crate::trajectory::CommandKind, t_s: f64) -> f64 {
@@ -434,6 +454,16 @@ pub struct StepResponse {
 /// [`STEP_EFFORT_NM`]) through [`Simulation::set_joint_commands`], against
 /// the analytic response of the law ([`rotor_analytic_rad`]).
 pub fn step_response(subject: Subject<'_>, kind: crate::trajectory::CommandKind) -> StepResponse {
+    step_response_with(subject, kind, PositionLaw::Pd)
+}
+
+/// [`step_response`] with the position step compared with `law`'s
+/// response.
+pub fn step_response_with(
+    subject: Subject<'_>,
+    kind: crate::trajectory::CommandKind,
+    law: PositionLaw,
+) -> StepResponse {
     use crate::engine::ServoCommand;
     use crate::trajectory::CommandKind;
     let (scene, robot) = rotor();
@@ -444,6 +474,10 @@ pub fn step_response(subject: Subject<'_>, kind: crate::trajectory::CommandKind)
         CommandKind::Effort => ServoCommand::effort(STEP_EFFORT_NM),
     };
     sim.set_joint_commands(&[command]).unwrap();
+    let reference = |t: f64| match kind {
+        CommandKind::Position => rotor_position_rad(law, t),
+        _ => rotor_analytic_rad(kind, t),
+    };
     let dt = sim.timestep_s();
     let steps = (1.0 / dt).round() as u64;
     let mut q = [0.0];
@@ -452,14 +486,13 @@ pub fn step_response(subject: Subject<'_>, kind: crate::trajectory::CommandKind)
     for k in 1..=steps {
         sim.step().unwrap();
         sim.joint_angles_rad(&mut q);
-        last = (q[0] - rotor_analytic_rad(kind, k as f64 * dt)).abs();
-
+        last = (q[0] - reference(k as f64 * dt)).abs();
         max_error = max_error.max(last);
     }
     StepResponse {
         max_error_rad: max_error,
         final_error_rad: last,
-        final_rad: rotor_analytic_rad(kind, steps as f64 * dt),
+        final_rad: reference(steps as f64 * dt),
     }
 }
 

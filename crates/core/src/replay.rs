@@ -19,9 +19,11 @@
 //! PD servo. The samples are recorded at the recording's own times, at the
 //! engine step nearest to each (at most half a timestep away).
 
-use crate::controller::{RunError, RunOutcome, RunStatus};
+use crate::controller::{RunError, RunOptions, RunOutcome, RunStatus};
 use crate::engine::{EngineError, ServoCommand, Simulation};
+use crate::params::PhysicalParams;
 use crate::pose::Pose;
+use crate::scene::Scene;
 use crate::trajectory::{CommandKind, JointCommands, Trajectory};
 use std::time::Instant;
 
@@ -164,6 +166,81 @@ impl ReplayPlan {
             CommandKind::Effort => command.value,
         };
         tau.clamp(-limit, limit)
+    }
+}
+
+/// The default gains of a replay servo whose gains neither the scene nor
+/// the parameters give: full effort at 0.05 rad of error (`kp`; effort 100
+/// N m when the limit is none or not finite) and `kv = kp * 0.1 s`.
+pub fn default_gains(force_limit_nm: f64) -> (f64, f64) {
+    let effort = if force_limit_nm.is_finite() && force_limit_nm > 0.0 && force_limit_nm < 1e5 {
+        force_limit_nm
+    } else {
+        100.0
+    };
+    let kp = effort / 0.05;
+    (kp, kp * 0.1)
+}
+
+/// Gives every actuator of `scene` without a position gain the default
+/// one ([`default_gains`]): a replay holds uncommanded joints at their
+/// first angle through the PD law.
+pub fn fill_default_gains(scene: &mut Scene) {
+    for a in scene.actuators.iter_mut().filter(|a| a.kp.is_none()) {
+        a.kp = Some(default_gains(a.force_limit).0);
+    }
+}
+
+impl ReplayPlan {
+    /// The plan of one recorded episode (`real`: joint angles, optional
+    /// velocities, commands) in `scene`, whose actuators already carry
+    /// `params` ([`PhysicalParams::apply`]) and a position gain
+    /// ([`fill_default_gains`]); the delay is the parameters'. The error
+    /// says what the recording lacks.
+    pub fn for_recording(
+        real: &Trajectory,
+        scene: &Scene,
+        params: &PhysicalParams,
+    ) -> Result<ReplayPlan, String> {
+        let commands = real
+            .commands
+            .clone()
+            .ok_or("the recording has no commands")?;
+        let angles = real
+            .joint_angles_rad
+            .as_ref()
+            .and_then(|r| r.first())
+            .cloned()
+            .ok_or("the recording has no joint angles")?;
+        let velocities = real
+            .joint_velocities_rad_s
+            .as_ref()
+            .and_then(|r| r.first())
+            .cloned()
+            .unwrap_or_else(|| vec![0.0; angles.len()]);
+        let mut kp = Vec::new();
+        let mut kv = Vec::new();
+        let mut force_limit_nm = Vec::new();
+        for a in &scene.actuators {
+            kp.push(a.kp.unwrap_or_else(|| default_gains(a.force_limit).0));
+            kv.push(a.kv);
+            // 0 switches the servo off; a limit that is not a number >= 0
+            // is none.
+            let limit = a.force_limit;
+            force_limit_nm.push(if limit >= 0.0 { limit } else { f64::INFINITY });
+        }
+        Ok(ReplayPlan {
+            commands,
+            sample_times_s: real.time_s.clone(),
+            initial_angles_rad: angles,
+            initial_velocities_rad_s: velocities,
+            kp,
+            kv,
+            force_limit_nm,
+            delay_s: params.delay_s(),
+            roles: scene.tracked.iter().map(|t| t.role.clone()).collect(),
+            divergence_bound_m: RunOptions::default().divergence_bound_m,
+        })
     }
 }
 

@@ -95,7 +95,7 @@ mod state;
 mod urdf_file;
 
 pub use messages::{install_message_handler, take_messages, BulletMessage, Level};
-pub use settings::{BulletSettings, SETTINGS};
+pub use settings::{BulletSettings, PositionServo, SETTINGS};
 
 use build::{
     apply_variation, check_mesh_messages, create_ground, create_objects, hold_joints, load_robot,
@@ -229,7 +229,7 @@ pub const COMMAND_SUPPORT: [CommandSupport; 3] = [
     },
     CommandSupport {
         kind: CommandKind::Position,
-        mechanism: "PD_CONTROL (pdControl plugin): explicit kp (q - angle) - kv qd, clamped to the limit, before every step; the velocity motor off",
+        mechanism: "POSITION_CONTROL motor with positionGain = kp dt / kv, velocityGain 1: the constraint asks for (kp/kv)(q - angle), at most the limit (setting position_servo = \"pd_control\": PD_CONTROL, the explicit law kp (q - angle) - kv qd before every step)",
     },
     CommandSupport {
         kind: CommandKind::Effort,
@@ -285,6 +285,7 @@ pub struct BulletSimulation {
     /// Simulated time at step 0, s (0 after loading; set by `set_state`).
     time_origin_s: f64,
     velocity_gain: f64,
+    position_servo: PositionServo,
     joints: Vec<MotorJoint>,
     /// Every movable joint that is not controlled: Bullet joint index and
     /// q/u index, its held position, rad (or m).
@@ -297,6 +298,8 @@ pub struct BulletSimulation {
     commands: Vec<ServoCommand>,
     /// True while a joint may have a PD law of the pdControl plugin.
     pd_active: bool,
+    /// The kinds of command the motors were last set for.
+    kinds_sent: Vec<CommandKind>,
     /// The scene, for checking commands.
     scene: Scene,
     // The state after the last step (or reset).
@@ -441,6 +444,7 @@ impl BulletSimulation {
             steps: 0,
             time_origin_s: 0.0,
             velocity_gain: options.velocity_gain,
+            position_servo: options.position_servo,
             joints,
             held,
             tracked,
@@ -448,6 +452,7 @@ impl BulletSimulation {
             targets_pending: true,
             commands: Vec::new(),
             pd_active: false,
+            kinds_sent: Vec::new(),
             scene: scene.clone(),
             angles_rad: vec![0.0; n],
             velocities_rad_s: vec![0.0; n],
@@ -484,13 +489,14 @@ impl BulletSimulation {
                 .get(i)
                 .map_or(CommandKind::Velocity, |c: &ServoCommand| c.kind)
         };
-        if self.pd_active || !self.commands.is_empty() {
+        let pd = self.position_servo == PositionServo::PdControl;
+        if self.pd_active || (pd && !self.commands.is_empty()) {
             // SAFETY: the command is created on this client and submitted
             // once, with the lock held.
             let kind = unsafe {
                 let cmd = ffi::b3JointControlCommandInit2(h, self.robot, ffi::CONTROL_MODE_PD);
                 for (i, joint) in self.joints.iter().enumerate() {
-                    if kind_of(i) == CommandKind::Position {
+                    if pd && kind_of(i) == CommandKind::Position {
                         ffi::b3JointControlSetDesiredPosition(
                             cmd,
                             joint.q_index as c_int,
@@ -513,33 +519,67 @@ impl BulletSimulation {
                 "sending the PD laws",
             )
             .map_err(|m| self.unstable(m))?;
-            self.pd_active = self
+            self.pd_active = pd
+                && self
+                    .commands
+                    .iter()
+                    .any(|c| c.kind == CommandKind::Position);
+        }
+        // The velocity command, unless every joint's motor is a position
+        // motor already (a replay of position commands changes only the
+        // targets, ten times in a hundred steps).
+        let kinds: Vec<CommandKind> = (0..self.joints.len()).map(kind_of).collect();
+        let only_positions = !pd && kinds.iter().all(|&k| k == CommandKind::Position);
+        if !(only_positions && kinds == self.kinds_sent) {
+            self.send_velocities(lock, &kind_of, pd)?;
+        }
+        self.kinds_sent = kinds;
+        if !pd
+            && self
                 .commands
                 .iter()
-                .any(|c| c.kind == CommandKind::Position);
+                .any(|c| c.kind == CommandKind::Position)
+        {
+            // POSITION_CONTROL: the motor's constraint asks for the joint
+            // velocity positionGain (q - angle) / dt at the end of the step;
+            // positionGain = kp dt / kv makes it (kp / kv)(q - angle), the
+            // PD law's velocity with the damping term made exact.
+            // SAFETY: the command is created on this client and submitted
+            // once, with the lock held.
+            let kind = unsafe {
+                let cmd = ffi::b3JointControlCommandInit2(
+                    h,
+                    self.robot,
+                    ffi::CONTROL_MODE_POSITION_VELOCITY_PD,
+                );
+                for (i, joint) in self.joints.iter().enumerate() {
+                    if kind_of(i) != CommandKind::Position {
+                        continue;
+                    }
+                    let gain = if joint.kv > 0.0 {
+                        (joint.kp * self.timestep_s / joint.kv).min(1.0)
+                    } else {
+                        1.0
+                    };
+                    ffi::b3JointControlSetDesiredPosition(
+                        cmd,
+                        joint.q_index as c_int,
+                        self.commands[i].value,
+                    );
+                    ffi::b3JointControlSetKp(cmd, joint.u_index, gain);
+                    ffi::b3JointControlSetDesiredVelocity(cmd, joint.u_index, 0.0);
+                    ffi::b3JointControlSetKd(cmd, joint.u_index, 1.0);
+                    ffi::b3JointControlSetMaximumForce(cmd, joint.u_index, joint.max_force);
+                }
+                self.client.submit(lock, cmd).kind
+            };
+            check_status(
+                kind,
+                ffi::CMD_DESIRED_STATE_RECEIVED_COMPLETED,
+                "sending the position targets",
+            )
+            .map_err(|m| self.unstable(m))?;
         }
-        // SAFETY: the command is created on this client and
-        // submitted once, with the lock held.
-        let kind = unsafe {
-            let cmd = ffi::b3JointControlCommandInit2(h, self.robot, ffi::CONTROL_MODE_VELOCITY);
-            for (i, (joint, &v)) in self.joints.iter().zip(&self.targets_rad_s).enumerate() {
-                let (target, gain, force) = match (kind_of(i), joint.friction) {
-                    (CommandKind::Position | CommandKind::Effort, _) => (0.0, 1.0, 0.0),
-                    (CommandKind::Velocity, Some(f)) => (0.0, 1.0, f),
-                    (CommandKind::Velocity, None) => (v, self.velocity_gain, joint.max_force),
-                };
-                ffi::b3JointControlSetDesiredVelocity(cmd, joint.u_index, target);
-                ffi::b3JointControlSetKd(cmd, joint.u_index, gain);
-                ffi::b3JointControlSetMaximumForce(cmd, joint.u_index, force);
-            }
-            self.client.submit(lock, cmd).kind
-        };
-        check_status(
-            kind,
-            ffi::CMD_DESIRED_STATE_RECEIVED_COMPLETED,
-            "sending the motor targets",
-        )
-        .map_err(|m| self.unstable(m))?;
         self.targets_pending = false;
         Ok(())
     }
@@ -676,6 +716,42 @@ impl BulletSimulation {
             self.step_once(lock)?;
         }
         Ok(())
+    }
+
+    /// Sends the velocity motors' command: the velocity targets, the dry
+    /// friction of a joint without a servo, every other motor off (a
+    /// position motor is set apart). Needs the Bullet lock (`lock`).
+    fn send_velocities(
+        &self,
+        lock: &ffi::BulletLock,
+        kind_of: &dyn Fn(usize) -> CommandKind,
+        pd: bool,
+    ) -> Result<(), EngineError> {
+        let h = self.client.handle(lock);
+        // SAFETY: the command is created on this client and
+        // submitted once, with the lock held.
+        let kind = unsafe {
+            let cmd = ffi::b3JointControlCommandInit2(h, self.robot, ffi::CONTROL_MODE_VELOCITY);
+            for (i, (joint, &v)) in self.joints.iter().zip(&self.targets_rad_s).enumerate() {
+                let (target, gain, force) = match (kind_of(i), joint.friction) {
+                    // The position motor is set below.
+                    (CommandKind::Position, _) if !pd => continue,
+                    (CommandKind::Position | CommandKind::Effort, _) => (0.0, 1.0, 0.0),
+                    (CommandKind::Velocity, Some(f)) => (0.0, 1.0, f),
+                    (CommandKind::Velocity, None) => (v, self.velocity_gain, joint.max_force),
+                };
+                ffi::b3JointControlSetDesiredVelocity(cmd, joint.u_index, target);
+                ffi::b3JointControlSetKd(cmd, joint.u_index, gain);
+                ffi::b3JointControlSetMaximumForce(cmd, joint.u_index, force);
+            }
+            self.client.submit(lock, cmd).kind
+        };
+        check_status(
+            kind,
+            ffi::CMD_DESIRED_STATE_RECEIVED_COMPLETED,
+            "sending the motor targets",
+        )
+        .map_err(|m| self.unstable(m))
     }
 
     /// Sends the effort commands as joint torques for the next step

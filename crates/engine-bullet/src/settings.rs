@@ -52,7 +52,21 @@ pub const SETTINGS: &[SettingInfo] = &[
         key: "implicit_cylinders",
         help: "URDF cylinders as exact cylinders (true) or as convex hulls (false, Bullet's default); default false",
     },
+    SettingInfo {
+        key: "position_servo",
+        help: "how position commands drive a joint: position_control (PyBullet's POSITION_CONTROL motor, a constraint with positionGain = kp dt / kv: the first-order response v = (kp/kv)(q - angle), stable at any gain) or pd_control (PyBullet's PD_CONTROL: the explicit law kp (q - angle) - kv qd, exact, unstable past kv dt / I = 2); default position_control",
+    },
 ];
+
+/// How position commands drive a joint in Bullet (the `position_servo`
+/// setting).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PositionServo {
+    /// `POSITION_CONTROL`: the joint motor's constraint towards the target.
+    PositionControl,
+    /// `PD_CONTROL`: the explicit PD law of the pdControl plugin.
+    PdControl,
+}
 
 /// The engine's settings, checked. `None` keeps Bullet's own default
 /// (read back from the server by a test; the values are in [`SETTINGS`]).
@@ -87,6 +101,8 @@ pub struct BulletSettings {
     pub velocity_gain: f64,
     /// `URDF_USE_INERTIA_FROM_FILE`.
     pub inertia_from_file: bool,
+    /// How position commands drive a joint.
+    pub position_servo: PositionServo,
     /// `URDF_USE_SELF_COLLISION` (+ `_EXCLUDE_PARENT`).
     pub self_collision: bool,
     /// `URDF_USE_IMPLICIT_CYLINDER`.
@@ -112,6 +128,7 @@ impl Default for BulletSettings {
             inertia_from_file: true,
             self_collision: false,
             implicit_cylinders: false,
+            position_servo: PositionServo::PositionControl,
         }
     }
 }
@@ -168,6 +185,15 @@ impl BulletSettings {
             implicit_cylinders: r
                 .boolean("implicit_cylinders")?
                 .unwrap_or(d.implicit_cylinders),
+            position_servo: r
+                .choice(
+                    "position_servo",
+                    &[
+                        ("position_control", PositionServo::PositionControl),
+                        ("pd_control", PositionServo::PdControl),
+                    ],
+                )?
+                .unwrap_or(d.position_servo),
         })
     }
 }
@@ -271,6 +297,7 @@ mod tests {
                 "split_impulse" | "cone_friction" | "inertia_from_file" | "self_collision"
                 | "implicit_cylinders" => SettingValue::Bool(true),
                 "solver_iterations" => SettingValue::Integer(10),
+                "position_servo" => SettingValue::Text("pd_control".into()),
                 _ => SettingValue::Float(0.5),
             };
             BulletSettings::parse(&settings(&[(s.key, value)]))

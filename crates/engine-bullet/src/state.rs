@@ -181,6 +181,7 @@ impl BulletSimulation {
         self.commands.clone_from(&state.servo_commands);
         // The pdControl plugin's laws are not part of the saved world.
         self.pd_active = true;
+        self.kinds_sent.clear();
         self.send_targets(lock)?;
         self.refresh(lock)?;
         self.check_stability()

@@ -373,3 +373,21 @@ fn a_built_in_robot_loads_and_matches_the_file() {
     eprintln!("built-in vs file at t = 0: {first} m");
     assert!(first < 1e-12, "{first}");
 }
+
+/// `position_servo = "pd_control"`: PyBullet's PD_CONTROL, the explicit PD
+/// law, on the kit's rotor against the law's analytic response (the
+/// default POSITION_CONTROL is the kit's first-order law).
+#[test]
+fn pd_control_follows_the_pd_law() {
+    let settings =
+        realitygap_core::testing::kit::settings(&["timestep_s=0.001", "position_servo=pd_control"]);
+    let r = conformance::step_response(
+        Subject {
+            engine: &BulletEngine,
+            settings: &settings,
+        },
+        realitygap_core::trajectory::CommandKind::Position,
+    );
+    report("step_response_position_pd_control", r.max_error_rad, "6e-3");
+    assert!(r.max_error_rad < 6e-3, "{r:?}");
+}

@@ -122,6 +122,7 @@ impl<'a> SlurmSweep<'a> {
             check_only: false,
             stitch: None,
             allow_unstable: true,
+            replay: None,
         }
     }
 

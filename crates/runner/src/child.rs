@@ -6,7 +6,7 @@
 use crate::prepare::{
     engine_names, parse_perturbation, prepare, prepare_with, Prepared, RunSource,
 };
-use crate::protocol::{ChildResult, Job};
+use crate::protocol::{ChildResult, Job, ReplayJob};
 use crate::Registry;
 use anyhow::{Context, Result};
 use realitygap_core::controller::{
@@ -121,6 +121,9 @@ pub fn simulate(registry: Registry, job: &Job) -> Result<Option<ChildResult>> {
     if let Some(plan) = &job.stitch {
         return simulate_stitched(registry, job, plan);
     }
+    if let Some(episode) = &job.replay {
+        return simulate_replay(registry, job, episode);
+    }
     let p = prepare_for(registry, job, &job.engine)?;
     let options = run_options(job, p.scene.actuators.len())?;
     let mut sim = load_prepared(
@@ -144,6 +147,57 @@ pub fn simulate(registry: Registry, job: &Job) -> Result<Option<ChildResult>> {
     result.cpu_s = start.zip(end).map(|(a, b)| b - a);
     result.stability_issues = issues;
     result.instability = instability_of(&p.scene, &p.robot, &outcome);
+    Ok(Some(result))
+}
+
+/// Runs a replay job: the episode's recorded commands replayed in the
+/// job's engine on the job's scene (`realitygap_core::replay`), every
+/// actuator without a position gain given the default one.
+fn simulate_replay(
+    registry: Registry,
+    job: &Job,
+    episode: &ReplayJob,
+) -> Result<Option<ChildResult>> {
+    use realitygap_core::replay::{fill_default_gains, replay, ReplayPlan};
+    let mut p = prepare_for(registry, job, &job.engine)?;
+    fill_default_gains(&mut p.scene);
+    let store = realitygap_data::RunStore::open(&episode.real_dir).with_context(|| {
+        format!(
+            "reading the recorded episodes in {}",
+            episode.real_dir.display()
+        )
+    })?;
+    let real = store.read_run(&episode.episode)?;
+    let plan = ReplayPlan::for_recording(&real, &p.scene, &p.params).map_err(|e| {
+        anyhow::anyhow!(
+            "{}: run '{}': {e}",
+            episode.real_dir.display(),
+            episode.episode
+        )
+    })?;
+    let options = RunOptions {
+        allow_unstable: job.allow_unstable,
+        ..RunOptions::default()
+    };
+    let mut sim = load_prepared(
+        p.engine.as_ref(),
+        &p.scene,
+        &p.robot,
+        &p.settings,
+        &p.params,
+        &options,
+    )?;
+    refuse_unstable(p.engine.as_ref(), sim.as_ref(), &options)?;
+    if job.check_only {
+        return Ok(None);
+    }
+    let issues = sim.stability_issues();
+    let start = crate::cpu_clock::thread_cpu_s();
+    let outcome = replay(sim.as_mut(), &plan)?;
+    let end = crate::cpu_clock::thread_cpu_s();
+    let mut result = ChildResult::from_outcome(&outcome);
+    result.cpu_s = start.zip(end).map(|(a, b)| b - a);
+    result.stability_issues = issues;
     Ok(Some(result))
 }
 
@@ -373,6 +427,7 @@ mod tests {
             check_only,
             stitch: None,
             allow_unstable: false,
+            replay: None,
         }
     }
 

@@ -470,6 +470,7 @@ impl Plan {
             check_only,
             stitch: g.stitch.clone(),
             allow_unstable: spec.allow_unstable,
+            replay: None,
         }
     }
 

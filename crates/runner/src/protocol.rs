@@ -48,6 +48,19 @@ pub struct Job {
     /// manifest entry.
     #[serde(default)]
     pub allow_unstable: bool,
+    /// A recorded episode to replay instead of the scene's schedule
+    /// (`realitygap replay`): the scene file is then the replay's scene.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub replay: Option<ReplayJob>,
+}
+
+/// The recorded episode a replay job drives the engine with.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ReplayJob {
+    /// The results directory of the import that holds the episode.
+    pub real_dir: PathBuf,
+    /// The episode's run id.
+    pub episode: String,
 }
 
 /// What the child process sends back.
@@ -69,6 +82,14 @@ pub struct ChildResult {
     pub joint_angles_rad: Vec<Vec<u64>>,
     /// `[sample][joint]` velocity commands (rad/s), as IEEE bits.
     pub commands_rad_s: Vec<Vec<u64>>,
+    /// `[sample][joint]` joint velocities (rad/s), as IEEE bits, when the
+    /// run recorded them (a replay).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub joint_velocities_rad_s: Option<Vec<Vec<u64>>>,
+    /// `[sample][joint]` servo efforts (N m), as IEEE bits, when the run
+    /// recorded them (a replay).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub joint_efforts_nm: Option<Vec<Vec<u64>>>,
     /// The handovers of a stitched run (empty otherwise).
     #[serde(default)]
     pub handovers: Vec<Handover>,
@@ -141,6 +162,14 @@ impl ChildResult {
                 .flatten()
                 .map(|r| bits(r))
                 .collect(),
+            joint_velocities_rad_s: t
+                .joint_velocities_rad_s
+                .as_ref()
+                .map(|rows| rows.iter().map(|r| bits(r)).collect()),
+            joint_efforts_nm: t
+                .joint_efforts_nm
+                .as_ref()
+                .map(|rows| rows.iter().map(|r| bits(r)).collect()),
             handovers: Vec::new(),
             stability_issues: Vec::new(),
             instability: None,
@@ -163,9 +192,19 @@ impl ChildResult {
                 })
                 .collect(),
             joint_angles_rad: Some(self.joint_angles_rad.iter().map(|r| unbits(r)).collect()),
-            joint_velocity_commands_rad_s: Some(
-                self.commands_rad_s.iter().map(|r| unbits(r)).collect(),
-            ),
+            // A replay of position or effort commands records no velocity
+            // commands (and says so by an empty list with samples).
+            joint_velocity_commands_rad_s: (self.time_s.is_empty()
+                || !self.commands_rad_s.is_empty())
+            .then(|| self.commands_rad_s.iter().map(|r| unbits(r)).collect()),
+            joint_velocities_rad_s: self
+                .joint_velocities_rad_s
+                .as_ref()
+                .map(|rows| rows.iter().map(|r| unbits(r)).collect()),
+            joint_efforts_nm: self
+                .joint_efforts_nm
+                .as_ref()
+                .map(|rows| rows.iter().map(|r| unbits(r)).collect()),
             ..Trajectory::default()
         };
         t.validate()
@@ -186,6 +225,8 @@ mod tests {
         t.bodies[0].poses = vec![Some(Pose::new(Vec3::new(x, -0.0, 1e-300), Quat::IDENTITY)); 2];
         t.joint_angles_rad = Some(vec![vec![x], vec![f64::MIN_POSITIVE]]);
         t.joint_velocity_commands_rad_s = Some(vec![vec![1.0 / 3.0], vec![-2.5]]);
+        t.joint_velocities_rad_s = Some(vec![vec![0.1], vec![x]]);
+        t.joint_efforts_nm = Some(vec![vec![-7.0], vec![1e-310]]);
         let outcome = RunOutcome {
             trajectory: t.clone(),
             status: RunStatus::Completed,
@@ -196,6 +237,16 @@ mod tests {
         let back: ChildResult = serde_json::from_str(&text).unwrap();
         assert_eq!(back.trajectory().unwrap(), t);
         assert!(back.trajectory().unwrap().time_s[1].to_bits() == 0.05f64.to_bits());
+        // A replay of position commands: no velocity commands.
+        let mut p = t.clone();
+        p.joint_velocity_commands_rad_s = None;
+        let outcome = RunOutcome {
+            trajectory: p.clone(),
+            ..outcome
+        };
+        let text = serde_json::to_string(&ChildResult::from_outcome(&outcome)).unwrap();
+        let back: ChildResult = serde_json::from_str(&text).unwrap();
+        assert_eq!(back.trajectory().unwrap(), p);
     }
 
     #[test]

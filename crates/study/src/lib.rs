@@ -22,7 +22,9 @@
 pub mod data_source;
 pub mod evaluate;
 pub mod files;
+pub mod ik;
 pub mod import;
+pub mod joint_space;
 pub mod load;
 pub mod measure;
 pub mod provenance;

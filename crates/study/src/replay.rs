@@ -14,11 +14,16 @@
 
 use anyhow::{anyhow, bail, Context, Result};
 use realitygap_core::controller::{load_prepared, prepare, refuse_unstable, RunOptions, RunStatus};
-use realitygap_core::replay::{kinematic_angles, replay, ReplayPlan};
+use realitygap_core::replay::{
+    default_gains, fill_default_gains, kinematic_angles, replay, ReplayPlan,
+};
 use realitygap_core::robot::RobotModel;
 use realitygap_core::trajectory::WRIST;
 use realitygap_core::{BodyTrack, Engine, PhysicalParams, Pose, Scene, Trajectory};
 use realitygap_data::{EngineInfo, RunEntry, RunStatus as StoredStatus, RunStore, SourceKind};
+use realitygap_runner::protocol::{Job, ReplayJob};
+use realitygap_runner::slurm::SlurmOptions;
+use realitygap_runner::{run_child, ChildEnd, Launcher};
 use serde_json::{json, Value};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -67,19 +72,49 @@ pub struct Prepared {
     pub episodes: Vec<Episode>,
     /// The end-effector link's name.
     pub link: String,
+    /// The scene's file (the generated `OUT/replay.toml` or `--scene`),
+    /// absolute: what the child processes read.
+    pub scene_file: PathBuf,
+    /// The robot's URDF, absolute.
+    pub urdf: PathBuf,
+    /// `NAME=DIR` ROS package locations.
+    pub packages: Vec<String>,
+    /// The recorded episodes' results directory, absolute.
+    pub real_dir: PathBuf,
 }
 
-/// The default gains of a joint whose gains the parameters do not give:
-/// full effort at 0.05 rad of error (kp; effort 100 N m when the URDF gives
-/// none or no finite one), and kv = kp * 0.1 s. Printed in the scene file.
-fn default_gains(effort_limit: f64) -> (f64, f64) {
-    let effort = if effort_limit.is_finite() && effort_limit > 0.0 && effort_limit < 1e5 {
-        effort_limit
-    } else {
-        100.0
-    };
-    let kp = effort / 0.05;
-    (kp, kp * 0.1)
+impl Prepared {
+    /// The robot's joints the replay drives, in the scene's actuator
+    /// order: every moving joint for the generated scene, the controlled
+    /// joints of a scene of the user's.
+    pub fn replayed_joints(&self) -> Vec<usize> {
+        self.scene
+            .controlled_joints()
+            .iter()
+            .filter_map(|name| self.robot.joint_by_name(name))
+            .collect()
+    }
+
+    /// World poses of `link` for rows of the replayed joints' angles (rad):
+    /// forward kinematics from the scene's base, its held joints at their
+    /// angles.
+    pub fn link_poses(&self, rows: &[Vec<f64>], link: usize) -> Vec<Option<Pose>> {
+        let mut full = vec![0.0; self.robot.joints.len()];
+        for (name, &a) in &self.scene.robot.held_joints_rad {
+            if let Some(j) = self.robot.joint_by_name(name) {
+                full[j] = a;
+            }
+        }
+        let joints = self.replayed_joints();
+        rows.iter()
+            .map(|row| {
+                for (&j, &q) in joints.iter().zip(row) {
+                    full[j] = q;
+                }
+                self.robot.link_pose(&self.scene.robot.base, &full, link)
+            })
+            .collect()
+    }
 }
 
 /// The TOML of the generated replay scene.
@@ -177,18 +212,37 @@ pub fn prepare_replay(req: &ReplayRequest) -> Result<Prepared> {
                 .collect()
         })
         .unwrap_or_default();
-    let moving: Vec<String> = robot
-        .actuated_joints()
-        .iter()
-        .map(|&j| robot.joints[j].name.clone())
-        .collect();
+    // The joints replayed: the user's scene's controlled joints (the rest
+    // of the robot held as the scene says), else every moving joint.
+    let user_scene = match req.scene {
+        Some(path) => Some(Scene::from_file(path)?),
+        None => None,
+    };
+    let moving: Vec<String> = match &user_scene {
+        Some(s) => s
+            .controlled_joints()
+            .iter()
+            .map(|j| j.to_string())
+            .collect(),
+        None => robot
+            .actuated_joints()
+            .iter()
+            .map(|&j| robot.joints[j].name.clone())
+            .collect(),
+    };
     if !recorded.is_empty() && recorded != moving {
         bail!(
-            "{}: the episodes are of the joints {}, robot '{}' ({}) has the moving joints {}",
+            "{}: the episodes are of the joints {}, {} {}",
             req.real_dir.display(),
             recorded.join(", "),
-            robot.name,
-            urdf.display(),
+            match req.scene {
+                Some(p) => format!("the scene {} controls the joints", p.display()),
+                None => format!(
+                    "robot '{}' ({}) has the moving joints",
+                    robot.name,
+                    urdf.display()
+                ),
+            },
             moving.join(", ")
         );
     }
@@ -216,7 +270,7 @@ pub fn prepare_replay(req: &ReplayRequest) -> Result<Prepared> {
         }
         if real.joint_count() != moving.len() {
             bail!(
-                "{}: run '{}' has {} joints, robot '{}' {}",
+                "{}: run '{}' has {} joints, robot '{}' (or the scene) {}",
                 req.real_dir.display(),
                 run.id,
                 real.joint_count(),
@@ -238,14 +292,15 @@ pub fn prepare_replay(req: &ReplayRequest) -> Result<Prepared> {
         .fold(0.0, f64::max);
     let duration_s = ((duration / TIMESTEP_S).ceil().max(1.0)) * TIMESTEP_S;
     std::fs::create_dir_all(req.out).with_context(|| format!("creating {}", req.out.display()))?;
-    let scene = match req.scene {
-        Some(path) => Scene::from_file(path)?,
-        None => {
-            let abs_urdf = std::fs::canonicalize(&urdf).unwrap_or(urdf.clone());
+    let absolute = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf());
+    let abs_urdf = absolute(&urdf);
+    let (scene, scene_file) = match (req.scene, user_scene) {
+        (Some(path), Some(scene)) => (scene, absolute(path)),
+        _ => {
             let text = scene_toml(&robot, &abs_urdf, &link, duration_s);
             let path = req.out.join(SCENE_FILE);
             std::fs::write(&path, &text).with_context(|| format!("writing {}", path.display()))?;
-            Scene::from_toml_str(&text, &path)?
+            (Scene::from_toml_str(&text, &path)?, absolute(&path))
         }
     };
     scene.validate(&robot)?;
@@ -253,68 +308,46 @@ pub fn prepare_replay(req: &ReplayRequest) -> Result<Prepared> {
     // default one: joints without a command hold their first angle
     // through the PD servo.
     let mut scene = scene;
-    for a in scene.actuators.iter_mut().filter(|a| a.kp.is_none()) {
-        a.kp = Some(default_gains(a.force_limit).0);
-    }
-    Ok(Prepared {
+    fill_default_gains(&mut scene);
+    let mut prepared = Prepared {
         robot,
         scene,
-        episodes,
+        episodes: Vec::new(),
         link,
-    })
+        scene_file,
+        urdf: abs_urdf,
+        packages: req.packages.to_vec(),
+        real_dir: absolute(req.real_dir),
+    };
+    // The recorded end effector by forward kinematics of the recorded
+    // angles in the scene's world (a motion capture's own bodies are in
+    // the capture's frame).
+    let link_index = prepared.robot.link_by_name(&prepared.link);
+    for mut e in episodes {
+        if let (Some(l), Some(q)) = (link_index, &e.real.joint_angles_rad) {
+            let poses = prepared.link_poses(q, l);
+            e.real.bodies = vec![BodyTrack {
+                role: WRIST.into(),
+                poses,
+            }];
+        }
+        prepared.episodes.push(e);
+    }
+    Ok(prepared)
 }
 
-/// The replay plan of one episode in `scene` with `params`.
+/// The replay plan of one episode in `scene` (its actuators carrying
+/// `params` and a position gain) with `params`.
 pub fn plan_for(episode: &Episode, scene: &Scene, params: &PhysicalParams) -> Result<ReplayPlan> {
-    let real = &episode.real;
-    let commands = real
-        .commands
-        .clone()
-        .ok_or_else(|| anyhow!("run '{}' has no commands", episode.id))?;
-    let angles = real
-        .joint_angles_rad
-        .as_ref()
-        .and_then(|r| r.first())
-        .cloned()
-        .ok_or_else(|| anyhow!("run '{}' has no joint angles", episode.id))?;
-    let velocities = real
-        .joint_velocities_rad_s
-        .as_ref()
-        .and_then(|r| r.first())
-        .cloned()
-        .unwrap_or_else(|| vec![0.0; angles.len()]);
-    let mut kp = Vec::new();
-    let mut kv = Vec::new();
-    let mut force_limit_nm = Vec::new();
-    for a in &scene.actuators {
-        let given = params.joints.get(&a.joint);
-        let default_kp = a.kp.unwrap_or_else(|| default_gains(a.force_limit).0);
-        kp.push(given.and_then(|g| g.kp).unwrap_or(default_kp));
-        kv.push(given.and_then(|g| g.kv).unwrap_or(a.kv));
-        let limit = given.and_then(|g| g.force_limit).unwrap_or(a.force_limit);
-        // 0 switches the servo off; a limit that is not a number >= 0 is
-        // none.
-        force_limit_nm.push(if limit >= 0.0 { limit } else { f64::INFINITY });
-    }
-    Ok(ReplayPlan {
-        commands,
-        sample_times_s: real.time_s.clone(),
-        initial_angles_rad: angles,
-        initial_velocities_rad_s: velocities,
-        kp,
-        kv,
-        force_limit_nm,
-        delay_s: params.delay_s(),
-        roles: scene.tracked.iter().map(|t| t.role.clone()).collect(),
-        divergence_bound_m: RunOptions::default().divergence_bound_m,
-    })
+    ReplayPlan::for_recording(&episode.real, scene, params)
+        .map_err(|e| anyhow!("run '{}': {e}", episode.id))
 }
 
 /// The physics-free model of an episode: the commands with perfect tracking
 /// through forward kinematics (`None` for effort commands).
 pub fn kinematic_run(
     episode: &Episode,
-    robot: &RobotModel,
+    prepared: &Prepared,
     link: usize,
     delay_s: f64,
 ) -> Option<Trajectory> {
@@ -322,7 +355,7 @@ pub fn kinematic_run(
     let commands = real.commands.as_ref()?;
     let first = real.joint_angles_rad.as_ref()?.first()?;
     let angles = kinematic_angles(commands, first, &real.time_s, delay_s)?;
-    let poses = robot.link_poses_from_actuated(&Pose::IDENTITY, &angles, link);
+    let poses = prepared.link_poses(&angles, link);
     Some(Trajectory {
         time_s: real.time_s.clone(),
         bodies: vec![BodyTrack {
@@ -411,7 +444,7 @@ pub fn store_kinematic(out: &Path, prepared: &Prepared, delay_s: f64) -> Result<
     store.set_settings(json!({"model": "the recorded commands with perfect tracking, through forward kinematics", "delay_s": delay_s}))?;
     let mut count = 0;
     for e in &prepared.episodes {
-        if let Some(t) = kinematic_run(e, &prepared.robot, link, delay_s) {
+        if let Some(t) = kinematic_run(e, prepared, link, delay_s) {
             store.write_run(RunEntry::new(&e.id), &t)?;
             count += 1;
         }
@@ -482,7 +515,7 @@ pub fn joint_space_row(
     prepared: &Prepared,
     runs: &[(String, Trajectory)],
 ) -> Option<JointSpaceRow> {
-    let joints = prepared.robot.actuated_joints().len();
+    let joints = prepared.replayed_joints().len();
     let mut sum = vec![0.0; joints];
     let mut abs_sum = vec![0.0; joints];
     let mut max = vec![0.0f64; joints];
@@ -616,6 +649,7 @@ pub fn write_record(req: &ReplayRequest, prepared: &Prepared) -> Result<()> {
     let record = json!({
         "recordings": abs(req.real_dir),
         "urdf": abs(&prepared.robot.source),
+        "scene": prepared.scene_file,
         "packages": req.packages,
         "link": prepared.link,
     });
@@ -660,7 +694,14 @@ pub fn compare_replay(
         .unwrap_or_default();
     let real_dir = field("recordings")?;
     let urdf = field("urdf")?;
-    let scene = dir.join(SCENE_FILE);
+    // The replay's scene: the one it recorded (a scene of the user's),
+    // else the generated one in the folder.
+    let scene = record
+        .get("scene")
+        .and_then(Value::as_str)
+        .map(PathBuf::from)
+        .filter(|p| p.is_file())
+        .unwrap_or_else(|| dir.join(SCENE_FILE));
     let params = PhysicalParams::none();
     let mut prepared = prepare_replay(&ReplayRequest {
         real_dir: &real_dir,
@@ -686,18 +727,19 @@ pub fn compare_replay(
                 .join(", ")
         )
     })?;
-    let with_link = |t: &mut Trajectory, robot: &RobotModel| {
+    let with_link = |t: &mut Trajectory, prepared: &Prepared| {
         if let Some(q) = &t.joint_angles_rad {
             t.bodies = vec![BodyTrack {
                 role: WRIST.into(),
-                poses: robot.link_poses_from_actuated(&Pose::IDENTITY, q, link_index),
+                poses: prepared.link_poses(q, link_index),
             }];
         }
     };
-    let robot = prepared.robot.clone();
-    for e in &mut prepared.episodes {
-        with_link(&mut e.real, &robot);
+    let mut episodes = std::mem::take(&mut prepared.episodes);
+    for e in &mut episodes {
+        with_link(&mut e.real, &prepared);
     }
+    prepared.episodes = episodes;
     prepared.link = link_name;
     let mut sources: Vec<PathBuf> = std::fs::read_dir(dir)
         .with_context(|| format!("reading {}", dir.display()))?
@@ -716,7 +758,7 @@ pub fn compare_replay(
                 continue;
             }
             let mut t = store.read_run(&r.id)?;
-            with_link(&mut t, &robot);
+            with_link(&mut t, &prepared);
             runs.push((r.id.clone(), t));
         }
         let name = source
@@ -725,10 +767,10 @@ pub fn compare_replay(
             .unwrap_or_default();
         rows.extend(joint_space_row(&name, &prepared, &runs));
     }
-    let names = robot
-        .actuated_joints()
+    let names = prepared
+        .replayed_joints()
         .iter()
-        .map(|&j| robot.joints[j].name.clone())
+        .map(|&j| prepared.robot.joints[j].name.clone())
         .collect();
     Ok((rows, names, prepared.link))
 }
@@ -801,8 +843,7 @@ pub fn joint_figures(
         })
     };
     prepared
-        .robot
-        .actuated_joints()
+        .replayed_joints()
         .iter()
         .enumerate()
         .map(|(j, &ji)| {
@@ -825,54 +866,169 @@ pub fn joint_figures(
 /// Replays every episode in every engine, in parallel over the machine's
 /// cores, storing each run as it finishes (an interrupted batch loses no
 /// finished run; a rerun skips runs already stored). `done` is told of
-/// each run, stored or kept.
+/// Where `replay_all` runs the replays: every one in a child process of
+/// `launcher` (the `realitygap` binary's `__run-one`), so that an engine
+/// that aborts fails only its run.
+pub enum ReplayExecutor<'a> {
+    /// Child processes on this machine, `jobs` at a time.
+    Local {
+        /// How to start a child.
+        launcher: &'a Launcher,
+        /// Child processes at once (at least 1).
+        jobs: usize,
+    },
+    /// One Slurm job array (`OUT/slurm/`): the results directory must be on
+    /// a filesystem the compute nodes share.
+    Slurm {
+        /// How a task starts the binary.
+        launcher: &'a Launcher,
+        /// `sbatch` options.
+        options: &'a SlurmOptions,
+    },
+}
+
+/// The child job of one episode in one engine.
+fn replay_job(engine: &str, prepared: &Prepared, params: &PhysicalParams, episode: &str) -> Job {
+    // A file's parameters travel as the file (its errors name file, line
+    // and column); built ones as text.
+    let (file, text) = match &params.source {
+        Some(f) => (Some(std::fs::canonicalize(f).unwrap_or(f.clone())), None),
+        None if *params == PhysicalParams::none() => (None, None),
+        None => (None, Some(params.to_toml_string())),
+    };
+    Job {
+        scene_file: prepared.scene_file.clone(),
+        engine: engine.to_string(),
+        robot: Some(prepared.urdf.display().to_string()),
+        packages: prepared.packages.clone(),
+        set: Vec::new(),
+        perturb: Vec::new(),
+        seed: 0,
+        params: file,
+        params_text: text,
+        check_only: false,
+        stitch: None,
+        allow_unstable: false,
+        replay: Some(ReplayJob {
+            real_dir: prepared.real_dir.clone(),
+            episode: episode.to_string(),
+        }),
+    }
+}
+
+/// What a child's end says of the replayed run.
+fn replayed_result(end: ChildEnd) -> Result<(Trajectory, RunStatus, f64), String> {
+    match end {
+        ChildEnd::Done(r) => {
+            let trajectory = r.trajectory().map_err(|e| e.to_string())?;
+            let status = match &r.diverged {
+                Some((t_s, reason)) => RunStatus::Diverged {
+                    t_s: *t_s,
+                    reason: reason.clone(),
+                },
+                None => RunStatus::Completed,
+            };
+            Ok((trajectory, status, r.wall_time_s))
+        }
+        ChildEnd::Failed(m) => Err(m),
+    }
+}
+
+/// Replays every episode in every engine (each in a child process, see
+/// [`ReplayExecutor`]), storing each run in `OUT/<engine>/` as it ends; a
+/// run already stored is kept (resume). `done` is called for every run.
 pub fn replay_all(
     engines: &[Box<dyn Engine>],
     prepared: &Prepared,
     params: &PhysicalParams,
     out: &Path,
+    executor: &ReplayExecutor<'_>,
     done: &(dyn Fn(&Replayed) + Sync),
 ) -> Result<Vec<Replayed>> {
-    use rayon::prelude::*;
-    let finished = |engine: &dyn Engine, id: &str| {
-        RunStore::open(&out.join(engine.name()))
-            .map(|s| s.has_finished_run(id))
-            .unwrap_or(false)
-    };
-    let jobs: Vec<(usize, usize)> = (0..engines.len())
-        .flat_map(|e| (0..prepared.episodes.len()).map(move |k| (e, k)))
-        .collect();
-    let lock = std::sync::Mutex::new(());
-    let results: Vec<Result<Replayed>> = jobs
-        .par_iter()
+    let mut runs = Vec::new();
+    let mut todo: Vec<(usize, usize)> = Vec::new();
+    for (e, engine) in engines.iter().enumerate() {
+        let store = RunStore::open(&out.join(engine.name())).ok();
+        for (k, episode) in prepared.episodes.iter().enumerate() {
+            match &store {
+                Some(s) if s.has_finished_run(&episode.id) => {
+                    let run = Replayed {
+                        id: episode.id.clone(),
+                        engine: engine.name().to_string(),
+                        result: Ok((s.read_run(&episode.id)?, RunStatus::Completed, 0.0)),
+                        reused: true,
+                    };
+                    done(&run);
+                    runs.push(run);
+                }
+                _ => todo.push((e, k)),
+            }
+        }
+    }
+    let jobs: Vec<((usize, usize), Job)> = todo
+        .iter()
         .map(|&(e, k)| {
-            let engine = engines[e].as_ref();
-            let episode = &prepared.episodes[k];
-            if finished(engine, &episode.id) {
-                let store = RunStore::open(&out.join(engine.name()))?;
-                let trajectory = store.read_run(&episode.id)?;
-                let run = Replayed {
-                    id: episode.id.clone(),
-                    engine: engine.name().to_string(),
-                    result: Ok((trajectory, RunStatus::Completed, 0.0)),
-                    reused: true,
-                };
-                done(&run);
-                return Ok(run);
-            }
-            let run = Replayed {
-                id: episode.id.clone(),
-                engine: engine.name().to_string(),
-                result: replay_one(engine, prepared, episode, params),
-                reused: false,
-            };
-            {
-                let _guard = lock.lock().unwrap_or_else(|p| p.into_inner());
-                store_replayed(out, engine, &run)?;
-            }
-            done(&run);
-            Ok(run)
+            let job = replay_job(
+                engines[e].name(),
+                prepared,
+                params,
+                &prepared.episodes[k].id,
+            );
+            ((e, k), job)
         })
         .collect();
-    results.into_iter().collect()
+    let finished = std::sync::Mutex::new(Vec::new());
+    let mut keep = |(e, k): (usize, usize), end: ChildEnd| -> Result<()> {
+        let engine = engines[e].as_ref();
+        let run = Replayed {
+            id: prepared.episodes[k].id.clone(),
+            engine: engine.name().to_string(),
+            result: replayed_result(end),
+            reused: false,
+        };
+        // The parent alone writes the results directories, run by run, so
+        // that an interrupted batch keeps every finished run.
+        let mut f = finished.lock().unwrap_or_else(|p| p.into_inner());
+        store_replayed(out, engine, &run)?;
+        done(&run);
+        f.push(run);
+        Ok(())
+    };
+    match executor {
+        ReplayExecutor::Local { launcher, jobs: n } => {
+            let queue = std::sync::Mutex::new(jobs.into_iter());
+            let keep = std::sync::Mutex::new(&mut keep);
+            let errors = std::sync::Mutex::new(Vec::new());
+            std::thread::scope(|scope| {
+                for _ in 0..(*n).max(1) {
+                    scope.spawn(|| loop {
+                        let next = queue.lock().unwrap_or_else(|p| p.into_inner()).next();
+                        let Some((key, job)) = next else { break };
+                        let end = run_child(launcher, &job, None);
+                        let keep = keep.lock().unwrap_or_else(|p| p.into_inner());
+                        if let Err(e) = (*keep)(key, end) {
+                            errors.lock().unwrap_or_else(|p| p.into_inner()).push(e);
+                            break;
+                        }
+                    });
+                }
+            });
+            if let Some(e) = errors.into_inner().unwrap_or_default().into_iter().next() {
+                return Err(e);
+            }
+        }
+        ReplayExecutor::Slurm { launcher, options } => {
+            if !jobs.is_empty() {
+                realitygap_runner::slurm::run_array(
+                    jobs,
+                    &out.join("slurm"),
+                    launcher,
+                    options,
+                    &mut |key, end, _| keep(key, end),
+                )?;
+            }
+        }
+    }
+    runs.extend(finished.into_inner().unwrap_or_default());
+    Ok(runs)
 }

@@ -459,6 +459,7 @@ impl Simulator {
             check_only: false,
             stitch: None,
             allow_unstable: false,
+            replay: None,
         }
     }
 }

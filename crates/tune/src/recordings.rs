@@ -221,7 +221,7 @@ pub fn default_space(
         .and_then(|e| e.real.commands.as_ref())
         .map(|c| c.kind);
     let mut dims = Vec::new();
-    for (j, &ji) in prepared.robot.actuated_joints().iter().enumerate() {
+    for (j, &ji) in prepared.replayed_joints().iter().enumerate() {
         let joint = &prepared.robot.joints[ji];
         let name = &joint.name;
         let given = known.joints.get(name);
@@ -615,7 +615,7 @@ fn effort_weights(episodes: &[&Episode], joints: usize) -> Option<Vec<f64>> {
 
 /// Scores of `runs` (episode index, trajectory) against the recordings.
 fn set_score(prepared: &Prepared, runs: &[(usize, Trajectory)]) -> Option<SetScore> {
-    let joints = prepared.robot.actuated_joints().len();
+    let joints = prepared.replayed_joints().len();
     let mut per_joint = vec![0.0; joints];
     let mut n = 0usize;
     let mut episodes = Vec::new();
@@ -746,10 +746,10 @@ pub fn tune_recordings(
                 .real
                 .joint_angles_rad
                 .as_ref()
-                .map_or(0, |q| q.len() * prepared.robot.actuated_joints().len())
+                .map_or(0, |q| q.len() * prepared.replayed_joints().len())
         })
         .sum();
-    let joints = prepared.robot.actuated_joints().len();
+    let joints = prepared.replayed_joints().len();
     let weights = if spec.use_efforts {
         let chosen: Vec<&Episode> = train.iter().map(|&k| &prepared.episodes[k]).collect();
         effort_weights(&chosen, joints)
@@ -1058,7 +1058,7 @@ pub fn tune_recordings(
     let kin = |delay: f64| -> Vec<(usize, Trajectory)> {
         all.iter()
             .filter_map(|&k| {
-                kinematic_run(&prepared.episodes[k], &prepared.robot, link, delay).map(|t| (k, t))
+                kinematic_run(&prepared.episodes[k], prepared, link, delay).map(|t| (k, t))
             })
             .collect()
     };

@@ -14,7 +14,7 @@
 //! tolerance=<t>`, so that a README's table can be regenerated from a test
 //! run. Like the rest of [`crate::testing`], they panic on failure.
 
-use crate::conformance::{self, Subject};
+use crate::conformance::{self, PositionLaw, Subject};
 use crate::engine::{Engine, EngineError, EngineSettings, SettingValue};
 use crate::trajectory::CommandKind;
 
@@ -31,6 +31,9 @@ pub struct KitSpec {
     /// The largest gap between a run and its continuation from its own
     /// state, rad: native state (the engine's own), portable state.
     pub command_round_trip_rad: [f64; 2],
+    /// The law the engine's position servo follows at its default
+    /// settings.
+    pub position_law: PositionLaw,
 }
 
 /// Settings from `key=value` pairs (values as on the command line).
@@ -58,12 +61,13 @@ pub fn report(engine: &dyn Engine, check: &str, value: f64, tolerance: f64) {
 /// ([`conformance::step_response`]), within the spec's tolerance.
 pub fn step_response(engine: &dyn Engine, spec: &KitSpec, kind: CommandKind) {
     let settings = settings(spec.rotor_settings);
-    let r = conformance::step_response(
+    let r = conformance::step_response_with(
         Subject {
             engine,
             settings: &settings,
         },
         kind,
+        spec.position_law,
     );
     let k = CommandKind::ALL
         .iter()
