@@ -1,5 +1,6 @@
 //! The engine test kit (realitygap_core::testing::kit) on dart.
 
+use realitygap_core::conformance::PositionLaw;
 use realitygap_core::testing::kit::KitSpec;
 
 /// Tolerances: DART with its default servo = "kv" at 1 ms. The laws run
@@ -11,6 +12,7 @@ use realitygap_core::testing::kit::KitSpec;
 const SPEC: KitSpec = KitSpec {
     rotor_settings: &["timestep_s=0.001"],
     step_tolerance_rad: [3e-4, 3e-3, 1.5e-3],
+    position_law: PositionLaw::Pd,
     command_round_trip_rad: [0.0, 0.0],
 };
 
