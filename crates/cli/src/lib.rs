@@ -26,6 +26,8 @@ pub fn compiled_engines() -> Vec<Box<dyn Engine>> {
     engines.push(Box::new(realitygap_engine_bullet::BulletEngine));
     #[cfg(feature = "physx")]
     engines.push(Box::new(realitygap_engine_physx::PhysxEngine));
+    #[cfg(feature = "dart")]
+    engines.push(Box::new(realitygap_engine_dart::DartEngine));
     #[cfg(feature = "ideal")]
     engines.push(Box::new(realitygap_engine_ideal::IdealEngine));
     engines

@@ -211,6 +211,10 @@ pub fn default_grid(engine: &str) -> Result<Vec<Overlay>> {
             ("position_iterations".into(), ints(&[8, 32, 64])),
             ts(&coarse),
         ]),
+        "dart" => cross(&[
+            ("lcp_solver".into(), texts(&["dantzig", "pgs"])),
+            ts(&coarse),
+        ]),
         "ode" => {
             let mut points = cross(&[
                 ("stepper".into(), texts(&["quick_step"])),

@@ -160,7 +160,7 @@ pub fn scene_toml(robot: &RobotModel, urdf: &Path, link: &str, duration_s: f64) 
     }
     let _ = writeln!(s, "[[schedule]]\nt_s = 0.0\ntargets_deg = {{}}\n");
     let _ = writeln!(s, "[[track]]\nrole = \"wrist\"\nlink = {link:?}\n");
-    for engine in ["mujoco", "bullet", "ode", "rapier", "physx"] {
+    for engine in ["mujoco", "bullet", "ode", "rapier", "physx", "dart"] {
         let _ = writeln!(s, "[engine.{engine}]\ntimestep_s = {TIMESTEP_S:?}");
         match engine {
             // Implicit servo damping: stiff gains at 1 ms stay stable.
