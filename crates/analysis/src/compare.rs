@@ -211,6 +211,13 @@ pub struct Series {
     pub cube_displacement_m: Vec<Option<f64>>,
     /// Cube pitch change from its start, degrees.
     pub cube_pitch_change_deg: Vec<Option<f64>>,
+    /// Mean cube position, metres (empty without a cube).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub cube_mean_m: Vec<Option<[f64; 3]>>,
+    /// Mean cube orientation as a unit quaternion `[w, x, y, z]` (empty
+    /// without a cube).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub cube_mean_quat: Vec<Option<[f64; 4]>>,
     /// Runs averaged at each step.
     pub runs: Vec<usize>,
 }
@@ -740,6 +747,12 @@ fn cube_measures(
     let q0 = m.cube_rot.iter().flatten().next().copied();
     let q1 = m.cube_rot.iter().rev().flatten().next().copied();
     series.cube_displacement_m = disp.clone();
+    series.cube_mean_m = track.mean_m.iter().map(|p| p.map(Vec3::to_array)).collect();
+    series.cube_mean_quat = m
+        .cube_rot
+        .iter()
+        .map(|q| q.map(|q| [q.w, q.x, q.y, q.z]))
+        .collect();
     series.cube_pitch_change_deg = match q0 {
         Some(q0) => m
             .cube_rot

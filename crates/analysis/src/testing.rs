@@ -29,6 +29,8 @@ pub fn source(name: &str, runs: usize, f: impl Fn(f64) -> f64, scale: f64) -> So
         wrist_distance_to_reference_m: some(vec![Some(0.01 * scale); 100]),
         cube_displacement_m: vec![],
         cube_pitch_change_deg: vec![],
+        cube_mean_m: vec![],
+        cube_mean_quat: vec![],
         runs: vec![runs; 100],
         t_s,
     };

@@ -46,6 +46,19 @@ fn headless(browser: &Path, profile: &Path, extra: &[&str], url: &str) -> std::p
         .expect("chromium starts")
 }
 
+/// The RGB pixels of a PNG file.
+fn pixels(path: &Path) -> Vec<[u8; 3]> {
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
+    let mut reader = decoder.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    let step = info.color_type.samples();
+    buf[..info.buffer_size()]
+        .chunks(step)
+        .map(|c| [c[0], c[1], c[2]])
+        .collect()
+}
+
 #[test]
 fn reproduce_renders_every_figure_and_table_in_chromium() {
     let Some(data) = realitygap::paper_data_for_tests() else {
@@ -141,13 +154,8 @@ fn reproduce_renders_every_figure_and_table_in_chromium() {
         "no screenshot: {}",
         String::from_utf8_lossy(&s.stderr)
     );
-    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&shot).unwrap()));
-    let mut reader = decoder.read_info().unwrap();
-    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
-    let info = reader.next_frame(&mut buf).unwrap();
-    let px = &buf[..info.buffer_size()];
-    let step = info.color_type.samples();
-    let mut colours: Vec<[u8; 3]> = px.chunks(step).map(|c| [c[0], c[1], c[2]]).collect();
+    let mut colours = pixels(&shot);
+    let count = colours.len();
     let non_white = colours
         .iter()
         .filter(|c| c.iter().any(|&v| v < 240))
@@ -160,8 +168,73 @@ fn reproduce_renders_every_figure_and_table_in_chromium() {
         colours.len()
     );
     assert!(
-        non_white * 100 > px.len() / step,
+        non_white * 100 > count,
         "screenshot is almost blank ({non_white} non-white pixels)"
+    );
+
+    // The verdict comes first, in sentences generated from the numbers.
+    let verdict_at = dom.find("id=\"verdict\"").expect("a verdict section");
+    assert!(verdict_at < dom.find("id=\"summary\"").unwrap());
+    let verdict = &dom[verdict_at..];
+    let verdict = &verdict[..verdict.find("</section>").unwrap()];
+    assert!(
+        verdict.contains("physics-free") && verdict.contains("closest source"),
+        "{verdict}"
+    );
+    for scene in ["scene1_single_joint", "scene3_cube_push"] {
+        assert!(verdict.contains(scene), "{scene} in the verdict");
+    }
+    assert!(
+        verdict.contains("(contact, from"),
+        "scene 3's push is a contact phase: {verdict}"
+    );
+
+    // The 3D replay: the slider set to two times (through the page's
+    // `#replay=scene:time` location) draws two different pictures, and the
+    // clock beside the slider follows.
+    let replay = |t: &str, name: &str| -> Vec<[u8; 3]> {
+        let shot = tmp.path().join(name);
+        let at = format!("{url}#replay=2:{t}");
+        let s = headless(
+            &browser,
+            &profile,
+            &[
+                &format!("--screenshot={}", shot.display()),
+                "--window-size=1100,760",
+                "--virtual-time-budget=3000",
+            ],
+            &at,
+        );
+        assert!(
+            shot.is_file(),
+            "no screenshot: {}",
+            String::from_utf8_lossy(&s.stderr)
+        );
+        let dom = headless(
+            &browser,
+            &profile,
+            &["--dump-dom", "--virtual-time-budget=3000"],
+            &at,
+        );
+        let dom = String::from_utf8_lossy(&dom.stdout).into_owned();
+        assert!(
+            dom.contains(&format!("<output id=\"replay-clock\">{t}.00 s</output>")),
+            "the clock shows {t} s"
+        );
+        pixels(&shot)
+    };
+    let early = replay("2", "replay_2.png");
+    let late = replay("15", "replay_15.png");
+    let drawn = early.iter().filter(|c| c.iter().any(|&v| v < 200)).count();
+    assert!(
+        drawn > 2000,
+        "the replay draws almost nothing ({drawn} dark pixels)"
+    );
+    assert_eq!(early.len(), late.len());
+    let changed = early.iter().zip(&late).filter(|(a, b)| a != b).count();
+    assert!(
+        changed > 200,
+        "moving the slider changed only {changed} pixels"
     );
 
     // A rerun resumes: nothing is simulated again.

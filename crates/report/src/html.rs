@@ -1,5 +1,6 @@
 //! The self-contained HTML report: one `index.html` with the figures inline
-//! as SVG and the style sheet inline, no scripts and no network references.
+//! as SVG, the style sheet inline, and one inline script (the 3D replay's
+//! renderer); no network references.
 
 use crate::figures::Figure;
 use crate::provenance::Provenance;
@@ -165,8 +166,9 @@ pub fn render_index_with(
     };
     let _ = write!(
         h,
-        "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n<title>{}</title>\n<style>{CSS}</style>\n</head>\n<body>\n",
-        escape(title)
+        "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n<title>{}</title>\n<style>{CSS}{}</style>\n</head>\n<body>\n",
+        escape(title),
+        crate::replay3d::CSS
     );
     let mode = reports.first().map_or(provenance.mode, |r| r.mode);
     let _ = writeln!(
@@ -178,7 +180,7 @@ pub fn render_index_with(
         escape(mode_name(mode)),
     );
     // Contents.
-    h.push_str("<nav><ul>\n<li><a href=\"#summary\">Accumulated error</a></li>\n");
+    h.push_str("<nav><ul>\n<li><a href=\"#verdict\">Verdict</a></li>\n<li><a href=\"#summary\">Accumulated error</a></li>\n<li><a href=\"#replay\">3D replay</a></li>\n");
     for x in extra {
         let _ = writeln!(
             h,
@@ -197,7 +199,12 @@ pub fn render_index_with(
     }
     h.push_str("<li><a href=\"#provenance\">Provenance</a></li>\n</ul></nav>\n");
 
+    verdict_section(&mut h, reports);
     summary(&mut h, reports, downloads);
+    h.push_str(&crate::replay3d::section(
+        reports,
+        &crate::figures::SourceStyles::for_reports(reports),
+    ));
     for x in extra {
         extra_section(&mut h, x);
     }
@@ -211,6 +218,26 @@ pub fn render_index_with(
     provenance_section(&mut h, provenance);
     h.push_str("</body>\n</html>\n");
     h
+}
+
+/// The verdict in sentences, first in the page.
+fn verdict_section(h: &mut String, reports: &[SceneReport]) {
+    let v = crate::verdict::verdict(reports);
+    h.push_str("<section id=\"verdict\">\n<h2>Verdict</h2>\n");
+    for line in &v.overall {
+        let _ = writeln!(h, "<p class=\"verdict\">{}</p>", escape(line));
+    }
+    h.push_str("<ul>\n");
+    for (scene, lines) in &v.scenes {
+        let _ = writeln!(
+            h,
+            "<li><a href=\"#{}\"><strong>{}</strong></a>: {}</li>",
+            anchor("scene", scene),
+            escape(scene),
+            escape(&lines.join(" "))
+        );
+    }
+    h.push_str("</ul>\n<p class=\"note\">Generated from the numbers below: intervals are 95 % bootstrap intervals over the real runs; the physics-free model is the commanded motion with perfect tracking, through forward kinematics.</p>\n</section>\n");
 }
 
 fn mode_name(m: realitygap_analysis::AnalysisMode) -> &'static str {
@@ -909,7 +936,9 @@ mod tests {
             !html.contains("http://") && !html.contains("https://"),
             "a network reference"
         );
-        assert!(!html.contains("<script") && !html.contains("<link") && !html.contains("<img"));
+        // The only scripts are the 3D replay's data and renderer, inline.
+        assert_eq!(html.matches("<script").count(), 2);
+        assert!(!html.contains("<script src") && !html.contains("<link") && !html.contains("<img"));
         assert!(!html.contains("xmlns"));
     }
 

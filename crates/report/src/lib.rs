@@ -14,7 +14,8 @@
 //!   re-plotting elsewhere; `provenance.json`; `registration.json` when the
 //!   real runs were registered into the world frame;
 //! - `index.html`: one self-contained page (figures inline as SVG, style
-//!   inline, no scripts, no network) with the table, per-scene figures,
+//!   and scripts inline, no network) that opens with the verdict in
+//!   sentences ([`verdict`]) and a 3D replay ([`replay3d`]), then the table, per-scene figures,
 //!   measures, the closest source per scene and phase, run-health flags,
 //!   the alignment used and provenance ([`html`]).
 //!
@@ -30,6 +31,8 @@ pub mod html;
 pub mod joint_space;
 pub mod provenance;
 mod render;
+pub mod replay3d;
+pub mod verdict;
 
 pub use figures::{Figure, FigureKind, SourceStyles};
 pub use provenance::{HandoverMarks, Provenance, SourceProvenance};
