@@ -227,10 +227,108 @@ fn strip_series(v: &mut Value) {
     }
 }
 
-fn markdown(reports: &[SceneReport]) -> String {
+/// The short form for a terminal: the accumulated-error table with its
+/// intervals, the closest source per scene, and each kind of run flag once,
+/// with how many runs carry it, of which sources and scenes, and one
+/// example. The full lists are in [`render`]'s Markdown (`table.md`).
+pub fn summary(reports: &[SceneReport]) -> String {
     let mut out = String::new();
+    accumulated_table(&mut out, reports);
+    if let Some(b) = reports.iter().find_map(|r| r.bootstrap) {
+        let _ = writeln!(
+            out,
+            "\n[low, high]: {:.0} % bootstrap interval over the real runs.",
+            b.level * 100.0
+        );
+    }
+    for r in reports {
+        let _ = writeln!(out, "- {}: {}.", r.scene, r.verdict());
+    }
+    let flags = flag_summary(reports);
+    if !flags.is_empty() {
+        let _ = writeln!(out, "\nFlagged runs (the full list is in table.md):");
+        for f in flags {
+            let _ = writeln!(out, "- {f}");
+        }
+    }
+    out
+}
+
+/// Each kind of flag once: `short: 20 runs (left in) of real in
+/// scene3_cube_push, e.g. CubeExp0011_6D: only 366 of 400 samples after
+/// alignment`.
+pub fn flag_summary(reports: &[SceneReport]) -> Vec<String> {
+    struct Kind {
+        name: &'static str,
+        runs: usize,
+        excluded: usize,
+        sources: Vec<String>,
+        scenes: Vec<String>,
+        example: String,
+    }
+    let mut kinds: Vec<Kind> = Vec::new();
+    for r in reports {
+        for s in std::iter::once(&r.reference).chain(&r.sources) {
+            for f in &s.runs_flagged {
+                for flag in &f.flags {
+                    let i = match kinds.iter().position(|k| k.name == flag.name()) {
+                        Some(i) => i,
+                        None => {
+                            kinds.push(Kind {
+                                name: flag.name(),
+                                runs: 0,
+                                excluded: 0,
+                                sources: Vec::new(),
+                                scenes: Vec::new(),
+                                example: format!(
+                                    "{} / {} in {}: {}",
+                                    s.source,
+                                    f.run,
+                                    r.scene,
+                                    flag.describe()
+                                ),
+                            });
+                            kinds.len() - 1
+                        }
+                    };
+                    let k = &mut kinds[i];
+                    k.runs += 1;
+                    k.excluded += usize::from(f.excluded);
+                    if !k.sources.contains(&s.source) {
+                        k.sources.push(s.source.clone());
+                    }
+                    if !k.scenes.contains(&r.scene) {
+                        k.scenes.push(r.scene.clone());
+                    }
+                }
+            }
+        }
+    }
+    kinds
+        .into_iter()
+        .map(|k| {
+            let left = if k.excluded == k.runs {
+                "all left out".to_string()
+            } else if k.excluded == 0 {
+                "kept".to_string()
+            } else {
+                format!("{} left out", k.excluded)
+            };
+            format!(
+                "{}: {} run{} ({left}) of {} in {}; e.g. {}",
+                k.name,
+                k.runs,
+                if k.runs == 1 { "" } else { "s" },
+                k.sources.join(", "),
+                k.scenes.join(", "),
+                k.example
+            )
+        })
+        .collect()
+}
+
+fn accumulated_table(out: &mut String, reports: &[SceneReport]) {
     let names = source_names(reports);
-    let _ = writeln!(out, "## Accumulated error (m), summed over control steps\n");
     let mut head = String::from("| Source |");
     let mut rule = String::from("|---|");
     for r in reports {
@@ -255,6 +353,12 @@ fn markdown(reports: &[SceneReport]) -> String {
             fmt_with_interval(total(reports, n), total_interval(reports, n))
         );
     }
+}
+
+fn markdown(reports: &[SceneReport]) -> String {
+    let mut out = String::new();
+    let _ = writeln!(out, "## Accumulated error (m), summed over control steps\n");
+    accumulated_table(&mut out, reports);
     markdown_notes(&mut out, reports);
     for r in reports {
         markdown_scene(&mut out, r);

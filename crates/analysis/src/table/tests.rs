@@ -253,3 +253,29 @@ fn markdown_notes_appear_only_with_intervals_registration_or_selection() {
     assert!(!study.contains("[low, high]") && !study.contains("Registration"));
     assert!(study.contains("Closest source: Alpha <&>."));
 }
+
+/// The terminal summary: the table, the verdicts and each kind of flag
+/// once, with its count and an example; not the per-scene measures.
+#[test]
+fn summary_lists_each_flag_kind_once_with_a_count() {
+    let reports = default_reports();
+    let text = summary(&reports);
+    snapshot("summary_default.txt", &text);
+    assert!(text.contains("| Alpha <&> |"), "{text}");
+    assert!(!text.contains("Mean err"), "no measures table: {text}");
+    // Dead's 20 diverged runs in each of the two scenes: one line.
+    let lines: Vec<&str> = text
+        .lines()
+        .filter(|l| l.starts_with("- diverged:"))
+        .collect();
+    assert_eq!(lines.len(), 1, "{text}");
+    assert!(
+        lines[0].contains("40 runs (all left out) of Dead in scene_test, scene_two"),
+        "{}",
+        lines[0]
+    );
+    assert!(lines[0].contains("e.g. Dead / "), "{}", lines[0]);
+    // The full Markdown still lists every flagged run.
+    let full = render(&reports, Format::Markdown);
+    assert!(full.matches("(left out): diverged").count() >= 40, "{full}");
+}
