@@ -96,6 +96,10 @@ fn reproduce_renders_every_figure_and_table_in_chromium() {
 
     // The rendered DOM: Chromium loads the page and prints the DOM it built.
     let index = out_dir.join("report/index.html");
+    // Self-contained, figures and the 3D replay's data included, and under
+    // the 2 MB the guide states.
+    let size = std::fs::metadata(&index).unwrap().len();
+    assert!(size < 2_000_000, "index.html is {size} bytes");
     let url = format!("file://{}", index.display());
     let profile = tmp.path().join("profile");
     let dom = headless(&browser, &profile, &["--dump-dom"], &url);
