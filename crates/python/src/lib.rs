@@ -370,7 +370,11 @@ fn compare<'py>(
 /// JSON, runs left out). `run`: its id; default the first finished run.
 #[pyfunction]
 #[pyo3(signature = (dir, run=None))]
-fn load_run<'py>(py: Python<'py>, dir: PathBuf, run: Option<String>) -> PyResult<Bound<'py, PyDict>> {
+fn load_run<'py>(
+    py: Python<'py>,
+    dir: PathBuf,
+    run: Option<String>,
+) -> PyResult<Bound<'py, PyDict>> {
     use realitygap_data::runstore::RunStore;
     let store = RunStore::open(&dir)
         .map_err(|e| RealityGapError::new_err(format!("{}: {e}", dir.display())))?;
