@@ -130,7 +130,7 @@ pub fn run_columns(trajectory: &Trajectory) -> Vec<(String, Vec<f64>)> {
     let names = header.trim_end().split(',').map(str::to_string);
     let mut columns: Vec<Vec<f64>> = vec![trajectory.time_s.clone()];
     for b in &trajectory.bodies {
-        let mut seven = vec![Vec::with_capacity(b.poses.len()); 7];
+        let mut seven: Vec<Vec<f64>> = (0..7).map(|_| Vec::with_capacity(b.poses.len())).collect();
         for p in &b.poses {
             let values = match p {
                 Some(p) => {
