@@ -50,7 +50,7 @@ pub struct ReproduceRequest {
     /// Physical parameters for every engine's runs.
     pub params: Option<PathBuf>,
     /// Output folders of `realitygap tune`: each engine again with its
-    /// tuned.toml, as "<engine> (tuned)".
+    /// tuned.toml, as "`<engine> (tuned)`".
     pub tuned: Vec<PathBuf>,
     /// Also compare in joint space.
     pub joint_space: bool,

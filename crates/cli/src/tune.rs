@@ -41,7 +41,7 @@ pub struct TuneRequest {
     pub engine: String,
     /// Output folder (a rerun resumes in it).
     pub out: PathBuf,
-    /// Parameter space; default assets/tuning/<engine>.toml.
+    /// Parameter space; default `assets/tuning/<engine>.toml`.
     pub space: Option<PathBuf>,
     /// Runs (or episodes) to fit on.
     pub runs: Option<String>,
