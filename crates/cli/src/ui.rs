@@ -35,7 +35,9 @@ pub struct TerminalBar(pub ProgressBar);
 
 impl Progress for TerminalBar {
     fn println(&self, line: String) {
-        self.0.println(line);
+        // Above the bar, and on standard error also when the bar is hidden
+        // (not a terminal), where indicatif's own println writes nothing.
+        self.0.suspend(|| eprintln!("{line}"));
     }
     fn inc(&self, n: u64) {
         self.0.inc(n);
