@@ -99,6 +99,8 @@ def test_compare_measures_and_series():
     assert {"scene", "source", "role"} <= set(m.columns)
     assert set(m["scene"]) >= {"scene1_single_joint", "scene2_two_joints", "scene3_cube_push"}
     assert (m["role"] == "reference").sum() == 3
+    assert "accumulated_error_interval_m.low_m" in m.columns
+    assert "accumulated_error_interval_m" not in m.columns
     s = cmp.series("scene2_two_joints")
     assert s.index.name == "t_s" and len(s) > 10
     assert "MuJoCo" in s.columns

@@ -210,6 +210,12 @@ class Comparison:
                         row["role"] = role
                         rows.append(row)
                 frame = pd.json_normalize(rows)
+                # A nested measure absent from some rows (the reference has
+                # no interval) leaves an empty column beside its parts.
+                frame = frame.drop(columns=[
+                    c for c in frame.columns
+                    if frame[c].isna().all() and any(o.startswith(c + ".") for o in frame.columns)
+                ])
                 first = ["scene", "source", "role"]
                 frame = frame[first + [c for c in frame.columns if c not in first]]
             else:
