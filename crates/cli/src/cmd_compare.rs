@@ -1,9 +1,10 @@
 //! `realitygap compare`: the accumulated-error table and per-scene measures.
 
 use anyhow::{Context, Result};
+use realitygap::compare::{evaluate, CompareRequest};
 use realitygap_analysis::compare::AnalysisMode;
-use realitygap_analysis::table::{self, Format};
-use realitygap_study::{evaluate_measured, load_study, parse_mode, DataSource, Measure, MODES};
+use realitygap_analysis::table::Format;
+use realitygap_study::{parse_mode, DataSource, Measure, MODES};
 use std::path::PathBuf;
 
 /// How the gap is measured: mode, alignment, registration, runs and
@@ -117,75 +118,18 @@ pub struct Args {
 /// Runs the command.
 pub fn run(args: Args) -> Result<()> {
     let format: Format = args.format.parse().map_err(anyhow::Error::msg)?;
-    if args
-        .study
-        .join(realitygap_study::replay::RECORD_FILE)
-        .is_file()
-    {
-        return joint_space(&args, format);
-    }
-    if args.link.is_some() {
-        anyhow::bail!("--link belongs to the comparison of a replay's folder (the output of `realitygap replay`)");
-    }
-    let (study, roots) = load_study(&args.study, &args.data, args.results)?;
-    let measure = args.measure.measure();
-    let reports = evaluate_measured(&args.study, &study, &roots, &measure)?;
-    let joint = if args.joint_space {
-        Some(realitygap_study::joint_space::study_tables(
-            &study, &roots, &measure,
-        )?)
-    } else {
-        None
+    let request = CompareRequest {
+        study: args.study,
+        link: args.link,
+        data: args.data,
+        results: args.results,
+        measure: args.measure.measure(),
+        joint_space: args.joint_space,
     };
-    let text = match (&joint, format) {
-        (Some(tables), Format::Json) => {
-            let mut v = table::to_json(&reports, args.series);
-            v["joint_space"] = serde_json::to_value(tables)?;
-            serde_json::to_string_pretty(&v)? + "\n"
-        }
-        (Some(tables), Format::Markdown) => {
-            table::render(&reports, format)
-                + "\n"
-                + &realitygap_study::joint_space::markdown(tables)
-        }
-        (Some(_), other) => anyhow::bail!(
-            "--joint-space is written as md or json, not {}",
-            format!("{other:?}").to_lowercase()
-        ),
-        (None, _) if format == Format::Json && args.series => {
-            serde_json::to_string_pretty(&table::to_json(&reports, true))? + "\n"
-        }
-        (None, _) => table::render(&reports, format),
-    };
+    let text = evaluate(&request)?.render(format, args.series)?;
     match args.output {
         Some(p) => {
             std::fs::write(&p, text).with_context(|| format!("cannot write {}", p.display()))?
-        }
-        None => print!("{text}"),
-    }
-    Ok(())
-}
-
-/// `compare OUT` of a replay: the joint-space table of every source.
-fn joint_space(args: &Args, format: Format) -> Result<()> {
-    use realitygap_study::replay::{
-        compare_replay, joint_space_csv, joint_space_json, joint_space_markdown,
-    };
-    let (rows, names, link) = compare_replay(&args.study, args.link.as_deref())?;
-    let text = match format {
-        Format::Markdown => joint_space_markdown(&rows, &names),
-        Format::Csv => joint_space_csv(&rows, &names),
-        Format::Json => {
-            serde_json::to_string_pretty(&joint_space_json(&rows, &names, &link))? + "\n"
-        }
-        other => anyhow::bail!(
-            "--format {}: the joint-space comparison is written as md, csv or json",
-            format!("{other:?}").to_lowercase()
-        ),
-    };
-    match &args.output {
-        Some(p) => {
-            std::fs::write(p, text).with_context(|| format!("cannot write {}", p.display()))?
         }
         None => print!("{text}"),
     }

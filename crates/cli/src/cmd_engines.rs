@@ -2,8 +2,8 @@
 //! the registry the other commands find them in.
 
 use anyhow::Result;
+use realitygap::param_table;
 use realitygap_core::engine::Engine;
-use realitygap_core::params::ParamKey;
 
 /// Arguments of `realitygap engines`.
 #[derive(clap::Args)]
@@ -27,17 +27,6 @@ pub struct Args {
 /// ([`realitygap::compiled_engines`]).
 pub fn compiled() -> Vec<Box<dyn Engine>> {
     realitygap::compiled_engines()
-}
-
-/// Prepares the engines' native libraries for this process (MuJoCo: route
-/// its fatal-error messages to standard error). Call once, early.
-pub fn install_native_handlers() {
-    #[cfg(feature = "mujoco")]
-    realitygap_engine_mujoco::install_message_handler();
-    #[cfg(feature = "ode")]
-    realitygap_engine_ode::install_message_handler();
-    #[cfg(feature = "bullet")]
-    realitygap_engine_bullet::install_message_handler();
 }
 
 /// Prints the compiled-in engines, one per line: name, version, default
@@ -78,22 +67,4 @@ pub fn run(args: Args) -> Result<()> {
         }
     }
     Ok(())
-}
-
-/// Every parameter key with what it becomes in `engine`: the engine's own
-/// mapping, the controller's for the keys core applies, or "not supported
-/// (an error)".
-pub fn param_table(engine: &dyn Engine) -> Vec<(ParamKey, String)> {
-    let support = engine.param_support();
-    ParamKey::ALL
-        .iter()
-        .map(|&key| {
-            let mapping = match (key.core_mapping(), support.iter().find(|s| s.key == key)) {
-                (Some(core), _) => format!("core controller: {core}"),
-                (None, Some(s)) => s.mapping.to_string(),
-                (None, None) => "not supported (a file setting it is an error)".to_string(),
-            };
-            (key, mapping)
-        })
-        .collect()
 }

@@ -52,7 +52,7 @@ pub struct Args {
 
 /// `realitygap frontier`.
 pub fn run(args: Args) -> Result<()> {
-    cmd_engines::install_native_handlers();
+    realitygap::install_native_handlers();
     let engine = realitygap_runner::prepare::find_engine(cmd_engines::compiled, &args.engine)
         .context("--engine")?;
     let executor = args.executor.executor()?;

@@ -1,31 +1,14 @@
-//! `realitygap reproduce`: the whole study in one command.
-//!
-//! Stages, each timed:
-//! 1. **simulate**: the three study scenes in every compiled engine,
-//!    `--repeats` times each (20 by default), into `OUT/runs/` exactly as
-//!    `realitygap run` does (parallel, resumable);
-//! 2. **compare**: against the real arm's recordings, next to the study's
-//!    recorded simulators (MuJoCo 1.5, PyBullet 2.1 and the V-Rep engines),
-//!    from the recordings built in or `--data DIR`; with `--data none`, the
-//!    engines against each other (the reference is the first engine, MuJoCo
-//!    when compiled in);
-//! 3. **report**: tables, figures and `OUT/report/index.html`.
-//!
-//! A rerun skips the finished simulations and redoes the (fast) rest.
+//! `realitygap reproduce`: the whole study in one command (the stages are
+//! in [`realitygap::reproduce`]).
 
 use crate::cmd_compare::mode_parser;
-use crate::cmd_engines;
 use crate::cmd_run;
-use anyhow::{bail, Context, Result};
-use realitygap_analysis::compare::{AnalysisMode, CompareOptions, SceneReport};
-use realitygap_analysis::table::{self, Format};
-use realitygap_study::provenance::provenance_for_study;
-use realitygap_study::reproduce::{
-    reproduction_study, study_recordings, study_scene_files, TunedEngine,
-};
-use realitygap_study::{evaluate, DataSource, Roots, Study};
-use std::path::{Path, PathBuf};
-use std::time::Instant;
+use anyhow::Result;
+use realitygap::reproduce::{reproduce, ReproduceRequest};
+use realitygap_analysis::compare::AnalysisMode;
+use realitygap_runner::Launcher;
+use realitygap_study::DataSource;
+use std::path::PathBuf;
 
 /// Arguments of `realitygap reproduce`.
 #[derive(clap::Args, Debug)]
@@ -85,198 +68,30 @@ pub struct Args {
     pub executor: cmd_run::ExecutorArgs,
 }
 
-/// Stage timings, seconds, in order.
-type Timings = Vec<(String, f64)>;
-
 /// Runs the command.
 pub fn run(args: Args) -> Result<()> {
-    let started = Instant::now();
-    // `--executor slurm` without Slurm is an error now, not a warning per batch.
-    args.executor.executor()?;
-    let data = study_recordings(&args.data)?;
-    let scenes: Vec<PathBuf> = if args.scenes.is_empty() {
-        study_scene_files()
-    } else {
-        args.scenes.clone()
-    };
-    let engines: Vec<String> = if args.engines.is_empty() {
-        cmd_engines::compiled()
-            .iter()
-            .map(|e| e.name().to_string())
-            .collect()
-    } else {
-        args.engines.clone()
-    };
-    if engines.is_empty() {
-        bail!("no physics engine is compiled into this binary");
-    }
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create {}", args.out.display()))?;
-    let runs_dir = args.out.join("runs");
-    let mut timings: Timings = Vec::new();
-
-    let tuned: Vec<TunedEngine> = args
-        .tuned
-        .iter()
-        .map(|d| TunedEngine::from_dir(d))
-        .collect::<Result<_>>()?;
-    let t = Instant::now();
-    let mut problems = simulate(&args, &scenes, &engines, &runs_dir, None);
-    for te in &tuned {
-        problems.extend(simulate(
-            &args,
-            &scenes,
-            std::slice::from_ref(&te.engine),
-            &runs_dir.join(&te.runs_subdir),
-            Some(&te.params),
-        ));
-    }
-    timings.push(("simulate".into(), t.elapsed().as_secs_f64()));
-
-    eprintln!("[2/3] comparing");
-    let t = Instant::now();
-    let (mut study, study_path, roots) =
-        reproduction_study(&scenes, data.as_deref(), &args.out, &runs_dir, &engines)?;
-    for s in &mut study.scenes {
-        for te in &tuned {
-            s.sources.extend(te.source(&runs_dir, &s.name)?);
-        }
-    }
-    let opts = CompareOptions {
-        mode: args.mode,
-        ..CompareOptions::default()
-    };
-    let reports = evaluate(&study, &roots, &opts)?;
-    timings.push(("compare".into(), t.elapsed().as_secs_f64()));
-    print!("{}", table::render(&reports, Format::Markdown));
-    if args.joint_space {
-        if data.is_none() {
-            bail!("--joint-space needs the real arm's recordings (leave --data out, or give a folder)");
-        }
-        let t = Instant::now();
-        let measure = realitygap_study::Measure {
-            runs: args.runs.clone(),
-            holdout: args.holdout.clone(),
-            ..realitygap_study::Measure::default()
-        };
-        let tables = realitygap_study::joint_space::study_tables(&study, &roots, &measure)?;
-        let md = realitygap_study::joint_space::markdown(&tables);
-        std::fs::write(args.out.join("joint_space.md"), &md)?;
-        std::fs::write(
-            args.out.join("joint_space.json"),
-            serde_json::to_string_pretty(&tables)? + "\n",
-        )?;
-        print!("\n{md}");
-        timings.push(("joint space".into(), t.elapsed().as_secs_f64()));
-    }
-
-    eprintln!("[3/3] writing the report");
-    let t = Instant::now();
-    let index_html = write_report(&args, &reports, &study, &study_path, &roots)?;
-    timings.push(("report".into(), t.elapsed().as_secs_f64()));
-
-    timings.push(("total".into(), started.elapsed().as_secs_f64()));
-    write_timings(&args.out, &timings)?;
-    eprintln!("report: {}", index_html.display());
-    if !problems.is_empty() {
-        bail!(
-            "the study finished, but not every simulation did: {}",
-            problems.join("; ")
-        );
-    }
-    Ok(())
-}
-
-/// Stage 1: every scene in every engine, `--repeats` times, into
-/// `runs_dir`, exactly as `realitygap run` does. Failed runs are listed in
-/// the report and the comparison goes on with the runs that finished, so
-/// a failure is a problem to report at the end, not an error now.
-fn simulate(
-    args: &Args,
-    scenes: &[PathBuf],
-    engines: &[String],
-    runs_dir: &Path,
-    params: Option<&Path>,
-) -> Vec<String> {
-    eprintln!(
-        "[1/3] simulating {} scenes x {} engines ({}) x {} repeats -> {}",
-        scenes.len(),
-        engines.len(),
-        engines.join(", "),
-        args.repeats,
-        runs_dir.display()
-    );
-    let run_args = cmd_run::Args {
-        scenes: scenes.to_vec(),
-        engines: engines.to_vec(),
+    let request = ReproduceRequest {
+        data: args.data,
+        out: args.out,
         repeats: args.repeats,
-        out: runs_dir.to_path_buf(),
-        robot: None,
-        packages: vec![],
+        engines: args.engines,
+        scenes: args.scenes,
         jobs: args.jobs,
-        seed: 0,
-        perturb: vec![],
-        set: vec![],
+        mode: args.mode,
         timeout_s: args.timeout_s,
-        params: params
-            .map(Path::to_path_buf)
-            .or_else(|| args.params.clone()),
-        stitch: None,
-        allow_unstable: false,
-        executor: args.executor.clone(),
+        params: args.params,
+        tuned: args.tuned,
+        joint_space: args.joint_space,
+        runs: args.runs,
+        holdout: args.holdout,
+        // `--executor slurm` without Slurm is an error now, not a warning per batch.
+        executor: args.executor.executor()?,
+        command: std::env::args().collect::<Vec<_>>().join(" "),
     };
-    match cmd_run::run(run_args) {
-        Ok(()) => Vec::new(),
-        Err(e) => {
-            eprintln!("warning: {e:#}");
-            vec![format!("{e:#}")]
-        }
-    }
-}
-
-/// Stage 3: tables, figures and `OUT/report/index.html`, with the
-/// provenance of every source and of this command; the page's path.
-fn write_report(
-    args: &Args,
-    reports: &[SceneReport],
-    study: &Study,
-    study_path: &Path,
-    roots: &Roots,
-) -> Result<PathBuf> {
-    let mut provenance = provenance_for_study(study, study_path, roots, args.mode);
-    provenance.details.extend(args.data.provenance());
-    provenance.details.push((
-        "Command".into(),
-        std::env::args().collect::<Vec<_>>().join(" "),
-    ));
-    provenance.details.push((
-        "Repeats per scene and engine".into(),
-        args.repeats.to_string(),
-    ));
-    let report_dir = args.out.join("report");
-    let files = realitygap_report::write_report(reports, &provenance, &report_dir)
-        .with_context(|| format!("writing the report into {}", report_dir.display()))?;
-    Ok(files.index_html)
-}
-
-/// Writes `OUT/timings.json` and says the timings on standard error.
-fn write_timings(out: &Path, timings: &Timings) -> Result<()> {
-    let timing_json: serde_json::Map<String, serde_json::Value> = timings
-        .iter()
-        .map(|(k, v)| (format!("{k}_s"), serde_json::json!(v)))
-        .collect();
-    std::fs::write(
-        out.join("timings.json"),
-        serde_json::to_string_pretty(&timing_json)? + "\n",
-    )
-    .with_context(|| format!("cannot write {}", out.join("timings.json").display()))?;
-    eprintln!(
-        "stage timings: {}",
-        timings
-            .iter()
-            .map(|(k, v)| format!("{k} {v:.1} s"))
-            .collect::<Vec<_>>()
-            .join(", ")
-    );
+    reproduce(
+        &request,
+        &Launcher::this_executable(),
+        &realitygap::ui::Terminal,
+    )?;
     Ok(())
 }

@@ -17,15 +17,10 @@
 //! run), so an interrupted batch keeps every finished run, and a rerun skips
 //! them.
 
-use crate::cmd_engines;
 use anyhow::Result;
-use indicatif::{ProgressBar, ProgressStyle};
-use realitygap_runner::prepare::resolver;
 use realitygap_runner::slurm::{Executor, SlurmOptions};
-use realitygap_runner::{BatchSpec, BatchStats, Launcher, Plan, Progress};
-use std::io::Write;
+use realitygap_runner::{BatchSpec, Launcher};
 use std::path::PathBuf;
-use std::time::Instant;
 
 /// Arguments of `realitygap run`.
 #[derive(clap::Args, Debug, Clone)]
@@ -163,143 +158,20 @@ impl Args {
     }
 }
 
-/// `--robot official` with no kinova_description package given or on
-/// ROS_PACKAGE_PATH: adds the one of the study data built in. When that
-/// cannot be had either, says why and leaves the arguments as they are
-/// (loading the robot then fails naming where it looked).
-fn with_builtin_kinova(mut args: Args) -> Result<Args> {
-    if args.robot.as_deref() != Some("official")
-        || resolver(&args.packages)?.find("kinova_description").is_ok()
-    {
-        return Ok(args);
-    }
-    match realitygap_study::data_source::builtin_data_dir() {
-        Ok(dir) => args.packages.push(format!(
-            "kinova_description={}",
-            dir.join("kinova_description").display()
-        )),
-        Err(e) => eprintln!("warning: the built-in kinova_description cannot be used: {e:#}"),
-    }
-    Ok(args)
-}
-
 /// `realitygap __run-one`: runs one job (JSON on standard input) with the
 /// engines compiled in and writes its result on standard output.
 pub fn run_one() -> Result<()> {
-    realitygap_runner::run_one(cmd_engines::compiled, cmd_engines::install_native_handlers)
-}
-
-/// The progress bar of a batch, as the runner sees it.
-struct Bar(ProgressBar);
-
-impl Progress for Bar {
-    fn println(&self, line: String) {
-        self.0.println(line);
-    }
-    fn inc(&self, n: u64) {
-        self.0.inc(n);
-    }
-    fn set_message(&self, message: String) {
-        self.0.set_message(message);
-    }
-}
-
-/// A progress bar over `total` runs, saying how many were kept.
-fn progress_bar(total: usize, skipped: usize) -> Bar {
-    let bar = ProgressBar::new(total as u64);
-    bar.set_style(
-        ProgressStyle::with_template(
-            "{spinner} [{elapsed_precise}] {wide_bar} {pos}/{len} runs ({eta} left) {msg}",
-        )
-        .expect("a valid template"),
-    );
-    if skipped > 0 {
-        bar.println(format!(
-            "{skipped} finished runs kept from an earlier batch"
-        ));
-    }
-    Bar(bar)
+    realitygap::run_one()
 }
 
 /// `realitygap run`.
 pub fn run(args: Args) -> Result<()> {
-    let batch_start = Instant::now();
-    let args = with_builtin_kinova(args)?;
     let executor = args.executor.executor()?;
-    let mut plan = Plan::new(cmd_engines::compiled, args.into_spec())?;
-    plan.executor = executor;
-    let launcher = Launcher::this_executable();
-    plan.check_loads(&launcher);
-    let total = plan.total();
-    let bar = progress_bar(total, plan.skipped());
-    let stats = plan.execute(&launcher, &bar)?;
-    bar.0.finish_and_clear();
-    let batch_wall_s = batch_start.elapsed().as_secs_f64();
-    plan.record_batch(&stats, batch_wall_s)?;
-    print_summary(&plan, &stats, total, batch_wall_s)
-}
-
-/// Prints one line per results directory and one for the batch; an error
-/// when a model did not load or a run failed.
-fn print_summary(plan: &Plan, stats: &BatchStats, total: usize, batch_wall_s: f64) -> Result<()> {
-    let mut load_failures = Vec::new();
-    for g in &plan.groups {
-        let dir = g.store.dir().display().to_string();
-        match &g.load_error {
-            Some(e) => {
-                say(format!("{}/{}: not run: {e}", g.scene_name, g.source));
-                load_failures.push(format!("{}/{}", g.scene_name, g.source));
-            }
-            None => say(format!(
-                "{}/{}: {} ok, {} diverged{}, {} failed, {} kept -> {dir}",
-                g.scene_name,
-                g.source,
-                g.done.ok,
-                g.done.diverged,
-                match g.done.unstable {
-                    0 => String::new(),
-                    n => format!(", {n} unstable"),
-                },
-                g.done.failed,
-                plan.kept(g)
-            )),
-        }
-    }
-    if stats.steps_total > 0 {
-        say(format!(
-            "{total} runs ({} simulated, {} copies of identical deterministic runs) in {batch_wall_s:.1} s with {} jobs ({:.0} engine steps/s per run)",
-            stats.simulated,
-            total - stats.simulated,
-            plan.jobs,
-            stats.steps_per_second()
-        ));
-    }
-    if !load_failures.is_empty() {
-        anyhow::bail!("the engine could not load {}", load_failures.join(", "));
-    }
-    if stats.failures > 0 {
-        let first = first_failure(plan)
-            .map(|m| format!("; the first: {m}"))
-            .unwrap_or_default();
-        anyhow::bail!("{} of {total} runs failed (their messages are in the manifests{first}); rerun the same command to retry them", stats.failures);
-    }
+    realitygap::batch::run_and_report(
+        args.into_spec(),
+        executor,
+        &Launcher::this_executable(),
+        &realitygap::ui::Terminal,
+    )?;
     Ok(())
-}
-
-/// The message of the first failed run of the batch's results
-/// directories, for the final error (the progress bar's lines are not
-/// shown when standard error is not a terminal).
-fn first_failure(plan: &Plan) -> Option<String> {
-    plan.groups
-        .iter()
-        .flat_map(|g| g.store.runs())
-        .find(|r| r.status == realitygap_data::runstore::RunStatus::Failed)
-        .and_then(|r| r.message.clone())
-}
-
-/// Prints a line on standard output; a closed pipe (`| head`) is not an
-/// error worth a panic.
-fn say(line: String) {
-    let mut out = std::io::stdout().lock();
-    let _ = writeln!(out, "{line}");
 }

@@ -1,12 +1,22 @@
-//! Library side of the `realitygap` command: helpers for its tests and
-//! benchmarks. The work is done by the library crates (`realitygap-study`
-//! for studies and their evaluation, `realitygap-runner` for batches of
-//! runs); the binary (`main.rs`) is a thin layer of argument parsing and
-//! printing over them.
+//! Library side of the `realitygap` command: the engines compiled in, the
+//! sequences of the long commands (`run`, `compare`, `replay`, `tune`,
+//! `reproduce`) that the command and the Python package (`crates/python`)
+//! share, and helpers for the tests and benchmarks. The work is done by the
+//! library crates (`realitygap-study` for studies and their evaluation,
+//! `realitygap-runner` for batches of runs); the binary (`main.rs`) is a
+//! thin layer of argument parsing and printing over them.
 
 #![forbid(unsafe_code)]
 
+pub mod batch;
+pub mod compare;
+pub mod replay;
+pub mod reproduce;
+pub mod tune;
+pub mod ui;
+
 use realitygap_core::engine::Engine;
+use realitygap_core::params::ParamKey;
 
 /// Every engine compiled in (cargo features of this crate), in
 /// `realitygap engines` order: the command's registry, and the tests' and
@@ -40,6 +50,43 @@ pub fn physics_engines() -> Vec<Box<dyn Engine>> {
     compiled_engines()
         .into_iter()
         .filter(|e| e.name() != realitygap_core::engine::PHYSICS_FREE_ENGINE)
+        .collect()
+}
+
+/// Prepares the engines' native libraries for this process (MuJoCo, ODE
+/// and Bullet: route their fatal-error messages to standard error). Call
+/// once, early (the child process of a run does, before its job).
+pub fn install_native_handlers() {
+    #[cfg(feature = "mujoco")]
+    realitygap_engine_mujoco::install_message_handler();
+    #[cfg(feature = "ode")]
+    realitygap_engine_ode::install_message_handler();
+    #[cfg(feature = "bullet")]
+    realitygap_engine_bullet::install_message_handler();
+}
+
+/// The child's side of a run, `realitygap __run-one`: one job (JSON on
+/// standard input) run with the engines compiled in, its result on
+/// standard output.
+pub fn run_one() -> anyhow::Result<()> {
+    realitygap_runner::run_one(compiled_engines, install_native_handlers)
+}
+
+/// Every parameter key with what it becomes in `engine`: the engine's own
+/// mapping, the controller's for the keys core applies, or "not supported
+/// (an error)".
+pub fn param_table(engine: &dyn Engine) -> Vec<(ParamKey, String)> {
+    let support = engine.param_support();
+    ParamKey::ALL
+        .iter()
+        .map(|&key| {
+            let mapping = match (key.core_mapping(), support.iter().find(|s| s.key == key)) {
+                (Some(core), _) => format!("core controller: {core}"),
+                (None, Some(s)) => s.mapping.to_string(),
+                (None, None) => "not supported (a file setting it is an error)".to_string(),
+            };
+            (key, mapping)
+        })
         .collect()
 }
 

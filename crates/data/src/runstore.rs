@@ -43,7 +43,7 @@ use std::path::{Path, PathBuf};
 mod commandcsv;
 mod runcsv;
 pub use commandcsv::{format_commands_csv, parse_commands_csv};
-pub use runcsv::{format_run_csv, parse_run_csv, read_run_csv};
+pub use runcsv::{format_run_csv, parse_run_csv, read_run_csv, run_columns};
 
 /// File name of the manifest in a results directory.
 pub const MANIFEST_FILE: &str = "manifest.json";

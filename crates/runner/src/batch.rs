@@ -103,6 +103,9 @@ impl Plan {
             }
             let job = self.job(&self.groups[gi], 0, true);
             if let ChildEnd::Failed(message) = run_child(launcher, &job, timeout_s) {
+                if crate::interrupt::requested() {
+                    return;
+                }
                 self.groups[gi].load_error = Some(message);
             }
         }
@@ -111,7 +114,9 @@ impl Plan {
     /// Runs every pending repeat of the groups whose model loads, storing
     /// each as it finishes. Deterministic repeats are simulated twice; when
     /// the two are identical, the others are recorded as copies of the
-    /// first.
+    /// first. When an interruption is asked for
+    /// ([`crate::interrupt::request`]), stops at once with
+    /// [`crate::interrupt::Interrupted`], the runs finished before stored.
     pub fn execute(&mut self, launcher: &Launcher, progress: &dyn Progress) -> Result<BatchStats> {
         let (first, deferred) = split_for_copies(&self.groups, self.deterministic());
         let mut batch = Batch {
@@ -121,8 +126,10 @@ impl Plan {
             stats: BatchStats::default(),
         };
         batch.execute(first)?;
+        crate::interrupt::check()?;
         let rest = batch.copy_or_simulate(deferred)?;
         batch.execute(rest)?;
+        crate::interrupt::check()?;
         Ok(batch.stats)
     }
 
@@ -170,10 +177,17 @@ fn worker(
     tx: mpsc::Sender<Finished>,
 ) {
     loop {
+        if crate::interrupt::requested() {
+            break;
+        }
         let next = queue.lock().map(|mut q| q.pop_front()).unwrap_or(None);
         let Some((key, job)) = next else { break };
         let start = Instant::now();
         let end = run_child(launcher, &job, timeout_s);
+        if crate::interrupt::requested() && matches!(end, ChildEnd::Failed(_)) {
+            // Cut short by the interruption: not a failure of the run.
+            break;
+        }
         if tx.send((key, end, start.elapsed().as_secs_f64())).is_err() {
             break;
         }

@@ -357,6 +357,9 @@ fn interpret(job: &Job, status: ExitStatus, out: &[u8], err: &str) -> ChildEnd {
 /// Runs `job` in a child process started by `launcher`, killed after
 /// `timeout_s` seconds if given.
 pub fn run_child(launcher: &Launcher, job: &Job, timeout_s: Option<f64>) -> ChildEnd {
+    if crate::interrupt::requested() {
+        return ChildEnd::Failed(INTERRUPTED.to_string());
+    }
     let program = match &launcher.program {
         Some(p) => p.clone(),
         None => match std::env::current_exe() {
@@ -387,15 +390,16 @@ pub fn run_child(launcher: &Launcher, job: &Job, timeout_s: Option<f64>) -> Chil
     let limit = timeout_s
         .filter(|t| !t.is_nan())
         .and_then(|t| Duration::try_from_secs_f64(t.max(0.0)).ok());
-    let waited = match limit {
-        Some(limit) => child.wait_timeout(limit),
-        None => child.wait().map(Some),
-    };
-    let status = match waited {
-        Ok(Some(status)) => Some(status),
-        Ok(None) => {
+    let status = match wait_or_interrupt(&mut child, limit) {
+        Ok(Waited::Exited(status)) => Some(status),
+        Ok(end) => {
             let _ = child.kill();
             let _ = child.wait();
+            if end == Waited::Interrupted {
+                let _ = out_reader.join();
+                let _ = err_reader.join();
+                return ChildEnd::Failed(INTERRUPTED.to_string());
+            }
             None
         }
         Err(e) => return ChildEnd::Failed(format!("waiting for the run: {e}")),
@@ -405,6 +409,46 @@ pub fn run_child(launcher: &Launcher, job: &Job, timeout_s: Option<f64>) -> Chil
     match status {
         None => ChildEnd::Failed(format!("timed out after {} s", timeout_s.unwrap_or(0.0))),
         Some(status) => interpret(job, status, &out, &err),
+    }
+}
+
+/// The message of a run cut short by [`crate::interrupt::request`] (never
+/// stored: the callers drop such runs).
+pub const INTERRUPTED: &str = "interrupted";
+
+/// How waiting for a child ended.
+#[derive(Debug, PartialEq)]
+enum Waited {
+    /// It exited.
+    Exited(ExitStatus),
+    /// The time limit passed.
+    TimedOut,
+    /// An interruption was asked for.
+    Interrupted,
+}
+
+/// Waits for `child` until it exits, `limit` passes or an interruption is
+/// asked for (checked every 50 ms).
+fn wait_or_interrupt(
+    child: &mut std::process::Child,
+    limit: Option<Duration>,
+) -> std::io::Result<Waited> {
+    let start = std::time::Instant::now();
+    let tick = Duration::from_millis(50);
+    loop {
+        if crate::interrupt::requested() {
+            return Ok(Waited::Interrupted);
+        }
+        let wait = match limit {
+            Some(limit) => match limit.checked_sub(start.elapsed()) {
+                Some(left) => left.min(tick),
+                None => return Ok(Waited::TimedOut),
+            },
+            None => tick,
+        };
+        if let Some(status) = child.wait_timeout(wait)? {
+            return Ok(Waited::Exited(status));
+        }
     }
 }
 

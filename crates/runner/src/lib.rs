@@ -22,6 +22,7 @@
 pub mod batch;
 pub mod child;
 pub mod cpu_clock;
+pub mod interrupt;
 pub mod plan;
 pub mod prepare;
 pub mod protocol;

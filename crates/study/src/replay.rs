@@ -1005,6 +1005,10 @@ pub fn replay_all(
                         let next = queue.lock().unwrap_or_else(|p| p.into_inner()).next();
                         let Some((key, job)) = next else { break };
                         let end = run_child(launcher, &job, None);
+                        if realitygap_runner::interrupt::requested() {
+                            // Cut short: not stored; the finished runs are.
+                            break;
+                        }
                         let keep = keep.lock().unwrap_or_else(|p| p.into_inner());
                         if let Err(e) = (*keep)(key, end) {
                             errors.lock().unwrap_or_else(|p| p.into_inner()).push(e);
@@ -1016,6 +1020,7 @@ pub fn replay_all(
             if let Some(e) = errors.into_inner().unwrap_or_default().into_iter().next() {
                 return Err(e);
             }
+            realitygap_runner::interrupt::check()?;
         }
         ReplayExecutor::Slurm { launcher, options } => {
             if !jobs.is_empty() {

@@ -261,6 +261,7 @@ pub fn tune(
     simulator
         .check(&target.scenes, &start)
         .with_context(|| format!("parameter space {}", spec.space.source.display()))?;
+    realitygap_runner::interrupt::check()?;
     check_resume(spec, target)?;
     let mut history = History::open(
         &spec.out.join("history.csv"),
@@ -285,6 +286,8 @@ pub fn tune(
         progress,
     )?;
     let (summary, files) = outputs::finish(&tuner, &end, started)?;
+    // Final scores cut short by an interruption are not a result.
+    realitygap_runner::interrupt::check()?;
     Ok(TuneResult {
         end,
         summary,

@@ -423,6 +423,7 @@ pub fn finish(
     let params = tuner.params(&u).map_err(|m| anyhow!(m))?;
     let registration = tuner.registration(&u);
     let sens = sensitivity(tuner, &u, best.objective);
+    realitygap_runner::interrupt::check()?;
     let untuned_p = untuned_params(tuner);
     let sim = |p: &PhysicalParams, what: &str| {
         tuner

@@ -402,6 +402,9 @@ pub fn search(
     let reason = loop {
         generation.store(cma.generation(), Ordering::SeqCst);
         let end = pool.install(|| cma.next_parallel());
+        // An interrupted generation is not recorded: its evaluations were
+        // cut short; the finished generations stay in the history.
+        realitygap_runner::interrupt::check()?;
         let gen = generation.load(Ordering::SeqCst);
         let new = std::mem::take(&mut *fresh.lock().unwrap_or_else(|p| p.into_inner()));
         record_generation(history, gen, new, &mut all)?;

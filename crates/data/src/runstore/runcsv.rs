@@ -120,6 +120,47 @@ fn push_sample(out: &mut String, trajectory: &Trajectory, i: usize) {
     out.push('\n');
 }
 
+/// The columns of a trajectory as its run CSV has them: each named by its
+/// header (`t_s`, `wrist_x_m`, ..., `q1_rad`, ...), one value per sample
+/// (`NaN` in a body's seven columns at a gap). For array libraries (the
+/// Python package's `load_run`).
+pub fn run_columns(trajectory: &Trajectory) -> Vec<(String, Vec<f64>)> {
+    let mut header = String::new();
+    push_header(&mut header, trajectory);
+    let names = header.trim_end().split(',').map(str::to_string);
+    let mut columns: Vec<Vec<f64>> = vec![trajectory.time_s.clone()];
+    for b in &trajectory.bodies {
+        let mut seven: Vec<Vec<f64>> = (0..7).map(|_| Vec::with_capacity(b.poses.len())).collect();
+        for p in &b.poses {
+            let values = match p {
+                Some(p) => {
+                    let (v, o) = (p.position_m, p.orientation);
+                    [v.x, v.y, v.z, o.w, o.x, o.y, o.z]
+                }
+                None => [f64::NAN; 7],
+            };
+            for (c, x) in seven.iter_mut().zip(values) {
+                c.push(x);
+            }
+        }
+        columns.extend(seven);
+    }
+    for rows in [
+        &trajectory.joint_angles_rad,
+        &trajectory.joint_velocity_commands_rad_s,
+        &trajectory.joint_velocities_rad_s,
+        &trajectory.joint_efforts_nm,
+    ]
+    .into_iter()
+    .flatten()
+    {
+        for j in 0..rows.first().map_or(0, Vec::len) {
+            columns.push(rows.iter().map(|r| r[j]).collect());
+        }
+    }
+    names.zip(columns).collect()
+}
+
 /// Formats a trajectory as run CSV text (see the module docs). Roles must
 /// be non-empty and free of `,`, `"` and line breaks.
 pub fn format_run_csv(trajectory: &Trajectory) -> Result<String, StoreError> {

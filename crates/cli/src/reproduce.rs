@@ -1,0 +1,324 @@
+//! `realitygap reproduce`: the whole study in one call.
+//!
+//! Stages, each timed:
+//! 1. **simulate**: the three study scenes in every compiled engine,
+//!    `repeats` times each (20 by default), into `OUT/runs/` exactly as
+//!    `realitygap run` does (parallel, resumable);
+//! 2. **compare**: against the real arm's recordings, next to the study's
+//!    recorded simulators (MuJoCo 1.5, PyBullet 2.1 and the V-Rep engines),
+//!    from the recordings built in or `--data DIR`; with `--data none`, the
+//!    engines against each other (the reference is the first engine, MuJoCo
+//!    when compiled in);
+//! 3. **report**: tables, figures and `OUT/report/index.html`.
+//!
+//! A rerun skips the finished simulations and redoes the (fast) rest.
+//! Shared by the command and the Python package.
+
+use crate::ui::Ui;
+use anyhow::{bail, Context, Result};
+use realitygap_analysis::compare::{AnalysisMode, CompareOptions, SceneReport};
+use realitygap_analysis::table::{self, Format};
+use realitygap_runner::slurm::Executor;
+use realitygap_runner::{BatchSpec, Launcher};
+use realitygap_study::provenance::provenance_for_study;
+use realitygap_study::reproduce::{
+    reproduction_study, study_recordings, study_scene_files, TunedEngine,
+};
+use realitygap_study::{evaluate, DataSource, Roots, Study};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// What `reproduce` does (its options).
+#[derive(Debug, Clone)]
+pub struct ReproduceRequest {
+    /// The study's recordings: built in, none, or a folder.
+    pub data: DataSource,
+    /// Output folder: runs/, report/, tables and timings.json.
+    pub out: PathBuf,
+    /// Runs per scene and engine.
+    pub repeats: u32,
+    /// Engines; empty: every engine compiled in.
+    pub engines: Vec<String>,
+    /// Scene files; empty: the study's three scenes.
+    pub scenes: Vec<PathBuf>,
+    /// Simulations at a time (default: the number of cores).
+    pub jobs: Option<usize>,
+    /// The analysis mode.
+    pub mode: AnalysisMode,
+    /// Give up on a simulation after this many seconds.
+    pub timeout_s: Option<f64>,
+    /// Physical parameters for every engine's runs.
+    pub params: Option<PathBuf>,
+    /// Output folders of `realitygap tune`: each engine again with its
+    /// tuned.toml, as "`<engine> (tuned)`".
+    pub tuned: Vec<PathBuf>,
+    /// Also compare in joint space.
+    pub joint_space: bool,
+    /// With `joint_space`: the real runs to fit the IK registration on.
+    pub runs: Option<String>,
+    /// With `joint_space`: the real runs to score on.
+    pub holdout: Option<String>,
+    /// Where the simulations run.
+    pub executor: Executor,
+    /// The command line, for the report's provenance.
+    pub command: String,
+}
+
+impl Default for ReproduceRequest {
+    fn default() -> Self {
+        ReproduceRequest {
+            data: DataSource::Builtin,
+            out: PathBuf::from("results"),
+            repeats: 20,
+            engines: Vec::new(),
+            scenes: Vec::new(),
+            jobs: None,
+            mode: AnalysisMode::Default,
+            timeout_s: None,
+            params: None,
+            tuned: Vec::new(),
+            joint_space: false,
+            runs: None,
+            holdout: None,
+            executor: Executor::Local,
+            command: String::new(),
+        }
+    }
+}
+
+/// What `reproduce` made.
+pub struct Reproduced {
+    /// Per scene, the comparison.
+    pub reports: Vec<SceneReport>,
+    /// The table in Markdown (as printed).
+    pub table: String,
+    /// The joint-space tables in Markdown, when asked for.
+    pub joint_space: Option<String>,
+    /// `OUT/report/index.html`.
+    pub index_html: PathBuf,
+    /// Stage timings, seconds, in order.
+    pub timings: Vec<(String, f64)>,
+    /// The simulations that did not all finish (the study went on).
+    pub problems: Vec<String>,
+}
+
+/// Runs the study; says the table (and the joint-space tables) on `ui`.
+/// An error after the report when not every simulation finished.
+pub fn reproduce(
+    request: &ReproduceRequest,
+    launcher: &Launcher,
+    ui: &dyn Ui,
+) -> Result<Reproduced> {
+    let done = reproduce_keeping_problems(request, launcher, ui)?;
+    if !done.problems.is_empty() {
+        bail!(
+            "the study finished, but not every simulation did: {}",
+            done.problems.join("; ")
+        );
+    }
+    Ok(done)
+}
+
+/// [`reproduce`], the unfinished simulations returned instead of an error.
+pub fn reproduce_keeping_problems(
+    request: &ReproduceRequest,
+    launcher: &Launcher,
+    ui: &dyn Ui,
+) -> Result<Reproduced> {
+    let args = request;
+    let started = Instant::now();
+    let data = study_recordings(&args.data)?;
+    let scenes: Vec<PathBuf> = if args.scenes.is_empty() {
+        study_scene_files()
+    } else {
+        args.scenes.clone()
+    };
+    let engines: Vec<String> = if args.engines.is_empty() {
+        crate::compiled_engines()
+            .iter()
+            .map(|e| e.name().to_string())
+            .collect()
+    } else {
+        args.engines.clone()
+    };
+    if engines.is_empty() {
+        bail!("no physics engine is compiled into this binary");
+    }
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    let runs_dir = args.out.join("runs");
+    let mut timings: Vec<(String, f64)> = Vec::new();
+
+    let tuned: Vec<TunedEngine> = args
+        .tuned
+        .iter()
+        .map(|d| TunedEngine::from_dir(d))
+        .collect::<Result<_>>()?;
+    let t = Instant::now();
+    let mut problems = simulate(args, &scenes, &engines, &runs_dir, None, launcher, ui)?;
+    for te in &tuned {
+        problems.extend(simulate(
+            args,
+            &scenes,
+            std::slice::from_ref(&te.engine),
+            &runs_dir.join(&te.runs_subdir),
+            Some(&te.params),
+            launcher,
+            ui,
+        )?);
+    }
+    timings.push(("simulate".into(), t.elapsed().as_secs_f64()));
+
+    ui.note("[2/3] comparing".into());
+    let t = Instant::now();
+    let (mut study, study_path, roots) =
+        reproduction_study(&scenes, data.as_deref(), &args.out, &runs_dir, &engines)?;
+    for s in &mut study.scenes {
+        for te in &tuned {
+            s.sources.extend(te.source(&runs_dir, &s.name)?);
+        }
+    }
+    let opts = CompareOptions {
+        mode: args.mode,
+        ..CompareOptions::default()
+    };
+    let reports = evaluate(&study, &roots, &opts)?;
+    timings.push(("compare".into(), t.elapsed().as_secs_f64()));
+    let table = table::render(&reports, Format::Markdown);
+    ui.say(table.trim_end_matches('\n').to_string());
+    let mut joint_space = None;
+    if args.joint_space {
+        if data.is_none() {
+            bail!("--joint-space needs the real arm's recordings (leave --data out, or give a folder)");
+        }
+        let t = Instant::now();
+        let measure = realitygap_study::Measure {
+            runs: args.runs.clone(),
+            holdout: args.holdout.clone(),
+            ..realitygap_study::Measure::default()
+        };
+        let tables = realitygap_study::joint_space::study_tables(&study, &roots, &measure)?;
+        let md = realitygap_study::joint_space::markdown(&tables);
+        std::fs::write(args.out.join("joint_space.md"), &md)?;
+        std::fs::write(
+            args.out.join("joint_space.json"),
+            serde_json::to_string_pretty(&tables)? + "\n",
+        )?;
+        ui.say(format!("\n{}", md.trim_end_matches('\n')));
+        joint_space = Some(md);
+        timings.push(("joint space".into(), t.elapsed().as_secs_f64()));
+    }
+
+    ui.note("[3/3] writing the report".into());
+    let t = Instant::now();
+    let index_html = write_report(args, &reports, &study, &study_path, &roots)?;
+    timings.push(("report".into(), t.elapsed().as_secs_f64()));
+
+    timings.push(("total".into(), started.elapsed().as_secs_f64()));
+    write_timings(&args.out, &timings, ui)?;
+    ui.note(format!("report: {}", index_html.display()));
+    Ok(Reproduced {
+        reports,
+        table,
+        joint_space,
+        index_html,
+        timings,
+        problems,
+    })
+}
+
+/// Stage 1: every scene in every engine, `repeats` times, into
+/// `runs_dir`, exactly as `realitygap run` does. Failed runs are listed in
+/// the report and the comparison goes on with the runs that finished, so
+/// a failure is a problem to report at the end, not an error now (an
+/// interruption is an error).
+fn simulate(
+    args: &ReproduceRequest,
+    scenes: &[PathBuf],
+    engines: &[String],
+    runs_dir: &Path,
+    params: Option<&Path>,
+    launcher: &Launcher,
+    ui: &dyn Ui,
+) -> Result<Vec<String>> {
+    ui.note(format!(
+        "[1/3] simulating {} scenes x {} engines ({}) x {} repeats -> {}",
+        scenes.len(),
+        engines.len(),
+        engines.join(", "),
+        args.repeats,
+        runs_dir.display()
+    ));
+    let spec = BatchSpec {
+        scenes: scenes.to_vec(),
+        engines: engines.to_vec(),
+        repeats: args.repeats,
+        out: runs_dir.to_path_buf(),
+        robot: None,
+        packages: vec![],
+        jobs: args.jobs,
+        seed: 0,
+        perturb: vec![],
+        set: vec![],
+        timeout_s: args.timeout_s,
+        params: params
+            .map(Path::to_path_buf)
+            .or_else(|| args.params.clone()),
+        stitch: None,
+        allow_unstable: false,
+    };
+    match crate::batch::run_and_report(spec, args.executor.clone(), launcher, ui) {
+        Ok(_) => Ok(Vec::new()),
+        Err(e) if realitygap_runner::interrupt::is_interrupted(&e) => Err(e),
+        Err(e) => {
+            ui.note(format!("warning: {e:#}"));
+            Ok(vec![format!("{e:#}")])
+        }
+    }
+}
+
+/// Stage 3: tables, figures and `OUT/report/index.html`, with the
+/// provenance of every source and of this call; the page's path.
+fn write_report(
+    args: &ReproduceRequest,
+    reports: &[SceneReport],
+    study: &Study,
+    study_path: &Path,
+    roots: &Roots,
+) -> Result<PathBuf> {
+    let mut provenance = provenance_for_study(study, study_path, roots, args.mode);
+    provenance.details.extend(args.data.provenance());
+    provenance
+        .details
+        .push(("Command".into(), args.command.clone()));
+    provenance.details.push((
+        "Repeats per scene and engine".into(),
+        args.repeats.to_string(),
+    ));
+    let report_dir = args.out.join("report");
+    let files = realitygap_report::write_report(reports, &provenance, &report_dir)
+        .with_context(|| format!("writing the report into {}", report_dir.display()))?;
+    Ok(files.index_html)
+}
+
+/// Writes `OUT/timings.json` and notes the timings.
+fn write_timings(out: &Path, timings: &[(String, f64)], ui: &dyn Ui) -> Result<()> {
+    let timing_json: serde_json::Map<String, serde_json::Value> = timings
+        .iter()
+        .map(|(k, v)| (format!("{k}_s"), serde_json::json!(v)))
+        .collect();
+    std::fs::write(
+        out.join("timings.json"),
+        serde_json::to_string_pretty(&timing_json)? + "\n",
+    )
+    .with_context(|| format!("cannot write {}", out.join("timings.json").display()))?;
+    ui.note(format!(
+        "stage timings: {}",
+        timings
+            .iter()
+            .map(|(k, v)| format!("{k} {v:.1} s"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    ));
+    Ok(())
+}

@@ -1,0 +1,333 @@
+//! `realitygap tune`: an engine calibrated against a study's real runs or
+//! a robot's own recorded episodes (the work is `realitygap-tune`'s; this
+//! is the sequence the command and the Python package share: options,
+//! settings, the progress bar, the summary).
+
+use crate::ui::Ui;
+use anyhow::{Context, Result};
+use realitygap_analysis::selection::RunRange;
+use realitygap_core::params::PhysicalParams;
+use realitygap_runner::prepare::{engine_names, find_engine, overrides_for};
+use realitygap_runner::slurm::Executor;
+use realitygap_runner::Launcher;
+use realitygap_study::data_source::assets_dir;
+use realitygap_study::{load_study, DataSource};
+use realitygap_tune::objective::{Simulator, Target};
+use realitygap_tune::search::SearchOptions;
+use realitygap_tune::slurm_batch::Gatherer;
+use realitygap_tune::space::Space;
+use realitygap_tune::{default_space_file, TuneSpec};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// What `tune` does (its options).
+#[derive(Debug, Clone)]
+pub struct TuneRequest {
+    /// The study file (not with `recordings`).
+    pub study: Option<PathBuf>,
+    /// A results directory of recorded episodes (not with `study`).
+    pub recordings: Option<PathBuf>,
+    /// With `recordings`: known parameters, never searched.
+    pub params: Option<PathBuf>,
+    /// With `recordings`: a replay scene instead of the generated one.
+    pub scene: Option<PathBuf>,
+    /// With `recordings`: fit the recorded efforts too.
+    pub efforts: bool,
+    /// With `recordings`: Levenberg-Marquardt iterations at most.
+    pub iterations: usize,
+    /// The study's recordings.
+    pub data: DataSource,
+    /// The engine to tune.
+    pub engine: String,
+    /// Output folder (a rerun resumes in it).
+    pub out: PathBuf,
+    /// Parameter space; default `assets/tuning/<engine>.toml`.
+    pub space: Option<PathBuf>,
+    /// Runs (or episodes) to fit on.
+    pub runs: Option<String>,
+    /// Runs to score on and never fit on.
+    pub holdout: Option<String>,
+    /// Evaluations.
+    pub budget: usize,
+    /// Seed of the search.
+    pub seed: u64,
+    /// Parallel evaluations (default: the number of cores).
+    pub jobs: Option<usize>,
+    /// Weight of the cube's final position error.
+    pub cube_weight: f64,
+    /// Keep the measurement's registration estimate.
+    pub keep_registration: bool,
+    /// Engine settings over the space's (a parameters file).
+    pub settings: Option<PathBuf>,
+    /// Engine settings over the space's and `settings`: KEY=VALUE.
+    pub set: Vec<String>,
+    /// Robot instead of the scenes'.
+    pub robot: Option<String>,
+    /// Where ROS packages are: NAME=DIR.
+    pub packages: Vec<String>,
+    /// Where the simulations run.
+    pub executor: Executor,
+}
+
+impl Default for TuneRequest {
+    fn default() -> Self {
+        TuneRequest {
+            study: None,
+            recordings: None,
+            params: None,
+            scene: None,
+            efforts: false,
+            iterations: 30,
+            data: DataSource::Builtin,
+            engine: String::new(),
+            out: PathBuf::from("tune"),
+            space: None,
+            runs: None,
+            holdout: None,
+            budget: 600,
+            seed: 1,
+            jobs: None,
+            cube_weight: realitygap_tune::objective::CUBE_WEIGHT_PER_STEP,
+            keep_registration: false,
+            settings: None,
+            set: Vec::new(),
+            robot: None,
+            packages: Vec::new(),
+            executor: Executor::Local,
+        }
+    }
+}
+
+/// What a tune made.
+pub struct Tuned {
+    /// The summary in Markdown (as printed).
+    pub markdown: String,
+    /// The files written.
+    pub files: Vec<PathBuf>,
+}
+
+/// Evaluation threads with `--executor slurm`: enough for every candidate
+/// of a generation to wait on its array at once (CMA-ES's population is
+/// 4 + 3 ln n, 17 for 60 parameters).
+const SLURM_THREADS: usize = 64;
+
+/// The cores of this machine.
+fn cores() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
+/// A run range option, parsed.
+fn range(v: &Option<String>, flag: &str) -> Result<Option<RunRange>> {
+    Ok(match v {
+        Some(v) => Some(RunRange::parse(v, flag)?),
+        None => None,
+    })
+}
+
+/// Runs the tune `request` asks for; says the summary on `ui`.
+pub fn tune(request: &TuneRequest, launcher: &Launcher, ui: &dyn Ui) -> Result<Tuned> {
+    if let Some(recordings) = &request.recordings {
+        return tune_recordings(request, recordings, ui);
+    }
+    let args = request;
+    for (given, flag) in [
+        (args.params.is_some(), "--params"),
+        (args.scene.is_some(), "--scene"),
+        (args.efforts, "--efforts"),
+    ] {
+        if given {
+            anyhow::bail!("{flag} belongs to a tune against recordings: give --recordings DIR");
+        }
+    }
+    let study_file = args
+        .study
+        .clone()
+        .context("give a study file, or --recordings DIR")?;
+    let registry = crate::compiled_engines;
+    let engine = find_engine(registry, &args.engine)?;
+    let space_file = args
+        .space
+        .clone()
+        .unwrap_or_else(|| default_space_file(&assets_dir(), engine.name()));
+    let space = Space::from_file(&space_file)?;
+    let mut set = match &args.settings {
+        Some(f) => PhysicalParams::from_file(f)?
+            .engine_settings
+            .remove(engine.name())
+            .with_context(|| {
+                format!(
+                    "--settings {}: no [engine.{}] table",
+                    f.display(),
+                    engine.name()
+                )
+            })?,
+        None => Default::default(),
+    };
+    set.extend(overrides_for(
+        &args.set,
+        engine.name(),
+        &engine_names(registry),
+    )?);
+    let (study, roots) = load_study(&study_file, &args.data, None)?;
+    let target = Target::new(
+        &study,
+        &roots,
+        range(&args.runs, "--runs")?,
+        range(&args.holdout, "--holdout")?,
+        args.cube_weight,
+    )
+    .with_context(|| format!("study {}", study_file.display()))?;
+    let gatherer = match &args.executor {
+        Executor::Slurm(opts) => Some(std::sync::Arc::new(Gatherer::new(
+            launcher.clone(),
+            opts.clone(),
+            args.out.join(".slurm"),
+        ))),
+        Executor::Local => None,
+    };
+    let jobs = match gatherer {
+        Some(_) => SLURM_THREADS,
+        None => args.jobs.unwrap_or_else(cores),
+    };
+    let spec = TuneSpec {
+        engine: engine.name().to_string(),
+        fit_registration: !args.keep_registration && space.registration.is_some(),
+        space,
+        set,
+        search: SearchOptions {
+            budget: args.budget,
+            seed: args.seed,
+            jobs,
+        },
+        out: args.out.clone(),
+    };
+    ui.note(settings_line(&spec, &space_file));
+    let simulator = Simulator {
+        launcher: launcher.clone(),
+        engine: spec.engine.clone(),
+        robot: args.robot.clone(),
+        packages: args.packages.clone(),
+        slurm: gatherer.clone(),
+    };
+    let bar = ui.bar(args.budget as u64, "evaluations");
+    let started = Instant::now();
+    let on_progress = |p: realitygap_tune::search::Progress| {
+        bar.set_position(p.done as u64);
+        let fresh = p.done.saturating_sub(p.replayed);
+        bar.set_message(format!(
+            "best {:.4} m, {:.2} evaluations/s{}",
+            p.best,
+            fresh as f64 / started.elapsed().as_secs_f64().max(1e-9),
+            if p.replayed > 0 {
+                format!(" ({} replayed)", p.replayed)
+            } else {
+                String::new()
+            }
+        ));
+    };
+    let result = realitygap_tune::tune(&target, &simulator, &spec, &on_progress);
+    bar.finish();
+    let result = result?;
+    let markdown = realitygap_tune::outputs::markdown(&result.summary);
+    ui.say(markdown.trim_end_matches('\n').to_string());
+    let mut files = result.files;
+    files.push(args.out.join("history.csv"));
+    ui.note("\nwrote:".into());
+    for f in &files {
+        ui.note(format!("  {}", f.display()));
+    }
+    Ok(Tuned { markdown, files })
+}
+
+/// `tune --recordings`: the engine fitted to a robot's own episodes in
+/// joint space.
+fn tune_recordings(args: &TuneRequest, recordings: &Path, ui: &dyn Ui) -> Result<Tuned> {
+    use realitygap_tune::recordings::{
+        summary_markdown, tune_recordings, write_summary, RecordingsSpec,
+    };
+    if !matches!(args.executor, Executor::Local) {
+        anyhow::bail!("--recordings runs on this machine only (--executor local)");
+    }
+    let engine = find_engine(crate::compiled_engines, &args.engine)?;
+    let known = realitygap_runner::prepare::read_params(args.params.as_deref())?;
+    let urdf = args.robot.as_ref().map(PathBuf::from);
+    let prepared =
+        realitygap_study::replay::prepare_replay(&realitygap_study::replay::ReplayRequest {
+            real_dir: recordings,
+            urdf: urdf.as_deref(),
+            packages: &args.packages,
+            params: &known,
+            scene: args.scene.as_deref(),
+            out: &args.out,
+        })?;
+    let space = match &args.space {
+        Some(f) => Some(Space::from_file(f)?),
+        None => None,
+    };
+    let spec = RecordingsSpec {
+        engine: engine.as_ref(),
+        prepared: &prepared,
+        known: &known,
+        space,
+        selection: realitygap_analysis::selection::RunSelection {
+            runs: range(&args.runs, "--runs")?,
+            holdout: range(&args.holdout, "--holdout")?,
+        },
+        out: args.out.clone(),
+        jobs: args.jobs.unwrap_or_else(cores),
+        max_iterations: args.iterations,
+        use_efforts: args.efforts,
+    };
+    ui.note(format!(
+        "tuning {} against {} recorded episodes of robot '{}' in joint space",
+        engine.name(),
+        prepared.episodes.len(),
+        prepared.robot.name
+    ));
+    let bar = ui.bar(0, "evaluations");
+    let on_progress = |p: realitygap_tune::recordings::RecordingsProgress| {
+        bar.set_position(p.evaluations as u64);
+        bar.set_message(format!(
+            "{}; best training RMS {:.4} deg",
+            p.phase, p.best_rms_deg
+        ));
+    };
+    let result = tune_recordings(&spec, &on_progress);
+    bar.finish();
+    let mut result = result?;
+    write_summary(&args.out, recordings, &mut result)?;
+    let markdown = summary_markdown(&result.summary);
+    ui.say(markdown.trim_end_matches('\n').to_string());
+    ui.note("\nwrote:".into());
+    for f in &result.files {
+        ui.note(format!("  {}", f.display()));
+    }
+    Ok(Tuned {
+        markdown,
+        files: result.files.clone(),
+    })
+}
+
+/// Which settings the tune runs at, and where they come from.
+fn settings_line(spec: &TuneSpec, space_file: &Path) -> String {
+    let mut in_force = spec
+        .space
+        .settings
+        .get(&spec.engine)
+        .cloned()
+        .unwrap_or_default();
+    in_force.extend(spec.set.clone());
+    let settings: Vec<String> = in_force.iter().map(|(k, v)| format!("{k}={v}")).collect();
+    format!(
+        "tuning {} ({} parameters{}) at settings {} ({}; the space's are the speed-accuracy frontier's recommendation)",
+        spec.engine,
+        spec.space.dims.len(),
+        if spec.fit_registration { " + the registration's 6" } else { "" },
+        if settings.is_empty() { "of the scenes".to_string() } else { settings.join(" ") },
+        if spec.set.is_empty() {
+            format!("from {}", space_file.display())
+        } else {
+            format!("from {} with --settings/--set over it", space_file.display())
+        },
+    )
+}

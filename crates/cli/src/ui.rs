@@ -1,0 +1,101 @@
+//! Where the commands' long calls report: [`Ui`]. The command draws
+//! progress bars on standard error and prints results on standard output
+//! ([`Terminal`]); the Python package passes them on to Python (a tqdm bar
+//! and its own streams).
+
+use indicatif::{ProgressBar, ProgressStyle};
+use realitygap_runner::Progress;
+use std::io::Write;
+
+/// A progress bar of a long call: the runner's [`Progress`] (lines, steps,
+/// message) and a position.
+pub trait Bar: Progress + Sync {
+    /// Sets the position (items done).
+    fn set_position(&self, n: u64);
+    /// Removes the bar.
+    fn finish(&self);
+}
+
+/// Where a long call reports.
+pub trait Ui: Sync {
+    /// A note on the call's progress (the command: standard error).
+    fn note(&self, line: String);
+    /// A line of the call's result (the command: standard output).
+    fn say(&self, line: String);
+    /// A new bar over `total` items named `unit` (`runs`, `replays`,
+    /// `evaluations`; 0: a spinner with no known end).
+    fn bar(&self, total: u64, unit: &str) -> Box<dyn Bar + '_>;
+}
+
+/// The command's terminal: indicatif bars on standard error.
+pub struct Terminal;
+
+/// An indicatif bar.
+pub struct TerminalBar(pub ProgressBar);
+
+impl Progress for TerminalBar {
+    fn println(&self, line: String) {
+        // Above the bar, and on standard error also when the bar is hidden
+        // (not a terminal), where indicatif's own println writes nothing.
+        self.0.suspend(|| eprintln!("{line}"));
+    }
+    fn inc(&self, n: u64) {
+        self.0.inc(n);
+    }
+    fn set_message(&self, message: String) {
+        self.0.set_message(message);
+    }
+}
+
+impl Bar for TerminalBar {
+    fn set_position(&self, n: u64) {
+        self.0.set_position(n);
+    }
+    fn finish(&self) {
+        self.0.finish_and_clear();
+    }
+}
+
+impl Ui for Terminal {
+    fn note(&self, line: String) {
+        eprintln!("{line}");
+    }
+    fn say(&self, line: String) {
+        // A closed pipe (`| head`) is not an error worth a panic.
+        let mut out = std::io::stdout().lock();
+        let _ = writeln!(out, "{line}");
+    }
+    fn bar(&self, total: u64, unit: &str) -> Box<dyn Bar + '_> {
+        let bar = if total == 0 {
+            let bar = ProgressBar::new_spinner();
+            bar.set_style(
+                ProgressStyle::with_template(&format!(
+                    "{{spinner}} {{elapsed_precise}} {{pos}} {unit}, {{msg}}"
+                ))
+                .expect("a valid template"),
+            );
+            bar.enable_steady_tick(std::time::Duration::from_millis(200));
+            bar
+        } else if unit == "evaluations" {
+            let bar = ProgressBar::new(total);
+            bar.set_style(
+                ProgressStyle::with_template(
+                    "{elapsed_precise} [{bar:30}] {pos}/{len} evaluations, {msg}",
+                )
+                .expect("a valid template")
+                .progress_chars("=> "),
+            );
+            bar
+        } else {
+            let bar = ProgressBar::new(total);
+            bar.set_style(
+                ProgressStyle::with_template(&format!(
+                    "{{spinner}} [{{elapsed_precise}}] {{wide_bar}} {{pos}}/{{len}} {unit} ({{eta}} left) {{msg}}"
+                ))
+                .expect("a valid template"),
+            );
+            bar
+        };
+        Box::new(TerminalBar(bar))
+    }
+}

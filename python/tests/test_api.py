@@ -1,0 +1,257 @@
+"""The Python package against the ``realitygap`` command: each API call,
+the table equal to the command's, errors as exceptions with the command's
+messages, an interrupted run keeping its finished runs, and MuJoCo loaded
+from the ``mujoco`` wheel."""
+
+import io
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import realitygap as rg
+
+
+def finished(d: Path):
+    m = d / "manifest.json"
+    if not m.is_file():
+        return []
+    try:
+        runs = json.loads(m.read_text())["runs"]
+    except (ValueError, KeyError):
+        return []
+    return [r["id"] for r in runs if r["status"] == "ok"]
+
+
+# ------------------------------------------------------------ the wheel
+
+
+def test_imported_from_the_installed_wheel_not_the_source_tree(root):
+    package = Path(rg.__file__).resolve().parent
+    assert root.resolve() not in package.parents, package
+    assert "site-packages" in package.parts
+    # The scenes and the study ship inside the package.
+    assert Path(rg.builtin_study()).is_file()
+    assert Path(rg.builtin_study()).resolve().is_relative_to(package)
+    assert rg.__version__
+
+
+def test_mujoco_is_loaded_from_the_mujoco_wheel():
+    import importlib.util
+
+    mujoco_dir = Path(importlib.util.find_spec("mujoco").submodule_search_locations[0]).resolve()
+    ours = Path(rg.__file__).resolve().parent
+    # The wheel ships no copy.
+    assert not [p for p in ours.rglob("libmujoco*")], "a libmujoco inside the realitygap package"
+    # The one mapped in this process is the mujoco wheel's.
+    maps = Path("/proc/self/maps").read_text().splitlines()
+    loaded = {Path(line.split()[-1]).resolve() for line in maps if "libmujoco" in line}
+    assert loaded == {mujoco_dir / "libmujoco.so.3.17.0"}, loaded
+    assert Path(rg.MUJOCO_LIBRARY).resolve() == mujoco_dir / "libmujoco.so.3.17.0"
+    # And a simulation in MuJoCo works with it.
+    names = [e.name for e in rg.engines()]
+    assert "mujoco" in names
+
+
+# ------------------------------------------------------------ engines
+
+
+def test_engines_lists_every_engine_of_the_command(cli):
+    engines = rg.engines()
+    names = [e.name for e in engines]
+    for e in ["mujoco", "ode", "rapier", "bullet", "physx", "dart", "ideal"]:
+        assert e in names, names
+    mujoco = engines[names.index("mujoco")]
+    assert "3.17.0" in mujoco.version, mujoco.version
+    assert mujoco.default_timestep_s > 0
+    assert mujoco.params and mujoco.commands
+    listing = cli("engines").stdout
+    for e in engines:
+        assert e.name in listing
+
+
+# ------------------------------------------------------------ compare
+
+
+def test_compare_table_equals_the_commands_table_csv(cli, tmp_path):
+    cmp = rg.compare(rg.builtin_study(), progress=False)
+    expected = cli("compare", rg.builtin_study(), "--format", "csv").stdout
+    assert cmp.csv == expected
+    table = cmp.table
+    pd.testing.assert_frame_equal(table, pd.read_csv(io.StringIO(expected)))
+    # Interval columns, every scene and source of the study.
+    assert any("low" in c or "interval" in c for c in table.columns), list(table.columns)
+    assert len(table) >= 7
+    assert "MuJoCo" in table.to_string()
+
+
+def test_compare_measures_and_series():
+    cmp = rg.compare(series=True, progress=False)
+    m = cmp.measures
+    assert {"scene", "source", "role"} <= set(m.columns)
+    assert set(m["scene"]) >= {"scene1_single_joint", "scene2_two_joints", "scene3_cube_push"}
+    assert (m["role"] == "reference").sum() == 3
+    assert "accumulated_error_interval_m.low_m" in m.columns
+    assert "accumulated_error_interval_m" not in m.columns
+    s = cmp.series("scene2_two_joints")
+    assert s.index.name == "t_s" and len(s) > 10
+    assert "MuJoCo" in s.columns
+    assert np.isfinite(s["MuJoCo"].to_numpy()).any()
+    assert cmp.markdown in repr(cmp)
+
+
+# ------------------------------------------------------------ run, load_run
+
+
+def test_run_scene1_equals_the_command_and_loads_as_numpy(cli, tmp_path):
+    batch = rg.run("scene1", "mujoco", out=tmp_path / "py", progress=False)
+    assert len(batch.dirs) == 1
+    g = batch.groups
+    assert list(g["ok"]) == [1] and list(g["engine"]) == ["mujoco"]
+    run = batch.load()
+    assert run.status == "ok"
+    assert len(run) > 100
+    assert run.position().shape == (len(run), 3)
+    assert run.pose().shape == (len(run), 7)
+    assert np.all(np.diff(run.time_s) > 0)
+    assert list(run.frame.columns)[0] == "t_s"
+    # The command's run of the same scene: the same trajectory, to the byte.
+    cli("run", rg.scene_file("scene1"), "--engine", "mujoco", "--out", tmp_path / "cli")
+    ours = Path(batch.dirs[0]) / "runs" / ("%s.csv" % run.id)
+    theirs = tmp_path / "cli" / "scene1_single_joint" / "mujoco" / "runs" / ("%s.csv" % run.id)
+    assert ours.read_bytes() == theirs.read_bytes()
+    # load_run on a run's CSV file too.
+    again = rg.load_run(theirs)
+    np.testing.assert_array_equal(again.position(), run.position())
+
+
+def test_run_with_params_as_a_dict(tmp_path):
+    joint = "m1n6s300_joint_2"
+    batch = rg.run(
+        "scene1", "mujoco", out=tmp_path, params={"joints": {joint: {"damping": 0.5}}}, progress=False
+    )
+    assert list(batch.groups["ok"]) == [1]
+    assert list(tmp_path.glob("params-*.toml"))
+
+
+def test_interrupted_run_keeps_its_finished_runs(tmp_path):
+    out = tmp_path / "runs"
+    script = textwrap.dedent(
+        """
+        import sys, realitygap as rg
+        try:
+            rg.run("scene1", "mujoco", out=sys.argv[1], repeats=6, jobs=1, progress=False)
+        except KeyboardInterrupt as e:
+            print("interrupted:", e, flush=True)
+            sys.exit(3)
+        print("finished", flush=True)
+        """
+    )
+    p = subprocess.Popen([sys.executable, "-c", script, str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    d = out / "scene1_single_joint" / "mujoco"
+    start = time.time()
+    while not finished(d):
+        assert time.time() - start < 120, "no run finished within 120 s"
+        assert p.poll() is None, "the run ended before it could be interrupted: %s" % (p.communicate(),)
+        time.sleep(0.02)
+    p.send_signal(signal.SIGINT)
+    stdout, stderr = p.communicate(timeout=60)
+    assert p.returncode == 3, (stdout, stderr)
+    assert "interrupted" in stdout
+    kept = finished(d)
+    assert 1 <= len(kept) < 6, kept
+    # The finished runs are whole and load; no child is left.
+    for id in kept:
+        assert len(rg.load_run(d, id)) > 100
+    # A rerun completes the rest and leaves the kept ones untouched.
+    before = {id: (d / "runs" / ("%s.csv" % id)).read_bytes() for id in kept}
+    batch = rg.run("scene1", "mujoco", out=out, repeats=6, jobs=1, progress=False)
+    g = batch.groups.iloc[0]
+    assert (g["ok"], g["kept"]) == (6 - len(kept), len(kept)), batch.groups
+    assert len(finished(d)) == 6
+    for id, data in before.items():
+        assert (d / "runs" / ("%s.csv" % id)).read_bytes() == data
+
+
+# ------------------------------------------------------------ errors
+
+
+def test_errors_are_exceptions_with_the_commands_messages(cli, tmp_path):
+    missing = tmp_path / "no-such-study.toml"
+    with pytest.raises(rg.RealityGapError) as e:
+        rg.compare(missing, progress=False)
+    p = cli("compare", missing, check=False)
+    assert p.returncode != 0
+    message = p.stderr.strip().splitlines()[-1]
+    assert message.startswith("error: ")
+    assert str(e.value) == message[len("error: "):]
+    assert str(missing) in str(e.value)
+
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[joints.m1n6s300_joint_2]\ndamping = -1\n")
+    with pytest.raises(rg.RealityGapError) as e:
+        rg.run("scene1", "mujoco", out=tmp_path / "o", params=bad, progress=False)
+    p = cli("run", rg.scene_file("scene1"), "--engine", "mujoco", "--out", tmp_path / "o2", "--params", bad, check=False)
+    assert p.returncode != 0
+    assert str(e.value) in p.stderr
+    assert "bad.toml" in str(e.value)
+
+    with pytest.raises(rg.RealityGapError, match="no-such-engine"):
+        rg.run("scene1", "no-such-engine", out=tmp_path / "o3", progress=False)
+    with pytest.raises(rg.RealityGapError, match="no shipped scene"):
+        rg.scene_file("no-such-scene")
+    with pytest.raises(rg.RealityGapError):
+        rg.load_run(tmp_path / "nothing-here")
+
+
+# ------------------------------------------------------------ tune
+
+
+def test_tune_briefly_gives_params_summary_history_intervals(tmp_path):
+    t = rg.tune("ideal", out=tmp_path / "tune", budget=8, jobs=2, progress=False)
+    assert isinstance(t.params, dict) and t.params
+    assert Path(t.params_file).is_file()
+    h = t.history
+    assert len(h) >= 8
+    s = t.summary
+    assert {"set", "scene", "untuned_m", "tuned_m"} <= set(s.columns)
+    assert "Total" in set(s["scene"])
+    assert t.intervals is not None and len(t.intervals) > 0
+    assert len(t.parameters) > 0
+    assert t.markdown
+
+
+# ------------------------------------------------------------ replay
+
+
+def test_replay_of_recordings(recordings, root, tmp_path):
+    r = rg.replay(recordings, engines=["mujoco"], out=tmp_path / "replay", progress=False)
+    t = r.table
+    assert "kinematic" in set(t["source"]) and "mujoco" in set(t["source"])
+    assert Path(r.report).is_file()
+    again = r.compare()
+    assert again.kind == "replay"
+
+
+# ------------------------------------------------------------ reproduce
+
+
+def test_reproduce_small(tmp_path, cli):
+    out = tmp_path / "study"
+    r = rg.reproduce(out, repeats=1, engines=["ideal"], scenes=["scene1"], progress=False)
+    assert Path(r.report).is_file()
+    assert len(r.table) > 0
+    assert r.timings
+    t = r.table
+    assert "physics-free (this tool)" in set(t["source"])
+    assert set(t["scene"]) == {"scene1_single_joint", "total"}
+    assert r.problems == []
+    assert (out / "runs" / "scene1_single_joint").is_dir()
