@@ -246,7 +246,10 @@ pub fn summary(reports: &[SceneReport]) -> String {
     }
     let flags = flag_summary(reports);
     if !flags.is_empty() {
-        let _ = writeln!(out, "\nFlagged runs (the full list is in table.md):");
+        let _ = writeln!(
+            out,
+            "\nFlagged runs (each kind once; the full tables list every run):"
+        );
         for f in flags {
             let _ = writeln!(out, "- {f}");
         }

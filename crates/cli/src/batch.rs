@@ -136,6 +136,43 @@ impl BatchOutcome {
         lines
     }
 
+    /// The short form of [`BatchOutcome::summary`]: only the results
+    /// directories with a diverged, unstable or failed run or a model that
+    /// did not load, then one line of totals.
+    pub fn short_summary(&self) -> Vec<String> {
+        let plan = &self.plan;
+        let mut lines = Vec::new();
+        let (mut ok, mut diverged, mut unstable, mut failed, mut kept) = (0, 0, 0, 0, 0);
+        for g in &plan.groups {
+            ok += g.done.ok;
+            diverged += g.done.diverged;
+            unstable += g.done.unstable;
+            failed += g.done.failed;
+            kept += plan.kept(g);
+            match &g.load_error {
+                Some(e) => lines.push(format!("{}/{}: not run: {e}", g.scene_name, g.source)),
+                None if g.done.diverged + g.done.unstable + g.done.failed > 0 => {
+                    lines.push(format!(
+                        "{}/{}: {} ok, {} diverged, {} unstable, {} failed -> {}",
+                        g.scene_name,
+                        g.source,
+                        g.done.ok,
+                        g.done.diverged,
+                        g.done.unstable,
+                        g.done.failed,
+                        g.store.dir().display()
+                    ))
+                }
+                None => {}
+            }
+        }
+        lines.push(format!(
+            "{} runs: {ok} ok, {diverged} diverged, {unstable} unstable, {failed} failed, {kept} kept from an earlier batch ({} simulated in {:.1} s with {} jobs)",
+            self.total, self.stats.simulated, self.wall_s, plan.jobs
+        ));
+        lines
+    }
+
     /// An error when a model did not load or a run failed.
     pub fn check(&self) -> Result<()> {
         let load_failures: Vec<String> = self

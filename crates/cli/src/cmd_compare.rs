@@ -94,9 +94,15 @@ pub struct Args {
     /// relative to. Default: the study file's folder.
     #[arg(long)]
     pub results: Option<PathBuf>,
-    /// Output format: md, csv, json or latex.
-    #[arg(long, default_value = "md")]
-    pub format: String,
+    /// Output format: md, csv, json or latex. Without it, standard output
+    /// gets a summary (the table, the closest source per scene, each kind
+    /// of run flag once) and `--output` the full Markdown.
+    #[arg(long)]
+    pub format: Option<String>,
+    /// Without --format: print the full Markdown (every measure and flagged
+    /// run), not the summary.
+    #[arg(long, short = 'v')]
+    pub verbose: bool,
     /// How the gap is measured.
     #[command(flatten)]
     pub measure: MeasureArgs,
@@ -117,7 +123,12 @@ pub struct Args {
 
 /// Runs the command.
 pub fn run(args: Args) -> Result<()> {
-    let format: Format = args.format.parse().map_err(anyhow::Error::msg)?;
+    let format: Format = args
+        .format
+        .as_deref()
+        .unwrap_or("md")
+        .parse()
+        .map_err(anyhow::Error::msg)?;
     let request = CompareRequest {
         study: args.study,
         link: args.link,
@@ -126,7 +137,27 @@ pub fn run(args: Args) -> Result<()> {
         measure: args.measure.measure(),
         joint_space: args.joint_space,
     };
-    let text = evaluate(&request)?.render(format, args.series)?;
+    let comparison = evaluate(&request)?;
+    let short = args.format.is_none() && !args.verbose && args.output.is_none();
+    let text = match (&comparison, short) {
+        (realitygap::compare::Comparison::Study { reports, joint }, true) => {
+            let mut text = realitygap_analysis::table::summary(reports);
+            if let Some(tables) = joint {
+                text.push('\n');
+                text.push_str(&realitygap_study::joint_space::markdown(tables));
+            }
+            text.push_str(
+                "\nThe full tables (every measure and flagged run): --verbose, or --output FILE.\n",
+            );
+            text
+        }
+        _ => comparison.render(format, args.series)?,
+    };
+    if short {
+        use realitygap::ui::Ui;
+        realitygap::ui::Terminal.say(text.trim_end_matches('\n').to_string());
+        return Ok(());
+    }
     match args.output {
         Some(p) => {
             std::fs::write(&p, text).with_context(|| format!("cannot write {}", p.display()))?

@@ -66,6 +66,11 @@ pub struct Args {
     /// Where the simulations run (as for `run`).
     #[command(flatten)]
     pub executor: cmd_run::ExecutorArgs,
+    /// Print a line per scene and engine, and the full tables (every
+    /// measure and flagged run) instead of the summary; they are always in
+    /// OUT/report/table.md.
+    #[arg(long, short = 'v')]
+    pub verbose: bool,
 }
 
 /// Runs the command.
@@ -87,6 +92,7 @@ pub fn run(args: Args) -> Result<()> {
         // `--executor slurm` without Slurm is an error now, not a warning per batch.
         executor: args.executor.executor()?,
         command: std::env::args().collect::<Vec<_>>().join(" "),
+        verbose: args.verbose,
     };
     reproduce(
         &request,

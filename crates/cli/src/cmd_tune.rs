@@ -101,6 +101,10 @@ pub struct Args {
     /// generation's candidates are submitted together as one job array.
     #[command(flatten)]
     pub executor: crate::cmd_run::ExecutorArgs,
+    /// Print the whole summary (parameters, sensitivity), not only the
+    /// scores; it is always in OUT/summary.md.
+    #[arg(long, short = 'v')]
+    pub verbose: bool,
 }
 
 /// Runs the command.
@@ -128,6 +132,7 @@ pub fn run(args: Args) -> Result<()> {
         robot: args.robot,
         packages: args.packages,
         executor: args.executor.executor()?,
+        verbose: args.verbose,
     };
     tune(
         &request,

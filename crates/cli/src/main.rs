@@ -89,7 +89,9 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            use std::io::Write;
+            let mut err = anstream::stderr().lock();
+            let _ = writeln!(err, "{}", realitygap::ui::paint(&format!("error: {e:#}")));
             ExitCode::FAILURE
         }
     }

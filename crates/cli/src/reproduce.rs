@@ -62,6 +62,9 @@ pub struct ReproduceRequest {
     pub executor: Executor,
     /// The command line, for the report's provenance.
     pub command: String,
+    /// Say everything: a line per scene and engine, and the full tables
+    /// (every measure and flagged run) instead of the summary.
+    pub verbose: bool,
 }
 
 impl Default for ReproduceRequest {
@@ -82,6 +85,7 @@ impl Default for ReproduceRequest {
             holdout: None,
             executor: Executor::Local,
             command: String::new(),
+            verbose: false,
         }
     }
 }
@@ -185,7 +189,11 @@ pub fn reproduce_keeping_problems(
     let reports = evaluate(&study, &roots, &opts)?;
     timings.push(("compare".into(), t.elapsed().as_secs_f64()));
     let table = table::render(&reports, Format::Markdown);
-    ui.say(table.trim_end_matches('\n').to_string());
+    if args.verbose {
+        ui.say(table.trim_end_matches('\n').to_string());
+    } else {
+        ui.say(table::summary(&reports).trim_end_matches('\n').to_string());
+    }
     let mut joint_space = None;
     if args.joint_space {
         if data.is_none() {
@@ -216,7 +224,12 @@ pub fn reproduce_keeping_problems(
 
     timings.push(("total".into(), started.elapsed().as_secs_f64()));
     write_timings(&args.out, &timings, ui)?;
-    ui.note(format!("report: {}", index_html.display()));
+    ui.say(format!(
+        "\nreport: {}\ntables: {} (every measure and flagged run; also .csv, .json, .tex)\nruns: {}",
+        index_html.display(),
+        index_html.with_file_name("table.md").display(),
+        runs_dir.display()
+    ));
     Ok(Reproduced {
         reports,
         table,
@@ -267,8 +280,19 @@ fn simulate(
         stitch: None,
         allow_unstable: false,
     };
-    match crate::batch::run_and_report(spec, args.executor.clone(), launcher, ui) {
-        Ok(_) => Ok(Vec::new()),
+    let outcome = crate::batch::run(spec, args.executor.clone(), launcher, ui).and_then(|o| {
+        let lines = if args.verbose {
+            o.summary()
+        } else {
+            o.short_summary()
+        };
+        for line in lines {
+            ui.say(line);
+        }
+        o.check()
+    });
+    match outcome {
+        Ok(()) => Ok(Vec::new()),
         Err(e) if realitygap_runner::interrupt::is_interrupted(&e) => Err(e),
         Err(e) => {
             ui.note(format!("warning: {e:#}"));

@@ -67,6 +67,9 @@ pub struct TuneRequest {
     pub packages: Vec<String>,
     /// Where the simulations run.
     pub executor: Executor,
+    /// Say the whole summary (parameters, sensitivity) on standard output,
+    /// not only its scores; it is always in OUT/summary.md.
+    pub verbose: bool,
 }
 
 impl Default for TuneRequest {
@@ -94,6 +97,7 @@ impl Default for TuneRequest {
             robot: None,
             packages: Vec::new(),
             executor: Executor::Local,
+            verbose: false,
         }
     }
 }
@@ -229,7 +233,7 @@ pub fn tune(request: &TuneRequest, launcher: &Launcher, ui: &dyn Ui) -> Result<T
     bar.finish();
     let result = result?;
     let markdown = realitygap_tune::outputs::markdown(&result.summary);
-    ui.say(markdown.trim_end_matches('\n').to_string());
+    ui.say(shortened(&markdown, args.verbose, &args.out));
     let mut files = result.files;
     files.push(args.out.join("history.csv"));
     ui.note("\nwrote:".into());
@@ -297,7 +301,7 @@ fn tune_recordings(args: &TuneRequest, recordings: &Path, ui: &dyn Ui) -> Result
     let mut result = result?;
     write_summary(&args.out, recordings, &mut result)?;
     let markdown = summary_markdown(&result.summary);
-    ui.say(markdown.trim_end_matches('\n').to_string());
+    ui.say(shortened(&markdown, args.verbose, &args.out));
     ui.note("\nwrote:".into());
     for f in &result.files {
         ui.note(format!("  {}", f.display()));
@@ -330,4 +334,22 @@ fn settings_line(spec: &TuneSpec, space_file: &Path) -> String {
             format!("from {} with --settings/--set over it", space_file.display())
         },
     )
+}
+
+/// The summary for the terminal: everything before its parameters section
+/// (the search, the scores, the verdict) and where the rest is; all of it
+/// with `verbose`.
+fn shortened(markdown: &str, verbose: bool, out: &Path) -> String {
+    let full = markdown.trim_end_matches('\n');
+    if verbose {
+        return full.to_string();
+    }
+    match full.find("\n## Parameters") {
+        Some(at) => format!(
+            "{}\n\nThe parameters with their bounds, intervals and sensitivity: {} (or --verbose).",
+            full[..at].trim_end(),
+            out.join("summary.md").display()
+        ),
+        None => full.to_string(),
+    }
 }

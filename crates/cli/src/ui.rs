@@ -56,14 +56,59 @@ impl Bar for TerminalBar {
     }
 }
 
+/// Colours a line for a terminal by what it says: warnings and errors,
+/// the closest-source verdicts, the flag kinds, the verdict on the
+/// physics-free model, where the files are. anstream's streams drop the
+/// styles when the stream is not a terminal, or NO_COLOR is set
+/// (CLICOLOR_FORCE forces them).
+pub fn paint(line: &str) -> String {
+    use anstyle::{AnsiColor, Style};
+    let warn = Style::new().fg_color(Some(AnsiColor::Yellow.into())).bold();
+    let err = Style::new().fg_color(Some(AnsiColor::Red.into())).bold();
+    let good = Style::new().fg_color(Some(AnsiColor::Green.into())).bold();
+    let path = Style::new().fg_color(Some(AnsiColor::Cyan.into()));
+    let bold = Style::new().bold();
+    let styled = |style: Style, head: &str, rest: &str| format!("{style}{head}{style:#}{rest}");
+    for (prefix, style) in [("warning:", warn), ("error:", err)] {
+        if let Some(rest) = line.strip_prefix(prefix) {
+            return styled(style, prefix, rest);
+        }
+    }
+    for prefix in ["report: ", "tables: ", "runs: "] {
+        if let Some(rest) = line.strip_prefix(prefix) {
+            return format!("{bold}{prefix}{bold:#}{path}{rest}{path:#}");
+        }
+    }
+    if let Some(at) = line.find(": closest source: ") {
+        let (head, rest) = line.split_at(at + ": closest source: ".len());
+        let end = rest.find(" (closer").unwrap_or(rest.len());
+        return format!("{head}{good}{}{good:#}{}", &rest[..end], &rest[end..]);
+    }
+    if line.starts_with("- ") {
+        if let Some(at) = line.find(": ") {
+            let name = &line[2..at];
+            if !name.contains(' ') && name.chars().all(|c| c.is_ascii_lowercase() || c == '_') {
+                return format!("- {warn}{name}{warn:#}{}", &line[at..]);
+            }
+        }
+    }
+    if line.starts_with("Flagged runs") {
+        return styled(warn, line, "");
+    }
+    line.to_string()
+}
+
 impl Ui for Terminal {
     fn note(&self, line: String) {
-        eprintln!("{line}");
+        let mut err = anstream::stderr().lock();
+        let _ = writeln!(err, "{}", paint(&line));
     }
     fn say(&self, line: String) {
         // A closed pipe (`| head`) is not an error worth a panic.
-        let mut out = std::io::stdout().lock();
-        let _ = writeln!(out, "{line}");
+        let mut out = anstream::stdout().lock();
+        for l in line.split('\n') {
+            let _ = writeln!(out, "{}", paint(l));
+        }
     }
     fn bar(&self, total: u64, unit: &str) -> Box<dyn Bar + '_> {
         let bar = if total == 0 {

@@ -375,7 +375,7 @@ fn fit_on_runs_1_to_15_and_score_on_16_to_20() {
 
 #[test]
 fn intervals_in_every_format_and_a_saved_registration_reapplies() {
-    let Some((md, _)) = compare(&[]) else {
+    let Some((md, _)) = compare(&["--verbose"]) else {
         return;
     };
     let row = md.lines().find(|l| l.starts_with("| PyBullet |")).unwrap();
@@ -507,7 +507,7 @@ fn study_mode_table_matches_the_readme() {
     let Some((md, _)) = compare(&["--mode", "study"]) else {
         return;
     };
-    let readme = std::fs::read_to_string(root().join("README.md")).unwrap();
+    let readme = std::fs::read_to_string(root().join("docs/study.md")).unwrap();
     let block = readme.split("<!-- study-table -->\n").nth(1).unwrap();
     let expected: Vec<&str> = block.lines().take_while(|l| l.starts_with('|')).collect();
     let got: Vec<&str> = md
@@ -569,4 +569,45 @@ fn joint_space_tables_of_the_study() {
         .unwrap();
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("--joint-space is written as md or json"));
+}
+
+/// Without --format the terminal gets the summary: the table, the verdict
+/// per scene and each kind of flag once; --verbose gives the full tables.
+/// Colour only where asked for, and never with NO_COLOR.
+#[test]
+fn the_terminal_gets_a_summary_and_colour_only_when_wanted() {
+    let Some((short, _)) = compare(&[]) else {
+        return;
+    };
+    let (full, _) = compare(&["--verbose"]).unwrap();
+    assert!(short.lines().count() < 40, "{short}");
+    assert!(full.lines().count() > 100, "{full}");
+    assert!(!short.contains("Mean err") && full.contains("Mean err"));
+    assert_eq!(short.matches("- diverged: ").count(), 1, "{short}");
+    assert!(
+        short.contains("60 runs (all left out) of V-Rep ODE"),
+        "{short}"
+    );
+    assert!(full.matches("(left out): diverged").count() >= 60);
+    assert!(short.contains("--verbose"), "{short}");
+    assert!(!short.contains('\u{1b}'), "no colour in a pipe: {short}");
+    let data = realitygap::paper_data_for_tests().unwrap();
+    let coloured = |no_color: bool| {
+        let mut c = bin();
+        c.arg("compare")
+            .arg(root().join("assets/studies/collins2019.toml"))
+            .arg("--data")
+            .arg(&data)
+            .env("CLICOLOR_FORCE", "1")
+            .env_remove("NO_COLOR");
+        if no_color {
+            c.env("NO_COLOR", "1");
+        }
+        String::from_utf8(c.output().unwrap().stdout).unwrap()
+    };
+    assert!(
+        coloured(false).contains("\u{1b}["),
+        "CLICOLOR_FORCE gives colour"
+    );
+    assert!(!coloured(true).contains('\u{1b}'), "NO_COLOR wins");
 }

@@ -84,6 +84,19 @@ fn reproduce_renders_every_figure_and_table_in_chromium() {
         stdout.contains("| V-Rep Newton |"),
         "table on stdout: {stdout}"
     );
+    // A summary a person can read: the table, the verdicts, each kind of
+    // flag once, where the files are; the full lists are in table.md.
+    assert!(stdout.lines().count() < 45, "{stdout}");
+    assert_eq!(stdout.matches("- short: ").count(), 1, "{stdout}");
+    assert!(
+        stdout.contains("report: ") && stdout.contains("table.md"),
+        "{stdout}"
+    );
+    let full = std::fs::read_to_string(out_dir.join("report/table.md")).unwrap();
+    assert!(
+        full.matches("only ").count() >= 20,
+        "every short run in table.md"
+    );
     let timings: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out_dir.join("timings.json")).unwrap())
             .unwrap();

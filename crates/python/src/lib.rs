@@ -615,6 +615,7 @@ fn tune<'py>(
         robot,
         packages,
         executor: Executor::Local,
+        verbose: false,
     };
     let launcher = launcher(py)?;
     let tuned = long_call(py, reporter, move |ui| {
@@ -678,6 +679,7 @@ fn reproduce<'py>(
         holdout,
         executor: Executor::Local,
         command: "realitygap.reproduce(...) (Python)".into(),
+        verbose: false,
     };
     let launcher = launcher(py)?;
     let done = long_call(py, reporter, move |ui| {
