@@ -125,6 +125,11 @@ pub struct KitSpec {
     /// physics-free model reads neither: the kit then checks that a robot
     /// with broken meshes or no masses loads).
     pub reads_geometry: bool,
+    /// Whether a moving link whose inertia is not positive definite (link
+    /// 3 with a zero moment) is a load error naming the link; otherwise
+    /// the engine makes do with it, and scene 1 must still complete with
+    /// finite numbers.
+    pub refuses_singular_inertia: bool,
 
     /// Where scene 1 ends.
     pub scene1_end: End,
@@ -137,6 +142,9 @@ pub struct KitSpec {
     /// The largest distance of scene 2's final wrist from the upright
     /// arm's, m.
     pub scene2_upright_m: f64,
+    /// The largest gap of an iiwa scene's final joint angles from where
+    /// [`KitSpec::scene1_end`]'s law puts them, deg.
+    pub iiwa_end_deg: f64,
     /// Scene 3's push; `None`: the engine has no contact, and the cube
     /// stays where it is.
     pub push: Option<Push>,
@@ -252,7 +260,8 @@ impl KitSpec {
     /// - effects: [`Effects::CONTRACT`]; divergence: none given (every
     ///   engine states its own);
     /// - scene 1 ends where the servos balance gravity (0.1 deg); scene 2
-    ///   upright (1 mm); scene 3 pushes the cube over 2 cm from a contact
+    ///   upright (1 mm); the iiwa's scenes end within 1 deg of the same law
+///   (DART's check against MuJoCo); scene 3 pushes the cube over 2 cm from a contact
     ///   between 10 and 20 s.
     pub const CONTRACT: KitSpec = KitSpec {
         dynamics: true,
@@ -277,9 +286,11 @@ impl KitSpec {
         divergence: Divergence::CompletesOrDiverges(&[]),
         bad_settings: &[],
         reads_geometry: true,
+        refuses_singular_inertia: false,
         scene1_end: End::Equilibrium(0.1),
         stock_settings: &[],
         scene2_upright_m: 1e-3,
+        iiwa_end_deg: 1.0,
         push: Some(Push {
             min_x_m: 0.02,
             contact_s: Some((10.0, 20.0)),

@@ -26,8 +26,7 @@ pub fn kinematics_official(engine: &dyn Engine, spec: &KitSpec) {
 /// configurations (continuous joints up to [`super::Kinematics::turn_rad`]),
 /// the joint angles read back as set and every tracked link frame is where
 /// the URDF's forward kinematics puts it (held joints at their scene
-/// angles); one step later, at rest with the servos holding, the angles
-/// have not jumped (1e-3 rad). With the spec's settings and each of its
+/// angles). With the spec's settings and each of its
 /// [`KitSpec::kinematics_settings`].
 pub fn kinematics(engine: &dyn Engine, spec: &KitSpec, label: &str) {
     let Some((scene, robot)) = robot(label, &testing::scene("scene1_single_joint")) else {
@@ -102,16 +101,6 @@ pub fn kinematics(engine: &dyn Engine, spec: &KitSpec, label: &str) {
                     "{} {label} {extra:?} round {round}: link {} off by {d} m, {a} rad",
                     engine.name(),
                     link.name
-                );
-            }
-            sim.set_joint_velocity_targets(&vec![0.0; angles.len()]);
-            sim.step().unwrap();
-            sim.joint_angles_rad(&mut read);
-            for (a, b) in angles.iter().zip(&read) {
-                assert!(
-                    (a - b).abs() < 1e-3,
-                    "{} {label} {extra:?} round {round}: after a step {a} rad became {b} rad",
-                    engine.name()
                 );
             }
         }
