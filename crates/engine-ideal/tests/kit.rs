@@ -12,7 +12,11 @@ const SPEC: KitSpec = KitSpec {
     step_tolerance_rad: [0.1001, 1e-12, 0.0],
     position_law: PositionLaw::Instant,
     takes_efforts: false,
+    dynamics: false,
+    reads_geometry: false,
+    push: None,
     command_round_trip_rad: [0.0, 0.0],
+    ..KitSpec::CONTRACT
 };
 
 realitygap_core::engine_test_kit!(realitygap_engine_ideal::IdealEngine, SPEC);
