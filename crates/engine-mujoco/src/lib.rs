@@ -289,6 +289,19 @@ fn compile(scene: &Scene, robot: &RobotModel) -> Result<MjModel, EngineError> {
                 .map_err(|e| load_error(format!("MJCF file {}: {e}", path.display())))
         }
         None => {
+            for o in &scene.objects {
+                let realitygap_core::scene::ObjectShape::Box { size_m } = o.shape;
+                if ![size_m.x, size_m.y, size_m.z]
+                    .iter()
+                    .all(|v| v.is_finite() && *v > 0.0)
+                {
+                    return Err(load_error(format!(
+                        "object \"{}\": box size {:?} m must be positive and finite",
+                        o.name,
+                        size_m.to_array()
+                    )));
+                }
+            }
             let xml = mjcf::scene_to_mjcf(scene, robot).map_err(|e| load_error(e.0))?;
             MjModel::from_xml_string(&xml).map_err(|e| {
                 load_error(format!(
@@ -449,6 +462,10 @@ impl MujocoSimulation {
         params: &PhysicalParams,
     ) -> Result<MujocoSimulation, EngineError> {
         let options = MujocoSettings::parse(settings)?;
+        variation.check().map_err(load_error)?;
+        if scene.robot.mjcf.is_none() {
+            model_params::check_fixed_base(scene, robot, params)?;
+        }
         let mut model = Box::new(compile(scene, robot)?);
         {
             let opt = model.opt_mut();
@@ -712,6 +729,15 @@ impl Simulation for MujocoSimulation {
                     "{} joint angles given for {} joints",
                     rad.len(),
                     self.qpos_adr.len()
+                ),
+            });
+        }
+        if let Some(i) = rad.iter().position(|a| !a.is_finite()) {
+            return Err(EngineError::Usage {
+                engine: ENGINE_NAME.to_string(),
+                message: format!(
+                    "joint \"{}\": angle {} is not finite",
+                    self.scene.actuators[i].joint, rad[i]
                 ),
             });
         }

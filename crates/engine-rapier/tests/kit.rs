@@ -68,6 +68,7 @@ const SPEC: KitSpec = KitSpec {
         min_x_m: 0.05,
         contact_s: Some((10.0, 20.0)),
         ends_on_a_face: true,
+        max_sink_m: 0.002,
     }),
     ..KitSpec::CONTRACT
 };

@@ -117,6 +117,9 @@ pub struct KitSpec {
     pub effects: Effects,
     /// How the kit makes scene 1 diverge.
     pub divergence: Divergence,
+    /// Whether the engine's divergence report names the body that ran
+    /// away (the cube launched at 1e15 m/s); otherwise any reason will do.
+    pub divergence_names_body: bool,
     /// Engine-specific bad settings (`key=value`) and a part of the error
     /// each must give (every engine also gets an unknown key and a
     /// negative timestep).
@@ -142,6 +145,11 @@ pub struct KitSpec {
     /// The largest distance of scene 2's final wrist from the upright
     /// arm's, m.
     pub scene2_upright_m: f64,
+    /// The largest final joint angle of scene 2 (all targets back at 0),
+    /// rad.
+    pub scene2_angle_rad: f64,
+    /// The farthest scene 2's cube (untouched) may move, m.
+    pub scene2_cube_m: f64,
     /// The largest gap of an iiwa scene's final joint angles from where
     /// [`KitSpec::scene1_end`]'s law puts them, deg.
     pub iiwa_end_deg: f64,
@@ -203,6 +211,12 @@ pub struct Effects {
     /// constant 0.02 s, damping ratio 1 then 2): the least sinking, m, of
     /// each against the previous (the engine's own contact first).
     pub contact_sink_m: f64,
+    /// Whether the engine's own contact is the first softer one (time
+    /// constant 0.02 s, damping ratio 1: MuJoCo's default `solref`): the
+    /// cube then rests at the same height with and without it (1e-12 m),
+    /// and the second step changes the rest height by
+    /// [`Effects::contact_sink_m`] in either direction.
+    pub own_contact_is_tau_0_02: bool,
 }
 
 /// How scene 1 fares at the engine's harshest or diverging settings.
@@ -241,6 +255,9 @@ pub struct Push {
     pub contact_s: Option<(f64, f64)>,
     /// Whether the cube ends at rest on one of its faces (it may tip over).
     pub ends_on_a_face: bool,
+    /// The deepest the cube may sink below its rest height under the
+    /// hand's push, m.
+    pub max_sink_m: f64,
 }
 
 impl KitSpec {
@@ -284,17 +301,21 @@ impl KitSpec {
         handover_rad: 1e-9,
         effects: Effects::CONTRACT,
         divergence: Divergence::CompletesOrDiverges(&[]),
+        divergence_names_body: true,
         bad_settings: &[],
         reads_geometry: true,
         refuses_singular_inertia: false,
         scene1_end: End::Equilibrium(0.1),
         stock_settings: &[],
         scene2_upright_m: 1e-3,
+        scene2_angle_rad: 0.01,
+        scene2_cube_m: 1e-4,
         iiwa_end_deg: 1.0,
         push: Some(Push {
             min_x_m: 0.02,
             contact_s: Some((10.0, 20.0)),
             ends_on_a_face: true,
+            max_sink_m: 0.002,
         }),
     };
 }
@@ -320,6 +341,7 @@ impl Effects {
         dead_bounce_m: 0.01,
         bounce_ratio: [0.5, 2.0],
         contact_sink_m: 1e-3,
+        own_contact_is_tau_0_02: false,
     };
 }
 
