@@ -856,6 +856,33 @@ impl PhysicalParams {
         keys
     }
 
+    /// The error for `links.L.mass_scale` set on a link of the robot's
+    /// fixed base (no controlled joint between it and the root): the
+    /// engine welds it to the world, so its mass has no effect.
+    pub fn check_fixed_base_masses(
+        &self,
+        engine: &str,
+        scene: &Scene,
+        robot: &RobotModel,
+    ) -> Result<(), EngineError> {
+        for (name, l) in &self.links {
+            let Some(link) = robot.link_by_name(name) else {
+                continue; // `apply` reports unknown names.
+            };
+            if l.mass_scale.is_some() && crate::robot::plan::in_fixed_base(scene, robot, link) {
+                return Err(EngineError::Param {
+                    engine: engine.to_string(),
+                    key: format!("links.{name}.mass_scale"),
+                    message: format!(
+                        "link {name} is part of the robot's fixed base (no controlled joint between it \
+                         and the root), so its mass has no effect"
+                    ),
+                });
+            }
+        }
+        Ok(())
+    }
+
     /// The error for every key set that neither core nor `engine` (whose
     /// [`crate::Engine::param_support`] is `support`) honours; `Ok` when all
     /// are honoured.

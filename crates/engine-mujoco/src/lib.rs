@@ -290,17 +290,7 @@ fn compile(scene: &Scene, robot: &RobotModel) -> Result<MjModel, EngineError> {
         }
         None => {
             for o in &scene.objects {
-                let realitygap_core::scene::ObjectShape::Box { size_m } = o.shape;
-                if ![size_m.x, size_m.y, size_m.z]
-                    .iter()
-                    .all(|v| v.is_finite() && *v > 0.0)
-                {
-                    return Err(load_error(format!(
-                        "object \"{}\": box size {:?} m must be positive and finite",
-                        o.name,
-                        size_m.to_array()
-                    )));
-                }
+                o.check_shape().map_err(load_error)?;
             }
             let xml = mjcf::scene_to_mjcf(scene, robot).map_err(|e| load_error(e.0))?;
             MjModel::from_xml_string(&xml).map_err(|e| {
@@ -464,7 +454,7 @@ impl MujocoSimulation {
         let options = MujocoSettings::parse(settings)?;
         variation.check().map_err(load_error)?;
         if scene.robot.mjcf.is_none() {
-            model_params::check_fixed_base(scene, robot, params)?;
+            params.check_fixed_base_masses(ENGINE_NAME, scene, robot)?;
         }
         let mut model = Box::new(compile(scene, robot)?);
         {

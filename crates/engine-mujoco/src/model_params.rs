@@ -119,32 +119,6 @@ pub fn apply(
     Ok(changed)
 }
 
-/// Refuses `mass_scale` on a link of the robot's fixed base in the model
-/// built from URDF (no controlled joint between it and the root): MuJoCo
-/// welds it to the world, so its mass has no effect.
-pub fn check_fixed_base(
-    scene: &Scene,
-    robot: &realitygap_core::RobotModel,
-    params: &PhysicalParams,
-) -> Result<(), EngineError> {
-    for (name, l) in &params.links {
-        let Some(link) = robot.link_by_name(name) else {
-            continue; // core's reading reports unknown names.
-        };
-        if l.mass_scale.is_some() && realitygap_core::robot::plan::in_fixed_base(scene, robot, link)
-        {
-            return Err(param_error(
-                format!("links.{name}.mass_scale"),
-                format!(
-                    "link {name} is part of the robot's fixed base (no controlled joint between it and the root), \
-                     so its mass has no effect"
-                ),
-            ));
-        }
-    }
-    Ok(())
-}
-
 /// The hinge or slide joint named `name`.
 fn dof_of(model: &MjModel, name: &str) -> Option<usize> {
     let j = model.name_to_id(MjtObjBase::mjOBJ_JOINT, name)?;

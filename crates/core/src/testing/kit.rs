@@ -133,6 +133,16 @@ pub struct KitSpec {
     /// the engine makes do with it, and scene 1 must still complete with
     /// finite numbers.
     pub refuses_singular_inertia: bool,
+    /// Whether moving links without mass (link 6 and the fingers with no
+    /// `<inertial>`) are a load error naming the link; otherwise the
+    /// engine gives them a mass of its own, and scene 1 must still
+    /// complete with finite numbers.
+    pub refuses_massless_links: bool,
+    /// Whether the held joints (the fingers) are rigid in the engine's
+    /// model, so that joint keys set on them have no effect and are the
+    /// engine's error naming the key; otherwise they are joints held by
+    /// servos, and the keys are honoured.
+    pub held_joints_rigid: bool,
 
     /// Where scene 1 ends.
     pub scene1_end: End,
@@ -305,6 +315,8 @@ impl KitSpec {
         bad_settings: &[],
         reads_geometry: true,
         refuses_singular_inertia: false,
+        refuses_massless_links: true,
+        held_joints_rigid: true,
         scene1_end: End::Equilibrium(0.1),
         stock_settings: &[],
         scene2_upright_m: 1e-3,

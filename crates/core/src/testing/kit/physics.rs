@@ -210,7 +210,7 @@ pub fn unsupported_keys(engine: &dyn Engine, spec: &KitSpec) {
             "links.m1n6s300_link_base.mass_scale",
         ),
     ] {
-        if !honours(engine, key) {
+        if !honours(engine, key) || (key == ParamKey::JointDamping && !spec.held_joints_rigid) {
             continue;
         }
         let e = load(engine, &scene, &testing::mico2(), &settings, &params(text))
