@@ -292,7 +292,8 @@ fn compile(scene: &Scene, robot: &RobotModel) -> Result<MjModel, EngineError> {
             for o in &scene.objects {
                 o.check_shape().map_err(load_error)?;
             }
-            let xml = mjcf::scene_to_mjcf(scene, robot).map_err(|e| load_error(e.0))?;
+            let xml = mjcf::scene_to_mjcf(scene, robot)
+                .map_err(|e| load_error(format!("{} (robot {})", e.0, robot.source.display())))?;
             MjModel::from_xml_string(&xml).map_err(|e| {
                 load_error(format!(
                     "MuJoCo rejected the model built from {}: {e}",
