@@ -1,12 +1,15 @@
 //! The engine test kit (realitygap_core::testing::kit) on bullet.
 
 use realitygap_core::conformance::PositionLaw;
-use realitygap_core::testing::kit::{Divergence, Effects, End, KitSpec, Push};
+use realitygap_core::testing::kit::{Divergence, Effects, End, Kinematics, KitSpec, Push};
 
 /// Bullet against the contract ([`KitSpec::CONTRACT`]).
 ///
 /// Rotor: Bullet: its velocity motor is a stiff constraint (no gain: kv is not used), so the velocity step leads the kv servo's response by I/kv x 1 rad/s = 0.1 rad; its POSITION_CONTROL motor (positionGain kp dt / kv) follows the first-order law v = (kp/kv)(q - angle) to 9e-4 rad; its multibody keeps PyBullet's default link drag I w (0.04 + 0.04 |w|), 0.025 rad short of the effort step's 1 rad. The explicit PD law (position_servo = "pd_control") is checked in tests/conformance.rs.
 ///
+/// - `kinematics`: the link frames are the URDF's to 1e-12 m (Bullet
+///   computes them as core does, in double precision) and the angles read
+///   back exactly.
 /// - `round_trip_m`: the native state is exact; the portable state carries
 ///   no contact manifolds (warm starts), and Bullet solves every
 ///   constraint of the world in one loop, so the arm's motors see the
@@ -40,6 +43,11 @@ const SPEC: KitSpec = KitSpec {
     position_law: PositionLaw::FirstOrder,
     takes_efforts: true,
     command_round_trip_rad: [0.0, 0.0],
+    kinematics: Kinematics {
+        position_m: 1e-12,
+        readback_rad: 0.0,
+        ..KitSpec::CONTRACT.kinematics
+    },
     round_trip_m: [[0.0, 1e-3], [0.0, 1e-3]],
     scene1_end: End::Targets(2.5),
     divergence: Divergence::Diverges(&["global_cfm=1e6"]),

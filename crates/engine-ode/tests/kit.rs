@@ -1,12 +1,16 @@
 //! The engine test kit (realitygap_core::testing::kit) on ode.
 
 use realitygap_core::conformance::PositionLaw;
-use realitygap_core::testing::kit::{Divergence, Effects, End, KitSpec, Push};
+use realitygap_core::testing::kit::{Divergence, Effects, End, Kinematics, KitSpec, Push};
 
 /// Tolerances: ODE with the kv servo (the replay scene's): the motor row is the implicit damper kv (v - v_next), a step's lag; the portable state rebuilds the bodies from the angle (a few nanoradians).
 ///
 /// The study's scenes at ODE's defaults (the stiff motor, dt = 0.01 s):
 ///
+/// - `kinematics`: ODE measures the joint angles from its bodies: one
+///   step at rest, the servos holding, moves them less than 1e-3 rad (no
+///   jump, no sign flip); the model is checked as built by default and
+///   with the welds as fixed joints and the base as static geometry.
 /// - `round_trip_m`, `handover_m`: ODE's native state restores the run
 ///   exactly (every body's numbers, the collision list's order, the random
 ///   generator). The portable state rebuilds the bodies from the joint
@@ -34,6 +38,11 @@ const SPEC: KitSpec = KitSpec {
     position_law: PositionLaw::Pd,
     takes_efforts: true,
     command_round_trip_rad: [0.0, 1e-8],
+    kinematics: Kinematics {
+        after_step_rad: Some(1e-3),
+        ..KitSpec::CONTRACT.kinematics
+    },
+    kinematics_settings: &[&["weld=fixed_joint"], &["weld=fixed_joint", "base=static"]],
     round_trip_m: [[0.0, 1e-4], [0.0, 1e-4]],
     handover_m: [1e-4, 1e-4],
     scene1_end: End::Targets(1.0),

@@ -41,6 +41,7 @@ const SPEC: KitSpec = KitSpec {
         readback_rad: 1e-5,
         object_m: 1e-7,
         turn_rad: 5.0,
+        after_step_rad: None,
     },
     round_trip_m: [[1e-6, 1e-6], [0.005, 0.005]],
     handover_rad: 1e-6,

@@ -183,6 +183,12 @@ pub struct Kinematics {
     /// The angle range of continuous joints in the random
     /// configurations, rad (beyond pi: angles must not wrap).
     pub turn_rad: f64,
+    /// For an engine that measures the joint angles from its bodies: the
+    /// largest change of any angle over one step at rest with the servos
+    /// holding (no jump, no sign flip), rad; `None`: not checked (the
+    /// contract asks nothing of a step here: a velocity servo yields to
+    /// gravity).
+    pub after_step_rad: Option<f64>,
 }
 
 /// The effects of the physical parameters an engine honours. A key the
@@ -304,6 +310,7 @@ impl KitSpec {
             readback_rad: 1e-12,
             object_m: 1e-12,
             turn_rad: 5.0,
+            after_step_rad: None,
         },
         kinematics_settings: &[],
         round_trip_m: [[0.0, 1e-6], [0.0, 1e-3]],

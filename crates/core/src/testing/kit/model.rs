@@ -26,7 +26,9 @@ pub fn kinematics_official(engine: &dyn Engine, spec: &KitSpec) {
 /// configurations (continuous joints up to [`super::Kinematics::turn_rad`]),
 /// the joint angles read back as set and every tracked link frame is where
 /// the URDF's forward kinematics puts it (held joints at their scene
-/// angles). With the spec's settings and each of its
+/// angles); one step later, for an engine that measures the angles from
+/// its bodies, they have not jumped ([`super::Kinematics::after_step_rad`]).
+/// With the spec's settings and each of its
 /// [`KitSpec::kinematics_settings`].
 pub fn kinematics(engine: &dyn Engine, spec: &KitSpec, label: &str) {
     let Some((scene, robot)) = robot(label, &testing::scene("scene1_single_joint")) else {
@@ -102,6 +104,18 @@ pub fn kinematics(engine: &dyn Engine, spec: &KitSpec, label: &str) {
                     engine.name(),
                     link.name
                 );
+            }
+            if let Some(tolerance) = k.after_step_rad {
+                sim.set_joint_velocity_targets(&vec![0.0; angles.len()]);
+                sim.step().unwrap();
+                sim.joint_angles_rad(&mut read);
+                for (a, b) in angles.iter().zip(&read) {
+                    assert!(
+                        (a - b).abs() < tolerance,
+                        "{} {label} {extra:?} round {round}: after a step {a} rad became {b} rad",
+                        engine.name()
+                    );
+                }
             }
         }
     }
