@@ -87,7 +87,10 @@ fn expect(engine: &str) -> Expect {
                     "stepper=euler",
                     "setting `stepper`: \"euler\" is not one of world_step, quick_step",
                 ),
-                ("iterations=5", "setting `iterations`: unknown setting (accepted:"),
+                (
+                    "iterations=5",
+                    "setting `iterations`: unknown setting (accepted:",
+                ),
             ],
             ..base
         },
@@ -98,7 +101,10 @@ fn expect(engine: &str) -> Expect {
                     "internal_pgs_iterations=0",
                     "setting `internal_pgs_iterations`: must be a whole number from 1",
                 ),
-                ("mesh_shape=voxels", "\"voxels\" is not one of convex_hull, trimesh"),
+                (
+                    "mesh_shape=voxels",
+                    "\"voxels\" is not one of convex_hull, trimesh",
+                ),
             ],
             ..base
         },
@@ -107,8 +113,14 @@ fn expect(engine: &str) -> Expect {
             scene3: Scene3::WristAt([0.5074, -0.0070, 0.3397]),
             diverging: Some("global_cfm=1e6"),
             bad_settings: &[
-                ("solver=dantzig", "setting `solver`: unknown setting (accepted: timestep_s"),
-                ("velocity_gain=2", "setting `velocity_gain`: must be a number > 0 and <= 1"),
+                (
+                    "solver=dantzig",
+                    "setting `solver`: unknown setting (accepted: timestep_s",
+                ),
+                (
+                    "velocity_gain=2",
+                    "setting `velocity_gain`: must be a number > 0 and <= 1",
+                ),
             ],
             ..base
         },
@@ -162,8 +174,18 @@ fn last_row(csv: &Path) -> HashMap<String, f64> {
 /// quoting an engine, `Bullet said: ...`, go to standard error.)
 fn assert_no_engine_output(what: &str, out: &Output) {
     let stdout = text(&out.stdout);
-    for bad in ["b3Warning", "b3Error", "Warning [", "Error [", "ODE Message", "ODE INTERNAL"] {
-        assert!(!stdout.contains(bad), "{what}: an engine printed to stdout:\n{stdout}");
+    for bad in [
+        "b3Warning",
+        "b3Error",
+        "Warning [",
+        "Error [",
+        "ODE Message",
+        "ODE INTERNAL",
+    ] {
+        assert!(
+            !stdout.contains(bad),
+            "{what}: an engine printed to stdout:\n{stdout}"
+        );
     }
 }
 
@@ -200,10 +222,19 @@ fn run_all(label: &str, robot_args: &[&str], suffix: &str) {
         let name = e.name();
         let mut args = vec!["run".to_string()];
         args.extend(SCENES.map(|s| path(&scene_file(s))));
-        args.extend(["--engine".into(), name.into(), "--out".into(), path(&out_dir)]);
+        args.extend([
+            "--engine".into(),
+            name.into(),
+            "--out".into(),
+            path(&out_dir),
+        ]);
         args.extend(robot_args.iter().map(|s| s.to_string()));
         let out = realitygap(&args.iter().map(String::as_str).collect::<Vec<_>>());
-        assert!(out.status.success(), "{name} {label}: {}", text(&out.stderr));
+        assert!(
+            out.status.success(),
+            "{name} {label}: {}",
+            text(&out.stderr)
+        );
         assert_no_engine_output(name, &out);
         let source = format!("{name}{suffix}");
         let csv = |s: &str| out_dir.join(s).join(&source).join("runs/run000.csv");
@@ -211,7 +242,10 @@ fn run_all(label: &str, robot_args: &[&str], suffix: &str) {
         let s1 = last_row(&csv("scene1_single_joint"));
         let q2 = s1["q2_rad"].to_degrees();
         eprintln!("{source}: scene 1 joint 2 ends at {q2:.3} deg");
-        assert!((q2 + 100.0).abs() < want.scene1_q2_deg, "{source}: joint 2 ends at {q2} deg");
+        assert!(
+            (q2 + 100.0).abs() < want.scene1_q2_deg,
+            "{source}: joint 2 ends at {q2} deg"
+        );
         let s2 = last_row(&csv("scene2_two_joints"));
         assert!(
             s2["q2_rad"].abs() < want.scene2_rad && s2["q5_rad"].abs() < want.scene2_rad,
@@ -226,7 +260,11 @@ fn run_all(label: &str, robot_args: &[&str], suffix: &str) {
         );
         match want.scene3 {
             Scene3::CubePast(x) => {
-                assert!(s3["cube_x_m"] > x, "{source}: the cube ends at x = {}", s3["cube_x_m"])
+                assert!(
+                    s3["cube_x_m"] > x,
+                    "{source}: the cube ends at x = {}",
+                    s3["cube_x_m"]
+                )
             }
             Scene3::CubeStill => {
                 assert_eq!(s3["cube_x_m"], 0.5, "{source}: the cube moved")
@@ -240,8 +278,13 @@ fn run_all(label: &str, robot_args: &[&str], suffix: &str) {
             }
         }
         let manifest: serde_json::Value = serde_json::from_slice(
-            &std::fs::read(out_dir.join("scene1_single_joint").join(&source).join("manifest.json"))
-                .unwrap(),
+            &std::fs::read(
+                out_dir
+                    .join("scene1_single_joint")
+                    .join(&source)
+                    .join("manifest.json"),
+            )
+            .unwrap(),
         )
         .unwrap();
         assert_eq!(
@@ -259,7 +302,9 @@ fn every_engine_runs_the_three_scenes_with_the_project_mico2() {
 
 #[test]
 fn every_engine_runs_the_three_scenes_with_the_official_urdf() {
-    let Some(paper) = testing::paper_data() else { return };
+    let Some(paper) = testing::paper_data() else {
+        return;
+    };
     let package = format!(
         "kinova_description={}",
         paper.join("kinova_description").display()
@@ -289,11 +334,14 @@ fn the_built_in_mico2_runs_in_every_engine() {
             &path(&dir.join("r")),
         ]);
         assert!(out.status.success(), "{name}: {}", text(&out.stderr));
-        let last = last_row(
-            &dir.join(format!("r/scene1_single_joint/{name}-mico2/runs/run000.csv")),
-        );
+        let last = last_row(&dir.join(format!(
+            "r/scene1_single_joint/{name}-mico2/runs/run000.csv"
+        )));
         let q2 = last["q2_rad"].to_degrees();
-        assert!((q2 + 100.0).abs() < expect(name).scene1_q2_deg, "{name}: {q2} deg");
+        assert!(
+            (q2 + 100.0).abs() < expect(name).scene1_q2_deg,
+            "{name}: {q2} deg"
+        );
     }
 }
 
@@ -306,7 +354,10 @@ fn bad_settings_fail_naming_the_setting() {
     for e in engines() {
         let name = e.name();
         let mut cases = vec![
-            ("substeps=4".to_string(), "setting `substeps`: unknown setting".to_string()),
+            (
+                "substeps=4".to_string(),
+                "setting `substeps`: unknown setting".to_string(),
+            ),
             (
                 "timestep_s=0.03".to_string(),
                 "not a whole number of engine timesteps".to_string(),
@@ -380,8 +431,14 @@ fn a_broken_mesh_fails_the_run_with_a_clear_message() {
             assert!(out.status.success(), "{name}: {all}");
             continue;
         }
-        assert!(!out.status.success(), "{name}: a broken mesh was accepted: {all}");
-        if !(all.contains("arm.urdf") && all.contains("m1n6s300_link_6") && all.contains("hand.stl")) {
+        assert!(
+            !out.status.success(),
+            "{name}: a broken mesh was accepted: {all}"
+        );
+        if !(all.contains("arm.urdf")
+            && all.contains("m1n6s300_link_6")
+            && all.contains("hand.stl"))
+        {
             unnamed.push(format!("{name}: {all}"));
         }
     }
@@ -404,7 +461,9 @@ fn a_diverging_setting_is_recorded_and_the_batch_goes_on() {
         );
     for e in engines() {
         let name = e.name();
-        let Some(diverging) = expect(name).diverging else { continue };
+        let Some(diverging) = expect(name).diverging else {
+            continue;
+        };
         let mut doc: toml::Table = original.parse().unwrap();
         let engine_tables = doc
             .entry("engine")
@@ -429,16 +488,33 @@ fn a_diverging_setting_is_recorded_and_the_batch_goes_on() {
         doc.insert("name".into(), toml::Value::String("unstable".into()));
         let unstable = toml::to_string(&doc).unwrap();
         let stable = original.replace("name = \"scene1_single_joint\"", "name = \"stable\"");
-        let (u, s) = (dir.join(format!("unstable-{name}.toml")), dir.join(format!("stable-{name}.toml")));
+        let (u, s) = (
+            dir.join(format!("unstable-{name}.toml")),
+            dir.join(format!("stable-{name}.toml")),
+        );
         std::fs::write(&u, unstable).unwrap();
         std::fs::write(&s, stable).unwrap();
         let results = dir.join(format!("out-{name}"));
-        let out = realitygap(&["run", &path(&u), &path(&s), "--engine", name, "--out", &path(&results)]);
+        let out = realitygap(&[
+            "run",
+            &path(&u),
+            &path(&s),
+            "--engine",
+            name,
+            "--out",
+            &path(&results),
+        ]);
         let (stdout, stderr) = (text(&out.stdout), text(&out.stderr));
         assert!(out.status.success(), "{name}: {stdout}\n{stderr}");
         assert!(!stderr.contains("panicked"), "{stderr}");
-        assert!(stdout.contains(&format!("unstable/{name}: 0 ok, 1 diverged, 0 failed")), "{stdout}");
-        assert!(stdout.contains(&format!("stable/{name}: 1 ok, 0 diverged, 0 failed")), "{stdout}");
+        assert!(
+            stdout.contains(&format!("unstable/{name}: 0 ok, 1 diverged, 0 failed")),
+            "{stdout}"
+        );
+        assert!(
+            stdout.contains(&format!("stable/{name}: 1 ok, 0 diverged, 0 failed")),
+            "{stdout}"
+        );
         let m: serde_json::Value = serde_json::from_slice(
             &std::fs::read(results.join(format!("unstable/{name}/manifest.json"))).unwrap(),
         )
@@ -447,8 +523,15 @@ fn a_diverging_setting_is_recorded_and_the_batch_goes_on() {
         assert_eq!(run["status"], "diverged", "{name}: {run}");
         let t = run["extra"]["diverged_at_s"].as_f64().unwrap();
         assert!(t > 0.0 && t < 6.0, "{name}: {t}");
-        assert!(run["message"].as_str().unwrap().starts_with("diverged at t = "), "{run}");
-        let csv = std::fs::read_to_string(results.join(format!("unstable/{name}/runs/run000.csv"))).unwrap();
+        assert!(
+            run["message"]
+                .as_str()
+                .unwrap()
+                .starts_with("diverged at t = "),
+            "{run}"
+        );
+        let csv = std::fs::read_to_string(results.join(format!("unstable/{name}/runs/run000.csv")))
+            .unwrap();
         let rows: Vec<&str> = csv.lines().skip(1).collect();
         assert!(rows.len() < 120, "{name}: {} rows", rows.len());
         assert!(
@@ -458,7 +541,9 @@ fn a_diverging_setting_is_recorded_and_the_batch_goes_on() {
         );
         for row in &rows {
             assert!(
-                row.split(',').all(|c| c.parse::<f64>().is_ok_and(|v| v.is_finite() && v.abs() < 1e3)),
+                row.split(',').all(|c| c
+                    .parse::<f64>()
+                    .is_ok_and(|v| v.is_finite() && v.abs() < 1e3)),
                 "{name}: {row}"
             );
         }
@@ -480,7 +565,12 @@ fn engine(name: &str) -> Option<Box<dyn Engine>> {
 }
 
 /// A run at the engine's defaults (`settings`, else the scene's table).
-fn run(engine: &dyn Engine, scene: &Scene, robot: &RobotModel, settings: Option<EngineSettings>) -> RunOutcome {
+fn run(
+    engine: &dyn Engine,
+    scene: &Scene,
+    robot: &RobotModel,
+    settings: Option<EngineSettings>,
+) -> RunOutcome {
     let settings = settings.unwrap_or_else(|| scene.settings_for(engine.name()));
     let out = simulate_with(
         engine,
@@ -491,7 +581,13 @@ fn run(engine: &dyn Engine, scene: &Scene, robot: &RobotModel, settings: Option<
         &RunOptions::default(),
     )
     .unwrap_or_else(|e| panic!("{}: {e}", engine.name()));
-    assert_eq!(out.status, RunStatus::Completed, "{} {}", engine.name(), scene.name);
+    assert_eq!(
+        out.status,
+        RunStatus::Completed,
+        "{} {}",
+        engine.name(),
+        scene.name
+    );
     out
 }
 
@@ -502,10 +598,14 @@ fn run(engine: &dyn Engine, scene: &Scene, robot: &RobotModel, settings: Option<
 /// velocity servo's gravity droop puts it 23.8 mm from there, in both.)
 #[test]
 fn kv_engines_end_scene1_where_mujoco_does() {
-    let Some(mujoco) = engine("mujoco") else { return };
+    let Some(mujoco) = engine("mujoco") else {
+        return;
+    };
     for name in KV_ENGINES {
         let Some(e) = engine(name) else { continue };
-        for (label, s, robot) in realitygap_core::testing::kit::robots(&testing::scene("scene1_single_joint")) {
+        for (label, s, robot) in
+            realitygap_core::testing::kit::robots(&testing::scene("scene1_single_joint"))
+        {
             let a = run(e.as_ref(), &s, &robot, Some(EngineSettings::new()));
             let m = run(mujoco.as_ref(), &s, &robot, None);
             let (qa, qm) = (testing::final_angles_deg(&a), testing::final_angles_deg(&m));
@@ -516,9 +616,17 @@ fn kv_engines_end_scene1_where_mujoco_does() {
                 max * 1e3
             );
             for j in 0..6 {
-                assert!((qa[j] - qm[j]).abs() < 0.1, "{name} {label}: joint {} {} deg from MuJoCo", j + 1, qa[j] - qm[j]);
+                assert!(
+                    (qa[j] - qm[j]).abs() < 0.1,
+                    "{name} {label}: joint {} {} deg from MuJoCo",
+                    j + 1,
+                    qa[j] - qm[j]
+                );
             }
-            assert!(last < 0.005 && max < 0.01, "{name} {label}: wrist {last} m, largest {max} m");
+            assert!(
+                last < 0.005 && max < 0.01,
+                "{name} {label}: wrist {last} m, largest {max} m"
+            );
         }
     }
 }
@@ -531,18 +639,30 @@ fn kv_engines_end_scene1_where_mujoco_does() {
 /// are implicit.)
 #[test]
 fn kv_engines_follow_mujoco_in_scene2() {
-    let Some(mujoco) = engine("mujoco") else { return };
+    let Some(mujoco) = engine("mujoco") else {
+        return;
+    };
     let s = testing::scene("scene2_two_joints");
     let robot = testing::mico2();
     let mut implicit = s.settings_for("mujoco");
-    implicit.insert("integrator".into(), SettingValue::Text("implicitfast".into()));
+    implicit.insert(
+        "integrator".into(),
+        SettingValue::Text("implicitfast".into()),
+    );
     let m = run(mujoco.as_ref(), &s, &robot, Some(implicit));
     for name in KV_ENGINES {
         let Some(e) = engine(name) else { continue };
         let a = run(e.as_ref(), &s, &robot, Some(EngineSettings::new()));
         let (max, last) = realitygap_core::testing::kit::wrist_gaps(&a, &m);
-        eprintln!("{name} scene 2: wrist vs MuJoCo implicitfast: largest {:.2} mm, final {:.3} mm", max * 1e3, last * 1e3);
-        assert!(max < 0.002 && last < 0.001, "{name}: largest {max} m, final {last} m");
+        eprintln!(
+            "{name} scene 2: wrist vs MuJoCo implicitfast: largest {:.2} mm, final {:.3} mm",
+            max * 1e3,
+            last * 1e3
+        );
+        assert!(
+            max < 0.002 && last < 0.001,
+            "{name}: largest {max} m, final {last} m"
+        );
     }
 }
 
@@ -550,7 +670,9 @@ fn kv_engines_follow_mujoco_in_scene2() {
 /// MuJoCo's does (0.1 s) and the wrist ends within 5 mm of MuJoCo's.
 #[test]
 fn kv_engines_reach_the_cube_when_mujoco_does() {
-    let Some(mujoco) = engine("mujoco") else { return };
+    let Some(mujoco) = engine("mujoco") else {
+        return;
+    };
     let s = testing::scene("scene3_cube_push");
     let robot = testing::mico2();
     let contact = |out: &RunOutcome| {
@@ -567,7 +689,10 @@ fn kv_engines_reach_the_cube_when_mujoco_does() {
         let (ta, tm) = (contact(&a), contact(&m));
         let (_, last) = realitygap_core::testing::kit::wrist_gaps(&a, &m);
         eprintln!("{name} scene 3: contact at {ta:.2} s, MuJoCo {tm:.2} s; final wrist {:.3} mm from MuJoCo's", last * 1e3);
-        assert!((ta - tm).abs() <= 0.1, "{name}: contact at {ta} s, MuJoCo {tm} s");
+        assert!(
+            (ta - tm).abs() <= 0.1,
+            "{name}: contact at {ta} s, MuJoCo {tm} s"
+        );
         assert!(last < 0.005, "{name}: final wrist {last} m from MuJoCo's");
     }
 }
@@ -583,7 +708,12 @@ fn kv_engines_repeat_scene1_where_mujoco_ends() {
     let dir = scratch("engines", "repeats");
     let out = dir.join("results");
     let mut runs = vec![("mujoco", "1")];
-    runs.extend(KV_ENGINES.iter().filter(|n| engine(n).is_some()).map(|n| (*n, "2")));
+    runs.extend(
+        KV_ENGINES
+            .iter()
+            .filter(|n| engine(n).is_some())
+            .map(|n| (*n, "2")),
+    );
     for (name, repeats) in &runs {
         let o = realitygap(&[
             "run",
@@ -598,13 +728,20 @@ fn kv_engines_repeat_scene1_where_mujoco_ends() {
         assert!(o.status.success(), "{name}: {}", text(&o.stderr));
     }
     let wrist = |engine: &str, run: &str| {
-        let r = last_row(&out.join("scene1_single_joint").join(engine).join(format!("runs/{run}.csv")));
+        let r = last_row(
+            &out.join("scene1_single_joint")
+                .join(engine)
+                .join(format!("runs/{run}.csv")),
+        );
         realitygap_core::Vec3::new(r["wrist_x_m"], r["wrist_y_m"], r["wrist_z_m"])
     };
     let s = testing::scene("scene1_single_joint");
     let robot = testing::mico2();
-    let mut named: HashMap<String, f64> =
-        s.controlled_joints().iter().map(|n| (n.to_string(), 0.0)).collect();
+    let mut named: HashMap<String, f64> = s
+        .controlled_joints()
+        .iter()
+        .map(|n| (n.to_string(), 0.0))
+        .collect();
     named.insert("m1n6s300_joint_2".into(), (-100.0f64).to_radians());
     for (n, &a) in &s.robot.held_joints_rad {
         named.insert(n.clone(), a);
@@ -620,7 +757,11 @@ fn kv_engines_repeat_scene1_where_mujoco_ends() {
                 w.distance(m) * 1e3,
                 w.distance(target) * 1e3
             );
-            assert!(w.distance(m) < 0.001, "{name} {run}: {} m from MuJoCo", w.distance(m));
+            assert!(
+                w.distance(m) < 0.001,
+                "{name} {run}: {} m from MuJoCo",
+                w.distance(m)
+            );
             assert!(
                 (w.distance(target) - m.distance(target)).abs() < 0.001,
                 "{name} {run}: {} m from the targets, MuJoCo {} m",

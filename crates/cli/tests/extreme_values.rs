@@ -29,7 +29,8 @@ const VALUES: [(&str, f64); 6] = [
 
 /// Scene 1 cut to its first second (20 samples), written into `dir`.
 fn short_scene(dir: &Path) -> PathBuf {
-    let scene = realitygap_core::testing::workspace().join("assets/scenes/scene1_single_joint.toml");
+    let scene =
+        realitygap_core::testing::workspace().join("assets/scenes/scene1_single_joint.toml");
     let text = std::fs::read_to_string(&scene).unwrap();
     let robot = realitygap_core::testing::workspace().join("assets/robots/mico2/mico2.urdf");
     let text = text
@@ -38,7 +39,10 @@ fn short_scene(dir: &Path) -> PathBuf {
             &format!("urdf = {:?}", path(&robot)),
         )
         .replace("duration_s = 6.0", "duration_s = 1.0");
-    assert!(text.contains("duration_s = 1.0"), "scene 1's duration moved");
+    assert!(
+        text.contains("duration_s = 1.0"),
+        "scene 1's duration moved"
+    );
     let file = dir.join("scene1_short.toml");
     std::fs::write(&file, text).unwrap();
     file
@@ -57,7 +61,14 @@ fn params_text(key: ParamKey, value: f64) -> (String, String) {
 }
 
 /// What one run of an engine did with one extreme value.
-fn outcome(engine: &str, key: ParamKey, label: &str, value: f64, scene: &Path, dir: &Path) -> Result<String, String> {
+fn outcome(
+    engine: &str,
+    key: ParamKey,
+    label: &str,
+    value: f64,
+    scene: &Path,
+    dir: &Path,
+) -> Result<String, String> {
     let (toml, full) = params_text(key, value);
     let file = dir.join(format!("{engine}-{}-{label}.toml", full.replace('.', "_")));
     std::fs::write(&file, &toml).unwrap();
@@ -75,7 +86,10 @@ fn outcome(engine: &str, key: ParamKey, label: &str, value: f64, scene: &Path, d
     let (stdout, stderr) = (text(&out.stdout), text(&out.stderr));
     let what = format!("{engine} {full} = {value:e}");
     let Some(code) = out.status.code() else {
-        return Err(format!("{what}: killed by a signal ({:?}): {stderr}", out.status));
+        return Err(format!(
+            "{what}: killed by a signal ({:?}): {stderr}",
+            out.status
+        ));
     };
     if stderr.contains("panicked") || code == 101 {
         return Err(format!("{what}: panicked (exit {code}): {stderr}"));
@@ -93,7 +107,9 @@ fn outcome(engine: &str, key: ParamKey, label: &str, value: f64, scene: &Path, d
             let line = all.lines().find(|l| l.contains(item)).unwrap_or("");
             Ok(format!("{what}: refused: {line}"))
         } else {
-            Err(format!("{what}: failed without naming the key and the file or engine: {all}"))
+            Err(format!(
+                "{what}: failed without naming the key and the file or engine: {all}"
+            ))
         };
     }
     let scene_dir = std::fs::read_dir(&out_dir)
@@ -111,7 +127,10 @@ fn outcome(engine: &str, key: ParamKey, label: &str, value: f64, scene: &Path, d
         .unwrap_or_else(|| panic!("{what}: no manifest in {}", scene_dir.display()));
     let manifest: serde_json::Value =
         serde_json::from_slice(&std::fs::read(source.join("manifest.json")).unwrap()).unwrap();
-    let status = manifest["runs"][0]["status"].as_str().unwrap_or("").to_string();
+    let status = manifest["runs"][0]["status"]
+        .as_str()
+        .unwrap_or("")
+        .to_string();
     match status.as_str() {
         // Flagged: diverged (the controller's check) or unstable (the
         // engine saw a non-finite state).
@@ -163,5 +182,10 @@ fn extreme_values_are_refused_or_run_never_crash() {
             }
         }
     }
-    assert!(failures.is_empty(), "{} failures:\n{}", failures.len(), failures.join("\n"));
+    assert!(
+        failures.is_empty(),
+        "{} failures:\n{}",
+        failures.len(),
+        failures.join("\n")
+    );
 }

@@ -694,11 +694,7 @@ impl PhysicalParams {
                     &a.max_velocity_deg_s,
                     BOUNDED_POSITIVE,
                 )?,
-                deadband_deg_s: r.value(
-                    "actuator.deadband_deg_s",
-                    &a.deadband_deg_s,
-                    BOUNDED,
-                )?,
+                deadband_deg_s: r.value("actuator.deadband_deg_s", &a.deadband_deg_s, BOUNDED)?,
             };
         }
         for (engine, table) in &file.engine {
@@ -1211,7 +1207,10 @@ integrator = "implicitfast"
             .unwrap_err()
             .to_string();
         assert!(e.starts_with("/p/params.toml:2:11:"), "{e}");
-        assert!(e.contains("joints.a.damping") && e.contains("from 0e0 to 1e6"), "{e}");
+        assert!(
+            e.contains("joints.a.damping") && e.contains("from 0e0 to 1e6"),
+            "{e}"
+        );
         let e = parse("[objects.cube]\nrestitution = 1.5\n")
             .unwrap_err()
             .to_string();
@@ -1225,13 +1224,22 @@ integrator = "implicitfast"
         let e = parse("[joints.a]\nkv = nan\n").unwrap_err().to_string();
         assert!(e.contains("from 1e-6 to 1e6"), "{e}");
         // Beyond the physical range: the engines' numbers would overflow.
-        let e = parse("[joints.a]\ndamping = 1e300\n").unwrap_err().to_string();
+        let e = parse("[joints.a]\ndamping = 1e300\n")
+            .unwrap_err()
+            .to_string();
         assert!(
-            e.starts_with("/p/params.toml:2:11:") && e.contains("joints.a.damping") && e.contains("overflow"),
+            e.starts_with("/p/params.toml:2:11:")
+                && e.contains("joints.a.damping")
+                && e.contains("overflow"),
             "{e}"
         );
-        let e = parse("[objects.cube]\nmass_kg = 1e-300\n").unwrap_err().to_string();
-        assert!(e.contains("objects.cube.mass_kg") && e.contains("from 1e-6"), "{e}");
+        let e = parse("[objects.cube]\nmass_kg = 1e-300\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("objects.cube.mass_kg") && e.contains("from 1e-6"),
+            "{e}"
+        );
     }
 
     #[test]

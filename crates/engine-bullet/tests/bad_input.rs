@@ -3,13 +3,13 @@
 
 mod common;
 
-use realitygap_core::testing::rerun_in_child;
 use common::*;
 use realitygap_core::engine::{
     Engine, EngineError, EngineSettings, ModelVariation, SettingValue, Simulation,
 };
 use realitygap_core::robot::{PackageResolver, RobotModel};
 use realitygap_core::scene::Scene;
+use realitygap_core::testing::rerun_in_child;
 use realitygap_engine_bullet::{BulletEngine, BulletSimulation};
 use std::path::{Path, PathBuf};
 

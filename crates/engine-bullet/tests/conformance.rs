@@ -94,9 +94,6 @@ fn handover_into_a_fresh_bullet() {
     }
 }
 
-
-
-
 #[test]
 fn unsupported_key_is_an_error_naming_engine_and_key() {
     let (key, e) = conformance::unsupported_key_error(&BulletEngine).expect("Bullet lacks keys");
@@ -111,7 +108,6 @@ fn unsupported_key_is_an_error_naming_engine_and_key() {
 fn key_name(key: ParamKey) -> String {
     key.pattern().replace("<joint>", "m1n6s300_joint_2")
 }
-
 
 #[test]
 fn a_diverging_setting_ends_as_diverged() {

@@ -98,10 +98,6 @@ fn handover_with_mujoco_both_ways() {
     }
 }
 
-
-
-
-
 fn load_error(params: &PhysicalParams, settings: &EngineSettings) -> EngineError {
     let s = scene("scene1_single_joint");
     let robot = mico2();

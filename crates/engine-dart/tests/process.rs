@@ -5,10 +5,10 @@
 
 mod common;
 
-use realitygap_core::testing::rerun_in_child;
 use common::*;
 use realitygap_core::controller::RunOutcome;
 use realitygap_core::engine::EngineSettings;
+use realitygap_core::testing::rerun_in_child;
 use realitygap_engine_dart::DartEngine;
 use std::sync::Mutex;
 

@@ -138,9 +138,6 @@ fn portable_gap_is_odes_constraint_error() {
     assert!(stiff < fine / 2.0 && stiff < 3e-6, "{stiff}");
 }
 
-
-
-
 /// ODE honours every parameter key, so no key is unsupported; a key that a
 /// setting makes meaningless (kv with the stiff default motor) is an error
 /// naming the engine and the key (tests/params.rs).
@@ -173,7 +170,6 @@ fn no_key_is_unsupported() {
         other => panic!("{other}"),
     }
 }
-
 
 /// The iterative solver with one iteration at dt = 0.05 s blows up, and
 /// the run ends as diverged.

@@ -62,7 +62,10 @@ const SPEC: KitSpec = KitSpec {
             "internal_pgs_iterations=0",
             "setting `internal_pgs_iterations`: must be a whole number from 1",
         ),
-        ("mesh_shape=voxels", "\"voxels\" is not one of convex_hull, trimesh"),
+        (
+            "mesh_shape=voxels",
+            "\"voxels\" is not one of convex_hull, trimesh",
+        ),
     ],
     stock_settings: &["solver_iterations=4", "internal_pgs_iterations=1"],
     push: Some(Push {

@@ -294,7 +294,7 @@ impl KitSpec {
     ///   engine states its own);
     /// - scene 1 ends where the servos balance gravity (0.1 deg); scene 2
     ///   upright (1 mm); the iiwa's scenes end within 1 deg of the same law
-///   (DART's check against MuJoCo); scene 3 pushes the cube over 2 cm from a contact
+    ///   (DART's check against MuJoCo); scene 3 pushes the cube over 2 cm from a contact
     ///   between 10 and 20 s.
     pub const CONTRACT: KitSpec = KitSpec {
         dynamics: true,
@@ -406,11 +406,7 @@ pub fn report(engine: &dyn Engine, check: &str, value: f64, tolerance: f64) {
 }
 
 /// A [`Subject`] with the study's settings, for the conformance functions.
-pub fn with_subject<T>(
-    engine: &dyn Engine,
-    spec: &KitSpec,
-    f: impl FnOnce(Subject<'_>) -> T,
-) -> T {
+pub fn with_subject<T>(engine: &dyn Engine, spec: &KitSpec, f: impl FnOnce(Subject<'_>) -> T) -> T {
     let settings = study_settings(engine, spec);
     f(Subject {
         engine,
@@ -608,8 +604,9 @@ impl TempDir {
     /// The project's Mico2 URDF with `edit` applied, written here and read
     /// as a model.
     pub fn mico2_with(&self, edit: impl Fn(String) -> String) -> RobotModel {
-        let text = std::fs::read_to_string(testing::workspace().join("assets/robots/mico2/mico2.urdf"))
-            .unwrap();
+        let text =
+            std::fs::read_to_string(testing::workspace().join("assets/robots/mico2/mico2.urdf"))
+                .unwrap();
         let path = self.dir.join("mico2.urdf");
         std::fs::write(&path, edit(text)).unwrap();
         RobotModel::from_urdf_file(&path, &PackageResolver::new()).unwrap()
@@ -637,7 +634,11 @@ pub fn non_finite(out: &RunOutcome) -> Option<String> {
         }
     }
     for b in &t.bodies {
-        if let Some(i) = b.poses.iter().position(|p| p.is_some_and(|p| !p.is_finite())) {
+        if let Some(i) = b
+            .poses
+            .iter()
+            .position(|p| p.is_some_and(|p| !p.is_finite()))
+        {
             return Some(format!("pose of {} at sample {i}", b.role));
         }
     }

@@ -76,16 +76,13 @@ pub fn scene_mismatches(engine: &dyn Engine, spec: &KitSpec) {
     let robot = testing::mico2();
     let base = testing::scene("scene1_single_joint");
     let settings = settings_for(engine, spec, &base, &[]);
-    let load_error = |s: &Scene, what: &str| match engine.load(
-        s,
-        &robot,
-        &settings,
-        &ModelVariation::default(),
-    ) {
-        Ok(_) => panic!("{}: the scene with {what} loaded", engine.name()),
-        Err(e @ EngineError::Load { .. }) => e.to_string(),
-        Err(e) => panic!("{}: unexpected error kind: {e}", engine.name()),
-    };
+    let load_error =
+        |s: &Scene, what: &str| match engine.load(s, &robot, &settings, &ModelVariation::default())
+        {
+            Ok(_) => panic!("{}: the scene with {what} loaded", engine.name()),
+            Err(e @ EngineError::Load { .. }) => e.to_string(),
+            Err(e) => panic!("{}: unexpected error kind: {e}", engine.name()),
+        };
     let mut s = base.clone();
     s.actuators[0].joint = "m1n6s300_joint_9".into();
     let e = load_error(&s, "an actuator on joint 9");
@@ -184,9 +181,7 @@ pub fn bad_robots(engine: &dyn Engine, spec: &KitSpec) {
     std::fs::write(tmp.path("gone.stl"), "solid x\nendsolid x\n").unwrap();
     let mesh = |link: &str, file: &str| {
         let (link, file) = (link.to_string(), file.to_string());
-        move |t: String| {
-            replace_first_collision(t, &link, &format!("<mesh filename=\"{file}\"/>"))
-        }
+        move |t: String| replace_first_collision(t, &link, &format!("<mesh filename=\"{file}\"/>"))
     };
     let cases: Vec<(&str, RobotModel, Vec<&str>)> = vec![
         (
@@ -199,11 +194,15 @@ pub fn bad_robots(engine: &dyn Engine, spec: &KitSpec) {
             tmp.mico2_with(mesh(link6, "hand.stl")),
             vec![link6, "hand.stl"],
         ),
-        ("removed", {
-            let r = tmp.mico2_with(mesh("m1n6s300_link_2", "gone.stl"));
-            std::fs::remove_file(tmp.path("gone.stl")).unwrap();
-            r
-        }, vec!["m1n6s300_link_2", "gone.stl"]),
+        (
+            "removed",
+            {
+                let r = tmp.mico2_with(mesh("m1n6s300_link_2", "gone.stl"));
+                std::fs::remove_file(tmp.path("gone.stl")).unwrap();
+                r
+            },
+            vec!["m1n6s300_link_2", "gone.stl"],
+        ),
         (
             "massless",
             tmp.mico2_with(|t| without_inertials(t, &[link6, "finger"])),
@@ -290,13 +289,12 @@ pub fn bad_angles_and_states(engine: &dyn Engine, spec: &KitSpec) {
     sim.set_joint_velocity_targets(&[0.0, -0.3, 0.0, 0.0, 0.0, 0.0]);
     sim.step_n(10).unwrap();
     let good = sim.state().unwrap();
-    let state_error = |sim: &mut Box<dyn crate::Simulation>, state: &SimState| {
-        match sim.set_state(state) {
+    let state_error =
+        |sim: &mut Box<dyn crate::Simulation>, state: &SimState| match sim.set_state(state) {
             Err(e @ EngineError::State { .. }) => e.to_string(),
             Err(other) => panic!("{}: expected a state error, got {other}", engine.name()),
             Ok(()) => panic!("{}: the state loaded", engine.name()),
-        }
-    };
+        };
     let mut short = good.portable();
     short.joint_angles_rad.pop();
     let e = state_error(&mut sim, &short);
@@ -307,7 +305,7 @@ pub fn bad_angles_and_states(engine: &dyn Engine, spec: &KitSpec) {
     );
     // The portable numbers: a native state may carry a serial number of
     // the engine's own (Bullet's saved-state id) that each reading bumps.
-    let unchanged = |sim: &Box<dyn crate::Simulation>, what: &str| {
+    let unchanged = |sim: &dyn crate::Simulation, what: &str| {
         assert_eq!(
             sim.state().unwrap().portable(),
             good.portable(),
@@ -315,15 +313,15 @@ pub fn bad_angles_and_states(engine: &dyn Engine, spec: &KitSpec) {
             engine.name()
         );
     };
-    unchanged(&sim, "short state");
+    unchanged(sim.as_ref(), "short state");
     let mut nan = good.portable();
     nan.joint_angles_rad[1] = f64::NAN;
     assert!(state_error(&mut sim, &nan).contains("not finite"));
-    unchanged(&sim, "NaN angle");
+    unchanged(sim.as_ref(), "NaN angle");
     let mut nan = good.portable();
     nan.objects[0].linear_velocity_m_s.x = f64::NAN;
     assert!(state_error(&mut sim, &nan).contains("non-finite"));
-    unchanged(&sim, "NaN velocity");
+    unchanged(sim.as_ref(), "NaN velocity");
     if let Some(native) = &good.native {
         let mut cut = good.clone();
         cut.native = Some(NativeState {
@@ -332,7 +330,7 @@ pub fn bad_angles_and_states(engine: &dyn Engine, spec: &KitSpec) {
         });
         state_error(&mut sim, &cut);
     }
-    unchanged(&sim, "cut native state");
+    unchanged(sim.as_ref(), "cut native state");
     let mut foreign = good.portable();
     foreign.native = Some(NativeState {
         engine: "another-engine".into(),
@@ -368,7 +366,12 @@ pub fn divergence(engine: &dyn Engine, spec: &KitSpec) {
     let out = conformance::diverges(engine, &s);
     eprintln!("{}: {pairs:?}: {:?} ({want})", engine.name(), out.status);
     let diverged = matches!(out.status, RunStatus::Diverged { .. });
-    report(engine, &format!("{want} {pairs:?}"), diverged as u8 as f64, 0.0);
+    report(
+        engine,
+        &format!("{want} {pairs:?}"),
+        diverged as u8 as f64,
+        0.0,
+    );
     match spec.divergence {
         Divergence::Diverges(_) => {
             assert!(diverged, "{}: {pairs:?}: {:?}", engine.name(), out.status)

@@ -119,8 +119,18 @@ pub fn kinematics(engine: &dyn Engine, spec: &KitSpec, label: &str) {
             }
         }
     }
-    report(engine, &format!("kinematics_{label}_m"), worst_m, k.position_m);
-    report(engine, &format!("kinematics_{label}_rad"), worst_rad, k.angle_rad);
+    report(
+        engine,
+        &format!("kinematics_{label}_m"),
+        worst_m,
+        k.position_m,
+    );
+    report(
+        engine,
+        &format!("kinematics_{label}_rad"),
+        worst_rad,
+        k.angle_rad,
+    );
     report(
         engine,
         &format!("kinematics_{label}_readback_rad"),
@@ -157,8 +167,15 @@ pub fn initial_state(engine: &dyn Engine, spec: &KitSpec) {
     sim.tracked_poses(&mut poses);
     let wrist = wrist_at_zero(&scene, &robot);
     let d_wrist = poses[0].position_m.distance(wrist.position_m);
-    let d_cube = poses[1].position_m.distance(scene.objects[0].pose.position_m);
-    report(engine, "initial_wrist_m", d_wrist, spec.kinematics.position_m);
+    let d_cube = poses[1]
+        .position_m
+        .distance(scene.objects[0].pose.position_m);
+    report(
+        engine,
+        "initial_wrist_m",
+        d_wrist,
+        spec.kinematics.position_m,
+    );
     report(engine, "initial_cube_m", d_cube, spec.kinematics.object_m);
     assert!(d_wrist <= spec.kinematics.position_m, "{d_wrist}");
     assert!(d_cube <= spec.kinematics.object_m, "{d_cube}");

@@ -16,7 +16,7 @@ use crate::testing;
 /// The round trips' and handovers' scenes and ticks: scene 1 at 2 s (the
 /// arm moving, the cube resting on the table) and scene 3 at 12 s (the
 /// hand pushing the cube).
-const TAKEN: [(&str, usize); 2] = [("scene1_single_joint", 40), ("scene3_cube_push", 240)];
+pub const TAKEN: [(&str, usize); 2] = [("scene1_single_joint", 40), ("scene3_cube_push", 240)];
 
 /// A run saved at [`TAKEN`] and continued, against a fresh simulation
 /// given its state (native, then portable) and continued with the same
@@ -26,10 +26,21 @@ pub fn state_round_trips(engine: &dyn Engine, spec: &KitSpec) {
     for (i, (name, k)) in TAKEN.into_iter().enumerate() {
         for (j, what) in ["native", "portable"].into_iter().enumerate() {
             let gap = with_subject(engine, spec, |s| {
-                conformance::state_round_trip(s, &testing::scene(name), &testing::mico2(), k, j == 1)
+                conformance::state_round_trip(
+                    s,
+                    &testing::scene(name),
+                    &testing::mico2(),
+                    k,
+                    j == 1,
+                )
             });
             let tolerance = spec.round_trip_m[i][j];
-            report(engine, &format!("round_trip_{name}_{what}_m"), gap, tolerance);
+            report(
+                engine,
+                &format!("round_trip_{name}_{what}_m"),
+                gap,
+                tolerance,
+            );
             assert!(
                 gap <= tolerance,
                 "{}: {name}: {what} round trip moved {gap} m (tolerance {tolerance})",
@@ -49,8 +60,18 @@ pub fn handover(engine: &dyn Engine, spec: &KitSpec) {
         let (gap, angles) = with_subject(engine, spec, |s| {
             conformance::handover_gap(s, s, &testing::scene(name), &testing::mico2(), k)
         });
-        report(engine, &format!("handover_{name}_m"), gap, spec.handover_m[i]);
-        report(engine, &format!("handover_{name}_rad"), angles, spec.handover_rad);
+        report(
+            engine,
+            &format!("handover_{name}_m"),
+            gap,
+            spec.handover_m[i],
+        );
+        report(
+            engine,
+            &format!("handover_{name}_rad"),
+            angles,
+            spec.handover_rad,
+        );
         assert!(
             gap <= spec.handover_m[i],
             "{}: {name}: positions {gap} m apart",
@@ -104,7 +125,12 @@ const JOINT_2: &str = "joints.m1n6s300_joint_2";
 /// free fall is over 0.05 rad.
 pub fn damping(engine: &dyn Engine, spec: &KitSpec) {
     let (text, field) = ("[joints.m1n6s300_joint_2]\ndamping = 5.0\n", "damping");
-    if !measurable(engine, ParamKey::JointDamping, text, &format!("{JOINT_2}.{field}")) {
+    if !measurable(
+        engine,
+        ParamKey::JointDamping,
+        text,
+        &format!("{JOINT_2}.{field}"),
+    ) {
         return;
     }
     let (free, damped) = with_subject(engine, spec, |s| {
@@ -117,14 +143,22 @@ pub fn damping(engine: &dyn Engine, spec: &KitSpec) {
     report(engine, "falling_angle_damping0_rad", free, 0.05);
     report(engine, "falling_angle_ratio_damping5", damped / free, ratio);
     assert!(free > 0.05, "joint 2 fell only {free} rad without damping");
-    assert!(damped < free * ratio, "damping 5: {damped} rad, none: {free} rad");
+    assert!(
+        damped < free * ratio,
+        "damping 5: {damped} rad, none: {free} rad"
+    );
 }
 
 /// A parameters file (read from disk) limiting joint 2 to 2 N m makes the
 /// wrist lag scene 1's: more than 5 mm apart at 1.5 s.
 pub fn force_limit(engine: &dyn Engine, spec: &KitSpec) {
     let text = "[joints.m1n6s300_joint_2]\nforce_limit = 2.0\n";
-    if !measurable(engine, ParamKey::JointForceLimit, text, &format!("{JOINT_2}.force_limit")) {
+    if !measurable(
+        engine,
+        ParamKey::JointForceLimit,
+        text,
+        &format!("{JOINT_2}.force_limit"),
+    ) {
         return;
     }
     let tmp = TempDir::new(engine.name(), "force-limit");
@@ -144,16 +178,29 @@ pub fn force_limit(engine: &dyn Engine, spec: &KitSpec) {
 /// distance.
 pub fn cube_friction(engine: &dyn Engine, spec: &KitSpec) {
     let text = "[objects.cube]\nfriction = 0.0\n";
-    if !measurable(engine, ParamKey::ObjectFriction, text, "objects.cube.friction") {
+    if !measurable(
+        engine,
+        ParamKey::ObjectFriction,
+        text,
+        "objects.cube.friction",
+    ) {
         return;
     }
     let (slippery, rough) = with_subject(engine, spec, |s| {
-        (conformance::cube_push_m(s, 0.0), conformance::cube_push_m(s, 1.0))
+        (
+            conformance::cube_push_m(s, 0.0),
+            conformance::cube_push_m(s, 1.0),
+        )
     });
     let least = spec.effects.friction_push_m;
     report(engine, "cube_push_friction0_m", slippery, least);
     report(engine, "cube_push_friction1_m", rough, least);
-    report(engine, "cube_push_difference_m", (slippery - rough).abs(), least);
+    report(
+        engine,
+        "cube_push_difference_m",
+        (slippery - rough).abs(),
+        least,
+    );
     assert!(
         (slippery - rough).abs() > least,
         "friction 0: {slippery} m, friction 1: {rough} m"
@@ -166,17 +213,41 @@ pub fn cube_friction(engine: &dyn Engine, spec: &KitSpec) {
 /// on the fixed base link) is the engine's error naming the key.
 pub fn unsupported_keys(engine: &dyn Engine, spec: &KitSpec) {
     let examples = [
-        (ParamKey::JointDamping, "[joints.m1n6s300_joint_2]\ndamping = 1.0\n"),
-        (ParamKey::JointArmature, "[joints.m1n6s300_joint_2]\narmature = 0.01\n"),
-        (ParamKey::JointFrictionloss, "[joints.m1n6s300_joint_2]\nfrictionloss = 0.1\n"),
+        (
+            ParamKey::JointDamping,
+            "[joints.m1n6s300_joint_2]\ndamping = 1.0\n",
+        ),
+        (
+            ParamKey::JointArmature,
+            "[joints.m1n6s300_joint_2]\narmature = 0.01\n",
+        ),
+        (
+            ParamKey::JointFrictionloss,
+            "[joints.m1n6s300_joint_2]\nfrictionloss = 0.1\n",
+        ),
         (ParamKey::JointKv, "[joints.m1n6s300_joint_2]\nkv = 40.0\n"),
-        (ParamKey::JointForceLimit, "[joints.m1n6s300_joint_2]\nforce_limit = 30.0\n"),
-        (ParamKey::LinkMassScale, "[links.m1n6s300_link_3]\nmass_scale = 1.1\n"),
+        (
+            ParamKey::JointForceLimit,
+            "[joints.m1n6s300_joint_2]\nforce_limit = 30.0\n",
+        ),
+        (
+            ParamKey::LinkMassScale,
+            "[links.m1n6s300_link_3]\nmass_scale = 1.1\n",
+        ),
         (ParamKey::ObjectMass, "[objects.cube]\nmass_kg = 0.1\n"),
         (ParamKey::ObjectFriction, "[objects.cube]\nfriction = 0.5\n"),
-        (ParamKey::ObjectRestitution, "[objects.cube]\nrestitution = 0.1\n"),
-        (ParamKey::ContactTimeConstant, "[contact]\ntime_constant_s = 0.02\n"),
-        (ParamKey::ContactDampingRatio, "[contact]\ndamping_ratio = 1.0\n"),
+        (
+            ParamKey::ObjectRestitution,
+            "[objects.cube]\nrestitution = 0.1\n",
+        ),
+        (
+            ParamKey::ContactTimeConstant,
+            "[contact]\ntime_constant_s = 0.02\n",
+        ),
+        (
+            ParamKey::ContactDampingRatio,
+            "[contact]\ndamping_ratio = 1.0\n",
+        ),
     ];
     let mut refused = 0;
     for (key, text) in examples {
@@ -218,7 +289,9 @@ pub fn unsupported_keys(engine: &dyn Engine, spec: &KitSpec) {
             .unwrap_or_else(|| panic!("{}: {field} was accepted", engine.name()));
         eprintln!("{}: {field}: {e}", engine.name());
         match &e {
-            EngineError::Param { engine: name, key, .. } => {
+            EngineError::Param {
+                engine: name, key, ..
+            } => {
                 assert_eq!((name.as_str(), key.as_str()), (engine.name(), field));
             }
             other => panic!("{}: {field}: {other}", engine.name()),
@@ -232,7 +305,12 @@ pub fn unsupported_keys(engine: &dyn Engine, spec: &KitSpec) {
 /// with.
 pub fn gravity(engine: &dyn Engine, spec: &KitSpec) {
     let text = "[joints.m1n6s300_joint_2]\nforce_limit = 0.0\n";
-    if !measurable(engine, ParamKey::JointForceLimit, text, &format!("{JOINT_2}.force_limit")) {
+    if !measurable(
+        engine,
+        ParamKey::JointForceLimit,
+        text,
+        &format!("{JOINT_2}.force_limit"),
+    ) {
         return;
     }
     let (without, with) = with_subject(engine, spec, conformance::gravity_effect_rad);
@@ -249,14 +327,22 @@ pub fn gravity(engine: &dyn Engine, spec: &KitSpec) {
 /// inertia), to the spec's tolerance.
 pub fn armature(engine: &dyn Engine, spec: &KitSpec) {
     let text = "[joints.m1n6s300_joint_2]\narmature = 0.5\n";
-    if !measurable(engine, ParamKey::JointArmature, text, &format!("{JOINT_2}.armature")) {
+    if !measurable(
+        engine,
+        ParamKey::JointArmature,
+        text,
+        &format!("{JOINT_2}.armature"),
+    ) {
         return;
     }
     let plain = fall(engine, spec, "");
     let heavy = fall(engine, spec, "armature = 0.5\n");
     let ratio = spec.effects.armature_ratio;
     report(engine, "armature_fall_ratio", heavy / plain, ratio);
-    assert!(heavy < plain * ratio, "armature 0.5: {heavy} rad, none: {plain} rad");
+    assert!(
+        heavy < plain * ratio,
+        "armature 0.5: {heavy} rad, none: {plain} rad"
+    );
     if !spec.takes_efforts {
         return;
     }
@@ -265,7 +351,8 @@ pub fn armature(engine: &dyn Engine, spec: &KitSpec) {
     let angle = |armature: f64| {
         let p = params(&format!("[joints.spin]\narmature = {armature:?}\n"));
         let mut sim = load(engine, &rotor, &robot, &settings, &p).unwrap();
-        sim.set_joint_commands(&[ServoCommand::effort(0.02)]).unwrap();
+        sim.set_joint_commands(&[ServoCommand::effort(0.02)])
+            .unwrap();
         sim.step_n((1.0 / sim.timestep_s()).round() as u64).unwrap();
         let mut q = [0.0];
         sim.joint_angles_rad(&mut q);
@@ -273,7 +360,12 @@ pub fn armature(engine: &dyn Engine, spec: &KitSpec) {
     };
     let (free, loaded) = (angle(0.0), angle(conformance::ROTOR_INERTIA_KG_M2));
     let gap = (loaded / free - 0.5).abs();
-    report(engine, "armature_rotor_ratio_gap", gap, spec.effects.armature_rotor_ratio);
+    report(
+        engine,
+        "armature_rotor_ratio_gap",
+        gap,
+        spec.effects.armature_rotor_ratio,
+    );
     assert!(
         gap <= spec.effects.armature_rotor_ratio,
         "rotor with armature turns {loaded} rad, without {free} rad"
@@ -284,7 +376,12 @@ pub fn armature(engine: &dyn Engine, spec: &KitSpec) {
 /// (more than gravity's torque) holds the joint.
 pub fn frictionloss(engine: &dyn Engine, spec: &KitSpec) {
     let text = "[joints.m1n6s300_joint_2]\nfrictionloss = 1.0\n";
-    if !measurable(engine, ParamKey::JointFrictionloss, text, &format!("{JOINT_2}.frictionloss")) {
+    if !measurable(
+        engine,
+        ParamKey::JointFrictionloss,
+        text,
+        &format!("{JOINT_2}.frictionloss"),
+    ) {
         return;
     }
     let free = fall(engine, spec, "");
@@ -327,15 +424,29 @@ fn bounce_m(engine: &dyn Engine, spec: &KitSpec, toml: &str) -> f64 {
 /// spec's ratios.
 pub fn restitution(engine: &dyn Engine, spec: &KitSpec) {
     let text = "[objects.cube]\nrestitution = 0.5\n";
-    if !measurable(engine, ParamKey::ObjectRestitution, text, "objects.cube.restitution") {
+    if !measurable(
+        engine,
+        ParamKey::ObjectRestitution,
+        text,
+        "objects.cube.restitution",
+    ) {
         return;
     }
     let dead = bounce_m(engine, spec, "");
-    report(engine, "bounce_restitution0_m", dead, spec.effects.dead_bounce_m);
+    report(
+        engine,
+        "bounce_restitution0_m",
+        dead,
+        spec.effects.dead_bounce_m,
+    );
     assert!(dead < spec.effects.dead_bounce_m, "{dead} m");
     let [lo, hi] = spec.effects.bounce_ratio;
     for e in [0.5, 0.8] {
-        let up = bounce_m(engine, spec, &format!("[objects.cube]\nrestitution = {e:?}\n"));
+        let up = bounce_m(
+            engine,
+            spec,
+            &format!("[objects.cube]\nrestitution = {e:?}\n"),
+        );
         let ratio = up / (e * e * 0.2);
         report(engine, &format!("bounce_ratio_restitution{e}"), ratio, lo);
         assert!(
@@ -362,16 +473,32 @@ fn rest_z(engine: &dyn Engine, spec: &KitSpec, toml: &str) -> f64 {
 /// its law in the engine's tests.)
 pub fn contact_softness(engine: &dyn Engine, spec: &KitSpec) {
     let text = "[contact]\ntime_constant_s = 0.02\n";
-    if !measurable(engine, ParamKey::ContactTimeConstant, text, "contact.time_constant_s") {
+    if !measurable(
+        engine,
+        ParamKey::ContactTimeConstant,
+        text,
+        "contact.time_constant_s",
+    ) {
         return;
     }
     let stiff = rest_z(engine, spec, "");
-    let soft = rest_z(engine, spec, "[contact]\ntime_constant_s = 0.02\ndamping_ratio = 1.0\n");
-    let softer = rest_z(engine, spec, "[contact]\ntime_constant_s = 0.02\ndamping_ratio = 2.0\n");
+    let soft = rest_z(
+        engine,
+        spec,
+        "[contact]\ntime_constant_s = 0.02\ndamping_ratio = 1.0\n",
+    );
+    let softer = rest_z(
+        engine,
+        spec,
+        "[contact]\ntime_constant_s = 0.02\ndamping_ratio = 2.0\n",
+    );
     let least = spec.effects.contact_sink_m;
     if spec.effects.own_contact_is_tau_0_02 {
         report(engine, "contact_sink_tau0.02_zeta1_m", stiff - soft, 1e-12);
-        assert!((stiff - soft).abs() <= 1e-12, "default {stiff} m, tau 0.02 s {soft} m");
+        assert!(
+            (stiff - soft).abs() <= 1e-12,
+            "default {stiff} m, tau 0.02 s {soft} m"
+        );
     } else {
         report(engine, "contact_sink_tau0.02_zeta1_m", stiff - soft, least);
         assert!(stiff - soft > least, "default {stiff} m, soft {soft} m");
@@ -380,7 +507,10 @@ pub fn contact_softness(engine: &dyn Engine, spec: &KitSpec) {
     if spec.effects.own_contact_is_tau_0_02 {
         // MuJoCo's rest depth follows its impedance (`solimp`) as well as
         // the spring: the damping ratio changes it, in either direction.
-        assert!((soft - softer).abs() > least, "zeta 1 {soft} m, zeta 2 {softer} m");
+        assert!(
+            (soft - softer).abs() > least,
+            "zeta 1 {soft} m, zeta 2 {softer} m"
+        );
     } else {
         assert!(soft - softer > least, "zeta 1 {soft} m, zeta 2 {softer} m");
     }
@@ -402,7 +532,12 @@ pub fn cube_mass(engine: &dyn Engine, spec: &KitSpec) {
     let light = push(&PhysicalParams::none());
     let heavy = push(&params(text));
     let least = spec.effects.cube_mass_push_m;
-    report(engine, "cube_mass_push_difference_m", (light - heavy).abs(), least);
+    report(
+        engine,
+        "cube_mass_push_difference_m",
+        (light - heavy).abs(),
+        least,
+    );
     assert!((light - heavy).abs() > least, "{light} vs {heavy}");
 }
 
@@ -430,14 +565,22 @@ pub fn masses(engine: &dyn Engine, spec: &KitSpec) {
         mass_scale: 1.5,
         friction_scale: 1.0,
     };
-    let mut sim = engine
-        .load(&scene, &robot, &settings, &variation)
-        .unwrap();
+    let mut sim = engine.load(&scene, &robot, &settings, &variation).unwrap();
     let varied = crate::controller::run_scene(sim.as_mut(), &scene, &Default::default()).unwrap();
-    let mut runs: Vec<(&str, RunOutcome, &crate::RobotModel)> = vec![("masses x1.5", varied, &heavy)];
+    let mut runs: Vec<(&str, RunOutcome, &crate::RobotModel)> =
+        vec![("masses x1.5", varied, &heavy)];
     let text = "[links.m1n6s300_link_3]\nmass_scale = 2.0\n";
-    if measurable(engine, ParamKey::LinkMassScale, text, "links.m1n6s300_link_3.mass_scale") {
-        runs.push(("link 3 x2", run(engine, spec, &scene, &robot, &params(text), &[]), &link3));
+    if measurable(
+        engine,
+        ParamKey::LinkMassScale,
+        text,
+        "links.m1n6s300_link_3.mass_scale",
+    ) {
+        runs.push((
+            "link 3 x2",
+            run(engine, spec, &scene, &robot, &params(text), &[]),
+            &link3,
+        ));
     }
     for (what, out, model) in runs {
         let got = testing::final_angles_deg(&out);
@@ -450,7 +593,10 @@ pub fn masses(engine: &dyn Engine, spec: &KitSpec) {
             .zip(&want)
             .map(|(a, b)| (a - b).abs())
             .fold(0.0, f64::max);
-        eprintln!("{}: {what}: final {got:.3?} deg, expected {want:.3?} deg", engine.name());
+        eprintln!(
+            "{}: {what}: final {got:.3?} deg, expected {want:.3?} deg",
+            engine.name()
+        );
         report(engine, &format!("scene1 {what} end_deg"), gap, tolerance);
         assert!(gap <= tolerance, "{what}: {gap} deg from {want:?}");
     }

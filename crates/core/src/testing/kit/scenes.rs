@@ -75,7 +75,14 @@ pub fn stock_settings(engine: &dyn Engine, spec: &KitSpec) {
     }
     let s = testing::scene("scene1_single_joint");
     let robot = testing::mico2();
-    let out = run(engine, spec, &s, &robot, &PhysicalParams::none(), spec.stock_settings);
+    let out = run(
+        engine,
+        spec,
+        &s,
+        &robot,
+        &PhysicalParams::none(),
+        spec.stock_settings,
+    );
     let targets = s.targets_deg_at_tick(s.sample_count() - 1);
     let equilibrium = static_equilibrium_deg(&s, &robot, &targets);
     let sag: Vec<f64> = testing::final_angles_deg(&out)
@@ -121,7 +128,12 @@ pub fn scene2(engine: &dyn Engine, spec: &KitSpec, label: &str) {
     let upright = fk[robot.link_by_name("m1n6s300_link_6").unwrap()].position_m;
     let end = *testing::wrist(&out).last().unwrap();
     let d = end.distance(upright);
-    report(engine, &format!("scene2_{label}_upright_m"), d, spec.scene2_upright_m);
+    report(
+        engine,
+        &format!("scene2_{label}_upright_m"),
+        d,
+        spec.scene2_upright_m,
+    );
     eprintln!(
         "{} scene 2 ({label}): final wrist {:.3} mm from upright; {:.0} steps/s",
         engine.name(),
@@ -131,13 +143,22 @@ pub fn scene2(engine: &dyn Engine, spec: &KitSpec, label: &str) {
     assert!(d <= spec.scene2_upright_m, "{label}: {d} m from upright");
     let q = testing::final_angles_deg(&out);
     assert!(
-        q.iter().all(|a| a.to_radians().abs() < spec.scene2_angle_rad),
+        q.iter()
+            .all(|a| a.to_radians().abs() < spec.scene2_angle_rad),
         "{label}: final angles {q:?} deg"
     );
     let c = testing::cube(&out);
     let moved = c.last().unwrap().distance(c[0]);
-    report(engine, &format!("scene2_{label}_cube_m"), moved, spec.scene2_cube_m);
-    assert!(moved < spec.scene2_cube_m, "{label}: the cube moved {moved} m");
+    report(
+        engine,
+        &format!("scene2_{label}_cube_m"),
+        moved,
+        spec.scene2_cube_m,
+    );
+    assert!(
+        moved < spec.scene2_cube_m,
+        "{label}: the cube moved {moved} m"
+    );
 }
 
 /// [`scene3`] with the project's Mico2.
@@ -211,7 +232,10 @@ pub fn scene3(engine: &dyn Engine, spec: &KitSpec, label: &str) {
     assert!(d.z.abs() < 0.001, "{label}: the cube ends {} m up", d.z);
     if push.ends_on_a_face {
         let off_face = (final_tilt / 90.0 - (final_tilt / 90.0).round()).abs() * 90.0;
-        assert!(off_face < 2.0, "{label}: the cube ends tilted {final_tilt:.1} deg");
+        assert!(
+            off_face < 2.0,
+            "{label}: the cube ends tilted {final_tilt:.1} deg"
+        );
     }
     if let Some((from, to)) = push.contact_s {
         assert!(
@@ -263,8 +287,5 @@ pub fn iiwa(engine: &dyn Engine, spec: &KitSpec, name: &str) {
         out.steps_per_second()
     );
     report(engine, &format!("{name}_end_deg"), gap, spec.iiwa_end_deg);
-    assert!(
-        gap <= spec.iiwa_end_deg,
-        "{name}: {gap} deg from {want:?}"
-    );
+    assert!(gap <= spec.iiwa_end_deg, "{name}: {gap} deg from {want:?}");
 }
