@@ -18,11 +18,19 @@
 //! The response is integrated by semi-implicit Euler in substeps of at most
 //! [`MAX_SUBSTEP_S`]; at the natural frequencies of robot joints (20-100
 //! rad/s) that is within a fraction of a percent of the exact response.
+//! A far stiffer stage takes shorter substeps with its damping implicit,
+//! so that no accepted value makes the targets non-finite.
 
 use crate::params::PhysicalParams;
 
 /// The longest integration substep of the response, s.
 pub const MAX_SUBSTEP_S: f64 = 5e-4;
+
+/// The largest `w dt` (and half the largest `2 zeta w dt`) of a substep
+/// integrated explicitly; a stiffer stage (a natural frequency or damping
+/// far beyond a robot joint's, up to core's `PHYSICAL_MAX`) takes shorter
+/// substeps with its damping implicit, so its targets stay finite.
+const STIFF_W_DT: f64 = 0.5;
 
 /// What the stage's values are.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -134,12 +142,29 @@ impl ActuatorStage {
                 Some(w) => {
                     let n = (h_s / MAX_SUBSTEP_S).ceil().max(1.0) as usize;
                     let dt = h_s / n as f64;
-                    for _ in 0..n {
-                        *v += dt * (w * w * (u - *y) - 2.0 * p.damping_ratio * w * *v);
-                        if self.unit == StageUnit::Position {
-                            *v = v.clamp(-limit, limit);
+                    let c = 2.0 * p.damping_ratio * w;
+                    if w * dt <= STIFF_W_DT && c * dt <= 2.0 * STIFF_W_DT {
+                        for _ in 0..n {
+                            *v += dt * (w * w * (u - *y) - c * *v);
+                            if self.unit == StageUnit::Position {
+                                *v = v.clamp(-limit, limit);
+                            }
+                            *y += dt * *v;
                         }
-                        *y += dt * *v;
+                    } else {
+                        // A stiff stage: explicit substeps would blow up
+                        // (non-finite targets the engines abort on).
+                        // Shorter substeps for the spring, the damping
+                        // implicit: stable at any frequency and damping.
+                        let n = (h_s * w / STIFF_W_DT).ceil().max(n as f64) as usize;
+                        let dt = h_s / n as f64;
+                        for _ in 0..n {
+                            *v = (*v + dt * w * w * (u - *y)) / (1.0 + dt * c);
+                            if self.unit == StageUnit::Position {
+                                *v = v.clamp(-limit, limit);
+                            }
+                            *y += dt * *v;
+                        }
                     }
                 }
                 None => match self.unit {
@@ -201,6 +226,20 @@ mod tests {
             b.advance(&[1.0], 1e-2);
         }
         assert!(a.targets()[0] <= 1.0 && (a.targets()[0] - b.targets()[0]).abs() < 1e-9);
+    }
+
+    /// The extremes core's reading accepts (`PHYSICAL_MIN`, `PHYSICAL_MAX`)
+    /// keep the targets finite and bounded.
+    #[test]
+    fn a_stiff_stage_stays_finite() {
+        for (w, zeta) in [(1e6, 1e-6), (1e6, 1e6), (1e3, 1e6), (1e-6, 1e-6)] {
+            let mut s = stage(Some(w), zeta, StageUnit::Velocity);
+            for _ in 0..1000 {
+                s.advance(&[1.0], 1e-3);
+            }
+            let y = s.targets()[0];
+            assert!(y.is_finite() && y.abs() <= 2.0, "w {w}, zeta {zeta}: {y}");
+        }
     }
 
     #[test]

@@ -485,15 +485,36 @@ struct FileActuator {
 /// The allowed range of a value.
 #[derive(Clone, Copy)]
 enum Range {
-    /// Any finite number.
-    Finite,
     /// `>= 0`.
     NonNegative,
-    /// `> 0`.
-    Positive,
     /// `[0, 1]`.
     Unit,
+    /// From the first to the second, both included: the physical range of
+    /// a quantity the engines compute with ([`PHYSICAL_MAX`],
+    /// [`PHYSICAL_MIN`]).
+    Span(f64, f64),
 }
+
+/// The largest magnitude of a physical parameter (N m s/rad, kg m^2, N m,
+/// kg, 1/s, ...). Beyond it the engines' numbers overflow or their solvers
+/// break: single-precision engines (Rapier, PhysX) hold at most 3.4e38, so
+/// 1e300 becomes infinite; a joint damping of 1e300 panicked Rapier's
+/// solver and aborted PhysX (`PxIsFinite`); a link mass scale of 1e300
+/// aborted ODE. No robot comes near it (the iiwa's 300 N m, servo gains
+/// in the hundreds, tuning spaces up to a few thousand).
+pub const PHYSICAL_MAX: f64 = 1e6;
+
+/// The least value of a parameter that must be positive and that the
+/// engines divide by or invert (masses, a servo's kv, the contact's time
+/// constant and damping ratio, the actuator's damping ratio): below it the
+/// engines' inverses overflow (a 1e-300 kg cube aborted ODE and DART;
+/// Rapier and PhysX refuse it as no single-precision number).
+pub const PHYSICAL_MIN: f64 = 1e-6;
+
+/// `[0, PHYSICAL_MAX]`.
+const BOUNDED: Range = Range::Span(0.0, PHYSICAL_MAX);
+/// `[PHYSICAL_MIN, PHYSICAL_MAX]`.
+const BOUNDED_POSITIVE: Range = Range::Span(PHYSICAL_MIN, PHYSICAL_MAX);
 
 struct Reader<'a> {
     path: &'a Path,
@@ -522,13 +543,23 @@ impl Reader<'_> {
         let Some(s) = v else { return Ok(None) };
         let x = *s.get_ref();
         let (ok, want) = match range {
-            Range::Finite => (x.is_finite(), "a finite number"),
             Range::NonNegative => (x.is_finite() && x >= 0.0, "a finite number >= 0"),
-            Range::Positive => (x.is_finite() && x > 0.0, "a finite number > 0"),
             Range::Unit => (
                 x.is_finite() && (0.0..=1.0).contains(&x),
                 "a number from 0 to 1",
             ),
+            Range::Span(lo, hi) => {
+                if !(x.is_finite() && (lo..=hi).contains(&x)) {
+                    return Err(self.error_at(
+                        Some(s.span().start),
+                        format!(
+                            "{field}: must be a number from {lo:e} to {hi:e} (outside, the engines' numbers \
+                             overflow or their solvers break), found {x:e}"
+                        ),
+                    ));
+                }
+                (true, "")
+            }
         };
         if !ok {
             return Err(self.error_at(
@@ -587,13 +618,13 @@ impl PhysicalParams {
             let n = r.name(format!("joints.{}", name.get_ref()), name);
             let f = |k: &str| format!("joints.{n}.{k}");
             let jp = JointParams {
-                damping: r.value(&f("damping"), &j.damping, Range::NonNegative)?,
-                armature: r.value(&f("armature"), &j.armature, Range::NonNegative)?,
-                frictionloss: r.value(&f("frictionloss"), &j.frictionloss, Range::NonNegative)?,
-                kv: r.value(&f("kv"), &j.kv, Range::Positive)?,
-                kp: r.value(&f("kp"), &j.kp, Range::NonNegative)?,
-                force_limit: r.value(&f("force_limit"), &j.force_limit, Range::NonNegative)?,
-                offset_deg: r.value(&f("offset_deg"), &j.offset_deg, Range::Finite)?,
+                damping: r.value(&f("damping"), &j.damping, BOUNDED)?,
+                armature: r.value(&f("armature"), &j.armature, BOUNDED)?,
+                frictionloss: r.value(&f("frictionloss"), &j.frictionloss, BOUNDED)?,
+                kv: r.value(&f("kv"), &j.kv, BOUNDED_POSITIVE)?,
+                kp: r.value(&f("kp"), &j.kp, BOUNDED)?,
+                force_limit: r.value(&f("force_limit"), &j.force_limit, BOUNDED)?,
+                offset_deg: r.value(&f("offset_deg"), &j.offset_deg, Range::Span(-360.0, 360.0))?,
             };
             p.joints.insert(n, jp);
         }
@@ -602,7 +633,7 @@ impl PhysicalParams {
             let mass_scale = r.value(
                 &format!("links.{n}.mass_scale"),
                 &l.mass_scale,
-                Range::Positive,
+                BOUNDED_POSITIVE,
             )?;
             p.links.insert(n, LinkParams { mass_scale });
         }
@@ -610,8 +641,8 @@ impl PhysicalParams {
             let n = r.name(format!("objects.{}", name.get_ref()), name);
             let f = |k: &str| format!("objects.{n}.{k}");
             let op = ObjectParams {
-                mass_kg: r.value(&f("mass_kg"), &o.mass_kg, Range::Positive)?,
-                friction: r.value(&f("friction"), &o.friction, Range::NonNegative)?,
+                mass_kg: r.value(&f("mass_kg"), &o.mass_kg, BOUNDED_POSITIVE)?,
+                friction: r.value(&f("friction"), &o.friction, BOUNDED)?,
                 restitution: r.value(&f("restitution"), &o.restitution, Range::Unit)?,
             };
             p.objects.insert(n, op);
@@ -621,28 +652,28 @@ impl PhysicalParams {
                 time_constant_s: r.value(
                     "contact.time_constant_s",
                     &c.time_constant_s,
-                    Range::Positive,
+                    BOUNDED_POSITIVE,
                 )?,
                 damping_ratio: r.value(
                     "contact.damping_ratio",
                     &c.damping_ratio,
-                    Range::Positive,
+                    BOUNDED_POSITIVE,
                 )?,
             };
         }
         if let Some(c) = &file.controller {
             p.controller = ControllerParams {
                 delay_s: r.value("controller.delay_s", &c.delay_s, Range::NonNegative)?,
-                gain_per_s: r.value("controller.gain_per_s", &c.gain_per_s, Range::Positive)?,
+                gain_per_s: r.value("controller.gain_per_s", &c.gain_per_s, BOUNDED_POSITIVE)?,
                 max_speed_deg_s: r.value(
                     "controller.max_speed_deg_s",
                     &c.max_speed_deg_s,
-                    Range::Positive,
+                    BOUNDED_POSITIVE,
                 )?,
                 max_accel_deg_s2: r.value(
                     "controller.max_accel_deg_s2",
                     &c.max_accel_deg_s2,
-                    Range::Positive,
+                    BOUNDED_POSITIVE,
                 )?,
             };
         }
@@ -651,23 +682,19 @@ impl PhysicalParams {
                 frequency_rad_s: r.value(
                     "actuator.frequency_rad_s",
                     &a.frequency_rad_s,
-                    Range::Positive,
+                    BOUNDED_POSITIVE,
                 )?,
                 damping_ratio: r.value(
                     "actuator.damping_ratio",
                     &a.damping_ratio,
-                    Range::Positive,
+                    BOUNDED_POSITIVE,
                 )?,
                 max_velocity_deg_s: r.value(
                     "actuator.max_velocity_deg_s",
                     &a.max_velocity_deg_s,
-                    Range::Positive,
+                    BOUNDED_POSITIVE,
                 )?,
-                deadband_deg_s: r.value(
-                    "actuator.deadband_deg_s",
-                    &a.deadband_deg_s,
-                    Range::NonNegative,
-                )?,
+                deadband_deg_s: r.value("actuator.deadband_deg_s", &a.deadband_deg_s, BOUNDED)?,
             };
         }
         for (engine, table) in &file.engine {
@@ -854,6 +881,33 @@ impl PhysicalParams {
             }
         }
         keys
+    }
+
+    /// The error for `links.L.mass_scale` set on a link of the robot's
+    /// fixed base (no controlled joint between it and the root): the
+    /// engine welds it to the world, so its mass has no effect.
+    pub fn check_fixed_base_masses(
+        &self,
+        engine: &str,
+        scene: &Scene,
+        robot: &RobotModel,
+    ) -> Result<(), EngineError> {
+        for (name, l) in &self.links {
+            let Some(link) = robot.link_by_name(name) else {
+                continue; // `apply` reports unknown names.
+            };
+            if l.mass_scale.is_some() && crate::robot::plan::in_fixed_base(scene, robot, link) {
+                return Err(EngineError::Param {
+                    engine: engine.to_string(),
+                    key: format!("links.{name}.mass_scale"),
+                    message: format!(
+                        "link {name} is part of the robot's fixed base (no controlled joint between it \
+                         and the root), so its mass has no effect"
+                    ),
+                });
+            }
+        }
+        Ok(())
     }
 
     /// The error for every key set that neither core nor `engine` (whose
@@ -1153,7 +1207,10 @@ integrator = "implicitfast"
             .unwrap_err()
             .to_string();
         assert!(e.starts_with("/p/params.toml:2:11:"), "{e}");
-        assert!(e.contains("joints.a.damping") && e.contains(">= 0"), "{e}");
+        assert!(
+            e.contains("joints.a.damping") && e.contains("from 0e0 to 1e6"),
+            "{e}"
+        );
         let e = parse("[objects.cube]\nrestitution = 1.5\n")
             .unwrap_err()
             .to_string();
@@ -1165,7 +1222,24 @@ integrator = "implicitfast"
             .to_string();
         assert!(e.contains("longer than 10 s"), "{e}");
         let e = parse("[joints.a]\nkv = nan\n").unwrap_err().to_string();
-        assert!(e.contains("> 0"), "{e}");
+        assert!(e.contains("from 1e-6 to 1e6"), "{e}");
+        // Beyond the physical range: the engines' numbers would overflow.
+        let e = parse("[joints.a]\ndamping = 1e300\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("/p/params.toml:2:11:")
+                && e.contains("joints.a.damping")
+                && e.contains("overflow"),
+            "{e}"
+        );
+        let e = parse("[objects.cube]\nmass_kg = 1e-300\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("objects.cube.mass_kg") && e.contains("from 1e-6"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -177,6 +177,23 @@ pub enum ObjectShape {
 }
 
 impl SceneObject {
+    /// Checks the shape: every edge of a box positive and finite; the
+    /// message names the object.
+    pub fn check_shape(&self) -> Result<(), String> {
+        match self.shape {
+            ObjectShape::Box { size_m: s } => {
+                if [s.x, s.y, s.z].iter().all(|v| v.is_finite() && *v > 0.0) {
+                    Ok(())
+                } else {
+                    Err(format!(
+                        "object \"{}\": box size [{}, {}, {}] m must be positive and finite",
+                        self.name, s.x, s.y, s.z
+                    ))
+                }
+            }
+        }
+    }
+
     /// Principal moments of inertia about the centre, kg m^2 (uniform density).
     pub fn principal_inertia(&self) -> Vec3 {
         match self.shape {

@@ -13,6 +13,24 @@ use crate::trajectory::{CUBE, WRIST};
 use crate::Vec3;
 use std::path::{Path, PathBuf};
 
+/// Runs the calling test again in a child process (this test binary, the
+/// test `test` alone, single-threaded, `--nocapture`) with the environment
+/// variable `env` set, and returns what it printed and how it ended; in
+/// the child (where `env` is set) returns `None`, and the test does the
+/// child's work. For checks of what an engine prints and of aborts, which
+/// only a separate process can observe.
+pub fn rerun_in_child(test: &str, env: &str) -> Option<std::process::Output> {
+    if std::env::var_os(env).is_some() {
+        return None;
+    }
+    let out = std::process::Command::new(std::env::current_exe().unwrap())
+        .args(["--exact", test, "--nocapture", "--test-threads=1", "-q"])
+        .env(env, "1")
+        .output()
+        .unwrap();
+    Some(out)
+}
+
 /// The workspace root (the folder with `assets/` and `crates/`).
 pub fn workspace() -> PathBuf {
     // Under cargo, CARGO_MANIFEST_DIR at run time is the tested crate's own

@@ -266,7 +266,7 @@ pub(crate) fn motor_joints(
             })?;
         if !model.is_movable(j) {
             return Err(load_error(format!(
-                "joint \"{}\" is not a revolute or prismatic joint in Bullet",
+                "joint \"{}\" is not a revolute or prismatic joint in Bullet (fixed joints cannot be actuated)",
                 a.joint
             )));
         }

@@ -392,15 +392,11 @@ impl BulletSimulation {
     ) -> Result<BulletSimulation, EngineError> {
         let options = BulletSettings::parse(settings)?;
         params.check_support(ENGINE_NAME, params::SUPPORT)?;
+        params.check_fixed_base_masses(ENGINE_NAME, scene, robot)?;
         let contact = params::ContactPlan::new(scene, params)?;
-        let usable = variation.mass_scale.is_finite()
-            && variation.mass_scale > 0.0
-            && variation.friction_scale.is_finite()
-            && variation.friction_scale >= 0.0;
-        if !usable {
-            return Err(load_error(format!(
-                "unusable model variation {variation:?}"
-            )));
+        variation.check().map_err(load_error)?;
+        for o in &scene.objects {
+            o.check_shape().map_err(load_error)?;
         }
         install_message_handler();
         check_meshes(robot)?;
@@ -1217,6 +1213,15 @@ impl Simulation for BulletSimulation {
                     "{} joint angles given for {} joints",
                     rad.len(),
                     self.joints.len()
+                ),
+            });
+        }
+        if let Some(i) = rad.iter().position(|a| !a.is_finite()) {
+            return Err(EngineError::Usage {
+                engine: ENGINE_NAME.to_string(),
+                message: format!(
+                    "joint \"{}\": angle {} is not finite",
+                    self.scene.actuators[i].joint, rad[i]
                 ),
             });
         }

@@ -9,6 +9,7 @@ use realitygap_core::engine::{
 };
 use realitygap_core::robot::{PackageResolver, RobotModel};
 use realitygap_core::scene::Scene;
+use realitygap_core::testing::rerun_in_child;
 use realitygap_engine_bullet::{BulletEngine, BulletSimulation};
 use std::path::{Path, PathBuf};
 
@@ -341,22 +342,10 @@ const CHILD_ENV: &str = "REALITYGAP_BULLET_STDOUT_CHILD";
 /// that no part of it can pass without checking anything.
 #[test]
 fn bullet_writes_nothing_to_stdout() {
-    if std::env::var_os(CHILD_ENV).is_some() {
+    let Some(out) = rerun_in_child("bullet_writes_nothing_to_stdout", CHILD_ENV) else {
         make_bullet_complain();
         return;
-    }
-    let exe = std::env::current_exe().unwrap();
-    let out = std::process::Command::new(exe)
-        .args([
-            "--exact",
-            "bullet_writes_nothing_to_stdout",
-            "--nocapture",
-            "--test-threads=1",
-            "-q",
-        ])
-        .env(CHILD_ENV, "1")
-        .output()
-        .unwrap();
+    };
     let stdout = String::from_utf8_lossy(&out.stdout);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "child failed:\n{stdout}\n{stderr}");

@@ -95,39 +95,6 @@ fn handover_into_a_fresh_bullet() {
 }
 
 #[test]
-fn damping_slows_the_fall() {
-    let s = EngineSettings::new();
-    let free = conformance::falling_angle_rad(subject(&s), 0.0);
-    let damped = conformance::falling_angle_rad(subject(&s), 5.0);
-    report("falling_angle_damping_0", free, "> damped");
-    report("falling_angle_damping_5", damped, "< free");
-    assert!(damped < free * 0.9, "free {free} rad, damped {damped} rad");
-}
-
-#[test]
-fn force_limit_makes_joint_2_lag() {
-    let s = EngineSettings::new();
-    let effect = conformance::force_limit_effect_m(subject(&s), 2.0);
-    report("force_limit_effect", effect, "> 0.005 m");
-    assert!(effect > 0.005, "{effect} m");
-}
-
-#[test]
-fn cube_friction_changes_the_push() {
-    let s = EngineSettings::new();
-    let slippery = conformance::cube_push_m(subject(&s), 0.0);
-    let rough = conformance::cube_push_m(subject(&s), 1.0);
-    report("cube_push_friction_0", slippery, "differs from friction 1");
-    report("cube_push_friction_1", rough, "differs from friction 0");
-    report(
-        "cube_push_difference",
-        (rough - slippery).abs(),
-        "> 0.005 m",
-    );
-    assert!((rough - slippery).abs() > 0.005, "{slippery} vs {rough}");
-}
-
-#[test]
 fn unsupported_key_is_an_error_naming_engine_and_key() {
     let (key, e) = conformance::unsupported_key_error(&BulletEngine).expect("Bullet lacks keys");
     let text = e.to_string();
@@ -140,16 +107,6 @@ fn unsupported_key_is_an_error_naming_engine_and_key() {
 
 fn key_name(key: ParamKey) -> String {
     key.pattern().replace("<joint>", "m1n6s300_joint_2")
-}
-
-#[test]
-fn gravity_comes_from_the_scene() {
-    let s = EngineSettings::new();
-    let (without, with) = conformance::gravity_effect_rad(subject(&s));
-    report("gravity_zero_moved", without, "1e-6 rad");
-    report("gravity_default_moved", with, "> 0.05 rad");
-    assert!(without < 1e-6, "{without}");
-    assert!(with > 0.05, "{with}");
 }
 
 #[test]

@@ -5,13 +5,12 @@
 mod common;
 
 use common::*;
-use realitygap_core::controller::{simulate, RunOptions, RunStatus, SplitMix64};
+use realitygap_core::controller::{simulate, RunOptions, RunStatus};
 use realitygap_core::engine::{EngineSettings, ModelVariation, SettingValue, Simulation};
 use realitygap_core::pose::Pose;
 use realitygap_core::robot::RobotModel;
 use realitygap_core::scene::Scene;
 use realitygap_engine_bullet::{BulletEngine, BulletSimulation};
-use std::collections::HashMap;
 
 fn load(
     scene: &Scene,
@@ -21,90 +20,6 @@ fn load(
 ) -> BulletSimulation {
     scene.validate(robot).unwrap();
     BulletSimulation::load(scene, robot, settings, variation).unwrap()
-}
-
-/// Places the arm at random configurations and compares every link's frame
-/// with the URDF forward kinematics (fingers held at their scene angles).
-fn check_kinematics(scene: &Scene, robot: &RobotModel) {
-    let mut sim = load(
-        scene,
-        robot,
-        &EngineSettings::new(),
-        &ModelVariation::default(),
-    );
-    let mut rng = SplitMix64::new(5);
-    let controlled = scene.controlled_joints();
-    let mut worst: (f64, f64) = (0.0, 0.0);
-    for _ in 0..10 {
-        let angles: Vec<f64> = controlled
-            .iter()
-            .map(|name| {
-                let lim = robot.joints[robot.joint_by_name(name).unwrap()]
-                    .limits
-                    .unwrap();
-                let (lo, hi) = (lim.lower.max(-3.0), lim.upper.min(3.0));
-                lo + (hi - lo) * rng.uniform()
-            })
-            .collect();
-        sim.set_joint_angles_rad(&angles).unwrap();
-        let mut read = vec![0.0; angles.len()];
-        sim.joint_angles_rad(&mut read);
-        assert_eq!(read, angles);
-        let mut named: HashMap<String, f64> = controlled
-            .iter()
-            .zip(&angles)
-            .map(|(n, &a)| (n.to_string(), a))
-            .collect();
-        for (n, &a) in &scene.robot.held_joints_rad {
-            named.insert(n.clone(), a);
-        }
-        let fk = robot.forward_kinematics(
-            &scene.robot.base,
-            &robot.positions_from_names(&named).unwrap(),
-        );
-        for (link, expected) in robot.links.iter().zip(&fk) {
-            let Some(got) = sim.link_pose(&link.name).unwrap() else {
-                assert_eq!(
-                    link.name, robot.links[robot.root_link].name,
-                    "link {} missing",
-                    link.name
-                );
-                continue;
-            };
-            let d = got.position_m.distance(expected.position_m);
-            let a = got.orientation.angle_to(expected.orientation);
-            assert!(
-                d < 1e-12 && a < 1e-9,
-                "{}: link {} off by {d} m, {a} rad",
-                robot.name,
-                link.name
-            );
-            worst = (worst.0.max(d), worst.1.max(a));
-        }
-        let mut poses = [Pose::IDENTITY; 2];
-        sim.tracked_poses(&mut poses);
-        let w = fk[robot.link_by_name("m1n6s300_link_6").unwrap()];
-        assert!(poses[0].position_m.distance(w.position_m) < 1e-12);
-        assert!(poses[0].orientation.angle_to(w.orientation) < 1e-9);
-    }
-    eprintln!(
-        "{}: largest gap to the URDF kinematics {:.2e} m, {:.2e} rad",
-        robot.name, worst.0, worst.1
-    );
-}
-
-#[test]
-fn mico2_follows_urdf_kinematics() {
-    check_kinematics(&scene("scene1_single_joint"), &mico2());
-}
-
-#[test]
-fn official_model_follows_urdf_kinematics() {
-    let Some(paper) = paper_data() else { return };
-    check_kinematics(
-        &official_scene("scene1_single_joint", &paper),
-        &official_robot(&paper),
-    );
 }
 
 /// At rest the only contact is the cube on the ground; the initial state

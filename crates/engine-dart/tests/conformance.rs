@@ -98,52 +98,6 @@ fn handover_with_mujoco_both_ways() {
     }
 }
 
-#[test]
-fn damping_slows_the_falling_joint() {
-    let settings = EngineSettings::new();
-    let free = conformance::falling_angle_rad(subject(&settings), 0.0);
-    let damped = conformance::falling_angle_rad(subject(&settings), 5.0);
-    report("falling_angle_damping0_rad", free, "> 0.05");
-    report("falling_angle_damping5_rad", damped, "< 0.9 free");
-    assert!(free > 0.05, "joint 2 fell only {free} rad without damping");
-    assert!(
-        damped < free * 0.9,
-        "damping 5: {damped} rad, none: {free} rad"
-    );
-}
-
-#[test]
-fn force_limit_makes_joint_2_lag() {
-    let settings = EngineSettings::new();
-    let d = conformance::force_limit_effect_m(subject(&settings), 2.0);
-    report("force_limit_effect_m", d, "> 0.005");
-    assert!(d > 0.005, "force limit 2 N m moved the wrist {d} m");
-}
-
-#[test]
-fn cube_friction_changes_the_push() {
-    let settings = EngineSettings::new();
-    let slippery = conformance::cube_push_m(subject(&settings), 0.0);
-    let rough = conformance::cube_push_m(subject(&settings), 1.0);
-    report("cube_push_friction0_m", slippery, "differs");
-    report("cube_push_friction1_m", rough, "differs");
-    report("cube_push_difference_m", (slippery - rough).abs(), "> 0.01");
-    assert!(
-        (slippery - rough).abs() > 0.01,
-        "friction 0: {slippery} m, friction 1: {rough} m"
-    );
-}
-
-#[test]
-fn gravity_comes_from_the_scene() {
-    let settings = EngineSettings::new();
-    let (without, with) = conformance::gravity_effect_rad(subject(&settings));
-    report("gravity_zero_moved_rad", without, "1e-9");
-    report("gravity_default_moved_rad", with, "> 0.05");
-    assert!(without < 1e-9, "moved {without} rad without gravity");
-    assert!(with > 0.05, "moved only {with} rad with gravity");
-}
-
 fn load_error(params: &PhysicalParams, settings: &EngineSettings) -> EngineError {
     let s = scene("scene1_single_joint");
     let robot = mico2();

@@ -15,6 +15,7 @@ const SPEC: KitSpec = KitSpec {
     position_law: PositionLaw::Pd,
     takes_efforts: true,
     command_round_trip_rad: [0.0, 0.0],
+    ..KitSpec::CONTRACT
 };
 
 realitygap_core::engine_test_kit!(realitygap_engine_dart::DartEngine, SPEC);

@@ -8,6 +8,7 @@ mod common;
 use common::*;
 use realitygap_core::controller::RunOutcome;
 use realitygap_core::engine::EngineSettings;
+use realitygap_core::testing::rerun_in_child;
 use realitygap_engine_dart::DartEngine;
 use std::sync::Mutex;
 
@@ -59,21 +60,10 @@ fn child() {
 
 #[test]
 fn dart_printing_goes_to_the_log_not_the_streams() {
-    if std::env::var_os(CHILD).is_some() {
+    let Some(out) = rerun_in_child("dart_printing_goes_to_the_log_not_the_streams", CHILD) else {
         child();
         return;
-    }
-    let out = std::process::Command::new(std::env::current_exe().unwrap())
-        .args([
-            "--exact",
-            "dart_printing_goes_to_the_log_not_the_streams",
-            "--nocapture",
-            "--test-threads",
-            "1",
-        ])
-        .env(CHILD, "1")
-        .output()
-        .unwrap();
+    };
     let stdout = String::from_utf8_lossy(&out.stdout);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "child failed:\n{stdout}\n{stderr}");

@@ -103,9 +103,12 @@ impl Engine for IdealEngine {
         scene: &Scene,
         robot: &RobotModel,
         settings: &EngineSettings,
-        _variation: &ModelVariation,
+        variation: &ModelVariation,
         _params: &PhysicalParams,
     ) -> Result<Box<dyn Simulation>, EngineError> {
+        // The model has no masses or friction to vary, but a bad factor is
+        // the same error as in every engine.
+        variation.check().map_err(load_error)?;
         Ok(Box::new(IdealSimulation::load(scene, robot, settings)?))
     }
 }
@@ -152,6 +155,9 @@ impl IdealSimulation {
         settings: &EngineSettings,
     ) -> Result<IdealSimulation, EngineError> {
         let dt = timestep(settings)?;
+        scene
+            .validate(robot)
+            .map_err(|e| load_error(e.to_string()))?;
         let mut positions = vec![0.0; robot.joints.len()];
         for (name, &a) in &scene.robot.held_joints_rad {
             let j = robot
@@ -235,10 +241,19 @@ impl Simulation for IdealSimulation {
     }
 
     fn set_joint_angles_rad(&mut self, rad: &[f64]) -> Result<(), EngineError> {
-        if rad.len() != self.joints.len() || rad.iter().any(|a| !a.is_finite()) {
+        if rad.len() != self.joints.len() {
             return Err(EngineError::Usage {
                 engine: ENGINE_NAME.into(),
                 message: format!("{} finite joint angles are needed", self.joints.len()),
+            });
+        }
+        if let Some(i) = rad.iter().position(|a| !a.is_finite()) {
+            return Err(EngineError::Usage {
+                engine: ENGINE_NAME.into(),
+                message: format!(
+                    "joint \"{}\": angle {} is not finite",
+                    self.scene.actuators[i].joint, rad[i]
+                ),
             });
         }
         for (&j, &a) in self.joints.iter().zip(rad) {

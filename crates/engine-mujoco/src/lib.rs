@@ -289,7 +289,11 @@ fn compile(scene: &Scene, robot: &RobotModel) -> Result<MjModel, EngineError> {
                 .map_err(|e| load_error(format!("MJCF file {}: {e}", path.display())))
         }
         None => {
-            let xml = mjcf::scene_to_mjcf(scene, robot).map_err(|e| load_error(e.0))?;
+            for o in &scene.objects {
+                o.check_shape().map_err(load_error)?;
+            }
+            let xml = mjcf::scene_to_mjcf(scene, robot)
+                .map_err(|e| load_error(format!("{} (robot {})", e.0, robot.source.display())))?;
             MjModel::from_xml_string(&xml).map_err(|e| {
                 load_error(format!(
                     "MuJoCo rejected the model built from {}: {e}",
@@ -449,6 +453,10 @@ impl MujocoSimulation {
         params: &PhysicalParams,
     ) -> Result<MujocoSimulation, EngineError> {
         let options = MujocoSettings::parse(settings)?;
+        variation.check().map_err(load_error)?;
+        if scene.robot.mjcf.is_none() {
+            params.check_fixed_base_masses(ENGINE_NAME, scene, robot)?;
+        }
         let mut model = Box::new(compile(scene, robot)?);
         {
             let opt = model.opt_mut();
@@ -712,6 +720,15 @@ impl Simulation for MujocoSimulation {
                     "{} joint angles given for {} joints",
                     rad.len(),
                     self.qpos_adr.len()
+                ),
+            });
+        }
+        if let Some(i) = rad.iter().position(|a| !a.is_finite()) {
+            return Err(EngineError::Usage {
+                engine: ENGINE_NAME.to_string(),
+                message: format!(
+                    "joint \"{}\": angle {} is not finite",
+                    self.scene.actuators[i].joint, rad[i]
                 ),
             });
         }

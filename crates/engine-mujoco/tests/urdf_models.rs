@@ -5,80 +5,8 @@
 mod common;
 
 use common::*;
-use realitygap_core::controller::SplitMix64;
-use realitygap_core::engine::{EngineSettings, ModelVariation, Simulation};
-use realitygap_core::pose::Pose;
-use realitygap_core::robot::RobotModel;
-use realitygap_core::scene::Scene;
+use realitygap_core::engine::{EngineSettings, ModelVariation};
 use realitygap_engine_mujoco::MujocoSimulation;
-use std::collections::HashMap;
-
-/// Places the arm at random configurations and compares every link body's
-/// pose with the URDF forward kinematics (fingers held at their scene
-/// positions).
-fn check_kinematics(scene: &Scene, robot: &RobotModel) {
-    scene.validate(robot).unwrap();
-    let mut sim = MujocoSimulation::load(
-        scene,
-        robot,
-        &EngineSettings::new(),
-        &ModelVariation::default(),
-    )
-    .unwrap();
-    let mut rng = SplitMix64::new(11);
-    let controlled = scene.controlled_joints();
-    for _ in 0..20 {
-        let angles: Vec<f64> = controlled
-            .iter()
-            .map(|name| {
-                let lim = robot.joints[robot.joint_by_name(name).unwrap()]
-                    .limits
-                    .unwrap();
-                let (lo, hi) = (lim.lower.max(-3.0), lim.upper.min(3.0));
-                lo + (hi - lo) * rng.uniform()
-            })
-            .collect();
-        sim.set_joint_angles_rad(&angles).unwrap();
-        let mut named: HashMap<String, f64> = controlled
-            .iter()
-            .zip(&angles)
-            .map(|(n, &a)| (n.to_string(), a))
-            .collect();
-        for (n, &a) in &scene.robot.held_joints_rad {
-            named.insert(n.clone(), a);
-        }
-        let positions = robot.positions_from_names(&named).unwrap();
-        let fk = robot.forward_kinematics(&scene.robot.base, &positions);
-        for (link, expected) in robot.links.iter().zip(&fk) {
-            let got: Pose = sim.body_pose(&link.name).unwrap();
-            let d = got.position_m.distance(expected.position_m);
-            let a = got.orientation.angle_to(expected.orientation);
-            assert!(
-                d < 1e-9 && a < 1e-9,
-                "{}: link {} off by {d} m, {a} rad",
-                robot.name,
-                link.name
-            );
-        }
-        let mut wrist = [Pose::IDENTITY; 2];
-        sim.tracked_poses(&mut wrist);
-        let w = fk[robot.link_by_name("m1n6s300_link_6").unwrap()];
-        assert!(wrist[0].position_m.distance(w.position_m) < 1e-9);
-    }
-}
-
-#[test]
-fn mico2_model_follows_urdf_kinematics() {
-    check_kinematics(&scene("scene1_single_joint"), &mico2());
-}
-
-#[test]
-fn official_model_follows_urdf_kinematics() {
-    let Some(paper) = paper_data() else { return };
-    let mut s = scene("scene1_single_joint");
-    s.set_robot_urdf(paper.join("kinova_description/urdf/m1n6s300.urdf"));
-    check_kinematics(&s, &official_robot(&paper));
-}
 
 /// Runs one scene with both robots and returns the distance between their
 /// final wrist positions and the largest distance over the run, m.

@@ -234,6 +234,11 @@ impl OdeSimulation {
         physical: &PhysicalParams,
     ) -> Result<OdeSimulation, EngineError> {
         let options = OdeSettings::parse(settings)?;
+        physical.check_fixed_base_masses(ENGINE_NAME, scene, robot)?;
+        variation.check().map_err(load_error)?;
+        for o in &scene.objects {
+            o.check_shape().map_err(load_error)?;
+        }
         world::init().map_err(load_error)?;
         let mut plan = plan::plan(scene, robot, &options, variation)
             .map_err(|e| load_error(format!("{}: {}", robot.source.display(), e.0)))?;
@@ -419,6 +424,14 @@ impl Simulation for OdeSimulation {
     }
 
     fn set_joint_angles_rad(&mut self, rad: &[f64]) -> Result<(), EngineError> {
+        if let Some(i) = rad.iter().position(|a| !a.is_finite()) {
+            if let Some(a) = self.scene.actuators.get(i) {
+                return Err(EngineError::Usage {
+                    engine: ENGINE_NAME.to_string(),
+                    message: format!("joint \"{}\": angle {} is not finite", a.joint, rad[i]),
+                });
+            }
+        }
         if rad.len() != self.angles_rad.len() || rad.iter().any(|a| !a.is_finite()) {
             return Err(EngineError::Usage {
                 engine: ENGINE_NAME.to_string(),

@@ -138,41 +138,6 @@ fn portable_gap_is_odes_constraint_error() {
     assert!(stiff < fine / 2.0 && stiff < 3e-6, "{stiff}");
 }
 
-/// With the servos off, joint 2 falls less far in 0.3 s with 5 N m s/rad
-/// of damping than with none.
-#[test]
-fn damping_slows_the_falling_joint() {
-    let defaults = EngineSettings::new();
-    let free = conformance::falling_angle_rad(subject(&defaults), 0.0);
-    let damped = conformance::falling_angle_rad(subject(&defaults), 5.0);
-    eprintln!("joint 2 falls {free} rad undamped, {damped} rad with damping 5");
-    report("falling_angle_ratio_damped_to_free", damped / free, "< 0.9");
-    assert!(free > 0.05, "{free}");
-    assert!(damped < 0.9 * free, "{damped} vs {free}");
-}
-
-/// A 2 N m force limit on joint 2 makes the wrist lag by more than 5 mm at
-/// 1.5 s.
-#[test]
-fn force_limit_makes_joint_2_lag() {
-    let defaults = EngineSettings::new();
-    let gap = conformance::force_limit_effect_m(subject(&defaults), 2.0);
-    report("force_limit_effect_m", gap, "> 0.005");
-    assert!(gap > 0.005, "{gap} m");
-}
-
-/// Scene 3 with the cube's friction at 0 and at 1: how far the push moves
-/// the cube along x.
-#[test]
-fn cube_friction_changes_the_push() {
-    let defaults = EngineSettings::new();
-    let slippery = conformance::cube_push_m(subject(&defaults), 0.0);
-    let rough = conformance::cube_push_m(subject(&defaults), 1.0);
-    eprintln!("cube pushed {slippery} m with friction 0, {rough} m with friction 1");
-    report("cube_push_difference_m", (slippery - rough).abs(), "> 0.01");
-    assert!((slippery - rough).abs() > 0.01, "{slippery} vs {rough}");
-}
-
 /// ODE honours every parameter key, so no key is unsupported; a key that a
 /// setting makes meaningless (kv with the stiff default motor) is an error
 /// naming the engine and the key (tests/params.rs).
@@ -204,18 +169,6 @@ fn no_key_is_unsupported() {
         }
         other => panic!("{other}"),
     }
-}
-
-/// Gravity comes from the scene: with it at zero the joint with its servo
-/// off does not move; with the default it falls.
-#[test]
-fn gravity_comes_from_the_scene() {
-    let defaults = EngineSettings::new();
-    let (without, with) = conformance::gravity_effect_rad(subject(&defaults));
-    report("gravity_zero_moved_rad", without, "1e-6");
-    report("gravity_default_moved_rad", with, "> 0.05");
-    assert!(without < 1e-6, "{without}");
-    assert!(with > 0.05, "{with}");
 }
 
 /// The iterative solver with one iteration at dt = 0.05 s blows up, and

@@ -6,109 +6,15 @@
 mod common;
 
 use common::*;
-use realitygap_core::controller::SplitMix64;
 use realitygap_core::engine::{Engine, EngineError, ModelVariation, Simulation};
-use realitygap_core::pose::Pose;
 use realitygap_core::robot::{PackageResolver, RobotModel};
 use realitygap_core::scene::Scene;
 use realitygap_engine_ode::{OdeEngine, OdeSimulation};
-use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 fn load(scene: &Scene, robot: &RobotModel, pairs: &[&str]) -> OdeSimulation {
     scene.validate(robot).unwrap();
     OdeSimulation::load(scene, robot, &settings(pairs), &ModelVariation::default()).unwrap()
-}
-
-/// Places the arm at random configurations and compares every link frame
-/// with the URDF forward kinematics, and the joint angles read back with
-/// the ones set. (Without floor and cube: a random pose may put the hand
-/// through the floor, which would push it on the next step.)
-fn check_kinematics(scene: &Scene, robot: &RobotModel, pairs: &[&str]) {
-    let mut scene = scene.clone();
-    scene.ground = None;
-    scene.objects.clear();
-    scene.tracked.retain(|t| t.role == "wrist");
-    let scene = &scene;
-    let mut sim = load(scene, robot, pairs);
-    let mut rng = SplitMix64::new(7);
-    let controlled = scene.controlled_joints();
-    for round in 0..20 {
-        let angles: Vec<f64> = controlled
-            .iter()
-            .map(|name| {
-                let lim = robot.joints[robot.joint_by_name(name).unwrap()]
-                    .limits
-                    .unwrap();
-                // Continuous joints go beyond +-pi (up to +-5 rad).
-                let (lo, hi) = (lim.lower.max(-5.0), lim.upper.min(5.0));
-                lo + (hi - lo) * rng.uniform()
-            })
-            .collect();
-        sim.set_joint_angles_rad(&angles).unwrap();
-        let mut read = vec![0.0; angles.len()];
-        sim.joint_angles_rad(&mut read);
-        for (a, b) in angles.iter().zip(&read) {
-            assert!(
-                (a - b).abs() < 1e-12,
-                "round {round}: set {a} rad, read {b} rad"
-            );
-        }
-        let mut named: HashMap<String, f64> = controlled
-            .iter()
-            .zip(&angles)
-            .map(|(n, &a)| (n.to_string(), a))
-            .collect();
-        for (n, &a) in &scene.robot.held_joints_rad {
-            named.insert(n.clone(), a);
-        }
-        let fk = robot.forward_kinematics(
-            &scene.robot.base,
-            &robot.positions_from_names(&named).unwrap(),
-        );
-        for (link, expected) in robot.links.iter().zip(&fk) {
-            let got: Pose = sim.link_pose(&link.name).unwrap();
-            let d = got.position_m.distance(expected.position_m);
-            let a = got.orientation.angle_to(expected.orientation);
-            assert!(
-                d < 1e-9 && a < 1e-7,
-                "{} {pairs:?}: link {} off by {d} m, {a} rad",
-                robot.name,
-                link.name
-            );
-        }
-        let mut tracked = [Pose::IDENTITY; 1];
-        sim.tracked_poses(&mut tracked);
-        let w = fk[robot.link_by_name("m1n6s300_link_6").unwrap()];
-        assert!(tracked[0].position_m.distance(w.position_m) < 1e-9);
-        assert!(tracked[0].orientation.angle_to(w.orientation) < 1e-7);
-        // ODE measures the same angles from the bodies (one step at rest,
-        // servos holding): no jump, no sign flip.
-        sim.set_joint_velocity_targets(&vec![0.0; angles.len()]);
-        sim.step().unwrap();
-        sim.joint_angles_rad(&mut read);
-        for (a, b) in angles.iter().zip(&read) {
-            assert!(
-                (a - b).abs() < 1e-3,
-                "round {round}: after a step {a} rad became {b} rad"
-            );
-        }
-    }
-}
-
-#[test]
-fn mico2_model_follows_urdf_kinematics() {
-    let s = scene("scene1_single_joint");
-    check_kinematics(&s, &mico2(), &[]);
-    check_kinematics(&s, &mico2(), &["weld=fixed_joint", "base=static"]);
-}
-
-#[test]
-fn official_model_follows_urdf_kinematics() {
-    let Some(paper) = paper_data() else { return };
-    let (s, robot) = with_official_robot(&scene("scene1_single_joint"), &paper);
-    check_kinematics(&s, &robot, &[]);
-    check_kinematics(&s, &robot, &["weld=fixed_joint"]);
 }
 
 /// A continuous joint turned past +-pi keeps counting (ODE's own hinge
