@@ -148,7 +148,7 @@ def test_interrupted_run_keeps_its_finished_runs(tmp_path):
         """
         import sys, realitygap as rg
         try:
-            rg.run("scene1", "mujoco", out=sys.argv[1], repeats=6, jobs=1, progress=False)
+            rg.run("scene2", "mujoco", out=sys.argv[1], repeats=12, jobs=1, perturb={"sensor_noise_deg": 0.1}, set={"mujoco.timestep_s": 0.0002, "mujoco.integrator": "implicitfast"}, progress=False)
         except KeyboardInterrupt as e:
             print("interrupted:", e, flush=True)
             sys.exit(3)
@@ -156,7 +156,7 @@ def test_interrupted_run_keeps_its_finished_runs(tmp_path):
         """
     )
     p = subprocess.Popen([sys.executable, "-c", script, str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    d = out / "scene1_single_joint" / "mujoco"
+    d = out / "scene2_two_joints" / "mujoco"
     start = time.time()
     while not finished(d):
         assert time.time() - start < 120, "no run finished within 120 s"
@@ -167,16 +167,16 @@ def test_interrupted_run_keeps_its_finished_runs(tmp_path):
     assert p.returncode == 3, (stdout, stderr)
     assert "interrupted" in stdout
     kept = finished(d)
-    assert 1 <= len(kept) < 6, kept
+    assert 1 <= len(kept) < 12, kept
     # The finished runs are whole and load; no child is left.
     for id in kept:
         assert len(rg.load_run(d, id)) > 100
     # A rerun completes the rest and leaves the kept ones untouched.
     before = {id: (d / "runs" / ("%s.csv" % id)).read_bytes() for id in kept}
-    batch = rg.run("scene1", "mujoco", out=out, repeats=6, jobs=1, progress=False)
+    batch = rg.run("scene2", "mujoco", out=out, repeats=12, jobs=1, perturb={"sensor_noise_deg": 0.1}, set={"mujoco.timestep_s": 0.0002, "mujoco.integrator": "implicitfast"}, progress=False)
     g = batch.groups.iloc[0]
-    assert (g["ok"], g["kept"]) == (6 - len(kept), len(kept)), batch.groups
-    assert len(finished(d)) == 6
+    assert (g["ok"], g["kept"]) == (12 - len(kept), len(kept)), batch.groups
+    assert len(finished(d)) == 12
     for id, data in before.items():
         assert (d / "runs" / ("%s.csv" % id)).read_bytes() == data
 

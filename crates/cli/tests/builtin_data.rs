@@ -187,11 +187,12 @@ fn reproduce_with_the_builtin_data_gives_the_table_of_paper_data() {
         args.extend_from_slice(extra);
         ok(&realitygap(cache.path(), &args)).0
     };
-    // The tables and measures, after the simulation's summary lines
-    // (which say "1 ok" the first time and "1 kept" the second).
-    let tables = |stdout: String| {
-        let at = stdout.find("## Accumulated error").expect("the table");
-        stdout[at..].to_string()
+    // The full tables and measures, as written into the report folder
+    // (standard output has the summary).
+    let tables = |_stdout: String| {
+        let text = std::fs::read_to_string(out_dir.join("report/table.md")).unwrap();
+        assert!(text.contains("## Accumulated error"), "{text}");
+        text
     };
     let in_place = tables(with(&[os("--data"), os(&paper)]));
     let builtin = tables(with(&[]));

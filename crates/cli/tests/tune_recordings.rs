@@ -214,7 +214,7 @@ fn recorded_efforts_separate_damping_from_the_servo_gain_and_angles_alone_cannot
         (summary(&out), stdout)
     };
     // From the angles alone: each joint's pair is named.
-    let (s, stdout) = tune("angles-only", &["--iterations", "4"]);
+    let (s, stdout) = tune("angles-only", &["--iterations", "4", "--verbose"]);
     let trading = s["identifiability"]["trading"].as_array().unwrap();
     for name in &names {
         assert!(
