@@ -41,9 +41,11 @@ pub struct Args {
     /// integrator = "Euler").
     #[arg(long)]
     pub efforts: bool,
-    /// With --recordings: Levenberg-Marquardt iterations at most.
-    #[arg(long, default_value_t = 30, value_name = "N")]
-    pub iterations: usize,
+    /// Levenberg-Marquardt iterations at most: the whole fit with
+    /// --recordings (default 30); each round of the study tune's polish
+    /// after CMA-ES (default 10; 0: no polish, no intervals).
+    #[arg(long, value_name = "N")]
+    pub iterations: Option<usize>,
     /// Folder of the study's recordings: `builtin` (default) or a folder.
     #[arg(long, value_name = "builtin|DIR", default_value = "builtin")]
     pub data: DataSource,

@@ -33,8 +33,9 @@ pub struct TuneRequest {
     pub scene: Option<PathBuf>,
     /// With `recordings`: fit the recorded efforts too.
     pub efforts: bool,
-    /// With `recordings`: Levenberg-Marquardt iterations at most.
-    pub iterations: usize,
+    /// Levenberg-Marquardt iterations at most: the fit of `recordings`
+    /// (default 30), each round of the study tune's polish (default 10).
+    pub iterations: Option<usize>,
     /// The study's recordings.
     pub data: DataSource,
     /// The engine to tune.
@@ -80,7 +81,7 @@ impl Default for TuneRequest {
             params: None,
             scene: None,
             efforts: false,
-            iterations: 30,
+            iterations: None,
             data: DataSource::Builtin,
             engine: String::new(),
             out: PathBuf::from("tune"),
@@ -204,6 +205,18 @@ pub fn tune(request: &TuneRequest, launcher: &Launcher, ui: &dyn Ui) -> Result<T
             jobs,
         },
         out: args.out.clone(),
+        polish: realitygap_tune::polish::PolishOptions {
+            iterations: args.iterations.unwrap_or(10),
+            // The polish spends about what the search did.
+            max_evaluations: args.budget,
+            ..Default::default()
+        },
+        baseline_space: if engine.name() == realitygap_tune::outputs::PHYSICS_FREE {
+            None
+        } else {
+            let f = default_space_file(&assets_dir(), realitygap_tune::outputs::PHYSICS_FREE);
+            Some(Space::from_file(&f)?)
+        },
     };
     ui.note(settings_line(&spec, &space_file));
     let simulator = Simulator {
@@ -229,7 +242,8 @@ pub fn tune(request: &TuneRequest, launcher: &Launcher, ui: &dyn Ui) -> Result<T
             }
         ));
     };
-    let result = realitygap_tune::tune(&target, &simulator, &spec, &on_progress);
+    let on_note = |line: String| bar.println(line);
+    let result = realitygap_tune::tune(&target, &simulator, &spec, &on_progress, &on_note);
     bar.finish();
     let result = result?;
     let markdown = realitygap_tune::outputs::markdown(&result.summary);
@@ -279,7 +293,7 @@ fn tune_recordings(args: &TuneRequest, recordings: &Path, ui: &dyn Ui) -> Result
         },
         out: args.out.clone(),
         jobs: args.jobs.unwrap_or_else(cores),
-        max_iterations: args.iterations,
+        max_iterations: args.iterations.unwrap_or(30),
         use_efforts: args.efforts,
     };
     ui.note(format!(

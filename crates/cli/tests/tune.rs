@@ -192,6 +192,87 @@ fn recovers_known_parameters_and_the_tuned_file_reproduces_the_objective() {
     assert!((acc - best).abs() < 1e-9, "rerun {acc} against best {best}");
 }
 
+/// After CMA-ES the polish gives intervals that cover the known kv, the
+/// identifiability is checked before the search and at the optimum, both
+/// physics-free rows are scored, and `randomize.toml` drives `run
+/// --perturb`: every repeat draws its own parameters within the ranges.
+#[test]
+fn the_polish_gives_intervals_and_a_randomisation_file_that_run_accepts() {
+    let tmp = synthetic();
+    let d = tmp.path();
+    let out = d.join("tuned");
+    let s = tune(d, out.to_str().unwrap(), "40");
+    let p = &s["polish"];
+    assert!(p["rounds"].as_u64().unwrap() >= 1, "{p}");
+    assert!(
+        p["objective_m"].as_f64().unwrap() <= p["start_objective_m"].as_f64().unwrap(),
+        "{p}"
+    );
+    let kv = p["intervals"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|i| i["key"] == "joints.m1n6s300_joint_2.kv")
+        .unwrap();
+    let value = kv["value"].as_f64().unwrap();
+    assert!((value - KNOWN_KV).abs() < 0.02 * KNOWN_KV, "{kv}");
+    let iv = kv["interval"].as_array().unwrap_or_else(|| panic!("{kv}"));
+    let (lo, hi) = (iv[0].as_f64().unwrap(), iv[1].as_f64().unwrap());
+    assert!(lo <= KNOWN_KV && KNOWN_KV <= hi, "{kv}");
+    assert!(hi - lo < 0.5 * KNOWN_KV, "an interval that says something: {kv}");
+    assert_eq!(s["identifiability_before"]["at"], "start", "{s}");
+    assert_eq!(p["identifiability"]["at"], "optimum", "{p}");
+    let rows: Vec<&str> = s["training"]["baselines"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|b| b["source"].as_str().unwrap())
+        .collect();
+    assert_eq!(rows, ["physics-free", "physics-free + actuator (fitted)"]);
+    assert!(s["verdict"].as_str().unwrap().contains("physics-free"), "{s}");
+    // randomize.toml over tuned.toml in `run`.
+    let r = out.join("randomize.toml");
+    let text = std::fs::read_to_string(&r).unwrap();
+    assert!(text.contains("\"joints.m1n6s300_joint_2.kv\""), "{text}");
+    let runs = d.join("randomised");
+    ok(realitygap(&[
+        "run",
+        scene1().to_str().unwrap(),
+        "--engine",
+        "mujoco",
+        "--params",
+        out.join("tuned.toml").to_str().unwrap(),
+        "--perturb",
+        r.to_str().unwrap(),
+        "--repeats",
+        "3",
+        "--out",
+        runs.to_str().unwrap(),
+    ]));
+    let dir = runs.join("scene1_single_joint/mujoco");
+    let manifest = std::fs::read_to_string(dir.join("manifest.json")).unwrap();
+    assert!(manifest.contains("\"randomize\""), "{manifest}");
+    let a = std::fs::read_to_string(dir.join("runs/run000.csv")).unwrap();
+    let b = std::fs::read_to_string(dir.join("runs/run001.csv")).unwrap();
+    assert_ne!(a, b, "two repeats drew the same parameters");
+    // A bad randomisation file is refused with its line before anything runs.
+    let bad = d.join("bad.toml");
+    std::fs::write(&bad, "[params]\n\"joints.m1n6s300_joint_2.kv\" = { low = 5.0 }\n").unwrap();
+    let o = realitygap(&[
+        "run",
+        scene1().to_str().unwrap(),
+        "--engine",
+        "mujoco",
+        "--perturb",
+        bad.to_str().unwrap(),
+        "--out",
+        d.join("bad-runs").to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(e.contains("bad.toml:2") && e.contains("`high` is missing"), "{e}");
+}
+
 /// The first number under `key` in the sources of a compare JSON.
 fn find_number(v: &serde_json::Value, key: &str) -> Option<f64> {
     match v {

@@ -32,6 +32,7 @@ pub mod engine;
 pub mod instability;
 pub mod params;
 pub mod pose;
+pub mod randomize;
 pub mod replay;
 pub mod robot;
 pub mod scene;

@@ -557,7 +557,7 @@ fn replay<'py>(
 /// Returns a dict with `markdown` (the summary) and `files`.
 #[pyfunction]
 #[pyo3(signature = (*, engine, out, study=None, recordings=None, params=None, scene=None,
-    efforts=false, iterations=30, data="builtin", space=None, runs=None, holdout=None,
+    efforts=false, iterations=None, data="builtin", space=None, runs=None, holdout=None,
     budget=600, seed=1, jobs=None, cube_weight=None, keep_registration=false, settings=None,
     set=Vec::new(), robot=None, packages=Vec::new(), reporter=None))]
 #[allow(clippy::too_many_arguments)]
@@ -570,7 +570,7 @@ fn tune<'py>(
     params: Option<PathBuf>,
     scene: Option<PathBuf>,
     efforts: bool,
-    iterations: usize,
+    iterations: Option<usize>,
     data: &str,
     space: Option<PathBuf>,
     runs: Option<String>,

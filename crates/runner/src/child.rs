@@ -94,13 +94,24 @@ fn prepare_for(registry: Registry, job: &Job, entry: &str) -> Result<Prepared> {
         set: &job.set,
         params_file: params.map(Path::new).or(job.params.as_deref()),
     };
-    match (&job.params_text, params) {
-        (Some(text), None) => prepare_with(
-            registry,
-            &src,
-            PhysicalParams::from_toml_str(text, Path::new("<job parameters>"))?,
-        ),
-        _ => prepare(registry, &src),
+    let randomization = crate::prepare::parse_randomization(&job.perturb)?;
+    let base = match (&job.params_text, params, &randomization) {
+        (Some(text), None, _) => {
+            PhysicalParams::from_toml_str(text, Path::new("<job parameters>"))?
+        }
+        (_, _, Some(_)) => {
+            crate::prepare::read_params(params.map(Path::new).or(job.params.as_deref()))?
+        }
+        _ => return prepare(registry, &src),
+    };
+    match &randomization {
+        Some(r) => {
+            let drawn = r.apply(&base, job.seed).with_context(|| {
+                format!("--perturb {}: the draw of seed {}", r.source.display(), job.seed)
+            })?;
+            prepare_with(registry, &src, drawn)
+        }
+        None => prepare_with(registry, &src, base),
     }
 }
 

@@ -104,6 +104,8 @@ pub struct Plan {
     pub params_file: Option<PathBuf>,
     /// The repeats' perturbation (none: a deterministic batch).
     pub perturbation: Perturbation,
+    /// The repeats' randomised parameters (`--perturb randomize.toml`).
+    pub randomization: Option<realitygap_core::randomize::Randomization>,
     /// Where the simulations run: this machine (default) or a Slurm job
     /// array.
     pub executor: crate::slurm::Executor,
@@ -163,6 +165,17 @@ pub fn engines_to_run(registry: Registry, requested: &[String]) -> Result<Vec<St
     let mut v = requested.to_vec();
     v.dedup();
     Ok(v)
+}
+
+/// A randomisation in a results directory's configuration.
+fn randomization_json(r: &realitygap_core::randomize::Randomization) -> serde_json::Value {
+    serde_json::json!({
+        "file": r.source.display().to_string(),
+        "ranges": r.ranges.iter().map(|x| serde_json::json!({
+            "key": x.key, "low": x.low, "high": x.high,
+            "scale": if x.log { "log" } else { "linear" },
+        })).collect::<Vec<_>>(),
+    })
 }
 
 /// What a results directory's runs were made with; a rerun must match it.
@@ -266,6 +279,17 @@ impl Plan {
             None => engines_to_run(registry, &spec.engines)?,
         };
         let perturbation = parse_perturbation(&spec.perturb)?;
+        let randomization = crate::prepare::parse_randomization(&spec.perturb)?;
+        // The children read the randomisation file wherever they run.
+        let mut spec = spec;
+        for s in spec.perturb.iter_mut() {
+            if crate::prepare::is_randomization_file(s) {
+                *s = std::path::absolute(s.as_str())
+                    .with_context(|| format!("--perturb {s}"))?
+                    .display()
+                    .to_string();
+            }
+        }
         let params_file = match &spec.params {
             Some(p) => {
                 Some(std::path::absolute(p).with_context(|| format!("--params {}", p.display()))?)
@@ -286,6 +310,7 @@ impl Plan {
             jobs,
             params_file,
             perturbation,
+            randomization,
             executor: crate::slurm::Executor::Local,
         };
         for scene_file in plan.spec.scenes.clone() {
@@ -372,6 +397,10 @@ impl Plan {
         )?;
         if let Some(s) = &stitched {
             config["stitch"] = s.config.clone();
+        }
+        if let Some(r) = &self.randomization {
+            config["randomize"] = randomization_json(r);
+            config["deterministic"] = serde_json::json!(false);
         }
         let display = stitched.as_ref().map(|s| s.name.clone());
         let store = open_store(
@@ -476,7 +505,7 @@ impl Plan {
 
     /// Whether every repeat is the same simulation (no perturbation).
     pub fn deterministic(&self) -> bool {
-        self.perturbation.is_none()
+        self.perturbation.is_none() && self.randomization.is_none()
     }
 
     /// Runs kept from an earlier batch.

@@ -148,13 +148,39 @@ pub fn overrides_for(set: &[String], engine: &str, known: &[String]) -> Result<E
     Ok(out)
 }
 
-/// The perturbation of `KEY=VALUE,...` specs (none when empty).
+/// True when a `--perturb` value names a randomisation file (it has no
+/// `=`), not `KEY=VALUE,...` settings.
+pub fn is_randomization_file(spec: &str) -> bool {
+    !spec.contains('=')
+}
+
+/// The perturbation of `KEY=VALUE,...` specs (none when empty); specs
+/// that name randomisation files are [`parse_randomization`]'s.
 pub fn parse_perturbation(specs: &[String]) -> Result<Perturbation> {
     let mut p = Perturbation::default();
-    for s in specs {
+    for s in specs.iter().filter(|s| !is_randomization_file(s)) {
         p.parse_into(s)?;
     }
     Ok(p)
+}
+
+/// The randomisation file among `--perturb` values (`randomize.toml`, as
+/// `tune` writes it), if any; two are an error.
+pub fn parse_randomization(
+    specs: &[String],
+) -> Result<Option<realitygap_core::randomize::Randomization>> {
+    let files: Vec<&String> = specs.iter().filter(|s| is_randomization_file(s)).collect();
+    match files.as_slice() {
+        [] => Ok(None),
+        [f] => Ok(Some(realitygap_core::randomize::Randomization::from_file(
+            Path::new(f.as_str()),
+        )?)),
+        _ => anyhow::bail!(
+            "--perturb: give one randomisation file, not {} ({})",
+            files.len(),
+            files.iter().map(|s| s.as_str()).collect::<Vec<_>>().join(", ")
+        ),
+    }
 }
 
 /// Reads a parameters file, or none.

@@ -16,6 +16,7 @@
 pub mod least_squares;
 pub mod objective;
 pub mod outputs;
+pub mod polish;
 pub mod recordings;
 pub mod search;
 pub mod slurm_batch;
@@ -52,6 +53,13 @@ pub struct TuneSpec {
     pub search: SearchOptions,
     /// The output folder.
     pub out: PathBuf,
+    /// The least-squares polish after the search.
+    pub polish: polish::PolishOptions,
+    /// The physics-free model's actuator space (`assets/tuning/ideal.toml`):
+    /// fitted on the same training runs, it is the "physics-free +
+    /// actuator" row every tune is scored against. `None`: that row is
+    /// left out (the physics-free row stays).
+    pub baseline_space: Option<Space>,
 }
 
 /// What the command prints and the files hold.
@@ -118,6 +126,14 @@ impl Tuner<'_> {
             Ok(trajs) => self.target.score(trajs, registration),
             Err(m) => Score::failed(m),
         }
+    }
+
+    /// The polish's residuals at normalised coordinates `u`
+    /// ([`objective::Target::residuals`]).
+    pub fn residuals(&self, u: &[f64]) -> Result<Vec<f64>, String> {
+        let p = self.params(u)?;
+        let trajs = self.simulator.simulate(&self.target.scenes, &p)?;
+        self.target.residuals(trajs, &self.registration(u))
     }
 
     /// The search's evaluation of normalised coordinates `u`.
@@ -241,15 +257,41 @@ fn check_resume(spec: &TuneSpec, target: &Target) -> Result<()> {
         .with_context(|| format!("writing {}", path.display()))
 }
 
-/// Runs a whole tune: checks, search (resuming from `OUT/history.csv`),
-/// sensitivity, final scores and every output file.
-pub fn tune(
+/// A fit: the search, the identifiability at its start, and the polish.
+pub struct Fitted {
+    /// The search.
+    pub end: SearchEnd,
+    /// The polish from the search's best point.
+    pub polished: polish::Polished,
+    /// The identifiability check before the search.
+    pub before: Option<polish::IdentifiabilityReport>,
+}
+
+impl Fitted {
+    /// The spec of the polished space (bounds widened where they were).
+    pub fn polished_spec(&self, spec: &TuneSpec) -> TuneSpec {
+        TuneSpec {
+            engine: spec.engine.clone(),
+            space: self.polished.space.clone(),
+            fit_registration: spec.fit_registration,
+            set: spec.set.clone(),
+            search: spec.search,
+            out: spec.out.clone(),
+            polish: spec.polish,
+            baseline_space: None,
+        }
+    }
+}
+
+/// Fits `spec`: checks, the identifiability check, the search (resuming
+/// from `OUT/history.csv`) and the polish.
+pub fn fit(
     target: &Target,
     simulator: &Simulator,
     spec: &TuneSpec,
     progress: &(dyn Fn(Progress) + Sync),
-) -> Result<TuneResult> {
-    let started = Instant::now();
+    note: &(dyn Fn(String) + Sync),
+) -> Result<Fitted> {
     let tuner = Tuner {
         target,
         simulator,
@@ -263,6 +305,29 @@ pub fn tune(
         .with_context(|| format!("parameter space {}", spec.space.source.display()))?;
     realitygap_runner::interrupt::check()?;
     check_resume(spec, target)?;
+    // The identifiability check, before the long search.
+    let before = if spec.polish.iterations > 0 {
+        note(format!(
+            "identifiability at the start ({}): a Jacobian of {} coordinates",
+            spec.engine,
+            tuner.dims()
+        ));
+        let u0 = &spec.space.start_unit()[..tuner.dims()];
+        match polish::identifiability(&tuner, u0, "start", None, None) {
+            Ok((r, _, _)) => {
+                note(polish::identifiability_text(&r));
+                Some(r)
+            }
+            Err(e) => {
+                note(format!(
+                    "identifiability at the start: not measured ({e:#})"
+                ));
+                None
+            }
+        }
+    } else {
+        None
+    };
     let mut history = History::open(
         &spec.out.join("history.csv"),
         &tuner.part_names(),
@@ -285,11 +350,75 @@ pub fn tune(
         &|u| tuner.values(u),
         progress,
     )?;
-    let (summary, files) = outputs::finish(&tuner, &end, started)?;
+    let best = end.best().ok_or_else(|| {
+        anyhow::anyhow!(
+            "every candidate failed; see {}",
+            spec.out.join("history.csv").display()
+        )
+    })?;
+    let u: Vec<f64> = best.x.iter().map(|x| search::reflect(*x)).collect();
+    let polished = polish::polish(&tuner, &u, best.objective, spec.polish, note)?;
+    Ok(Fitted {
+        end,
+        polished,
+        before,
+    })
+}
+
+/// Runs a whole tune: [`fit`], the physics-free model behind its own
+/// fitted actuator stage ([`TuneSpec::baseline_space`], in
+/// `OUT/physics-free-actuator/`), the final scores and every output file.
+pub fn tune(
+    target: &Target,
+    simulator: &Simulator,
+    spec: &TuneSpec,
+    progress: &(dyn Fn(Progress) + Sync),
+    note: &(dyn Fn(String) + Sync),
+) -> Result<TuneResult> {
+    let started = Instant::now();
+    let fitted = fit(target, simulator, spec, progress, note)?;
+    realitygap_runner::interrupt::check()?;
+    let baseline = match &spec.baseline_space {
+        Some(space) if spec.engine != outputs::PHYSICS_FREE => {
+            note("fitting the physics-free model's actuator stage on the same runs".into());
+            let sim = Simulator {
+                engine: outputs::PHYSICS_FREE.to_string(),
+                ..simulator.clone()
+            };
+            let bspec = TuneSpec {
+                engine: outputs::PHYSICS_FREE.to_string(),
+                fit_registration: spec.fit_registration && space.registration.is_some(),
+                space: space.clone(),
+                set: EngineSettings::new(),
+                search: SearchOptions {
+                    budget: outputs::BASELINE_BUDGET.min(spec.search.budget.max(1)),
+                    ..spec.search
+                },
+                out: spec.out.join("physics-free-actuator"),
+                polish: polish::PolishOptions {
+                    iterations: spec.polish.iterations.min(8),
+                    widen_rounds: 0,
+                    probe_restarts: 0,
+                    max_evaluations: spec.polish.max_evaluations,
+                },
+                baseline_space: None,
+            };
+            let b = fit(target, &sim, &bspec, &|_| {}, &|_| {})?;
+            Some(outputs::Baseline::new(target, &sim, &bspec, b)?)
+        }
+        _ => None,
+    };
+    let polished_spec = fitted.polished_spec(spec);
+    let final_tuner = Tuner {
+        target,
+        simulator,
+        spec: &polished_spec,
+    };
+    let (summary, files) = outputs::finish(&final_tuner, &fitted, baseline.as_ref(), started)?;
     // Final scores cut short by an interruption are not a result.
     realitygap_runner::interrupt::check()?;
     Ok(TuneResult {
-        end,
+        end: fitted.end,
         summary,
         files,
     })

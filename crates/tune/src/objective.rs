@@ -320,6 +320,50 @@ impl Target {
     }
 }
 
+impl Target {
+    /// The residuals of one simulated trajectory per scene, registered by
+    /// `registration`, on the training runs: the square root of each
+    /// compared step's wrist distance (0 where a step is not compared),
+    /// then, per scene with a cube, the square root of its weighted final
+    /// position error. Their squares sum to [`Target::score`]'s objective.
+    pub fn residuals(
+        &self,
+        trajectories: Vec<Trajectory>,
+        registration: &Registration,
+    ) -> std::result::Result<Vec<f64>, String> {
+        let sources = self.sources("candidate", trajectories);
+        let choice = RegistrationChoice::Given {
+            registration: *registration,
+            origin: "tune candidate".into(),
+        };
+        let opts = self.options(choice, &self.train, None);
+        let reports = match &self.aligned_train {
+            Some(aligned) => evaluate_study_aligned(&self.inputs(&sources), aligned, &opts),
+            None => realitygap_analysis::evaluate_study(&self.inputs(&sources), &opts)
+                .map_err(|e| e.to_string())?,
+        };
+        let score = score_of(&reports, &self.scenes);
+        if let Some(m) = score.failed {
+            return Err(m);
+        }
+        let mut r = Vec::new();
+        for (report, s) in reports.iter().zip(&self.scenes) {
+            let d = report
+                .sources
+                .first()
+                .map(|x| &x.series.wrist_distance_to_reference_m[..])
+                .unwrap_or(&[]);
+            r.extend((0..s.steps).map(|k| d.get(k).copied().flatten().unwrap_or(0.0).max(0.0).sqrt()));
+            if let Some(sc) = score.scenes.iter().find(|x| x.scene == s.name) {
+                if let Some(c) = sc.cube_final_m {
+                    r.push((s.cube_weight * c).max(0.0).sqrt());
+                }
+            }
+        }
+        Ok(r)
+    }
+}
+
 /// The objective from the reports of one source per scene.
 pub fn score_of(reports: &[SceneReport], scenes: &[TargetScene]) -> Score {
     let mut out = Vec::new();

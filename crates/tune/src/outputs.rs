@@ -27,6 +27,88 @@ pub const SENSITIVITY_STEP: f64 = 0.10;
 /// Bootstrap resamples of the final scores' intervals.
 pub const RESAMPLES: usize = 1000;
 
+/// The physics-free engine: perfect tracking of the commands through
+/// forward kinematics, behind the actuator stage when one is given.
+pub const PHYSICS_FREE: &str = "ideal";
+
+/// Evaluations of the CMA-ES that fits the physics-free model's actuator
+/// stage before its polish (at most the tune's own budget).
+pub const BASELINE_BUDGET: usize = 200;
+
+/// The physics-free model behind its own actuator stage, fitted on the
+/// tune's training runs.
+pub struct Baseline {
+    simulator: crate::objective::Simulator,
+    params: PhysicalParams,
+    registration: Registration,
+    /// What the summary says of it.
+    pub summary: BaselineSummary,
+}
+
+/// The fitted physics-free model in `summary.json`.
+#[derive(Debug, Clone, Serialize)]
+pub struct BaselineSummary {
+    /// Its folder (`OUT/physics-free-actuator`: history and parameters).
+    pub folder: String,
+    /// Its objective on the training runs, metres.
+    pub objective_m: f64,
+    /// Evaluations: search and polish.
+    pub evaluations: usize,
+    /// The fitted values with their 95 % intervals.
+    pub parameters: Vec<crate::polish::ParamInterval>,
+}
+
+impl Baseline {
+    /// The baseline of a fit of the physics-free engine with `spec`.
+    pub fn new(
+        target: &crate::objective::Target,
+        simulator: &crate::objective::Simulator,
+        spec: &crate::TuneSpec,
+        fitted: crate::Fitted,
+    ) -> Result<Baseline> {
+        let pspec = fitted.polished_spec(spec);
+        let t = Tuner {
+            target,
+            simulator,
+            spec: &pspec,
+        };
+        let u = &fitted.polished.u;
+        let params = t.params(u).map_err(|m| anyhow!(m))?;
+        let registration = t.registration(u);
+        let text = format!(
+            "# The physics-free model behind its fitted actuator stage (realitygap tune).\n\n{}",
+            params.to_toml_string()
+        );
+        let file = spec.out.join("tuned.toml");
+        std::fs::write(&file, text).with_context(|| format!("writing {}", file.display()))?;
+        std::fs::write(spec.out.join("registration.json"), registration.to_json())
+            .with_context(|| format!("writing {}", spec.out.display()))?;
+        Ok(Baseline {
+            simulator: simulator.clone(),
+            params,
+            registration,
+            summary: BaselineSummary {
+                folder: spec.out.display().to_string(),
+                objective_m: fitted.polished.objective_m,
+                evaluations: fitted.end.history.len() + fitted.polished.report.evaluations,
+                parameters: fitted.polished.report.intervals.clone(),
+            },
+        })
+    }
+}
+
+/// A physics-free row of a comparison.
+#[derive(Debug, Clone, Serialize)]
+pub struct BaselineRow {
+    /// `physics-free` or `physics-free + actuator (fitted)`.
+    pub source: String,
+    /// Its total, with the interval.
+    pub total: Option<Scored>,
+    /// The tuned engine's total minus this row's: value and 95 % paired
+    /// bootstrap interval (negative: the tuned engine is closer).
+    pub tuned_minus_m: Option<[f64; 3]>,
+}
+
 /// One parameter's result.
 #[derive(Debug, Clone, Serialize)]
 pub struct ParamResult {
@@ -102,6 +184,8 @@ pub struct Comparison {
     /// The objective (accumulated errors plus weighted cube error),
     /// untuned and tuned, metres.
     pub objective_m: [f64; 2],
+    /// The physics-free rows.
+    pub baselines: Vec<BaselineRow>,
 }
 
 /// `summary.json`.
@@ -149,6 +233,16 @@ pub struct Summary {
     pub training: Comparison,
     /// Untuned against tuned on the held-out runs.
     pub holdout: Option<Comparison>,
+    /// The identifiability check before the search.
+    pub identifiability_before: Option<crate::polish::IdentifiabilityReport>,
+    /// The least-squares polish, with the intervals and the
+    /// identifiability at the optimum.
+    pub polish: crate::polish::PolishReport,
+    /// The physics-free model behind its fitted actuator stage.
+    pub baseline: Option<BaselineSummary>,
+    /// The answer in words: does the tuned engine beat the physics-free
+    /// rows on the held-out runs (on the training runs without)?
+    pub verdict: String,
 }
 
 /// The registrations of a tune.
@@ -188,7 +282,7 @@ fn registration_summary(
 }
 
 /// The sensitivity of the objective around the optimum `u`.
-fn sensitivity(tuner: &Tuner<'_>, u: &[f64], best: f64) -> Vec<Sensitivity> {
+pub(crate) fn sensitivity(tuner: &Tuner<'_>, u: &[f64], best: f64) -> Vec<Sensitivity> {
     let dims = &tuner.spec.space.dims;
     let registration = tuner.registration(u);
     let optimum = tuner.spec.space.values(u);
@@ -263,6 +357,10 @@ fn scored(r: &SceneReport) -> Option<Scored> {
 }
 
 fn total(reports: &Reports) -> Option<Scored> {
+    total_with_replicates(reports).map(|x| x.0)
+}
+
+fn total_with_replicates(reports: &Reports) -> Option<(Scored, Vec<f64>)> {
     let mut value = 0.0;
     let mut reps: Vec<f64> = Vec::new();
     for r in &reports.reports {
@@ -283,10 +381,36 @@ fn total(reports: &Reports) -> Option<Scored> {
         BootstrapOptions::default().level,
     )
     .map(|i| [i.low_m, i.high_m]);
-    Some(Scored {
-        value_m: value,
-        interval_m,
-    })
+    Some((
+        Scored {
+            value_m: value,
+            interval_m,
+        },
+        reps,
+    ))
+}
+
+/// The physics-free row `source` of `base`, against the tuned engine's
+/// `tuned` on the same runs (paired: the same resamples of the real runs).
+fn baseline_row(source: &str, base: &Reports, tuned: &Reports) -> BaselineRow {
+    let b = total_with_replicates(base);
+    let t = total_with_replicates(tuned);
+    let diff = match (&b, &t) {
+        (Some((bs, br)), Some((ts, tr))) if br.len() == tr.len() && !br.is_empty() => {
+            let d: Vec<f64> = tr.iter().zip(br).map(|(x, y)| x - y).collect();
+            realitygap_analysis::bootstrap::percentile_interval(
+                &d,
+                BootstrapOptions::default().level,
+            )
+            .map(|i| [ts.value_m - bs.value_m, i.low_m, i.high_m])
+        }
+        _ => None,
+    };
+    BaselineRow {
+        source: source.to_string(),
+        total: b.map(|x| x.0),
+        tuned_minus_m: diff,
+    }
 }
 
 fn cube_push(r: &SceneReport) -> Option<[f64; 2]> {
@@ -328,6 +452,7 @@ fn comparison(tuner: &Tuner<'_>, untuned: &Reports, tuned: &Reports, runs: Strin
             score_of(&untuned.reports, &tuner.target.scenes).objective,
             score_of(&tuned.reports, &tuner.target.scenes).objective,
         ],
+        baselines: Vec::new(),
     }
 }
 
@@ -406,23 +531,90 @@ fn to_within_5pct(end: &SearchEnd, best: f64) -> Option<usize> {
     None
 }
 
+/// Scores of the physics-free rows (`(name, trajectories, registration)`)
+/// on `selection`, against the tuned engine's reports there.
+fn baseline_rows(
+    tuner: &Tuner<'_>,
+    rows: &[(String, Vec<realitygap_core::Trajectory>, Registration)],
+    tuned: &Reports,
+    selection: &RunSelection,
+) -> Result<Vec<BaselineRow>> {
+    let t = tuner.target;
+    rows.iter()
+        .map(|(name, trajs, reg)| {
+            let r = t.evaluate(
+                &t.sources(name, trajs.clone()),
+                RegistrationChoice::Given {
+                    registration: *reg,
+                    origin: name.clone(),
+                },
+                selection,
+                Some(RESAMPLES),
+            )?;
+            Ok(baseline_row(name, &Reports { reports: r }, tuned))
+        })
+        .collect()
+}
+
+/// The answer in words: does the tuned engine beat the physics-free rows?
+fn verdict_text(engine: &str, c: &Comparison) -> String {
+    let Some(tuned) = &c.total_tuned else {
+        return format!("The tuned {engine} could not be scored.");
+    };
+    let on = if c.runs == "all" {
+        "On all runs (none held out)".to_string()
+    } else {
+        format!("On runs {}", c.runs)
+    };
+    let mut parts = Vec::new();
+    for b in &c.baselines {
+        let Some([d, lo, hi]) = b.tuned_minus_m else {
+            continue;
+        };
+        let word = if hi < 0.0 {
+            "beats"
+        } else if lo > 0.0 {
+            "does not beat"
+        } else {
+            "is not distinguishable from"
+        };
+        parts.push(format!(
+            "{word} {} ({:.3} m; tuned minus it {d:+.3} m [{lo:+.3}, {hi:+.3}])",
+            b.source,
+            b.total.as_ref().map_or(f64::NAN, |s| s.value_m)
+        ));
+    }
+    if parts.is_empty() {
+        return format!(
+            "{on}, the tuned {engine} scores {:.3} m; no physics-free row was scored.",
+            tuned.value_m
+        );
+    }
+    format!(
+        "{on}, the tuned {engine} ({:.3} m) {}.",
+        tuned.value_m,
+        parts.join(", and ")
+    )
+}
+
 /// Writes every output and returns the summary and the files.
 pub fn finish(
     tuner: &Tuner<'_>,
-    end: &SearchEnd,
+    fitted: &crate::Fitted,
+    baseline: Option<&Baseline>,
     started: Instant,
 ) -> Result<(Summary, Vec<PathBuf>)> {
     let spec = tuner.spec;
-    let best = end.best().ok_or_else(|| {
-        anyhow!(
-            "every candidate failed; see {}",
-            spec.out.join("history.csv").display()
-        )
-    })?;
-    let u: Vec<f64> = best.x.iter().map(|x| crate::search::reflect(*x)).collect();
+    let end = &fitted.end;
+    let polished = &fitted.polished;
+    let u = polished.u.clone();
+    let best_objective = polished.objective_m;
     let params = tuner.params(&u).map_err(|m| anyhow!(m))?;
     let registration = tuner.registration(&u);
-    let sens = sensitivity(tuner, &u, best.objective);
+    let sens = match &polished.probe {
+        Some(p) => p.clone(),
+        None => sensitivity(tuner, &u, best_objective),
+    };
     realitygap_runner::interrupt::check()?;
     let untuned_p = untuned_params(tuner);
     let sim = |p: &PhysicalParams, what: &str| {
@@ -433,19 +625,52 @@ pub fn finish(
     };
     let untuned = sim(&untuned_p, "untuned")?;
     let tuned = sim(&params, "tuned")?;
+    // The physics-free rows: perfect tracking under the measurement's
+    // registration (estimated against that very model), and behind its
+    // fitted actuator stage under its own fitted registration.
+    let mut rows = Vec::new();
+    if spec.engine != PHYSICS_FREE {
+        let free = crate::objective::Simulator {
+            engine: PHYSICS_FREE.to_string(),
+            ..tuner.simulator.clone()
+        };
+        let trajs = free
+            .simulate(&tuner.target.scenes, &PhysicalParams::none())
+            .map_err(|m| anyhow!("the physics-free model: {m}"))?;
+        rows.push((
+            "physics-free".to_string(),
+            trajs,
+            tuner.target.base_registration,
+        ));
+    }
+    if let Some(b) = baseline {
+        let trajs = b
+            .simulator
+            .simulate(&tuner.target.scenes, &b.params)
+            .map_err(|m| anyhow!("the physics-free model with its actuator stage: {m}"))?;
+        rows.push((
+            "physics-free + actuator (fitted)".to_string(),
+            trajs,
+            b.registration,
+        ));
+    }
     let train_sel = tuner.target.train.clone();
     let (a, b) = evaluate_both(tuner, &untuned, &tuned, &registration, &train_sel)?;
     let runs_text = |r: &Option<realitygap_analysis::selection::RunRange>| {
         r.as_ref().map_or("all".to_string(), |r| r.text.clone())
     };
-    let training = comparison(tuner, &a, &b, runs_text(&train_sel.runs));
+    let mut training = comparison(tuner, &a, &b, runs_text(&train_sel.runs));
+    training.baselines = baseline_rows(tuner, &rows, &b, &train_sel)?;
     let holdout = match tuner.target.holdout_selection() {
         Some(sel) => {
             let (a, b) = evaluate_both(tuner, &untuned, &tuned, &registration, &sel)?;
-            Some(comparison(tuner, &a, &b, runs_text(&sel.holdout)))
+            let mut c = comparison(tuner, &a, &b, runs_text(&sel.holdout));
+            c.baselines = baseline_rows(tuner, &rows, &b, &sel)?;
+            Some(c)
         }
         None => None,
     };
+    let verdict = verdict_text(&spec.engine, holdout.as_ref().unwrap_or(&training));
     let wall = started.elapsed().as_secs_f64();
     let fresh = end.history.len().saturating_sub(end.replayed);
     let settings: Vec<(String, String)> = params
@@ -466,21 +691,86 @@ pub fn finish(
         failed: end.history.iter().filter(|e| e.failed.is_some()).count(),
         stop: end.reason.clone(),
         wall_time_s: wall,
-        evaluations_per_s: (fresh > 0).then(|| fresh as f64 / wall.max(1e-9)),
-        evaluations_to_5pct: to_within_5pct(end, best.objective),
-        best_objective_m: best.objective,
+        evaluations_per_s: (fresh > 0).then(|| {
+            (fresh + polished.report.evaluations) as f64 / wall.max(1e-9)
+        }),
+        evaluations_to_5pct: end
+            .best()
+            .and_then(|b| to_within_5pct(end, b.objective)),
+        best_objective_m: best_objective,
         parameters: param_results(&spec.space.dims, &spec.space.values(&u)),
         registration: registration_summary(
             tuner.fits_registration(),
             &tuner.target.base_registration,
             &registration,
         ),
-        sensitivity: sens,
+        sensitivity: sens.clone(),
         training,
         holdout,
+        identifiability_before: fitted.before.clone(),
+        polish: crate::polish::PolishReport {
+            // Whatever the polish saw, the probe reported is the one here.
+            probe_clean: polished.report.rounds > 0
+                && sens.iter().all(|x| x.rise_m >= -1e-6 * best_objective),
+            ..polished.report.clone()
+        },
+        baseline: baseline.map(|b| b.summary.clone()),
+        verdict,
     };
     let files = write_files(tuner, end, &summary, &params, &registration)?;
     Ok((summary, files))
+}
+
+/// `randomize.toml`: the fitted parameters' 95 % intervals as ranges for
+/// `run --params tuned.toml --perturb randomize.toml`; `None` without
+/// intervals (no polish).
+fn randomize_toml(tuner: &Tuner<'_>, summary: &Summary) -> Option<String> {
+    if summary.polish.intervals.is_empty() {
+        return None;
+    }
+    let mut t = format!(
+        "# Domain randomisation from `realitygap tune` ({} on runs {}): each\n\
+         # parameter's 95 % interval from the polish's Jacobian. Use it over the\n\
+         # tuned parameters:\n\
+         #   realitygap run SCENE --engine {} --params tuned.toml \\\n\
+         #       --perturb randomize.toml --repeats 20 --out DIR\n\
+         # Each repeat draws every key uniformly in its range (in the logarithm\n\
+         # for scale = \"log\"). The intervals say how far each parameter can\n\
+         # move before the fit to the training runs' mean gets worse by more than\n\
+         # its own residual noise; where the data do not bound a parameter the\n\
+         # range is the whole searched range.\n\n[params]\n",
+        tuner.spec.engine, summary.training.runs, tuner.spec.engine
+    );
+    let mut left_out = Vec::new();
+    for d in &tuner.spec.space.dims {
+        let Some(i) = summary.polish.intervals.iter().find(|i| i.key == d.key) else {
+            continue;
+        };
+        let [low, high] = i.interval.unwrap_or([d.low, d.high]);
+        if !(high > low) {
+            left_out.push(d.key.clone());
+            continue;
+        }
+        let log = d.scale == Scale::Log && low > 0.0;
+        t.push_str(&format!(
+            "\"{}\" = {{ low = {low:?}, high = {high:?}{}, value = {:?} }}{}\n",
+            d.key,
+            if log { ", scale = \"log\"" } else { "" },
+            i.value,
+            if i.interval.is_none() {
+                "  # unbounded by the data: the searched range"
+            } else {
+                ""
+            }
+        ));
+    }
+    if !left_out.is_empty() {
+        t.push_str(&format!(
+            "# Not randomised (a zero-width interval): {}\n",
+            left_out.join(", ")
+        ));
+    }
+    Some(t)
 }
 
 fn objective_text(tuner: &Tuner<'_>) -> String {
@@ -532,6 +822,9 @@ fn write_files(
         serde_json::to_string_pretty(summary)? + "\n",
     )?);
     files.push(write("summary.md", crate::outputs::markdown(summary))?);
+    if let Some(text) = randomize_toml(tuner, summary) {
+        files.push(write("randomize.toml", text)?);
+    }
     let fig = ConvergenceFigure {
         stem: "convergence".into(),
         title: format!("realitygap tune: {}", tuner.spec.engine),
@@ -551,6 +844,16 @@ fn write_files(
     };
     files.extend(fig.write(out).map_err(|e| anyhow!("{e}"))?);
     Ok(files)
+}
+
+fn fmt_interval(i: Option<&crate::polish::ParamInterval>) -> String {
+    match i.and_then(|i| i.interval.map(|x| (x, i.clipped))) {
+        Some(([a, b], clipped)) => format!(
+            "[{a:.6}, {b:.6}]{}",
+            if clipped { " (reaches a bound)" } else { "" }
+        ),
+        None => "none (unseen)".into(),
+    }
 }
 
 fn fmt_scored(s: &Option<Scored>) -> String {
@@ -577,11 +880,26 @@ fn comparison_md(c: &Comparison) -> String {
         ));
     }
     t.push_str(&format!(
-        "| **total** | {} | {} |\n\nObjective (with the cube term): untuned {:.3} m, tuned {:.3} m.\n",
+        "| **total** | {} | {} |\n",
         fmt_scored(&c.total_untuned),
         fmt_scored(&c.total_tuned),
-        c.objective_m[0],
-        c.objective_m[1]
+    ));
+    if !c.baselines.is_empty() {
+        t.push_str("\n| physics-free row | total (m, 95 % interval) | tuned minus it (m, 95 % paired interval) |\n|---|---|---|\n");
+        for b in &c.baselines {
+            t.push_str(&format!(
+                "| {} | {} | {} |\n",
+                b.source,
+                fmt_scored(&b.total),
+                b.tuned_minus_m.map_or("n/a".into(), |[d, lo, hi]| format!(
+                    "{d:+.3} [{lo:+.3}, {hi:+.3}]"
+                ))
+            ));
+        }
+    }
+    t.push_str(&format!(
+        "\nObjective (with the cube term): untuned {:.3} m, tuned {:.3} m.\n",
+        c.objective_m[0], c.objective_m[1]
     ));
     for s in &c.scenes {
         if let Some([real, u, v]) = &s.cube_push {
@@ -604,7 +922,7 @@ fn comparison_md(c: &Comparison) -> String {
 pub fn markdown(s: &Summary) -> String {
     let mut m = format!("# Tune of {}\n\n", s.engine);
     m.push_str(&format!(
-        "- Objective: {}.\n- Space: `{}`; engine settings: {}.\n- Search: CMA-ES, seed {}, {} evaluations ({} replayed, {} failed) of a budget of {}, {} jobs; stopped by {}.\n- Wall time {:.1} s, {} evaluations/s; within 5 % of the final best after {} evaluations.\n- Best objective {:.4} m on the training runs.\n\n",
+        "- Objective: {}.\n- Space: `{}`; engine settings: {}.\n- Search: CMA-ES, seed {}, {} evaluations ({} replayed, {} failed) of a budget of {}, {} jobs; stopped by {}.\n- Wall time {:.1} s, {} evaluations/s; CMA-ES within 5 % of its best after {} evaluations.\n- Best objective {:.4} m on the training runs.\n\n",
         s.objective,
         s.space,
         if s.settings.is_empty() {
@@ -625,6 +943,46 @@ pub fn markdown(s: &Summary) -> String {
         s.evaluations_to_5pct.map_or("n/a".into(), |n| n.to_string()),
         s.best_objective_m,
     ));
+    let p = &s.polish;
+    if p.rounds > 0 {
+        m.push_str(&format!(
+            "- Polish: Levenberg-Marquardt (rounds: {}), {} iterations, {} evaluations, {:.1} s: {:.4} -> {:.4} m ({}); {}{}.\n",
+            p.rounds,
+            p.iterations,
+            p.evaluations,
+            p.wall_time_s,
+            p.start_objective_m,
+            p.objective_m,
+            p.reason,
+            if p.probe_clean {
+                "the ±10 % probe found no better point".to_string()
+            } else {
+                format!(
+                    "the ±10 % probe still finds a better point ({} restarts from one): not converged",
+                    p.probe_restarts
+                )
+            },
+            if p.widened.is_empty() {
+                String::new()
+            } else {
+                format!(
+                    "; bounds widened: {}",
+                    p.widened
+                        .iter()
+                        .map(|w| format!("{} {} {} -> {}", w.key, w.side, w.from, w.to))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                )
+            }
+        ));
+    }
+    if let Some(b) = &s.baseline {
+        m.push_str(&format!(
+            "- Physics-free + actuator: fitted on the same runs ({} evaluations, objective {:.4} m), in `{}`.\n",
+            b.evaluations, b.objective_m, b.folder
+        ));
+    }
+    m.push_str(&format!("\n**{}**\n\n", s.verdict));
     m.push_str(&format!("## Training runs ({})\n\n", s.training.runs));
     m.push_str(&comparison_md(&s.training));
     if let Some(h) = &s.holdout {
@@ -632,19 +990,54 @@ pub fn markdown(s: &Summary) -> String {
         m.push_str(&comparison_md(h));
     }
     m.push_str(
-        "\n## Parameters\n\n| key | value | bounds | scale | start |\n|---|---|---|---|---|\n",
+        "\n## Parameters\n\n| key | value | 95 % interval | bounds searched | scale | start |\n|---|---|---|---|---|---|\n",
     );
     for p in &s.parameters {
+        let iv = s.polish.intervals.iter().find(|i| i.key == p.key);
         m.push_str(&format!(
-            "| {} | {:.6}{} | [{}, {}] | {:?} | {} |\n",
+            "| {} | {:.6}{} | {} | [{}, {}] | {:?} | {} |\n",
             p.key,
             p.value,
             if p.at_bound { " (at a bound)" } else { "" },
+            fmt_interval(iv),
             p.low,
             p.high,
             p.scale,
             p.start
         ));
+    }
+    let reg: Vec<_> = s
+        .polish
+        .intervals
+        .iter()
+        .filter(|i| i.key.starts_with("registration."))
+        .collect();
+    if !reg.is_empty() {
+        m.push_str("\nRegistration offset fitted with them: ");
+        m.push_str(
+            &reg.iter()
+                .map(|i| format!("{} {:.3} {}", i.key, i.value, fmt_interval(Some(i))))
+                .collect::<Vec<_>>()
+                .join("; "),
+        );
+        m.push_str(".\n");
+    }
+    m.push_str("\n## Identifiability\n\n");
+    for r in s
+        .identifiability_before
+        .iter()
+        .chain(s.polish.identifiability.iter())
+    {
+        m.push_str(&format!("- {}.\n", crate::polish::identifiability_text(r)));
+    }
+    if s.identifiability_before.is_none() && s.polish.identifiability.is_none() {
+        m.push_str("- Not measured (no polish).\n");
+    }
+    if let Some(b) = &s.baseline {
+        m.push_str("\n## Physics-free + actuator: the fitted stage\n\n| key | value | 95 % interval |\n|---|---|---|\n");
+        for i in &b.parameters {
+            m.push_str(&format!("| {} | {:.6} | {} |\n", i.key, i.value, fmt_interval(Some(i))));
+        }
     }
     let r = &s.registration;
     m.push_str(&format!(

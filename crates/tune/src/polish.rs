@@ -1,0 +1,560 @@
+//! After CMA-ES: the least-squares polish of a study tune, with the
+//! identifiability check that runs before the search, the bounds it
+//! widens, the probe that restarts it, and the parameters' intervals.
+//!
+//! - **Residuals.** The objective is the accumulated wrist error, a sum of
+//!   per-step distances `d_k >= 0`, plus `w * c` for a cube's final
+//!   position error `c`. Its residual vector is `r_k = sqrt(d_k)` and
+//!   `sqrt(w * c)`: `sum r^2` is the objective itself, so
+//!   Levenberg-Marquardt ([`crate::least_squares`]) minimises exactly what
+//!   CMA-ES did, with a Jacobian instead of samples.
+//! - **Bounds.** A parameter that ends on a bound of the space is widened
+//!   within its physical limits ([`physical_limits`]): a linear range by
+//!   its own width on that side, a log range by a factor of 4, and the
+//!   polish goes on from the same point ([`PolishOptions::widen_rounds`]
+//!   rounds at most). A bound that is already the physical limit stays and
+//!   is reported.
+//! - **Probe.** Each parameter is then moved 10 % either way from the
+//!   optimum ([`crate::outputs::SENSITIVITY_STEP`]); a probe that scores
+//!   better means the search had not converged, and the polish restarts
+//!   from it (twice at most).
+//! - **Intervals.** From the Jacobian at the optimum, as for recordings:
+//!   `s^2 (J^T J)^-1` with the residuals' autocorrelation counted
+//!   ([`crate::least_squares::spread`]); a 95 % interval per parameter in
+//!   its own units. The intervals describe the fit's local curvature
+//!   against the residual noise of the training runs' mean; they are not
+//!   the spread of the real arm from run to run.
+//! - **Identifiability.** The same Jacobian, at the start point before the
+//!   search and at the optimum after it, names the parameters whose effect
+//!   is below the noise (their interval spans the whole range) and the
+//!   pairs that trade against each other (correlation beyond 0.95).
+
+use crate::least_squares::{self, FitOptions};
+use crate::space::{Dim, Scale, Space};
+use crate::{TuneSpec, Tuner};
+use anyhow::{anyhow, Result};
+use serde::Serialize;
+use std::sync::Mutex;
+
+/// Settings of the polish.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PolishOptions {
+    /// Levenberg-Marquardt iterations per round at most (0: no polish).
+    pub iterations: usize,
+    /// Rounds that widen bounds at most (0: the space's bounds are kept).
+    pub widen_rounds: usize,
+    /// Restarts from a better probe point at most.
+    pub probe_restarts: usize,
+    /// No new round starts once the polish has made this many evaluations
+    /// (a round under way finishes).
+    pub max_evaluations: usize,
+}
+
+impl Default for PolishOptions {
+    fn default() -> Self {
+        PolishOptions {
+            iterations: 12,
+            widen_rounds: 2,
+            probe_restarts: 2,
+            max_evaluations: 600,
+        }
+    }
+}
+
+/// A bound the polish moved.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Widened {
+    /// The parameter.
+    pub key: String,
+    /// `low` or `high`.
+    pub side: String,
+    /// The space's bound.
+    pub from: f64,
+    /// The bound the polish searched to.
+    pub to: f64,
+}
+
+/// A fitted parameter with its interval.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ParamInterval {
+    /// The key (a parameter, or `registration.*`).
+    pub key: String,
+    /// The value at the optimum.
+    pub value: f64,
+    /// Its 95 % interval, clipped to the (widened) bounds; `None` when
+    /// the data say nothing of it.
+    pub interval: Option<[f64; 2]>,
+    /// True when the interval reaches a bound (it would be wider).
+    pub clipped: bool,
+}
+
+/// What the data cannot tell apart, at one point.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct IdentifiabilityReport {
+    /// Where: `start` (before the search) or `optimum`.
+    pub at: String,
+    /// Parameters whose effect is below the noise: no effect at all, or a
+    /// 95 % interval wider than the whole range.
+    pub unseen: Vec<String>,
+    /// Pairs whose estimates are correlated beyond 0.95 (key, key,
+    /// correlation).
+    pub trading: Vec<(String, String, f64)>,
+    /// Autocorrelation of the residuals from one step to the next.
+    pub residual_autocorrelation: f64,
+    /// Residuals, and the independent ones they count as.
+    pub residuals: (usize, f64),
+}
+
+/// The polish's account, in `summary.json`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct PolishReport {
+    /// The objective CMA-ES ended at, metres.
+    pub start_objective_m: f64,
+    /// The objective after the polish, metres.
+    pub objective_m: f64,
+    /// Simulations of the polish (Jacobians, steps, probes).
+    pub evaluations: usize,
+    /// Levenberg-Marquardt iterations, all rounds.
+    pub iterations: usize,
+    /// Rounds of Levenberg-Marquardt.
+    pub rounds: usize,
+    /// Why the last round stopped.
+    pub reason: String,
+    /// Bounds widened.
+    pub widened: Vec<Widened>,
+    /// Parameters that end on a bound that is their physical limit, or
+    /// that could not be widened further.
+    pub at_limit: Vec<String>,
+    /// Restarts from a better probe point.
+    pub probe_restarts: usize,
+    /// True when the last probe found no better point.
+    pub probe_clean: bool,
+    /// Every coordinate with its interval.
+    pub intervals: Vec<ParamInterval>,
+    /// At the optimum.
+    pub identifiability: Option<IdentifiabilityReport>,
+    /// Wall time, s.
+    pub wall_time_s: f64,
+}
+
+/// The identifiability report in a few lines.
+pub fn identifiability_text(r: &IdentifiabilityReport) -> String {
+    let mut t = format!(
+        "identifiability at the {}: {} residuals counting as {:.0} independent ones (step-to-step autocorrelation {:.2})",
+        r.at, r.residuals.0, r.residuals.1, r.residual_autocorrelation
+    );
+    if r.unseen.is_empty() {
+        t.push_str("; every coordinate has an effect above the noise");
+    } else {
+        t.push_str(&format!(
+            "; effect below the noise: {}",
+            r.unseen.join(", ")
+        ));
+    }
+    if r.trading.is_empty() {
+        t.push_str("; no pair trades against another");
+    } else {
+        t.push_str(&format!(
+            "; trading against each other: {}",
+            r.trading
+                .iter()
+                .map(|(a, b, c)| format!("{a} ~ {b} ({c:+.2})"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+    }
+    t
+}
+
+/// The polish's end.
+pub struct Polished {
+    /// The space searched last (bounds widened where they were).
+    pub space: Space,
+    /// The optimum's coordinates in that space.
+    pub u: Vec<f64>,
+    /// Its objective, metres.
+    pub objective_m: f64,
+    /// The account.
+    pub report: PolishReport,
+    /// The last probe around the optimum (none without a polish).
+    pub probe: Option<Vec<crate::outputs::Sensitivity>>,
+}
+
+/// The physical limits a parameter's bounds may be widened to, from its
+/// key's last part; `None` for a key without one (never widened).
+pub fn physical_limits(key: &str) -> Option<(f64, f64)> {
+    let field = key.rsplit('.').next().unwrap_or(key);
+    Some(match (key, field) {
+        ("controller.delay_s", _) => (0.0, 0.5),
+        ("controller.max_accel_deg_s2", _) => (1.0, 1.0e5),
+        ("actuator.frequency_rad_s", _) => (0.5, 2000.0),
+        ("actuator.damping_ratio", _) => (0.05, 10.0),
+        ("actuator.max_velocity_deg_s", _) => (1.0, 1000.0),
+        ("actuator.deadband_deg_s", _) => (0.0, 30.0),
+        (_, "damping" | "frictionloss") => (0.0, 1.0e3),
+        (_, "armature") => (0.0, 10.0),
+        (_, "kv" | "kp" | "max_force" | "stiffness") => (1.0e-3, 1.0e6),
+        (_, "offset_deg") => (-10.0, 10.0),
+        (_, "mass_kg") => (1.0e-3, 100.0),
+        (_, "friction") => (1.0e-3, 5.0),
+        (_, "time_constant_s") => (1.0e-3, 1.0),
+        (_, "damping_ratio") => (0.05, 10.0),
+        _ => return None,
+    })
+}
+
+/// `d` with its `side` bound widened within the physical limits; `None`
+/// when it cannot move.
+fn widen(d: &Dim, high_side: bool) -> Option<Dim> {
+    let (lo, hi) = physical_limits(&d.key)?;
+    let mut w = d.clone();
+    match (d.scale, high_side) {
+        (Scale::Linear, true) => w.high = (d.high + (d.high - d.low)).min(hi),
+        (Scale::Linear, false) => w.low = (d.low - (d.high - d.low)).max(lo),
+        (Scale::Log, true) => w.high = (d.high * 4.0).min(hi),
+        (Scale::Log, false) => w.low = (d.low / 4.0).max(lo.max(f64::MIN_POSITIVE)),
+    }
+    let moved = if high_side {
+        w.high > d.high * (1.0 + 1e-12) + 1e-300
+    } else {
+        w.low < d.low - d.low.abs() * 1e-12 - 1e-300
+    };
+    moved.then_some(w)
+}
+
+/// The tuner of `spec` with another space.
+fn with_space(spec: &TuneSpec, space: Space) -> TuneSpec {
+    TuneSpec {
+        engine: spec.engine.clone(),
+        space,
+        fit_registration: spec.fit_registration,
+        set: spec.set.clone(),
+        search: spec.search,
+        out: spec.out.clone(),
+        polish: spec.polish,
+        baseline_space: None,
+    }
+}
+
+/// The Jacobian's report at `u`: identifiability, and the spread.
+pub fn identifiability(
+    tuner: &Tuner<'_>,
+    u: &[f64],
+    at: &str,
+    jac: Option<nalgebra::DMatrix<f64>>,
+    r: Option<Vec<f64>>,
+) -> Result<(IdentifiabilityReport, least_squares::Spread, usize)> {
+    let f = |x: &[f64]| tuner.residuals(x);
+    let mut evaluations = 0;
+    let r = match r {
+        Some(r) => r,
+        None => {
+            evaluations += 1;
+            f(u).map_err(|m| anyhow!("{at}: {m}"))?
+        }
+    };
+    let j = match jac {
+        Some(j) => j,
+        None => {
+            evaluations += u.len();
+            least_squares::jacobian(&f, u, &r, 1e-3, tuner.spec.search.jobs)
+                .map_err(|m| anyhow!("{at}: the Jacobian: {m}"))?
+        }
+    };
+    let s = least_squares::spread(&j, &r, 1);
+    let names = tuner.value_names();
+    let mut unseen = Vec::new();
+    for (c, k) in names.iter().enumerate() {
+        let width = 2.0 * 1.96 * s.sd_u[c];
+        if j.column(c).norm() == 0.0 || !width.is_finite() || width >= 1.0 {
+            unseen.push(k.clone());
+        }
+    }
+    let mut trading = Vec::new();
+    for a in 0..names.len() {
+        for b in a + 1..names.len() {
+            let c = s.correlation[a][b];
+            if c.is_finite() && c.abs() > 0.95 {
+                trading.push((names[a].clone(), names[b].clone(), c));
+            }
+        }
+    }
+    Ok((
+        IdentifiabilityReport {
+            at: at.to_string(),
+            unseen,
+            trading,
+            residual_autocorrelation: s.rho,
+            residuals: (s.n, s.n_eff),
+        },
+        s,
+        evaluations,
+    ))
+}
+
+/// Polishes the search's best point `u0` (objective `start_objective`).
+/// `note` hears what the polish is doing.
+pub fn polish(
+    tuner: &Tuner<'_>,
+    u0: &[f64],
+    start_objective: f64,
+    options: PolishOptions,
+    note: &(dyn Fn(String) + Sync),
+) -> Result<Polished> {
+    let started = std::time::Instant::now();
+    let spec = tuner.spec;
+    let mut space = spec.space.clone();
+    let mut u = u0.to_vec();
+    let mut objective = start_objective;
+    let mut report = PolishReport {
+        start_objective_m: start_objective,
+        objective_m: start_objective,
+        evaluations: 0,
+        iterations: 0,
+        rounds: 0,
+        reason: "no polish asked for".into(),
+        widened: Vec::new(),
+        at_limit: Vec::new(),
+        probe_restarts: 0,
+        probe_clean: false,
+        intervals: Vec::new(),
+        identifiability: None,
+        wall_time_s: 0.0,
+    };
+    if options.iterations == 0 {
+        return Ok(Polished {
+            space,
+            u,
+            objective_m: objective,
+            report,
+            probe: None,
+        });
+    }
+    let fit_options = FitOptions {
+        max_iterations: options.iterations,
+        step: 1e-3,
+        tolerance: 1e-4,
+        jobs: spec.search.jobs,
+    };
+    let mut widen_rounds = 0;
+    let mut last: Option<least_squares::Fit>;
+    let mut last_probe;
+    loop {
+        realitygap_runner::interrupt::check()?;
+        let round_spec = with_space(spec, space.clone());
+        let t = Tuner {
+            target: tuner.target,
+            simulator: tuner.simulator,
+            spec: &round_spec,
+        };
+        report.rounds += 1;
+        note(format!(
+            "polish round {}: Levenberg-Marquardt from {:.4} m over {} coordinates",
+            report.rounds,
+            objective,
+            u.len()
+        ));
+        let count = Mutex::new(0usize);
+        let f = |x: &[f64]| {
+            *count.lock().unwrap_or_else(|e| e.into_inner()) += 1;
+            t.residuals(x)
+        };
+        let fit = least_squares::levenberg_marquardt(&f, &u, fit_options, &|_, _, _| {})
+            .map_err(|m| anyhow!("the polish: {m}"))?;
+        report.evaluations += count.into_inner().unwrap_or_else(|e| e.into_inner());
+        report.iterations += fit.iterations;
+        report.reason = fit.reason.clone();
+        if fit.cost < objective {
+            u = fit.u.clone();
+            objective = fit.cost;
+        }
+        note(format!(
+            "  {:.4} m after {} iterations ({})",
+            objective, fit.iterations, fit.reason
+        ));
+        last = Some(fit);
+        if report.evaluations >= options.max_evaluations {
+            report.reason = format!(
+                "{} (the polish's {} evaluations are spent)",
+                report.reason, options.max_evaluations
+            );
+            last_probe = None;
+            break;
+        }
+        // Parameters on a bound: widen, and go on from the same point.
+        let mut moved = false;
+        if widen_rounds < options.widen_rounds {
+            let values = space.values(&u);
+            let mut next = space.clone();
+            for (i, d) in space.dims.iter().enumerate() {
+                let side = if u[i] <= 1e-6 {
+                    false
+                } else if u[i] >= 1.0 - 1e-6 {
+                    true
+                } else {
+                    continue;
+                };
+                match widen(d, side) {
+                    Some(w) => {
+                        report.widened.push(Widened {
+                            key: d.key.clone(),
+                            side: if side { "high" } else { "low" }.into(),
+                            from: if side { d.high } else { d.low },
+                            to: if side { w.high } else { w.low },
+                        });
+                        next.dims[i] = w;
+                        moved = true;
+                    }
+                    None => {}
+                }
+            }
+            if moved {
+                widen_rounds += 1;
+                for (i, d) in next.dims.iter().enumerate() {
+                    u[i] = d.unit(values[i]);
+                }
+                space = next;
+                note(format!(
+                    "  widened: {}",
+                    report
+                        .widened
+                        .iter()
+                        .map(|w| format!("{} {} {} -> {}", w.key, w.side, w.from, w.to))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ));
+                continue;
+            }
+        }
+        // The probe: 10 % either way of each parameter.
+        let probe = crate::outputs::sensitivity(&t, &u, objective);
+        report.evaluations += 2 * probe.len();
+        last_probe = Some(probe.clone());
+        let better = probe
+            .iter()
+            .flat_map(|s| {
+                s.objectives_m
+                    .iter()
+                    .zip(s.tried)
+                    .map(move |(o, v)| (s.key.clone(), *o, v))
+            })
+            .filter(|(_, o, _)| *o < objective * (1.0 - 1e-6))
+            .min_by(|a, b| a.1.total_cmp(&b.1));
+        match better {
+            Some((key, o, v)) if report.probe_restarts < options.probe_restarts => {
+                report.probe_restarts += 1;
+                note(format!(
+                    "  the probe found {o:.4} m at {key} = {v:.6}: not converged, going on from there"
+                ));
+                if let Some(i) = space.dims.iter().position(|d| d.key == key) {
+                    u[i] = space.dims[i].unit(v);
+                }
+                objective = o;
+                continue;
+            }
+            Some((key, o, v)) => {
+                // No restarts left: keep the better point, unpolished.
+                report.probe_clean = false;
+                note(format!(
+                    "  the probe found {o:.4} m at {key} = {v:.6}; no restarts left: the search has not converged"
+                ));
+                if let Some(i) = space.dims.iter().position(|d| d.key == key) {
+                    u[i] = space.dims[i].unit(v);
+                }
+                objective = o;
+                last_probe = None;
+                break;
+            }
+            None => {
+                report.probe_clean = true;
+                break;
+            }
+        }
+    }
+    // Intervals and identifiability at the optimum.
+    let final_spec = with_space(spec, space.clone());
+    let t = Tuner {
+        target: tuner.target,
+        simulator: tuner.simulator,
+        spec: &final_spec,
+    };
+    let (jac, r) = match last {
+        Some(fit) if fit.u == u => (fit.jacobian, Some(fit.residuals)),
+        _ => (None, None),
+    };
+    let (ident, spread, n) = identifiability(&t, &u, "optimum", jac, r)?;
+    report.evaluations += n;
+    let names = t.value_names();
+    let values = t.values(&u);
+    for (c, key) in names.iter().enumerate() {
+        let sd = spread.sd_u[c];
+        let (interval, clipped) = if sd.is_finite() {
+            let (a, b) = (u[c] - 1.96 * sd, u[c] + 1.96 * sd);
+            let clipped = a < 0.0 || b > 1.0;
+            let at = |x: f64| {
+                let mut v = u.to_vec();
+                v[c] = x.clamp(0.0, 1.0);
+                t.values(&v)[c]
+            };
+            let (lo, hi) = (at(a), at(b));
+            (Some([lo.min(hi), lo.max(hi)]), clipped)
+        } else {
+            (None, true)
+        };
+        report.intervals.push(ParamInterval {
+            key: key.clone(),
+            value: values[c],
+            interval,
+            clipped,
+        });
+    }
+    for (i, d) in space.dims.iter().enumerate() {
+        if u[i] <= 1e-6 || u[i] >= 1.0 - 1e-6 {
+            report.at_limit.push(d.key.clone());
+        }
+    }
+    report.identifiability = Some(ident);
+    report.objective_m = objective;
+    report.wall_time_s = started.elapsed().as_secs_f64();
+    Ok(Polished {
+        space,
+        u,
+        objective_m: objective,
+        report,
+        probe: last_probe,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn dim(key: &str, low: f64, high: f64, scale: Scale) -> Dim {
+        Dim {
+            key: key.into(),
+            low,
+            high,
+            scale,
+            start: low,
+        }
+    }
+
+    #[test]
+    fn widening_stays_within_physical_limits() {
+        let d = dim("joints.j2.damping", 0.0, 5.0, Scale::Linear);
+        assert!(widen(&d, false).is_none(), "damping cannot go below 0");
+        assert_eq!(widen(&d, true).unwrap().high, 10.0);
+        let k = dim("joints.j2.kv", 4.0, 4000.0, Scale::Log);
+        assert_eq!(widen(&k, true).unwrap().high, 16000.0);
+        assert_eq!(widen(&k, false).unwrap().low, 1.0);
+        let o = dim("joints.j2.offset_deg", -3.0, 3.0, Scale::Linear);
+        assert_eq!(widen(&o, true).unwrap().high, 9.0);
+        let o2 = dim("joints.j2.offset_deg", -3.0, 9.0, Scale::Linear);
+        assert_eq!(widen(&o2, true).unwrap().high, 10.0);
+        let o3 = dim("joints.j2.offset_deg", -3.0, 10.0, Scale::Linear);
+        assert!(widen(&o3, true).is_none(), "already at the limit");
+        assert!(widen(&dim("objects.cube.unknown", 0.0, 1.0, Scale::Linear), true).is_none());
+        let delay = dim("controller.delay_s", 0.0, 0.15, Scale::Linear);
+        assert_eq!(widen(&delay, true).unwrap().high, 0.3);
+    }
+}
