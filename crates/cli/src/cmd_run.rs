@@ -55,8 +55,10 @@ pub struct Args {
     pub seed: u64,
     /// Perturb each repeat: key=value[,key=value] with keys
     /// initial_offset_deg, sensor_noise_deg, delay_periods, mass_scale,
-    /// friction_scale (see the README). Off by default.
-    #[arg(long = "perturb", value_name = "KEY=VALUE,...")]
+    /// friction_scale; or a randomisation file (randomize.toml, as `tune`
+    /// writes it) whose parameter ranges each repeat draws from, over
+    /// --params. Off by default.
+    #[arg(long = "perturb", value_name = "KEY=VALUE,...|FILE")]
     pub perturb: Vec<String>,
     /// Engine setting overriding the scene's: key=value for every engine,
     /// or engine.key=value (e.g. mujoco.timestep_s=0.0005).

@@ -93,9 +93,17 @@ pub struct ParamInterval {
 pub struct IdentifiabilityReport {
     /// Where: `start` (before the search) or `optimum`.
     pub at: String,
-    /// Parameters whose effect is below the noise: no effect at all, or a
-    /// 95 % interval wider than the whole range.
+    /// Parameters whose effect is below the noise: moving one a tenth of
+    /// its range either way changes the objective (to second order, from
+    /// the Jacobian) by less than the objective's own spread over
+    /// resamples of the real runs.
     pub unseen: Vec<String>,
+    /// That spread: the bootstrap standard deviation of the wrist total
+    /// over the training runs, metres (`None`: not measured).
+    pub noise_m: Option<f64>,
+    /// Each coordinate's effect: the objective's larger change when it
+    /// moves a tenth of its range either way, metres.
+    pub effects_m: Vec<(String, f64)>,
     /// Pairs whose estimates are correlated beyond 0.95 (key, key,
     /// correlation).
     pub trading: Vec<(String, String, f64)>,
@@ -143,11 +151,18 @@ pub fn identifiability_text(r: &IdentifiabilityReport) -> String {
         "identifiability at the {}: {} residuals counting as {:.0} independent ones (step-to-step autocorrelation {:.2})",
         r.at, r.residuals.0, r.residuals.1, r.residual_autocorrelation
     );
+    let noise = r
+        .noise_m
+        .map_or("n/a".to_string(), |n| format!("{n:.3} m"));
     if r.unseen.is_empty() {
-        t.push_str("; every coordinate has an effect above the noise");
+        t.push_str(&format!(
+            "; every coordinate moves the objective more than the real runs' noise ({noise}) when it moves a tenth of its range"
+        ));
     } else {
         t.push_str(&format!(
-            "; effect below the noise: {}",
+            "; {} of {} coordinates move the objective less than the real runs' noise ({noise}) when they move a tenth of their range: {}",
+            r.unseen.len(),
+            r.effects_m.len(),
             r.unseen.join(", ")
         ));
     }
@@ -263,16 +278,37 @@ pub fn identifiability(
     };
     let s = least_squares::spread(&j, &r, 1);
     let names = tuner.value_names();
-    let mut unseen = Vec::new();
-    for (c, k) in names.iter().enumerate() {
-        let width = 2.0 * 1.96 * s.sd_u[c];
-        if j.column(c).norm() == 0.0 || !width.is_finite() || width >= 1.0 {
-            unseen.push(k.clone());
-        }
+    let noise_m = objective_noise(tuner, u);
+    if noise_m.is_some() {
+        evaluations += 1;
     }
+    // The objective's change for a move of h = 0.1 (normalised) either
+    // way: 2 h (J^T r)_i + h^2 (J^T J)_ii.
+    let h = 0.1;
+    let effects_m: Vec<(String, f64)> = names
+        .iter()
+        .enumerate()
+        .map(|(c, k)| {
+            let col = j.column(c);
+            let g: f64 = col.iter().zip(&r).map(|(a, b)| a * b).sum();
+            let q = col.norm_squared();
+            let up = 2.0 * h * g + h * h * q;
+            let down = -2.0 * h * g + h * h * q;
+            (k.clone(), up.abs().max(down.abs()))
+        })
+        .collect();
+    let threshold = noise_m.unwrap_or(0.0);
+    let unseen: Vec<String> = effects_m
+        .iter()
+        .filter(|(_, e)| !(*e > threshold))
+        .map(|(k, _)| k.clone())
+        .collect();
     let mut trading = Vec::new();
     for a in 0..names.len() {
         for b in a + 1..names.len() {
+            if unseen.contains(&names[a]) || unseen.contains(&names[b]) {
+                continue;
+            }
             let c = s.correlation[a][b];
             if c.is_finite() && c.abs() > 0.95 {
                 trading.push((names[a].clone(), names[b].clone(), c));
@@ -283,6 +319,8 @@ pub fn identifiability(
         IdentifiabilityReport {
             at: at.to_string(),
             unseen,
+            noise_m,
+            effects_m,
             trading,
             residual_autocorrelation: s.rho,
             residuals: (s.n, s.n_eff),
@@ -290,6 +328,43 @@ pub fn identifiability(
         s,
         evaluations,
     ))
+}
+
+/// The bootstrap standard deviation of the wrist total at `u` over the
+/// training runs (200 resamples of the real runs), metres.
+fn objective_noise(tuner: &Tuner<'_>, u: &[f64]) -> Option<f64> {
+    let p = tuner.params(u).ok()?;
+    let trajs = tuner.simulator.simulate(&tuner.target.scenes, &p).ok()?;
+    let t = tuner.target;
+    let reports = t
+        .evaluate(
+            &t.sources("noise", trajs),
+            realitygap_analysis::compare::RegistrationChoice::Given {
+                registration: tuner.registration(u),
+                origin: "identifiability".into(),
+            },
+            &t.train,
+            Some(200),
+        )
+        .ok()?;
+    let mut reps: Vec<f64> = Vec::new();
+    for r in &reports {
+        let x = &r.sources.first()?.bootstrap_replicates_m;
+        if reps.is_empty() {
+            reps = x.clone();
+        } else if reps.len() == x.len() {
+            reps.iter_mut().zip(x).for_each(|(a, b)| *a += b);
+        } else {
+            return None;
+        }
+    }
+    let reps: Vec<f64> = reps.into_iter().filter(|x| x.is_finite()).collect();
+    if reps.len() < 10 {
+        return None;
+    }
+    let mean = reps.iter().sum::<f64>() / reps.len() as f64;
+    let var = reps.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (reps.len() - 1) as f64;
+    Some(var.sqrt())
 }
 
 /// Polishes the search's best point `u0` (objective `start_objective`).
@@ -359,7 +434,16 @@ pub fn polish(
             *count.lock().unwrap_or_else(|e| e.into_inner()) += 1;
             t.residuals(x)
         };
-        let fit = least_squares::levenberg_marquardt(&f, &u, fit_options, &|_, _, _| {})
+        // Iterations this round: what is left of the polish's evaluations,
+        // a Jacobian and a step each, at least one.
+        let left = options.max_evaluations.saturating_sub(report.evaluations);
+        let round_options = FitOptions {
+            max_iterations: fit_options
+                .max_iterations
+                .min((left / (u.len() + 1)).max(1)),
+            ..fit_options
+        };
+        let fit = least_squares::levenberg_marquardt(&f, &u, round_options, &|_, _, _| {})
             .map_err(|m| anyhow!("the polish: {m}"))?;
         report.evaluations += count.into_inner().unwrap_or_else(|e| e.into_inner());
         report.iterations += fit.iterations;
