@@ -219,7 +219,10 @@ fn the_polish_gives_intervals_and_a_randomisation_file_that_run_accepts() {
     let iv = kv["interval"].as_array().unwrap_or_else(|| panic!("{kv}"));
     let (lo, hi) = (iv[0].as_f64().unwrap(), iv[1].as_f64().unwrap());
     assert!(lo <= KNOWN_KV && KNOWN_KV <= hi, "{kv}");
-    assert!(hi - lo < 0.5 * KNOWN_KV, "an interval that says something: {kv}");
+    assert!(
+        hi - lo < 0.5 * KNOWN_KV,
+        "an interval that says something: {kv}"
+    );
     assert_eq!(s["identifiability_before"]["at"], "start", "{s}");
     assert_eq!(p["identifiability"]["at"], "optimum", "{p}");
     let rows: Vec<&str> = s["training"]["baselines"]
@@ -229,7 +232,10 @@ fn the_polish_gives_intervals_and_a_randomisation_file_that_run_accepts() {
         .map(|b| b["source"].as_str().unwrap())
         .collect();
     assert_eq!(rows, ["physics-free", "physics-free + actuator (fitted)"]);
-    assert!(s["verdict"].as_str().unwrap().contains("physics-free"), "{s}");
+    assert!(
+        s["verdict"].as_str().unwrap().contains("physics-free"),
+        "{s}"
+    );
     // randomize.toml over tuned.toml in `run`.
     let r = out.join("randomize.toml");
     let text = std::fs::read_to_string(&r).unwrap();
@@ -257,7 +263,11 @@ fn the_polish_gives_intervals_and_a_randomisation_file_that_run_accepts() {
     assert_ne!(a, b, "two repeats drew the same parameters");
     // A bad randomisation file is refused with its line before anything runs.
     let bad = d.join("bad.toml");
-    std::fs::write(&bad, "[params]\n\"joints.m1n6s300_joint_2.kv\" = { low = 5.0 }\n").unwrap();
+    std::fs::write(
+        &bad,
+        "[params]\n\"joints.m1n6s300_joint_2.kv\" = { low = 5.0 }\n",
+    )
+    .unwrap();
     let o = realitygap(&[
         "run",
         scene1().to_str().unwrap(),
@@ -270,7 +280,10 @@ fn the_polish_gives_intervals_and_a_randomisation_file_that_run_accepts() {
     ]);
     assert!(!o.status.success());
     let e = String::from_utf8_lossy(&o.stderr);
-    assert!(e.contains("bad.toml:2") && e.contains("`high` is missing"), "{e}");
+    assert!(
+        e.contains("bad.toml:2") && e.contains("`high` is missing"),
+        "{e}"
+    );
 }
 
 /// The first number under `key` in the sources of a compare JSON.

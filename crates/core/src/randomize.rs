@@ -97,9 +97,7 @@ impl Randomization {
                 e.message().to_string(),
             )
         })?;
-        let line_of = |needle: &str| {
-            text.find(needle).map(|i| line_col(text, i).0)
-        };
+        let line_of = |needle: &str| text.find(needle).map(|i| line_col(text, i).0);
         let doc = doc.into_inner();
         for k in doc.keys() {
             if k != "params" {
@@ -130,9 +128,7 @@ impl Randomization {
                 }
             }
             let num = |f: &str| -> Result<f64, RandomizeError> {
-                let x = t
-                    .get(f)
-                    .ok_or_else(|| at(format!("`{f}` is missing")))?;
+                let x = t.get(f).ok_or_else(|| at(format!("`{f}` is missing")))?;
                 let x = x
                     .as_float()
                     .or_else(|| x.as_integer().map(|i| i as f64))
@@ -182,7 +178,7 @@ impl Randomization {
     /// The values of one repeat, drawn from `seed`.
     pub fn sample(&self, seed: u64) -> Vec<(String, f64)> {
         // A stream of its own, apart from the perturbation's.
-        let mut rng = SplitMix64::new(seed ^ 0x5EED_0F_D0_A1_2A_11);
+        let mut rng = SplitMix64::new(seed ^ 0x005E_ED0F_D0A1_2A11);
         self.ranges
             .iter()
             .map(|r| {
@@ -205,7 +201,10 @@ impl Randomization {
 
 /// `base` with `values` (parameter keys) set over it, checked as a
 /// parameters file is.
-pub fn overlay(base: &PhysicalParams, values: &[(String, f64)]) -> Result<PhysicalParams, ParamsError> {
+pub fn overlay(
+    base: &PhysicalParams,
+    values: &[(String, f64)],
+) -> Result<PhysicalParams, ParamsError> {
     let mut doc: toml::Table = toml::from_str(&base.to_toml_string()).unwrap_or_default();
     for (key, value) in values {
         let Some(path) = path_of(key) else {
@@ -262,13 +261,41 @@ mod tests {
     #[test]
     fn bad_files_name_the_line_and_key() {
         let bad = [
-            ("[params]\n\"joints.j2.kv\" = { low = 10.0 }\n", "`high` is missing", 2),
-            ("[params]\n\"joints.j2.kv\" = { low = 10.0, high = 1.0 }\n", "above high", 2),
-            ("[params]\n\"joints.j2.wobble\" = { low = 1.0, high = 2.0 }\n", "wobble", 2),
-            ("[params]\n\"gravity\" = { low = 1.0, high = 2.0 }\n", "not a parameter key", 2),
-            ("[params]\n\"joints.j2.kv\" = { low = 0.0, high = 2.0, scale = \"log\" }\n", "low > 0", 2),
-            ("[params]\n\"joints.j2.kv\" = { low = 1.0, high = nan }\n", "finite", 2),
-            ("[params]\n\n\"joints.j2.kv\" = { low = 1.0, hgh = 2.0 }\n", "unknown field", 3),
+            (
+                "[params]\n\"joints.j2.kv\" = { low = 10.0 }\n",
+                "`high` is missing",
+                2,
+            ),
+            (
+                "[params]\n\"joints.j2.kv\" = { low = 10.0, high = 1.0 }\n",
+                "above high",
+                2,
+            ),
+            (
+                "[params]\n\"joints.j2.wobble\" = { low = 1.0, high = 2.0 }\n",
+                "wobble",
+                2,
+            ),
+            (
+                "[params]\n\"gravity\" = { low = 1.0, high = 2.0 }\n",
+                "not a parameter key",
+                2,
+            ),
+            (
+                "[params]\n\"joints.j2.kv\" = { low = 0.0, high = 2.0, scale = \"log\" }\n",
+                "low > 0",
+                2,
+            ),
+            (
+                "[params]\n\"joints.j2.kv\" = { low = 1.0, high = nan }\n",
+                "finite",
+                2,
+            ),
+            (
+                "[params]\n\n\"joints.j2.kv\" = { low = 1.0, hgh = 2.0 }\n",
+                "unknown field",
+                3,
+            ),
             ("[parms]\n", "unknown table", 1),
         ];
         for (text, want, line) in bad {

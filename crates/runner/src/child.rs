@@ -107,7 +107,11 @@ fn prepare_for(registry: Registry, job: &Job, entry: &str) -> Result<Prepared> {
     match &randomization {
         Some(r) => {
             let drawn = r.apply(&base, job.seed).with_context(|| {
-                format!("--perturb {}: the draw of seed {}", r.source.display(), job.seed)
+                format!(
+                    "--perturb {}: the draw of seed {}",
+                    r.source.display(),
+                    job.seed
+                )
             })?;
             prepare_with(registry, &src, drawn)
         }

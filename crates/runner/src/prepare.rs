@@ -178,7 +178,11 @@ pub fn parse_randomization(
         _ => anyhow::bail!(
             "--perturb: give one randomisation file, not {} ({})",
             files.len(),
-            files.iter().map(|s| s.as_str()).collect::<Vec<_>>().join(", ")
+            files
+                .iter()
+                .map(|s| s.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
         ),
     }
 }

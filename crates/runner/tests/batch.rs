@@ -53,6 +53,7 @@ fn plan(dir: &Path, groups: Vec<Group>, repeats: u32, perturbation: Perturbation
         jobs: 2,
         params_file: None,
         perturbation,
+        randomization: None,
         executor: Default::default(),
     }
 }

@@ -353,7 +353,9 @@ impl Target {
                 .first()
                 .map(|x| &x.series.wrist_distance_to_reference_m[..])
                 .unwrap_or(&[]);
-            r.extend((0..s.steps).map(|k| d.get(k).copied().flatten().unwrap_or(0.0).max(0.0).sqrt()));
+            r.extend(
+                (0..s.steps).map(|k| d.get(k).copied().flatten().unwrap_or(0.0).max(0.0).sqrt()),
+            );
             if let Some(sc) = score.scenes.iter().find(|x| x.scene == s.name) {
                 if let Some(c) = sc.cube_final_m {
                     r.push((s.cube_weight * c).max(0.0).sqrt());

@@ -691,12 +691,9 @@ pub fn finish(
         failed: end.history.iter().filter(|e| e.failed.is_some()).count(),
         stop: end.reason.clone(),
         wall_time_s: wall,
-        evaluations_per_s: (fresh > 0).then(|| {
-            (fresh + polished.report.evaluations) as f64 / wall.max(1e-9)
-        }),
-        evaluations_to_5pct: end
-            .best()
-            .and_then(|b| to_within_5pct(end, b.objective)),
+        evaluations_per_s: (fresh > 0)
+            .then(|| (fresh + polished.report.evaluations) as f64 / wall.max(1e-9)),
+        evaluations_to_5pct: end.best().and_then(|b| to_within_5pct(end, b.objective)),
         best_objective_m: best_objective,
         parameters: param_results(&spec.space.dims, &spec.space.values(&u)),
         registration: registration_summary(
@@ -747,7 +744,7 @@ fn randomize_toml(tuner: &Tuner<'_>, summary: &Summary) -> Option<String> {
             continue;
         };
         let [low, high] = i.interval.unwrap_or([d.low, d.high]);
-        if !(high > low) {
+        if high.partial_cmp(&low) != Some(std::cmp::Ordering::Greater) {
             left_out.push(d.key.clone());
             continue;
         }
@@ -1036,7 +1033,12 @@ pub fn markdown(s: &Summary) -> String {
     if let Some(b) = &s.baseline {
         m.push_str("\n## Physics-free + actuator: the fitted stage\n\n| key | value | 95 % interval |\n|---|---|---|\n");
         for i in &b.parameters {
-            m.push_str(&format!("| {} | {:.6} | {} |\n", i.key, i.value, fmt_interval(Some(i))));
+            m.push_str(&format!(
+                "| {} | {:.6} | {} |\n",
+                i.key,
+                i.value,
+                fmt_interval(Some(i))
+            ));
         }
     }
     let r = &s.registration;

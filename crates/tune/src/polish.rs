@@ -151,9 +151,7 @@ pub fn identifiability_text(r: &IdentifiabilityReport) -> String {
         "identifiability at the {}: {} residuals counting as {:.0} independent ones (step-to-step autocorrelation {:.2})",
         r.at, r.residuals.0, r.residuals.1, r.residual_autocorrelation
     );
-    let noise = r
-        .noise_m
-        .map_or("n/a".to_string(), |n| format!("{n:.3} m"));
+    let noise = r.noise_m.map_or("n/a".to_string(), |n| format!("{n:.3} m"));
     if r.unseen.is_empty() {
         t.push_str(&format!(
             "; every coordinate moves the objective more than the real runs' noise ({noise}) when it moves a tenth of its range"
@@ -300,7 +298,7 @@ pub fn identifiability(
     let threshold = noise_m.unwrap_or(0.0);
     let unseen: Vec<String> = effects_m
         .iter()
-        .filter(|(_, e)| !(*e > threshold))
+        .filter(|(_, e)| e.partial_cmp(&threshold) != Some(std::cmp::Ordering::Greater))
         .map(|(k, _)| k.clone())
         .collect();
     let mut trading = Vec::new();
@@ -478,18 +476,15 @@ pub fn polish(
                 } else {
                     continue;
                 };
-                match widen(d, side) {
-                    Some(w) => {
-                        report.widened.push(Widened {
-                            key: d.key.clone(),
-                            side: if side { "high" } else { "low" }.into(),
-                            from: if side { d.high } else { d.low },
-                            to: if side { w.high } else { w.low },
-                        });
-                        next.dims[i] = w;
-                        moved = true;
-                    }
-                    None => {}
+                if let Some(w) = widen(d, side) {
+                    report.widened.push(Widened {
+                        key: d.key.clone(),
+                        side: if side { "high" } else { "low" }.into(),
+                        from: if side { d.high } else { d.low },
+                        to: if side { w.high } else { w.low },
+                    });
+                    next.dims[i] = w;
+                    moved = true;
                 }
             }
             if moved {
