@@ -200,6 +200,23 @@ fn recovers_known_parameters_and_the_tuned_file_reproduces_the_objective() {
 fn the_polish_gives_intervals_and_a_randomisation_file_that_run_accepts() {
     let tmp = synthetic();
     let d = tmp.path();
+    // Six "real" runs that differ (initial offsets and reading noise), so
+    // that the objective has a spread over them for the intervals.
+    std::fs::remove_dir_all(d.join("runs")).unwrap();
+    ok(realitygap(&[
+        "run",
+        scene1().to_str().unwrap(),
+        "--engine",
+        "mujoco",
+        "--params",
+        d.join("known.toml").to_str().unwrap(),
+        "--repeats",
+        "6",
+        "--perturb",
+        "initial_offset_deg=0.3,sensor_noise_deg=0.05",
+        "--out",
+        d.join("runs").to_str().unwrap(),
+    ]));
     let out = d.join("tuned");
     let s = tune(d, out.to_str().unwrap(), "40");
     let p = &s["polish"];
@@ -215,7 +232,7 @@ fn the_polish_gives_intervals_and_a_randomisation_file_that_run_accepts() {
         .find(|i| i["key"] == "joints.m1n6s300_joint_2.kv")
         .unwrap();
     let value = kv["value"].as_f64().unwrap();
-    assert!((value - KNOWN_KV).abs() < 0.02 * KNOWN_KV, "{kv}");
+    assert!((value - KNOWN_KV).abs() < 0.05 * KNOWN_KV, "{kv}");
     let iv = kv["interval"].as_array().unwrap_or_else(|| panic!("{kv}"));
     let (lo, hi) = (iv[0].as_f64().unwrap(), iv[1].as_f64().unwrap());
     assert!(lo <= KNOWN_KV && KNOWN_KV <= hi, "{kv}");
@@ -223,6 +240,12 @@ fn the_polish_gives_intervals_and_a_randomisation_file_that_run_accepts() {
         hi - lo < 0.5 * KNOWN_KV,
         "an interval that says something: {kv}"
     );
+    assert!(
+        p["interval_basis"].as_str().unwrap().contains("noise"),
+        "the real runs' spread sets the intervals: {p}"
+    );
+    let noise = p["identifiability"]["noise_m"].as_f64().unwrap();
+    assert!(noise > 0.0, "{p}");
     assert_eq!(s["identifiability_before"]["at"], "start", "{s}");
     assert_eq!(p["identifiability"]["at"], "optimum", "{p}");
     let rows: Vec<&str> = s["training"]["baselines"]
@@ -470,11 +493,18 @@ fn a_tune_on_slurm_equals_the_local_tune() {
         std::fs::read_to_string(local.join("tuned.toml")).unwrap(),
         std::fs::read_to_string(on_slurm.join("tuned.toml")).unwrap()
     );
-    // One array per generation (6 candidates each for 2 parameters), plus
-    // the sensitivity's and the final runs'.
+    // Candidates evaluated together go as one array: a generation (6
+    // candidates for 2 parameters), a Jacobian's columns, the probe. So
+    // there are far fewer arrays than evaluations (each of 1 scene).
     let arrays = std::fs::read_dir(on_slurm.join(".slurm")).unwrap().count();
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(on_slurm.join("summary.json")).unwrap())
+            .unwrap();
+    let evaluations = summary["evaluations"].as_u64().unwrap()
+        + summary["polish"]["evaluations"].as_u64().unwrap()
+        + summary["baseline"]["evaluations"].as_u64().unwrap();
     assert!(
-        (4..=12).contains(&arrays),
-        "{arrays} arrays for 24 evaluations"
+        arrays >= 4 && 2 * arrays as u64 <= evaluations,
+        "{arrays} arrays for {evaluations} evaluations"
     );
 }

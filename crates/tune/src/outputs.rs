@@ -732,10 +732,11 @@ fn randomize_toml(tuner: &Tuner<'_>, summary: &Summary) -> Option<String> {
          #   realitygap run SCENE --engine {} --params tuned.toml \\\n\
          #       --perturb randomize.toml --repeats 20 --out DIR\n\
          # Each repeat draws every key uniformly in its range (in the logarithm\n\
-         # for scale = \"log\"). The intervals say how far each parameter can\n\
-         # move before the fit to the training runs' mean gets worse by more than\n\
-         # its own residual noise; where the data do not bound a parameter the\n\
-         # range is the whole searched range.\n\n[params]\n",
+         # for scale = \"log\"). An interval holds the values over which the\n\
+         # training objective stays within the real runs' own noise of its optimum,\n\
+         # the other parameters refitted (summary.md says which basis was used);\n\
+         # where the data do not bound a parameter the range is the whole\n\
+         # searched range.\n\n[params]\n",
         tuner.spec.engine, summary.training.runs, tuner.spec.engine
     );
     let mut left_out = Vec::new();
@@ -1002,6 +1003,9 @@ pub fn markdown(s: &Summary) -> String {
             p.scale,
             p.start
         ));
+    }
+    if !s.polish.interval_basis.is_empty() {
+        m.push_str(&format!("\nIntervals: {}.\n", s.polish.interval_basis));
     }
     let reg: Vec<_> = s
         .polish

@@ -18,12 +18,17 @@
 //!   optimum ([`crate::outputs::SENSITIVITY_STEP`]); a probe that scores
 //!   better means the search had not converged, and the polish restarts
 //!   from it (twice at most).
-//! - **Intervals.** From the Jacobian at the optimum, as for recordings:
-//!   `s^2 (J^T J)^-1` with the residuals' autocorrelation counted
-//!   ([`crate::least_squares::spread`]); a 95 % interval per parameter in
-//!   its own units. The intervals describe the fit's local curvature
-//!   against the residual noise of the training runs' mean; they are not
-//!   the spread of the real arm from run to run.
+//! - **Intervals.** From the Jacobian `J` at the optimum: the objective
+//!   there rises by `d^T J^T J d` for a move `d`, so the values of one
+//!   parameter over which it rises by less than `T` (the others refitted)
+//!   lie within `sqrt(T (J^T J)^-1_ii)`. `T` is 1.96 times the objective's
+//!   bootstrap standard deviation over the training runs: the interval is
+//!   what the real runs' own spread cannot tell apart. Without that spread
+//!   (a single reference run), the Gauss-Newton covariance `s^2 (J^T J)^-1`
+//!   with the residuals' autocorrelation counted
+//!   ([`crate::least_squares::spread`]) gives 1.96 standard deviations.
+//!   Both are local (a quadratic model at the optimum), clipped to the
+//!   bounds searched.
 //! - **Identifiability.** The same Jacobian, at the start point before the
 //!   search and at the optimum after it, names the parameters whose effect
 //!   is below the noise (their interval spans the whole range) and the
@@ -139,6 +144,8 @@ pub struct PolishReport {
     pub probe_clean: bool,
     /// Every coordinate with its interval.
     pub intervals: Vec<ParamInterval>,
+    /// What the intervals mean.
+    pub interval_basis: String,
     /// At the optimum.
     pub identifiability: Option<IdentifiabilityReport>,
     /// Wall time, s.
@@ -391,6 +398,7 @@ pub fn polish(
         probe_restarts: 0,
         probe_clean: false,
         intervals: Vec::new(),
+        interval_basis: String::new(),
         identifiability: None,
         wall_time_s: 0.0,
     };
@@ -565,10 +573,24 @@ pub fn polish(
     report.evaluations += n;
     let names = t.value_names();
     let values = t.values(&u);
+    // The half-width per unit of `sd_u`: with the real runs' noise, the
+    // values over which the objective rises by less than 1.96 times its
+    // bootstrap standard deviation (the local quadratic model, the other
+    // coordinates refitted); without it, 1.96 standard deviations of the
+    // Gauss-Newton covariance.
+    let gn = spread.variance * spread.n as f64 / spread.n_eff;
+    let (k, basis) = match ident.noise_m {
+        Some(n) if n > 0.0 && gn > 0.0 => (
+            (1.96 * n).sqrt() / gn.sqrt(),
+            format!("the objective within 1.96 x the real runs' noise ({n:.3} m) of its optimum"),
+        ),
+        _ => (1.96, "the Gauss-Newton covariance (the real runs' noise unknown)".to_string()),
+    };
+    report.interval_basis = basis;
     for (c, key) in names.iter().enumerate() {
         let sd = spread.sd_u[c];
         let (interval, clipped) = if sd.is_finite() {
-            let (a, b) = (u[c] - 1.96 * sd, u[c] + 1.96 * sd);
+            let (a, b) = (u[c] - k * sd, u[c] + k * sd);
             let clipped = a < 0.0 || b > 1.0;
             let at = |x: f64| {
                 let mut v = u.to_vec();
