@@ -476,14 +476,49 @@ pub fn polish(
         if widen_rounds < options.widen_rounds {
             let values = space.values(&u);
             let mut next = space.clone();
-            for (i, d) in space.dims.iter().enumerate() {
-                let side = if u[i] <= 1e-6 {
-                    false
-                } else if u[i] >= 1.0 - 1e-6 {
-                    true
-                } else {
+            // A bound holds a coordinate when a step inward (1 % of the
+            // range) raises the objective: only those are widened, not the
+            // ones that sit there because they do not matter.
+            let at_bound: Vec<(usize, bool)> = (0..space.dims.len())
+                .filter_map(|i| {
+                    if u[i] <= 1e-6 {
+                        Some((i, false))
+                    } else if u[i] >= 1.0 - 1e-6 {
+                        Some((i, true))
+                    } else {
+                        None
+                    }
+                })
+                .collect();
+            let held: Vec<bool> = {
+                use rayon::prelude::*;
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(spec.search.jobs.max(1))
+                    .build()
+                    .map_err(|e| anyhow!("{e}"))?;
+                pool.install(|| {
+                    at_bound
+                        .par_iter()
+                        .map(|&(i, high)| {
+                            let mut x = u.clone();
+                            x[i] += if high { -0.01 } else { 0.01 };
+                            match t.residuals(&x) {
+                                Ok(r) => {
+                                    r.iter().map(|v| v * v).sum::<f64>()
+                                        > objective * (1.0 + 1e-6)
+                                }
+                                Err(_) => false,
+                            }
+                        })
+                        .collect()
+                })
+            };
+            report.evaluations += at_bound.len();
+            for (&(i, side), held) in at_bound.iter().zip(held) {
+                let d = &space.dims[i];
+                if !held {
                     continue;
-                };
+                }
                 if let Some(w) = widen(d, side) {
                     report.widened.push(Widened {
                         key: d.key.clone(),
