@@ -52,11 +52,6 @@ fn best<'a>(it: impl Iterator<Item = &'a SourceSummary>) -> Option<(&'a SourceSu
 }
 
 /// Percentile of sorted values (nearest rank).
-fn percentile(sorted: &[f64], p: f64) -> f64 {
-    let i = ((sorted.len() as f64 - 1.0) * p).round() as usize;
-    sorted[i.min(sorted.len() - 1)]
-}
-
 /// The paired bootstrap comparison of `a` against `b` summed over scenes:
 /// (difference a - b, 95 % interval, probability a < b), when both have
 /// replicates in every scene.
@@ -89,14 +84,13 @@ fn paired(
         }
     }
     match reps.filter(|v| !v.is_empty()) {
-        Some(mut v) => {
+        Some(v) => {
             let p = v.iter().filter(|d| **d < 0.0).count() as f64 / v.len() as f64;
-            v.sort_by(f64::total_cmp);
-            let i = Interval {
-                low_m: percentile(&v, 0.025),
-                high_m: percentile(&v, 0.975),
-            };
-            Some((diff, Some(i), Some(p)))
+            let i = realitygap_analysis::bootstrap::percentile_interval(
+                &v,
+                realitygap_analysis::bootstrap::BootstrapOptions::default().level,
+            );
+            Some((diff, i, Some(p)))
         }
         None => Some((diff, None, None)),
     }
@@ -357,6 +351,7 @@ mod tests {
         assert!((d + 1.0).abs() < 1e-12);
         assert_eq!(p, Some(0.75));
         let i = i.unwrap();
-        assert!(i.low_m <= -0.9 && i.high_m >= 0.5, "{i:?}");
+        // The 2.5 % and 97.5 % quantiles of -1.3, -1.0, -0.9, 0.6 (interpolated).
+        assert!(i.low_m < -1.25 && i.high_m > 0.45, "{i:?}");
     }
 }
