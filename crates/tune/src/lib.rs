@@ -390,17 +390,11 @@ pub fn tune(
                 fit_registration: spec.fit_registration && space.registration.is_some(),
                 space: space.clone(),
                 set: EngineSettings::new(),
-                search: SearchOptions {
-                    budget: outputs::BASELINE_BUDGET.min(spec.search.budget.max(1)),
-                    ..spec.search
-                },
+                // The same effort as the engine's own fit: the same budget,
+                // polish, widening and probe.
+                search: spec.search,
                 out: spec.out.join("physics-free-actuator"),
-                polish: polish::PolishOptions {
-                    iterations: spec.polish.iterations.min(8),
-                    widen_rounds: 0,
-                    probe_restarts: 0,
-                    max_evaluations: spec.polish.max_evaluations,
-                },
+                polish: spec.polish,
                 baseline_space: None,
             };
             let b = fit(target, &sim, &bspec, &|_| {}, &|_| {})?;

@@ -31,9 +31,6 @@ pub const RESAMPLES: usize = 1000;
 /// forward kinematics, behind the actuator stage when one is given.
 pub const PHYSICS_FREE: &str = "ideal";
 
-/// Evaluations of the CMA-ES that fits the physics-free model's actuator
-/// stage before its polish (at most the tune's own budget).
-pub const BASELINE_BUDGET: usize = 200;
 
 /// The physics-free model behind its own actuator stage, fitted on the
 /// tune's training runs.
