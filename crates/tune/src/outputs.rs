@@ -31,7 +31,6 @@ pub const RESAMPLES: usize = 1000;
 /// forward kinematics, behind the actuator stage when one is given.
 pub const PHYSICS_FREE: &str = "ideal";
 
-
 /// The physics-free model behind its own actuator stage, fitted on the
 /// tune's training runs.
 pub struct Baseline {

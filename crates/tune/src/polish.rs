@@ -510,8 +510,7 @@ pub fn polish(
                             x[i] += if high { -0.01 } else { 0.01 };
                             match t.residuals(&x) {
                                 Ok(r) => {
-                                    r.iter().map(|v| v * v).sum::<f64>()
-                                        > objective * (1.0 + 1e-6)
+                                    r.iter().map(|v| v * v).sum::<f64>() > objective * (1.0 + 1e-6)
                                 }
                                 Err(_) => false,
                             }
@@ -628,7 +627,10 @@ pub fn polish(
             (1.96 * n).sqrt() / gn.sqrt(),
             format!("the objective within 1.96 x the real runs' noise ({n:.3} m) of its optimum"),
         ),
-        _ => (1.96, "the Gauss-Newton covariance (the real runs' noise unknown)".to_string()),
+        _ => (
+            1.96,
+            "the Gauss-Newton covariance (the real runs' noise unknown)".to_string(),
+        ),
     };
     report.interval_basis = basis;
     for (c, key) in names.iter().enumerate() {
