@@ -259,6 +259,12 @@ fn the_polish_gives_intervals_and_a_randomisation_file_that_run_accepts() {
         s["verdict"].as_str().unwrap().contains("physics-free"),
         "{s}"
     );
+    // The fitted physics-free row is a tune folder `reproduce --tuned` reads.
+    let pfa = out.join("physics-free-actuator");
+    let b: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(pfa.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(b["engine"], "ideal", "{b}");
+    assert!(pfa.join("tuned.toml").is_file() && pfa.join("registration.json").is_file());
     // randomize.toml over tuned.toml in `run`.
     let r = out.join("randomize.toml");
     let text = std::fs::read_to_string(&r).unwrap();

@@ -79,16 +79,23 @@ impl Baseline {
         std::fs::write(&file, text).with_context(|| format!("writing {}", file.display()))?;
         std::fs::write(spec.out.join("registration.json"), registration.to_json())
             .with_context(|| format!("writing {}", spec.out.display()))?;
+        let summary = BaselineSummary {
+            folder: spec.out.display().to_string(),
+            objective_m: fitted.polished.objective_m,
+            evaluations: fitted.end.history.len() + fitted.polished.report.evaluations,
+            parameters: fitted.polished.report.intervals.clone(),
+        };
+        // What `reproduce --tuned` reads: the engine and tuned.toml.
+        let mut json = serde_json::to_value(&summary)?;
+        json["engine"] = serde_json::json!(PHYSICS_FREE);
+        let file = spec.out.join("summary.json");
+        std::fs::write(&file, serde_json::to_string_pretty(&json)? + "\n")
+            .with_context(|| format!("writing {}", file.display()))?;
         Ok(Baseline {
             simulator: simulator.clone(),
             params,
             registration,
-            summary: BaselineSummary {
-                folder: spec.out.display().to_string(),
-                objective_m: fitted.polished.objective_m,
-                evaluations: fitted.end.history.len() + fitted.polished.report.evaluations,
-                parameters: fitted.polished.report.intervals.clone(),
-            },
+            summary,
         })
     }
 }
