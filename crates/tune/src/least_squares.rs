@@ -131,7 +131,8 @@ pub fn jacobian(
     Ok(j)
 }
 
-fn pool(jobs: usize) -> rayon::ThreadPool {
+/// A pool of `jobs` threads (one when it cannot be built).
+pub(crate) fn pool(jobs: usize) -> rayon::ThreadPool {
     rayon::ThreadPoolBuilder::new()
         .num_threads(jobs.max(1))
         .build()
@@ -389,6 +390,26 @@ pub fn spread(j: &DMatrix<f64>, r: &[f64], lag: usize) -> Spread {
         sd_u,
         correlation,
     }
+}
+
+/// Pairs of coordinates (named `names`) whose estimates are correlated
+/// beyond 0.95 in `s`: they trade against each other. Coordinates for
+/// which `skip` is true are left out.
+pub fn trading_pairs(
+    names: &[String],
+    s: &Spread,
+    skip: &dyn Fn(usize) -> bool,
+) -> Vec<(String, String, f64)> {
+    let mut out = Vec::new();
+    for a in (0..names.len()).filter(|&a| !skip(a)) {
+        for b in (a + 1..names.len()).filter(|&b| !skip(b)) {
+            let c = s.correlation[a][b];
+            if c.is_finite() && c.abs() > 0.95 {
+                out.push((names[a].clone(), names[b].clone(), c));
+            }
+        }
+    }
+    out
 }
 
 #[cfg(test)]

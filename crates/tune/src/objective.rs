@@ -303,20 +303,34 @@ impl Target {
     /// The objective of one simulated trajectory per scene, registered by
     /// `registration`, on the training runs.
     pub fn score(&self, trajectories: Vec<Trajectory>, registration: &Registration) -> Score {
+        match self.candidate_reports(trajectories, registration) {
+            Ok(reports) => score_of(&reports, &self.scenes),
+            Err(m) => Score::failed(m),
+        }
+    }
+
+    /// The training runs' reports of one simulated trajectory per scene,
+    /// registered by `registration` (the runs aligned once, in [`Target::new`]).
+    fn candidate_reports(
+        &self,
+        trajectories: Vec<Trajectory>,
+        registration: &Registration,
+    ) -> std::result::Result<Vec<SceneReport>, String> {
         let sources = self.sources("candidate", trajectories);
         let choice = RegistrationChoice::Given {
             registration: *registration,
             origin: "tune candidate".into(),
         };
         let opts = self.options(choice, &self.train, None);
-        let reports = match &self.aligned_train {
-            Some(aligned) => evaluate_study_aligned(&self.inputs(&sources), aligned, &opts),
-            None => match realitygap_analysis::evaluate_study(&self.inputs(&sources), &opts) {
-                Ok(r) => r,
-                Err(e) => return Score::failed(e.to_string()),
-            },
-        };
-        score_of(&reports, &self.scenes)
+        match &self.aligned_train {
+            Some(aligned) => Ok(evaluate_study_aligned(
+                &self.inputs(&sources),
+                aligned,
+                &opts,
+            )),
+            None => realitygap_analysis::evaluate_study(&self.inputs(&sources), &opts)
+                .map_err(|e| e.to_string()),
+        }
     }
 }
 
@@ -331,17 +345,7 @@ impl Target {
         trajectories: Vec<Trajectory>,
         registration: &Registration,
     ) -> std::result::Result<Vec<f64>, String> {
-        let sources = self.sources("candidate", trajectories);
-        let choice = RegistrationChoice::Given {
-            registration: *registration,
-            origin: "tune candidate".into(),
-        };
-        let opts = self.options(choice, &self.train, None);
-        let reports = match &self.aligned_train {
-            Some(aligned) => evaluate_study_aligned(&self.inputs(&sources), aligned, &opts),
-            None => realitygap_analysis::evaluate_study(&self.inputs(&sources), &opts)
-                .map_err(|e| e.to_string())?,
-        };
+        let reports = self.candidate_reports(trajectories, registration)?;
         let score = score_of(&reports, &self.scenes);
         if let Some(m) = score.failed {
             return Err(m);

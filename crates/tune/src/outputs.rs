@@ -364,21 +364,7 @@ fn total(reports: &Reports) -> Option<Scored> {
 }
 
 fn total_with_replicates(reports: &Reports) -> Option<(Scored, Vec<f64>)> {
-    let mut value = 0.0;
-    let mut reps: Vec<f64> = Vec::new();
-    for r in &reports.reports {
-        let s = r.sources.first()?;
-        value += s.accumulated_error_m?;
-        if reps.is_empty() {
-            reps = s.bootstrap_replicates_m.clone();
-        } else if reps.len() == s.bootstrap_replicates_m.len() {
-            for (a, b) in reps.iter_mut().zip(&s.bootstrap_replicates_m) {
-                *a += b;
-            }
-        } else {
-            reps.clear();
-        }
-    }
+    let (value, reps) = summed(&reports.reports)?;
     let interval_m = realitygap_analysis::bootstrap::percentile_interval(
         &reps,
         BootstrapOptions::default().level,
@@ -391,6 +377,28 @@ fn total_with_replicates(reports: &Reports) -> Option<(Scored, Vec<f64>)> {
         },
         reps,
     ))
+}
+
+/// The accumulated error of one source's reports summed over the scenes,
+/// with its bootstrap replicates summed replicate by replicate (empty
+/// when the scenes' replicates do not pair up).
+pub(crate) fn summed(reports: &[SceneReport]) -> Option<(f64, Vec<f64>)> {
+    let mut value = 0.0;
+    let mut reps: Vec<f64> = Vec::new();
+    for r in reports {
+        let s = r.sources.first()?;
+        value += s.accumulated_error_m?;
+        if reps.is_empty() {
+            reps = s.bootstrap_replicates_m.clone();
+        } else if reps.len() == s.bootstrap_replicates_m.len() {
+            for (a, b) in reps.iter_mut().zip(&s.bootstrap_replicates_m) {
+                *a += b;
+            }
+        } else {
+            reps.clear();
+        }
+    }
+    Some((value, reps))
 }
 
 /// The physics-free row `source` of `base`, against the tuned engine's

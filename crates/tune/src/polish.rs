@@ -314,18 +314,7 @@ pub fn identifiability(
         .filter(|(_, e)| e.partial_cmp(&threshold) != Some(std::cmp::Ordering::Greater))
         .map(|(k, _)| k.clone())
         .collect();
-    let mut trading = Vec::new();
-    for a in 0..names.len() {
-        for b in a + 1..names.len() {
-            if unseen.contains(&names[a]) || unseen.contains(&names[b]) {
-                continue;
-            }
-            let c = s.correlation[a][b];
-            if c.is_finite() && c.abs() > 0.95 {
-                trading.push((names[a].clone(), names[b].clone(), c));
-            }
-        }
-    }
+    let trading = least_squares::trading_pairs(&names, &s, &|i| unseen.contains(&names[i]));
     Ok((
         IdentifiabilityReport {
             at: at.to_string(),
@@ -358,17 +347,7 @@ fn objective_noise(tuner: &Tuner<'_>, u: &[f64]) -> Option<f64> {
             Some(200),
         )
         .ok()?;
-    let mut reps: Vec<f64> = Vec::new();
-    for r in &reports {
-        let x = &r.sources.first()?.bootstrap_replicates_m;
-        if reps.is_empty() {
-            reps = x.clone();
-        } else if reps.len() == x.len() {
-            reps.iter_mut().zip(x).for_each(|(a, b)| *a += b);
-        } else {
-            return None;
-        }
-    }
+    let (_, reps) = crate::outputs::summed(&reports)?;
     let reps: Vec<f64> = reps.into_iter().filter(|x| x.is_finite()).collect();
     if reps.len() < 10 {
         return None;
@@ -498,11 +477,7 @@ pub fn polish(
                 .collect();
             let held: Vec<bool> = {
                 use rayon::prelude::*;
-                let pool = rayon::ThreadPoolBuilder::new()
-                    .num_threads(spec.search.jobs.max(1))
-                    .build()
-                    .map_err(|e| anyhow!("{e}"))?;
-                pool.install(|| {
+                least_squares::pool(spec.search.jobs).install(|| {
                     at_bound
                         .par_iter()
                         .map(|&(i, high)| {

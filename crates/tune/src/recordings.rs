@@ -1038,15 +1038,7 @@ pub fn tune_recordings(
             unseen.push(k.clone());
         }
     }
-    let mut trading = Vec::new();
-    for a in 0..keys.len() {
-        for b in a + 1..keys.len() {
-            let c = spread.correlation[a][b];
-            if c.is_finite() && c.abs() > 0.95 {
-                trading.push((keys[a].clone(), keys[b].clone(), c));
-            }
-        }
-    }
+    let trading = least_squares::trading_pairs(&keys, &spread, &|_| false);
     let identifiability = Identifiability {
         unseen,
         trading,
