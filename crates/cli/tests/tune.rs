@@ -126,8 +126,8 @@ fn param(summary: &serde_json::Value, key: &str) -> f64 {
 
 /// Tolerances: the target is the engine itself, so the optimum is exact;
 /// within 200 evaluations CMA-ES gets kv within 5 % and the delay within
-/// 5 ms (one engine step: a delay acts at the next engine step, so delays
-/// within one step of each other give the same run).
+/// 5 ms (one engine step; the delay acts continuously within a step, as an
+/// average of the old and new command, so it is not exact either).
 #[test]
 fn recovers_known_parameters_and_the_tuned_file_reproduces_the_objective() {
     let tmp = synthetic();

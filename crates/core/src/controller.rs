@@ -629,7 +629,8 @@ impl ControllerLoop {
     }
 
     /// Steps one control period, releasing delayed commands at the engine
-    /// step where they fall due. `Some` diverged status when the engine
+    /// step where they fall due (averaged over the step they fall inside).
+    /// `Some` diverged status when the engine
     /// reports itself unstable; an error when it fails otherwise.
     fn step_period(
         &mut self,
@@ -655,10 +656,44 @@ impl ControllerLoop {
                     sim.set_joint_velocity_targets(&targets);
                 }
             }
-            // Step up to the engine step where the next command falls due
-            // (or the stage's next update).
+            // A command falling due inside the coming engine step: that step
+            // runs on the time-average of the old and the new command, so a
+            // delay acts continuously instead of rounded up to the engine's
+            // step (and a fit sees it move the run).
+            if let Some(weight) = self.due_inside_step(t_s, done, dt) {
+                let old = self.in_force.clone();
+                if let Some(&(due, _)) = self.pending.front() {
+                    self.release_due(due);
+                }
+                let blended = old
+                    .iter()
+                    .zip(&self.in_force)
+                    .map(|(o, n)| o + weight * (n - o))
+                    .collect();
+                let new = std::mem::replace(&mut self.in_force, blended);
+                if dynamic {
+                    self.stage.advance(&self.in_force, dt);
+                    let targets = self.stage.targets().to_vec();
+                    sim.set_joint_velocity_targets(&targets);
+                } else {
+                    let targets = self.targets(0.0);
+                    sim.set_joint_velocity_targets(&targets);
+                }
+                self.in_force = new;
+                if let Some(status) = self.take_steps(sim, t_s, done, done + 1)? {
+                    return Ok(Some(status));
+                }
+                done += 1;
+                if !dynamic {
+                    let targets = self.targets(0.0);
+                    sim.set_joint_velocity_targets(&targets);
+                }
+                continue;
+            }
+            // Step up to the engine step where the next command falls due,
+            // or the one it falls inside (or the stage's next update).
             let next = match self.pending.front() {
-                Some((due, _)) => ((due - t_s) / dt - 1e-9).ceil().max(0.0) as u64,
+                Some((due, _)) => ((due - t_s) / dt + 1e-9).floor().max(0.0) as u64,
                 None => steps,
             }
             .min(done + chunk)
@@ -670,24 +705,52 @@ impl ControllerLoop {
                 let targets = self.stage.targets().to_vec();
                 sim.set_joint_velocity_targets(&targets);
             }
-            match sim.step_n(next - done) {
-                Ok(()) => self.engine_steps += next - done,
-                Err(EngineError::Unstable {
-                    t_s: at, message, ..
-                }) => {
-                    // Steps taken, up to and including the bad one.
-                    let into = ((at - t_s) / dt).round().max(0.0) as u64;
-                    self.engine_steps += (into + 1).clamp(done, next) - done;
-                    return Ok(Some(RunStatus::Diverged {
-                        t_s: at,
-                        reason: message,
-                    }));
-                }
-                Err(e) => return Err(e.into()),
+            if let Some(status) = self.take_steps(sim, t_s, done, next)? {
+                return Ok(Some(status));
             }
             done = next;
         }
         Ok(None)
+    }
+
+    /// The share of the engine step from `done` (steps into the period
+    /// that started at `t_s`) that the next pending command is in force
+    /// for, when it falls due strictly inside that step.
+    fn due_inside_step(&self, t_s: f64, done: u64, dt: f64) -> Option<f64> {
+        let (due, _) = self.pending.front()?;
+        let x = (due - t_s) / dt - done as f64;
+        (x > 1e-9 && x < 1.0 - 1e-9).then_some(1.0 - x)
+    }
+
+    /// Takes the engine from step `from` to step `to` of the period that
+    /// started at `t_s`. `Some` diverged status when the engine reports
+    /// itself unstable; an error when it fails otherwise.
+    fn take_steps(
+        &mut self,
+        sim: &mut dyn Simulation,
+        t_s: f64,
+        from: u64,
+        to: u64,
+    ) -> Result<Option<RunStatus>, RunError> {
+        match sim.step_n(to - from) {
+            Ok(()) => {
+                self.engine_steps += to - from;
+                Ok(None)
+            }
+            Err(EngineError::Unstable {
+                t_s: at, message, ..
+            }) => {
+                // Steps taken, up to and including the bad one.
+                let dt = sim.timestep_s();
+                let into = ((at - t_s) / dt).round().max(0.0) as u64;
+                self.engine_steps += (into + 1).clamp(from, to) - from;
+                Ok(Some(RunStatus::Diverged {
+                    t_s: at,
+                    reason: message,
+                }))
+            }
+            Err(e) => Err(e.into()),
+        }
     }
 
     /// The servos' targets from the commands in force through the actuator
@@ -1054,7 +1117,7 @@ link = "l2"
     }
 
     #[test]
-    fn a_delay_in_seconds_takes_effect_at_the_next_engine_step() {
+    fn a_delay_in_seconds_acts_continuously_within_an_engine_step() {
         let scene = scene();
         let control = ControlParams {
             offsets_rad: Vec::new(),
@@ -1064,10 +1127,12 @@ link = "l2"
         let out =
             run_scene_with(&mut ideal(0.01), &scene, &RunOptions::default(), &control).unwrap();
         let q = out.trajectory.joint_angles_rad.as_ref().unwrap();
-        // The first command (-30 deg/s) reaches the servo at 0.03 s: two of
-        // the period's five steps at it.
+        // The first command (-30 deg/s) reaches the servo at 0.025 s, half
+        // way through the third of the period's five steps: that step at
+        // the average (-15 deg/s), the last two at -30 deg/s: 0.025 s at
+        // -30 deg/s in all.
         assert!(
-            (q[1][0].to_degrees() + 0.6).abs() < 1e-9,
+            (q[1][0].to_degrees() + 0.75).abs() < 1e-9,
             "{}",
             q[1][0].to_degrees()
         );

@@ -340,7 +340,7 @@ impl ParamKey {
                 Some("the controller reads angle - offset, so the joint settles at target + offset")
             }
             ParamKey::ControllerDelay => {
-                Some("commands reach the servos delay_s after they are computed, at the next engine step")
+                Some("commands reach the servos delay_s after they are computed; the engine step a command falls inside runs on the average of the old and the new command, so the delay acts continuously")
             }
             ParamKey::JointKp => Some(
                 "written into the scene's actuator: the gain of the PD servo that position commands drive (tau = kp (q_cmd - q) - kv qd), each engine's own mechanism (`realitygap engines` lists them)",

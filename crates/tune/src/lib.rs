@@ -136,6 +136,14 @@ impl Tuner<'_> {
         self.target.residuals(trajs, &self.registration(u))
     }
 
+    /// The errors at normalised coordinates `u`
+    /// ([`objective::Target::errors`]): the polish's reweighted residuals.
+    pub fn errors(&self, u: &[f64]) -> Result<objective::Errors, String> {
+        let p = self.params(u)?;
+        let trajs = self.simulator.simulate(&self.target.scenes, &p)?;
+        self.target.errors(trajs, &self.registration(u))
+    }
+
     /// The search's evaluation of normalised coordinates `u`.
     pub fn evaluate(&self, u: &[f64]) -> Outcome {
         let score = match self.params(u) {

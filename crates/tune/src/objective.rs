@@ -345,29 +345,117 @@ impl Target {
         trajectories: Vec<Trajectory>,
         registration: &Registration,
     ) -> std::result::Result<Vec<f64>, String> {
+        Ok(self.errors(trajectories, registration)?.residuals(None))
+    }
+
+    /// The errors of one simulated trajectory per scene, registered by
+    /// `registration`, on the training runs: each compared step's wrist
+    /// error (the simulated mean minus the reference's), then, per scene
+    /// with a cube, its weighted final position error.
+    pub fn errors(
+        &self,
+        trajectories: Vec<Trajectory>,
+        registration: &Registration,
+    ) -> std::result::Result<Errors, String> {
         let reports = self.candidate_reports(trajectories, registration)?;
         let score = score_of(&reports, &self.scenes);
         if let Some(m) = score.failed {
             return Err(m);
         }
-        let mut r = Vec::new();
+        let mut out = Errors::default();
         for (report, s) in reports.iter().zip(&self.scenes) {
-            let d = report
-                .sources
-                .first()
-                .map(|x| &x.series.wrist_distance_to_reference_m[..])
-                .unwrap_or(&[]);
-            r.extend(
-                (0..s.steps).map(|k| d.get(k).copied().flatten().unwrap_or(0.0).max(0.0).sqrt()),
-            );
+            let series = report.sources.first().map(|x| &x.series);
+            let reference = &report.reference.series.wrist_mean_m;
+            out.wrist.extend((0..s.steps).map(|k| {
+                let compared = series
+                    .and_then(|x| x.wrist_distance_to_reference_m.get(k).copied().flatten())
+                    .is_some();
+                let a = series.and_then(|x| x.wrist_mean_m.get(k).copied().flatten());
+                let b = reference.get(k).copied().flatten();
+                match (compared, a, b) {
+                    (true, Some(a), Some(b)) => Some([a[0] - b[0], a[1] - b[1], a[2] - b[2]]),
+                    _ => None,
+                }
+            }));
             if let Some(sc) = score.scenes.iter().find(|x| x.scene == s.name) {
                 if let Some(c) = sc.cube_final_m {
-                    r.push((s.cube_weight * c).max(0.0).sqrt());
+                    out.cube.push((s.cube_weight * c).max(0.0));
                 }
             }
         }
-        Ok(r)
+        Ok(out)
     }
+}
+
+/// A candidate's errors ([`Target::errors`]): the objective is the sum of
+/// the wrist errors' lengths and the cubes' weighted errors.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Errors {
+    /// Per compared step of every scene, the wrist error (metres); `None`
+    /// where a step is not compared.
+    pub wrist: Vec<Option<[f64; 3]>>,
+    /// Per scene with a cube, its weighted final position error.
+    pub cube: Vec<f64>,
+}
+
+/// Weights of the reweighted least squares ([`Errors::weights`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Weights {
+    wrist: Vec<f64>,
+    cube: Vec<f64>,
+}
+
+impl Errors {
+    /// The objective: the wrist errors' lengths and the cubes' errors,
+    /// summed.
+    pub fn objective(&self) -> f64 {
+        self.wrist.iter().flatten().map(norm).sum::<f64>() + self.cube.iter().sum::<f64>()
+    }
+
+    /// Reweighting at this point: each error's length, floored at
+    /// `floor_m`, to the power -1/2 ([`Errors::residuals`]).
+    pub fn weights(&self, floor_m: f64) -> Weights {
+        let w = |d: f64| 1.0 / d.max(floor_m).sqrt();
+        Weights {
+            wrist: self
+                .wrist
+                .iter()
+                .map(|e| e.map(|e| w(norm(&e))).unwrap_or(0.0))
+                .collect(),
+            cube: self.cube.iter().map(|&c| w(c)).collect(),
+        }
+    }
+
+    /// Least-squares residuals. Without weights: the square root of each
+    /// error's length (0 where a step is not compared), whose squares sum
+    /// to the objective, but whose Jacobian is poor where an error is
+    /// small. With weights from a point `x0`: each error's components times
+    /// its weight, whose squares sum to the objective at `x0` and near it
+    /// are smooth (iteratively reweighted least squares for a sum of
+    /// lengths).
+    pub fn residuals(&self, weights: Option<&Weights>) -> Vec<f64> {
+        match weights {
+            None => self
+                .wrist
+                .iter()
+                .map(|e| e.map(|e| norm(&e).sqrt()).unwrap_or(0.0))
+                .chain(self.cube.iter().map(|c| c.sqrt()))
+                .collect(),
+            Some(w) => {
+                let mut r = Vec::with_capacity(3 * self.wrist.len() + self.cube.len());
+                for (e, w) in self.wrist.iter().zip(&w.wrist) {
+                    let e = e.unwrap_or([0.0; 3]);
+                    r.extend(e.iter().map(|x| x * w));
+                }
+                r.extend(self.cube.iter().zip(&w.cube).map(|(c, w)| c * w));
+                r
+            }
+        }
+    }
+}
+
+fn norm(e: &[f64; 3]) -> f64 {
+    (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt()
 }
 
 /// The objective from the reports of one source per scene.

@@ -37,7 +37,7 @@
 use crate::least_squares::{self, FitOptions};
 use crate::space::{Dim, Scale, Space};
 use crate::{TuneSpec, Tuner};
-use anyhow::{anyhow, Result};
+use anyhow::{anyhow, bail, Result};
 use serde::Serialize;
 use std::sync::Mutex;
 
@@ -46,6 +46,14 @@ use std::sync::Mutex;
 /// wide enough that a difference does not hinge on one contact event or
 /// engine step.
 pub const REPORT_STEP: f64 = 0.01;
+
+/// Reweighting passes per polish round, at most ([`polish`]'s iteratively
+/// reweighted least squares).
+const IRLS_PASSES: usize = 6;
+
+/// The error length below which the reweighting's weights stop growing,
+/// metres: a tenth of a millimetre, under any capture's noise.
+const IRLS_FLOOR_M: f64 = 1e-4;
 
 /// Settings of the polish.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -403,7 +411,6 @@ pub fn polish(
         jobs: spec.search.jobs,
     };
     let mut widen_rounds = 0;
-    let mut last: Option<least_squares::Fit>;
     let mut last_probe;
     loop {
         realitygap_runner::interrupt::check()?;
@@ -420,34 +427,65 @@ pub fn polish(
             objective,
             u.len()
         ));
-        let count = Mutex::new(0usize);
-        let f = |x: &[f64]| {
-            *count.lock().unwrap_or_else(|e| e.into_inner()) += 1;
-            t.residuals(x)
-        };
-        // Iterations this round: what is left of the polish's evaluations,
-        // a Jacobian and a step each, at least one.
-        let left = options.max_evaluations.saturating_sub(report.evaluations);
-        let round_options = FitOptions {
-            max_iterations: fit_options
-                .max_iterations
-                .min((left / (u.len() + 1)).max(1)),
-            ..fit_options
-        };
-        let fit = least_squares::levenberg_marquardt(&f, &u, round_options, &|_, _, _| {})
-            .map_err(|m| anyhow!("the polish: {m}"))?;
-        report.evaluations += count.into_inner().unwrap_or_else(|e| e.into_inner());
-        report.iterations += fit.iterations;
-        report.reason = fit.reason.clone();
-        if fit.cost < objective {
-            u = fit.u.clone();
-            objective = fit.cost;
+        // Iteratively reweighted least squares: each pass fixes weights at
+        // its start (each error's length to the power -1/2, so that the
+        // squares sum to the objective there) and runs Levenberg-Marquardt
+        // on the weighted error components, which are smooth where the
+        // square roots of the lengths are not (near a good fit); passes go
+        // on while the objective itself falls.
+        let mut fit_reason = String::new();
+        for pass in 0..IRLS_PASSES {
+            let count = Mutex::new(0usize);
+            let weights = match t.errors(&u) {
+                Ok(e) => e.weights(IRLS_FLOOR_M),
+                Err(m) => bail!("the polish, at its start: {m}"),
+            };
+            let f = |x: &[f64]| {
+                *count.lock().unwrap_or_else(|e| e.into_inner()) += 1;
+                t.errors(x).map(|e| e.residuals(Some(&weights)))
+            };
+            // Iterations this pass: what is left of the polish's
+            // evaluations, a Jacobian and a step each, at least one.
+            let left = options
+                .max_evaluations
+                .saturating_sub(report.evaluations + 2);
+            let round_options = FitOptions {
+                max_iterations: fit_options
+                    .max_iterations
+                    .min((left / (u.len() + 1)).max(1)),
+                ..fit_options
+            };
+            let fit = least_squares::levenberg_marquardt(&f, &u, round_options, &|_, _, _| {})
+                .map_err(|m| anyhow!("the polish: {m}"))?;
+            report.evaluations += count.into_inner().unwrap_or_else(|e| e.into_inner()) + 1;
+            report.iterations += fit.iterations;
+            fit_reason = fit.reason.clone();
+            // The objective itself at the pass's end (the weighted cost is
+            // only its model).
+            let reached = t.errors(&fit.u).map(|e| e.objective()).ok();
+            let gain = match reached {
+                Some(o) if o < objective => {
+                    let gain = (objective - o) / objective.max(f64::MIN_POSITIVE);
+                    u = fit.u.clone();
+                    objective = o;
+                    gain
+                }
+                _ => 0.0,
+            };
+            note(format!(
+                "  pass {}: {:.4} m after {} iterations ({})",
+                pass + 1,
+                objective,
+                fit.iterations,
+                fit.reason
+            ));
+            if gain < fit_options.tolerance
+                || report.evaluations + u.len() + 2 >= options.max_evaluations
+            {
+                break;
+            }
         }
-        note(format!(
-            "  {:.4} m after {} iterations ({})",
-            objective, fit.iterations, fit.reason
-        ));
-        last = Some(fit);
+        report.reason = fit_reason;
         if report.evaluations >= options.max_evaluations {
             report.reason = format!(
                 "{} (the polish's {} evaluations are spent)",
@@ -583,11 +621,7 @@ pub fn polish(
     // A Jacobian of its own, with the report's wider step (the fit's is
     // for the steps, and a simulator's small differences can straddle a
     // contact event).
-    let r = match last {
-        Some(fit) if fit.u == u => Some(fit.residuals),
-        _ => None,
-    };
-    let (ident, spread, n) = identifiability(&t, &u, "optimum", None, r)?;
+    let (ident, spread, n) = identifiability(&t, &u, "optimum", None, None)?;
     report.evaluations += n;
     let names = t.value_names();
     let values = t.values(&u);
