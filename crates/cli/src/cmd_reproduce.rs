@@ -45,7 +45,8 @@ pub struct Args {
     pub params: Option<PathBuf>,
     /// The output folder of a `realitygap tune` (repeatable): its engine
     /// runs again with tuned.toml and shows as "<engine> (tuned)" next to
-    /// the untuned rows.
+    /// the untuned rows; the physics-free row fitted beside it
+    /// (DIR/physics-free-actuator) shows as "physics-free (tuned)".
     #[arg(long, value_name = "DIR")]
     pub tuned: Vec<PathBuf>,
     /// Also compare in joint space (`compare --joint-space`): every

@@ -42,7 +42,7 @@ pub struct Args {
     #[arg(long)]
     pub efforts: bool,
     /// Levenberg-Marquardt iterations at most: the whole fit with
-    /// --recordings (default 30); each round of the study tune's polish
+    /// --recordings (default 30); each round of the study tune's polish (its reweighting passes together)
     /// after CMA-ES (default 10; 0: no polish, no intervals).
     #[arg(long, value_name = "N")]
     pub iterations: Option<usize>,

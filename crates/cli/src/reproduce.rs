@@ -153,11 +153,10 @@ pub fn reproduce_keeping_problems(
     let runs_dir = args.out.join("runs");
     let mut timings: Vec<(String, f64)> = Vec::new();
 
-    let tuned: Vec<TunedEngine> = args
-        .tuned
-        .iter()
-        .map(|d| TunedEngine::from_dir(d))
-        .collect::<Result<_>>()?;
+    // Each tune, and the physics-free row fitted beside it (both rows of
+    // the physics-free model then show, untuned and tuned).
+    let tuned =
+        TunedEngine::with_physics_free(&args.tuned, realitygap_tune::outputs::PHYSICS_FREE_DIR)?;
     let t = Instant::now();
     let mut problems = simulate(args, &scenes, &engines, &runs_dir, None, launcher, ui)?;
     for te in &tuned {

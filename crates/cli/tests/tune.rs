@@ -65,15 +65,7 @@ fn synthetic() -> tempfile::TempDir {
         "--out",
         d.join("runs").to_str().unwrap(),
     ]));
-    std::fs::write(
-        d.join("study.toml"),
-        format!(
-            "name = \"synthetic\"\n[[scenes]]\nname = \"scene1_single_joint\"\nscene = {:?}\nsteps = 120\n\
-             [scenes.reference]\nname = \"known\"\nformat = \"store\"\ndir = \"runs/scene1_single_joint/mujoco\"\n",
-            scene.to_str().unwrap()
-        ),
-    )
-    .unwrap();
+    write_study(d, "mujoco");
     std::fs::write(
         d.join("space.toml"),
         format!(
@@ -83,6 +75,39 @@ fn synthetic() -> tempfile::TempDir {
     )
     .unwrap();
     tmp
+}
+
+/// `d/study.toml`: scene 1 against the runs of `engine` in `d/runs`.
+fn write_study(d: &Path, engine: &str) {
+    std::fs::write(
+        d.join("study.toml"),
+        format!(
+            "name = \"known-truth\"\n[[scenes]]\nname = \"scene1_single_joint\"\nscene = {:?}\nsteps = 120\n\
+             [scenes.reference]\nname = \"known\"\nformat = \"store\"\ndir = \"runs/scene1_single_joint/{engine}\"\n",
+            scene1().to_str().unwrap()
+        ),
+    )
+    .unwrap();
+}
+
+/// Six "real" runs of scene 1 in `engine` with `d/known.toml`, into
+/// `d/runs`: they differ (initial offsets and reading noise), so that the
+/// objective has a spread over them for the intervals.
+fn noisy_known_runs(d: &Path, engine: &str) {
+    ok(realitygap(&[
+        "run",
+        scene1().to_str().unwrap(),
+        "--engine",
+        engine,
+        "--params",
+        d.join("known.toml").to_str().unwrap(),
+        "--repeats",
+        "6",
+        "--perturb",
+        "initial_offset_deg=0.3,sensor_noise_deg=0.05",
+        "--out",
+        d.join("runs").to_str().unwrap(),
+    ]));
 }
 
 fn tune_args<'a>(d: &'a Path, out: &'a str, budget: &'a str) -> Vec<String> {
@@ -203,20 +228,7 @@ fn the_polish_gives_intervals_and_a_randomisation_file_that_run_accepts() {
     // Six "real" runs that differ (initial offsets and reading noise), so
     // that the objective has a spread over them for the intervals.
     std::fs::remove_dir_all(d.join("runs")).unwrap();
-    ok(realitygap(&[
-        "run",
-        scene1().to_str().unwrap(),
-        "--engine",
-        "mujoco",
-        "--params",
-        d.join("known.toml").to_str().unwrap(),
-        "--repeats",
-        "6",
-        "--perturb",
-        "initial_offset_deg=0.3,sensor_noise_deg=0.05",
-        "--out",
-        d.join("runs").to_str().unwrap(),
-    ]));
+    noisy_known_runs(d, "mujoco");
     let out = d.join("tuned");
     let s = tune(d, out.to_str().unwrap(), "40");
     let p = &s["polish"];
@@ -525,7 +537,6 @@ fn a_tune_on_slurm_equals_the_local_tune() {
 /// stage's effect is partly the servo's: tools/known-truth reports those).
 #[test]
 fn known_truth_is_covered_by_the_intervals_in_every_engine() {
-    let scene = scene1();
     let mut failures = Vec::new();
     for engine in ["ode", "bullet", "mujoco", "physx", "rapier", "dart"] {
         let has_kv = !matches!(engine, "ode" | "bullet");
@@ -546,29 +557,8 @@ fn known_truth_is_covered_by_the_intervals_in_every_engine() {
         }
         std::fs::write(d.join("known.toml"), &known).unwrap();
         std::fs::write(d.join("space.toml"), &space).unwrap();
-        ok(realitygap(&[
-            "run",
-            scene.to_str().unwrap(),
-            "--engine",
-            engine,
-            "--params",
-            d.join("known.toml").to_str().unwrap(),
-            "--repeats",
-            "6",
-            "--perturb",
-            "initial_offset_deg=0.3,sensor_noise_deg=0.05",
-            "--out",
-            d.join("runs").to_str().unwrap(),
-        ]));
-        std::fs::write(
-            d.join("study.toml"),
-            format!(
-                "name = \"known-truth\"\n[[scenes]]\nname = \"scene1_single_joint\"\nscene = {:?}\nsteps = 120\n\
-                 [scenes.reference]\nname = \"known\"\nformat = \"store\"\ndir = \"runs/scene1_single_joint/{engine}\"\n",
-                scene.to_str().unwrap()
-            ),
-        )
-        .unwrap();
+        noisy_known_runs(d, engine);
+        write_study(d, engine);
         let out = d.join("tuned");
         ok(realitygap(&[
             "tune",

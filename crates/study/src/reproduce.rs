@@ -135,6 +135,30 @@ impl TunedEngine {
         })
     }
 
+    /// The tunes of `dirs`, each followed by the fitted physics-free row
+    /// it holds (`DIR/physics-free-actuator`, a tune folder of the
+    /// physics-free model behind its fitted actuator stage), once: the
+    /// first tune's, unless a physics-free folder is given itself.
+    pub fn with_physics_free(dirs: &[PathBuf], physics_free_dir: &str) -> Result<Vec<TunedEngine>> {
+        let mut out: Vec<TunedEngine> = dirs
+            .iter()
+            .map(|d| TunedEngine::from_dir(d))
+            .collect::<Result<_>>()?;
+        let given = out
+            .iter()
+            .any(|t| t.engine == realitygap_core::engine::PHYSICS_FREE_ENGINE);
+        if !given {
+            let fitted = dirs
+                .iter()
+                .map(|d| d.join(physics_free_dir))
+                .find(|d| d.join("summary.json").is_file() && d.join("tuned.toml").is_file());
+            if let Some(d) = fitted {
+                out.push(TunedEngine::from_dir(&d)?);
+            }
+        }
+        Ok(out)
+    }
+
     /// The scene's source of the tuned runs under `runs_dir`, named like
     /// the engine's own with "(tuned)", e.g. `MuJoCo 3.17.0 (tuned)`.
     pub fn source(&self, runs_dir: &Path, scene: &str) -> Result<Option<SourceSpec>> {
@@ -277,4 +301,56 @@ fn final_wrist(scene: &Scene, robot: &RobotModel) -> Option<[f64; 3]> {
     robot
         .link_pose(&scene.robot.base, &q, link)
         .map(|p| p.position_m.to_array())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tune_dir(dir: &Path, engine: &str) {
+        std::fs::create_dir_all(dir).unwrap();
+        std::fs::write(
+            dir.join("summary.json"),
+            format!("{{\"engine\": \"{engine}\"}}"),
+        )
+        .unwrap();
+        std::fs::write(dir.join("tuned.toml"), "").unwrap();
+    }
+
+    #[test]
+    fn a_tune_brings_its_fitted_physics_free_row_once() {
+        let tmp = tempfile::tempdir().unwrap();
+        let (a, b) = (tmp.path().join("tune-mujoco"), tmp.path().join("tune-ode"));
+        tune_dir(&a, "mujoco");
+        tune_dir(&a.join("physics-free-actuator"), "ideal");
+        tune_dir(&b, "ode");
+        tune_dir(&b.join("physics-free-actuator"), "ideal");
+        let engines = |dirs: &[PathBuf]| -> Vec<(String, PathBuf)> {
+            TunedEngine::with_physics_free(dirs, "physics-free-actuator")
+                .unwrap()
+                .into_iter()
+                .map(|t| (t.engine, t.params))
+                .collect()
+        };
+        let both = engines(&[a.clone(), b.clone()]);
+        assert_eq!(
+            both,
+            [
+                ("mujoco".to_string(), a.join("tuned.toml")),
+                ("ode".to_string(), b.join("tuned.toml")),
+                (
+                    "ideal".to_string(),
+                    a.join("physics-free-actuator/tuned.toml")
+                ),
+            ]
+        );
+        // Given itself, it is not added again.
+        let given = engines(&[b.join("physics-free-actuator"), a.clone()]);
+        assert_eq!(given.iter().filter(|(e, _)| e == "ideal").count(), 1);
+        assert_eq!(given[0].1, b.join("physics-free-actuator/tuned.toml"));
+        // A tune without one brings none.
+        let c = tmp.path().join("tune-bullet");
+        tune_dir(&c, "bullet");
+        assert_eq!(engines(&[c]).len(), 1);
+    }
 }

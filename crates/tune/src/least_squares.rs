@@ -91,44 +91,63 @@ pub fn jacobian(
     let columns: Vec<Result<Vec<f64>, String>> = pool(jobs).install(|| {
         (0..u.len())
             .into_par_iter()
-            .map(|i| {
-                // Forward, or backward at the upper bound or where the
-                // forward point cannot be evaluated (a diverging engine).
-                let first = if u[i] + step <= 1.0 { step } else { -step };
-                let mut last = String::new();
-                let mut found = None;
-                for h in [first, -first] {
-                    if !(0.0..=1.0).contains(&(u[i] + h)) {
-                        continue;
-                    }
-                    let mut x = u.to_vec();
-                    x[i] += h;
-                    match f(&x) {
-                        Ok(r) => {
-                            found = Some((h, r));
-                            break;
-                        }
-                        Err(m) => last = m,
-                    }
-                }
-                let (h, r) = found.ok_or_else(|| format!("coordinate {i}: {last}"))?;
-                if r.len() != r0.len() {
-                    return Err(format!(
-                        "coordinate {i}: {} residuals, {} at the centre",
-                        r.len(),
-                        r0.len()
-                    ));
-                }
-                Ok(r.iter().zip(r0).map(|(a, b)| (a - b) / h).collect())
-            })
+            .map(|i| column(f, u, r0, step, i).map_err(|m| format!("coordinate {i}: {m}")))
             .collect()
     });
     let mut j = DMatrix::zeros(r0.len(), u.len());
     for (i, c) in columns.into_iter().enumerate() {
-        let c = c?;
-        j.set_column(i, &DVector::from_vec(c));
+        j.set_column(i, &DVector::from_vec(c?));
     }
     Ok(j)
+}
+
+/// [`jacobian`] for a report: a coordinate whose column cannot be
+/// evaluated either way (the engine diverges on both sides) gets a zero
+/// column (the data then say nothing of it) and is listed with why.
+pub fn jacobian_or_blind(
+    f: &Residuals,
+    u: &[f64],
+    r0: &[f64],
+    step: f64,
+    jobs: usize,
+) -> (DMatrix<f64>, Vec<(usize, String)>) {
+    let columns: Vec<Result<Vec<f64>, String>> = pool(jobs).install(|| {
+        (0..u.len())
+            .into_par_iter()
+            .map(|i| column(f, u, r0, step, i))
+            .collect()
+    });
+    let mut j = DMatrix::zeros(r0.len(), u.len());
+    let mut blind = Vec::new();
+    for (i, c) in columns.into_iter().enumerate() {
+        match c {
+            Ok(c) => j.set_column(i, &DVector::from_vec(c)),
+            Err(m) => blind.push((i, m)),
+        }
+    }
+    (j, blind)
+}
+
+/// Column `i` of the Jacobian: forward, or backward at the upper bound or
+/// where the forward point cannot be evaluated (a diverging engine).
+fn column(f: &Residuals, u: &[f64], r0: &[f64], step: f64, i: usize) -> Result<Vec<f64>, String> {
+    let first = if u[i] + step <= 1.0 { step } else { -step };
+    let mut last = String::new();
+    for h in [first, -first] {
+        if !(0.0..=1.0).contains(&(u[i] + h)) {
+            continue;
+        }
+        let mut x = u.to_vec();
+        x[i] += h;
+        match f(&x) {
+            Ok(r) if r.len() != r0.len() => {
+                return Err(format!("{} residuals, {} at the centre", r.len(), r0.len()))
+            }
+            Ok(r) => return Ok(r.iter().zip(r0).map(|(a, b)| (a - b) / h).collect()),
+            Err(m) => last = m,
+        }
+    }
+    Err(last)
 }
 
 /// A pool of `jobs` threads (one when it cannot be built).
@@ -415,6 +434,29 @@ pub fn trading_pairs(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_column_the_engine_fails_either_way_is_blind_not_an_error() {
+        // Coordinate 1 fails whenever it moves (a diverging engine on both
+        // sides); coordinate 0 is linear.
+        let f = |x: &[f64]| {
+            if (x[1] - 0.5).abs() > 1e-12 {
+                Err("diverged".to_string())
+            } else {
+                Ok(vec![2.0 * x[0], 3.0 * x[0]])
+            }
+        };
+        let u = [0.3, 0.5];
+        let r0 = f(&u).unwrap();
+        assert!(jacobian(&f, &u, &r0, 1e-3, 2)
+            .unwrap_err()
+            .contains("coordinate 1"));
+        let (j, blind) = jacobian_or_blind(&f, &u, &r0, 1e-3, 2);
+        assert_eq!(blind, [(1, "diverged".to_string())]);
+        assert!((j[(0, 0)] - 2.0).abs() < 1e-9 && (j[(1, 0)] - 3.0).abs() < 1e-9);
+        assert_eq!((j[(0, 1)], j[(1, 1)]), (0.0, 0.0));
+        assert!(spread(&j, &r0, 1).sd_u[1].is_infinite());
+    }
 
     /// y = a exp(-b t) + c on a grid, coordinates mapped a = 4u0,
     /// b = 2u1, c = u2 - 0.5.

@@ -401,7 +401,7 @@ pub fn tune(
                 // The same effort as the engine's own fit: the same budget,
                 // polish, widening and probe.
                 search: spec.search,
-                out: spec.out.join("physics-free-actuator"),
+                out: spec.out.join(outputs::PHYSICS_FREE_DIR),
                 polish: spec.polish,
                 baseline_space: None,
             };

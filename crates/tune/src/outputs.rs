@@ -31,6 +31,10 @@ pub const RESAMPLES: usize = 1000;
 /// forward kinematics, behind the actuator stage when one is given.
 pub const PHYSICS_FREE: &str = "ideal";
 
+/// The folder, inside a tune's `--out`, of its fitted physics-free row
+/// (the physics-free model behind the fitted actuator stage).
+pub const PHYSICS_FREE_DIR: &str = "physics-free-actuator";
+
 /// The physics-free model behind its own actuator stage, fitted on the
 /// tune's training runs.
 pub struct Baseline {
@@ -955,7 +959,7 @@ pub fn markdown(s: &Summary) -> String {
     let p = &s.polish;
     if p.rounds > 0 {
         m.push_str(&format!(
-            "- Polish: Levenberg-Marquardt (rounds: {}), {} iterations, {} evaluations, {:.1} s: {:.4} -> {:.4} m ({}); {}{}.\n",
+            "- Polish: reweighted least squares, Levenberg-Marquardt passes (rounds: {}), {} iterations, {} evaluations, {:.1} s: {:.4} -> {:.4} m ({}); {}{}.\n",
             p.rounds,
             p.iterations,
             p.evaluations,

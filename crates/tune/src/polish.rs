@@ -3,11 +3,16 @@
 //! widens, the probe that restarts it, and the parameters' intervals.
 //!
 //! - **Residuals.** The objective is the accumulated wrist error, a sum of
-//!   per-step distances `d_k >= 0`, plus `w * c` for a cube's final
-//!   position error `c`. Its residual vector is `r_k = sqrt(d_k)` and
-//!   `sqrt(w * c)`: `sum r^2` is the objective itself, so
-//!   Levenberg-Marquardt ([`crate::least_squares`]) minimises exactly what
-//!   CMA-ES did, with a Jacobian instead of samples.
+//!   per-step distances `d_k = |e_k| >= 0` (`e_k` the wrist error), plus
+//!   `w * c` for a cube's final position error `c`. The polish minimises
+//!   it by iteratively reweighted least squares: each pass fixes weights
+//!   `1 / sqrt(max(d_k, floor))` at its start and runs
+//!   Levenberg-Marquardt ([`crate::least_squares`]) on the weighted error
+//!   components, whose squares sum to the objective at the pass's start;
+//!   passes go on while the objective itself falls. The plain residuals
+//!   `sqrt(d_k)` (whose squares also sum to the objective) have a Jacobian
+//!   that degrades where `d_k` is small, near a good fit; the reports
+//!   below use them with a wider step.
 //! - **Bounds.** A parameter that ends on a bound of the space is widened
 //!   within its physical limits ([`physical_limits`]): a linear range by
 //!   its own width on that side, a log range by a factor of 4, and the
@@ -58,7 +63,8 @@ const IRLS_FLOOR_M: f64 = 1e-4;
 /// Settings of the polish.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PolishOptions {
-    /// Levenberg-Marquardt iterations per round at most (0: no polish).
+    /// Levenberg-Marquardt iterations per round at most, over its
+    /// reweighting passes (0: no polish).
     pub iterations: usize,
     /// Rounds that widen bounds at most (0: the space's bounds are kept).
     pub widen_rounds: usize,
@@ -117,6 +123,11 @@ pub struct IdentifiabilityReport {
     /// the Jacobian) by less than the objective's own spread over
     /// resamples of the real runs.
     pub unseen: Vec<String>,
+    /// Coordinates whose effect could not be measured here: the engine
+    /// failed (diverged) a small step either way from the point. Their
+    /// effect counts as zero and they get no interval.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub unmeasured: Vec<(String, String)>,
     /// That spread: the bootstrap standard deviation of the wrist total
     /// over the training runs, metres (`None`: not measured).
     pub noise_m: Option<f64>,
@@ -143,7 +154,7 @@ pub struct PolishReport {
     pub evaluations: usize,
     /// Levenberg-Marquardt iterations, all rounds.
     pub iterations: usize,
-    /// Rounds of Levenberg-Marquardt.
+    /// Rounds of the polish (each of reweighting passes).
     pub rounds: usize,
     /// Why the last round stopped.
     pub reason: String,
@@ -183,6 +194,16 @@ pub fn identifiability_text(r: &IdentifiabilityReport) -> String {
             r.unseen.len(),
             r.effects_m.len(),
             r.unseen.join(", ")
+        ));
+    }
+    if !r.unmeasured.is_empty() {
+        t.push_str(&format!(
+            "; not measured (the engine fails a small step either way): {}",
+            r.unmeasured
+                .iter()
+                .map(|(k, why)| format!("{k} ({why})"))
+                .collect::<Vec<_>>()
+                .join(", ")
         ));
     }
     if r.trading.is_empty() {
@@ -287,16 +308,21 @@ pub fn identifiability(
             f(u).map_err(|m| anyhow!("{at}: {m}"))?
         }
     };
-    let j = match jac {
-        Some(j) => j,
+    let names = tuner.value_names();
+    let (j, unmeasured) = match jac {
+        Some(j) => (j, Vec::new()),
         None => {
             evaluations += u.len();
-            least_squares::jacobian(&f, u, &r, REPORT_STEP, tuner.spec.search.jobs)
-                .map_err(|m| anyhow!("{at}: the Jacobian: {m}"))?
+            let (j, blind) =
+                least_squares::jacobian_or_blind(&f, u, &r, REPORT_STEP, tuner.spec.search.jobs);
+            let unmeasured: Vec<(String, String)> = blind
+                .into_iter()
+                .map(|(i, why)| (names[i].clone(), why))
+                .collect();
+            (j, unmeasured)
         }
     };
     let s = least_squares::spread(&j, &r, 1);
-    let names = tuner.value_names();
     let noise_m = objective_noise(tuner, u);
     if noise_m.is_some() {
         evaluations += 1;
@@ -327,6 +353,7 @@ pub fn identifiability(
         IdentifiabilityReport {
             at: at.to_string(),
             unseen,
+            unmeasured,
             noise_m,
             effects_m,
             trading,
@@ -422,7 +449,7 @@ pub fn polish(
         };
         report.rounds += 1;
         note(format!(
-            "polish round {}: Levenberg-Marquardt from {:.4} m over {} coordinates",
+            "polish round {}: reweighted least squares from {:.4} m over {} coordinates",
             report.rounds,
             objective,
             u.len()
@@ -434,6 +461,10 @@ pub fn polish(
         // square roots of the lengths are not (near a good fit); passes go
         // on while the objective itself falls.
         let mut fit_reason = String::new();
+        // The round's iterations (`--iterations`) are shared by its passes,
+        // so that a round costs what one Levenberg-Marquardt run did and
+        // the budget leaves room for the rounds after a widening.
+        let mut round_iterations = fit_options.max_iterations;
         for pass in 0..IRLS_PASSES {
             let count = Mutex::new(0usize);
             let weights = match t.errors(&u) {
@@ -450,15 +481,14 @@ pub fn polish(
                 .max_evaluations
                 .saturating_sub(report.evaluations + 2);
             let round_options = FitOptions {
-                max_iterations: fit_options
-                    .max_iterations
-                    .min((left / (u.len() + 1)).max(1)),
+                max_iterations: round_iterations.min((left / (u.len() + 1)).max(1)),
                 ..fit_options
             };
             let fit = least_squares::levenberg_marquardt(&f, &u, round_options, &|_, _, _| {})
                 .map_err(|m| anyhow!("the polish: {m}"))?;
             report.evaluations += count.into_inner().unwrap_or_else(|e| e.into_inner()) + 1;
             report.iterations += fit.iterations;
+            round_iterations = round_iterations.saturating_sub(fit.iterations.max(1));
             fit_reason = fit.reason.clone();
             // The objective itself at the pass's end (the weighted cost is
             // only its model).
@@ -480,6 +510,7 @@ pub fn polish(
                 fit.reason
             ));
             if gain < fit_options.tolerance
+                || round_iterations == 0
                 || report.evaluations + u.len() + 2 >= options.max_evaluations
             {
                 break;
