@@ -43,7 +43,9 @@ pub struct Args {
     /// An engine with a parameters file of its own taking part beside the
     /// engines at their defaults: ENGINE=FILE, or the --out folder of a
     /// `realitygap tune` (its engine and tuned.toml); repeatable. A plan
-    /// names it ENGINE@FILE.
+    /// names it ENGINE@FILE. The first tune folder's fitted physics-free
+    /// model (physics-free-actuator/) is scored as a baseline row, unless
+    /// `ideal=FILE` is given.
     #[arg(long = "tuned", value_name = "ENGINE=FILE|TUNE_DIR")]
     pub tuned: Vec<String>,
     /// How the gap is measured (`--runs` choose the plans, `--holdout`
@@ -65,6 +67,7 @@ pub fn run(args: Args) -> Result<()> {
         jobs: args.jobs,
         plans: args.plans,
         tuned: args.tuned,
+        physics_free_subdir: Some(realitygap_tune::outputs::PHYSICS_FREE_DIR.to_string()),
     };
     let runner = Runner {
         registry: cmd_engines::compiled,

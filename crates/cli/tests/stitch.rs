@@ -419,9 +419,23 @@ fn the_stitch_command_chooses_runs_and_scores_plans() {
         return;
     }
     let tmp = tempfile::tempdir().unwrap();
-    let study = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/studies/collins2019.toml"); // A parameters file of its own for ODE (as a tune's tuned.toml would be).
-    let damped = tmp.path().join("damped.toml");
+    let study = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/studies/collins2019.toml");
+    // A tune's output folder for ODE (its engine and tuned.toml), with the
+    // physics-free model fitted beside it (a slow actuator stage behind a
+    // delay, as `realitygap tune` writes it).
+    let tune = tmp.path().join("tune-ode");
+    let fitted = tune.join("physics-free-actuator");
+    std::fs::create_dir_all(&fitted).unwrap();
+    std::fs::write(tune.join("summary.json"), r#"{"engine": "ode"}"#).unwrap();
+    let damped = tune.join("tuned.toml");
     std::fs::write(&damped, "[joints.m1n6s300_joint_2]\ndamping = 0.5\n").unwrap();
+    std::fs::write(fitted.join("summary.json"), r#"{"engine": "ideal"}"#).unwrap();
+    std::fs::write(
+        fitted.join("tuned.toml"),
+        "[controller]\ndelay_s = 0.05\n\n[actuator]\nfrequency_rad_s = 20.0\ndamping_ratio = 0.5\n",
+    )
+    .unwrap();
+    let out = tmp.path().join("out");
 
     let o = Command::new(env!("CARGO_BIN_EXE_realitygap"))
         .arg("stitch")
@@ -431,33 +445,75 @@ fn the_stitch_command_chooses_runs_and_scores_plans() {
         .args(["--runs", "1-15", "--holdout", "16-20", "--bootstrap", "200"])
         .args(["--plan", "ode,ode,mujoco"])
         .arg("--tuned")
-        .arg(format!("ode={}", damped.display()))
+        .arg(&tune)
         .arg("--out")
-        .arg(tmp.path())
+        .arg(&out)
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let md = std::fs::read_to_string(tmp.path().join("stitch.md")).unwrap();
+    let md = std::fs::read_to_string(out.join("stitch.md")).unwrap();
     assert_eq!(md, String::from_utf8_lossy(&o.stdout));
     let v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(tmp.path().join("stitch.json")).unwrap())
-            .unwrap();
+        serde_json::from_str(&std::fs::read_to_string(out.join("stitch.json")).unwrap()).unwrap();
     let scenes = v["scenes"].as_array().unwrap();
     assert_eq!(scenes.len(), 3);
     for s in scenes {
         let rows = s["rows"].as_array().unwrap();
         let engines: Vec<&serde_json::Value> =
             rows.iter().filter(|r| r["role"] == "engine").collect();
-        // Every engine at its defaults, and ODE with its own parameters.
-        assert_eq!(engines.len(), self::engines().len() + 1);
+        // Every engine at its defaults but the physics-free model, and ODE
+        // with its own parameters.
+        let physics = self::engines()
+            .iter()
+            .filter(|e| e.name() != "ideal")
+            .count();
+        assert_eq!(engines.len(), physics + 1);
         let tuned = engines
             .iter()
-            .find(|r| r["source"] == "ODE 0.16.2 (this tool, damped)")
+            .find(|r| r["source"] == "ODE 0.16.2 (this tool, tuned)")
             .expect("the --tuned candidate");
         let entry = format!("ode@{}", damped.display());
         assert_eq!(tuned["plan"][0].as_str(), Some(entry.as_str()));
         let plain = engines.iter().find(|r| r["plan"][0] == "ode").unwrap();
         assert_ne!(tuned["training"]["error_m"], plain["training"]["error_m"]);
+        // The physics-free rows: perfect tracking, and the tune's fitted
+        // one (slower, so another error); baselines, never a phase's engine.
+        let free: Vec<&serde_json::Value> =
+            rows.iter().filter(|r| r["role"] == "physics-free").collect();
+        let names: Vec<&str> = free.iter().map(|r| r["source"].as_str().unwrap()).collect();
+        assert_eq!(
+            names,
+            ["physics-free (this tool)", "physics-free (this tool, tuned)"],
+            "{}",
+            s["scene"]
+        );
+        let fitted_entry = format!("ideal@{}", fitted.join("tuned.toml").display());
+        assert_eq!(free[1]["plan"][0].as_str(), Some(fitted_entry.as_str()));
+        for set in ["training", "held_out"] {
+            let e = |r: &serde_json::Value| r[set]["error_m"].as_f64().unwrap();
+            assert!(e(free[0]).is_finite() && e(free[1]).is_finite());
+            assert!((e(free[0]) - e(free[1])).abs() > 1e-3, "{}", s["scene"]);
+        }
+        assert!(!s["automatic"].to_string().contains("ideal"));
+        // Each says whether the closest engine or plan beats it, with the
+        // gain as the rows' errors give it.
+        let against = s["held_out_versus_physics_free"].as_array().unwrap();
+        assert_eq!(against.len(), 2);
+        for a in against {
+            let row = |name: &serde_json::Value| {
+                rows.iter()
+                    .find(|r| r["source"] == *name)
+                    .unwrap()["held_out"]["error_m"]
+                    .as_f64()
+                    .unwrap()
+            };
+            let gain = row(&a["physics_free"]) - row(&a["closest"]);
+            assert!((a["gain_m"].as_f64().unwrap() - gain).abs() < 1e-9);
+            let closest = row(&a["closest"]);
+            for r in rows.iter().filter(|r| r["role"] != "physics-free") {
+                assert!(r["held_out"]["error_m"].as_f64().unwrap() >= closest);
+            }
+        }
         let phases = s["phases_s"].as_array().unwrap().len();
         let automatic: Vec<&str> = s["automatic"]
             .as_array()
@@ -483,7 +539,10 @@ fn the_stitch_command_chooses_runs_and_scores_plans() {
                 s["scene"]
             );
         }
-        for r in rows.iter().filter(|r| r["role"] != "engine") {
+        for r in rows
+            .iter()
+            .filter(|r| r["role"] != "engine" && r["role"] != "physics-free")
+        {
             let plan = r["plan"].as_array().unwrap();
             assert!(r["held_out"]["error_m"].as_f64().unwrap().is_finite());
             assert!(r["training"]["interval_m"]["low_m"].as_f64().is_some());
@@ -521,7 +580,7 @@ fn the_stitch_command_chooses_runs_and_scores_plans() {
     assert_eq!(given(2), ["stitched ode>ode>mujoco"]);
     assert!(md.contains("## scene3_cube_push"), "{md}");
     // The report has the stitching section, with one answer per scene.
-    let html = std::fs::read_to_string(tmp.path().join("report/index.html")).unwrap();
+    let html = std::fs::read_to_string(out.join("report/index.html")).unwrap();
     assert!(html.contains("<section id=\"stitching\">"));
     for s in scenes {
         let scene = s["scene"].as_str().unwrap();
@@ -531,4 +590,8 @@ fn the_stitch_command_chooses_runs_and_scores_plans() {
         );
         assert!(html.contains(&format!("<p>{scene}: the automatic plan is ")));
     }
+    assert!(
+        md.contains("The closest source, ") && md.contains(" physics-free (this tool, tuned): "),
+        "{md}"
+    );
 }

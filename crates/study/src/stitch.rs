@@ -25,6 +25,13 @@
 //! their defaults: their single runs go to `OUT/runs/tuned-<label>/`, and
 //! a plan names them `ENGINE@FILE`.
 //!
+//! The physics-free model (perfect tracking of the commands, the `ideal`
+//! engine) is scored in every scene as a baseline row, never a phase's
+//! engine; so is the physics-free model fitted by a tune (its
+//! `physics-free-actuator/` folder, when a `--tuned` tune folder holds
+//! one). Each scene then says whether its closest engine or plan beats
+//! them ([`AgainstPhysicsFree`]).
+//!
 //! Outputs: `OUT/stitch.md` and `OUT/stitch.json` ([`StitchStudy`]), and
 //! `OUT/report/` (the report of every source on the held-out runs, else
 //! the training runs; the stitched sources' handovers drawn as vertical
@@ -73,8 +80,15 @@ pub struct StitchOptions {
     pub plans: Vec<String>,
     /// Engines with a parameters file of their own (e.g. a tune's
     /// `tuned.toml`), `ENGINE=FILE`: candidates for the automatic plan
-    /// beside the engines at their defaults.
+    /// beside the engines at their defaults. A tune's output folder may be
+    /// given instead of `ENGINE=FILE`.
     pub tuned: Vec<String>,
+    /// The sub-folder of a tune's output folder that holds the physics-free
+    /// model fitted beside it (`realitygap tune` writes
+    /// `physics-free-actuator/`): the first `--tuned` folder's takes part
+    /// as a physics-free row, unless a physics-free model is given in
+    /// `tuned` itself. `None`: only the given ones.
+    pub physics_free_subdir: Option<String>,
 }
 
 /// How the runs are made: the engines and the child process.
@@ -105,8 +119,10 @@ pub struct Score {
 pub struct Row {
     /// The source's name in the comparison.
     pub source: String,
-    /// `engine`, `automatic`, `proposed` or `given` (`--plan`); a plan
-    /// that is also an earlier role's is listed once, under that role.
+    /// `engine`, `automatic`, `proposed` or `given` (`--plan`), or
+    /// `physics-free` (a baseline: the model with no physics at its
+    /// defaults, and behind a tune's fitted actuator stage); a plan that
+    /// is also an earlier role's is listed once, under that role.
     pub role: String,
     /// The engine of every phase (a single engine: the same throughout).
     pub plan: Vec<String>,
@@ -132,6 +148,24 @@ pub struct Versus {
     pub probability_better: f64,
 }
 
+/// The closest engine or plan against one physics-free row, on one set
+/// of runs: does simulating physics beat perfect tracking at all?
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct AgainstPhysicsFree {
+    /// The physics-free row's source name.
+    pub physics_free: String,
+    /// The engine or plan with the smallest error on these runs.
+    pub closest: String,
+    /// The physics-free row's error minus the closest source's, metres
+    /// (positive: the simulation is closer to the real arm).
+    pub gain_m: f64,
+    /// Interval of the gain over the bootstrap replicates, metres.
+    pub gain_interval_m: Option<Interval>,
+    /// Probability that the closest source is closer than the physics-free
+    /// row.
+    pub probability_better: f64,
+}
+
 /// The outcome in one scene.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct SceneStitch {
@@ -153,6 +187,11 @@ pub struct SceneStitch {
     pub training_versus: Vec<Versus>,
     /// The same on the held-out runs.
     pub held_out_versus: Vec<Versus>,
+    /// The closest engine or plan against each physics-free row, on the
+    /// training runs.
+    pub training_versus_physics_free: Vec<AgainstPhysicsFree>,
+    /// The same on the held-out runs.
+    pub held_out_versus_physics_free: Vec<AgainstPhysicsFree>,
 }
 
 /// The whole outcome.
@@ -180,7 +219,9 @@ struct StudySceneFile {
 pub fn stitch_study(opts: &StitchOptions, runner: &Runner) -> Result<StitchStudy> {
     let study = Study::from_file(&opts.study)?;
     let scenes = scene_files(&study, &opts.study)?;
-    let engines = engines_taking_part(runner.registry, opts)?;
+    let taking = engines_taking_part(runner.registry, opts)?;
+    let engines = &taking.candidates;
+    let all = taking.all();
     let data = opts
         .data
         .resolve()?
@@ -191,12 +232,12 @@ pub fn stitch_study(opts: &StitchOptions, runner: &Runner) -> Result<StitchStudy
         results: runs_dir.clone(),
     };
     let files: Vec<PathBuf> = scenes.iter().map(|s| s.file.clone()).collect();
-    simulate(runner, opts, &files, &engines, None)?;
+    simulate(runner, opts, &files, &all, None)?;
     let training = Measure {
         holdout: None,
         ..opts.measure.clone()
     };
-    let with_engines = without_holdout(&with_sources(&study, &runs_dir, &engines, &[])?);
+    let with_engines = without_holdout(&with_sources(&study, &runs_dir, engines, &[])?);
     let fit = evaluate(&with_engines, &roots, &training)?;
     let mut plans = Vec::new();
     for s in &scenes {
@@ -205,14 +246,14 @@ pub fn stitch_study(opts: &StitchOptions, runner: &Runner) -> Result<StitchStudy
             runner,
             s,
             (&fit, &with_engines),
-            &engines,
+            engines,
         )?);
     }
     let stitched: Vec<(String, Vec<String>)> = plans
         .iter()
         .flat_map(|(scene, roles, _)| roles.iter().map(|(_, p)| (scene.clone(), p.clone())))
         .collect();
-    let full = with_sources(&study, &runs_dir, &engines, &stitched)?;
+    let full = with_sources(&study, &runs_dir, &all, &stitched)?;
     let train_reports = evaluate(&without_holdout(&full), &roots, &training)?;
     let held_reports = match &opts.measure.holdout.clone().or(study.holdout.clone()) {
         Some(_) => Some(evaluate(&full, &roots, &opts.measure)?),
@@ -225,7 +266,7 @@ pub fn stitch_study(opts: &StitchOptions, runner: &Runner) -> Result<StitchStudy
         let held = held_reports.as_deref().and_then(find);
         out.push(scene_outcome(
             &full,
-            &engines,
+            &taking,
             (&train, held.as_ref()),
             &roles,
             onset,
@@ -335,13 +376,14 @@ fn scene_files(study: &Study, path: &Path) -> Result<Vec<StudySceneFile>> {
 
 /// The engines asked for (checked), else every one compiled in; the
 /// proposed plan's engines must be among them.
-fn engines_taking_part(registry: Registry, opts: &StitchOptions) -> Result<Vec<String>> {
+fn engines_taking_part(registry: Registry, opts: &StitchOptions) -> Result<Taking> {
+    use realitygap_core::engine::PHYSICS_FREE_ENGINE;
     let known = engine_names(registry);
     let engines = if opts.engines.is_empty() {
         // The physics-free model is a baseline, not a phase's engine.
         known
             .iter()
-            .filter(|e| *e != realitygap_core::engine::PHYSICS_FREE_ENGINE)
+            .filter(|e| *e != PHYSICS_FREE_ENGINE)
             .cloned()
             .collect()
     } else {
@@ -354,18 +396,39 @@ fn engines_taking_part(registry: Registry, opts: &StitchOptions) -> Result<Vec<S
         if !known.contains(e) {
             bail!("unknown engine \"{e}\" (compiled in: {})", known.join(", "));
         }
+        if e == PHYSICS_FREE_ENGINE {
+            bail!("the physics-free model ({PHYSICS_FREE_ENGINE}) is a baseline row of every table, not an engine to stitch: leave it out of --engine, --stiff and --contact");
+        }
     }
     if engines.is_empty() {
         bail!("no physics engine is compiled into this binary");
     }
-    let mut entries = engines;
+    let mut taking = Taking {
+        candidates: engines,
+        physics_free: Vec::new(),
+    };
+    if known.iter().any(|k| k == PHYSICS_FREE_ENGINE) {
+        taking.physics_free.push(PHYSICS_FREE_ENGINE.to_string());
+    }
+    let mut fitted_physics_free: Option<String> = None;
     for t in &opts.tuned {
         // A tune's output folder names its engine and holds tuned.toml.
-        let from_dir = std::path::Path::new(t.as_str())
+        let dir = std::path::Path::new(t.as_str());
+        let from_dir = dir
             .is_dir()
-            .then(|| crate::reproduce::TunedEngine::from_dir(std::path::Path::new(t.as_str())))
+            .then(|| crate::reproduce::TunedEngine::from_dir(dir))
             .transpose()?
             .map(|te| format!("{}={}", te.engine, te.params.display()));
+        let fitted = opts
+            .physics_free_subdir
+            .as_ref()
+            .map(|sub| dir.join(sub))
+            .filter(|d| d.join("summary.json").is_file() && d.join("tuned.toml").is_file());
+        if let (None, Some(_), Some(d)) = (&fitted_physics_free, &from_dir, fitted) {
+            let te = crate::reproduce::TunedEngine::from_dir(&d)?;
+            let params = absolute(&te.params, t)?;
+            fitted_physics_free = Some(format!("{}@{}", te.engine, params.display()));
+        }
         let spec = from_dir.as_deref().unwrap_or(t.as_str());
         let Some((engine, file)) = spec.split_once('=') else {
             bail!("--tuned \"{t}\": expected ENGINE=FILE (a parameters file, e.g. a tune's tuned.toml) or the --out folder of a `realitygap tune`");
@@ -377,13 +440,47 @@ fn engines_taking_part(registry: Registry, opts: &StitchOptions) -> Result<Vec<S
                 known.join(", ")
             );
         }
-        let path = std::path::absolute(file.trim()).with_context(|| format!("--tuned \"{t}\""))?;
+        let path = absolute(Path::new(file.trim()), t)?;
         if !path.is_file() {
             bail!("--tuned \"{t}\": no parameters file {}", path.display());
         }
-        entries.push(format!("{engine}@{}", path.display()));
+        let entry = format!("{engine}@{}", path.display());
+        if engine == PHYSICS_FREE_ENGINE {
+            // Given itself: it replaces the one a tune's folder holds.
+            taking.physics_free.push(entry);
+            fitted_physics_free = Some(String::new());
+        } else {
+            taking.candidates.push(entry);
+        }
     }
-    Ok(entries)
+    taking
+        .physics_free
+        .extend(fitted_physics_free.filter(|e| !e.is_empty()));
+    Ok(taking)
+}
+
+/// `path` made absolute (for `--tuned "given"`'s errors).
+fn absolute(path: &Path, given: &str) -> Result<PathBuf> {
+    std::path::absolute(path).with_context(|| format!("--tuned \"{given}\""))
+}
+
+/// The engines of a stitch: candidates for the plans' phases (the engines
+/// at their defaults, then those with a parameters file of their own),
+/// and the physics-free rows (the model at its defaults, and the one
+/// fitted by a tune), scored beside them and never a phase's engine.
+struct Taking {
+    candidates: Vec<String>,
+    physics_free: Vec<String>,
+}
+
+impl Taking {
+    fn all(&self) -> Vec<String> {
+        self.candidates
+            .iter()
+            .chain(&self.physics_free)
+            .cloned()
+            .collect()
+    }
 }
 
 /// Where the single-engine runs of a candidate are, relative to
@@ -630,7 +727,7 @@ fn score(s: &SourceSummary) -> Score {
 /// reports.
 fn scene_outcome(
     study: &Study,
-    engines: &[String],
+    taking: &Taking,
     (train, held): (&SceneReport, Option<&SceneReport>),
     roles: &[(String, Vec<String>)],
     contact_onset_s: Option<f64>,
@@ -648,9 +745,14 @@ fn scene_outcome(
         |r: &SceneReport, name: &str| r.sources.iter().find(|s| s.source == name).cloned();
     let mut rows = Vec::new();
     let mut entries: Vec<(String, String, Vec<String>)> = Vec::new();
-    for e in engines {
-        if let Some(name) = engine_source_name(study, &scene, e) {
-            entries.push((name, "engine".into(), vec![e.clone(); automatic.len()]));
+    for (list, role) in [
+        (&taking.candidates, "engine"),
+        (&taking.physics_free, "physics-free"),
+    ] {
+        for e in list {
+            if let Some(name) = engine_source_name(study, &scene, e) {
+                entries.push((name, role.into(), vec![e.clone(); automatic.len()]));
+            }
         }
     }
     for (role, plan) in roles {
@@ -682,12 +784,40 @@ fn scene_outcome(
             .collect();
         let plans: Vec<&SourceSummary> = rows
             .iter()
-            .filter(|row| row.role != "engine")
+            .filter(|row| row.role != "engine" && row.role != "physics-free")
             .filter_map(|row| r.sources.iter().find(|s| s.source == row.source))
             .collect();
         plans
             .iter()
             .filter_map(|p| against_best(p, &singles))
+            .collect()
+    };
+    let versus_physics_free = |r: &SceneReport| -> Vec<AgainstPhysicsFree> {
+        let of = |physics_free: bool| -> Vec<&SourceSummary> {
+            rows.iter()
+                .filter(|row| (row.role == "physics-free") == physics_free)
+                .filter_map(|row| r.sources.iter().find(|s| s.source == row.source))
+                .collect()
+        };
+        let Some(closest) = of(false)
+            .into_iter()
+            .filter(|s| s.accumulated_error_m.is_some_and(f64::is_finite))
+            .min_by(|a, b| a.accumulated_error_m.unwrap().total_cmp(&b.accumulated_error_m.unwrap()))
+        else {
+            return Vec::new();
+        };
+        of(true)
+            .into_iter()
+            .filter_map(|free| {
+                let (g, c) = gain(closest, free)?;
+                Some(AgainstPhysicsFree {
+                    physics_free: free.source.clone(),
+                    closest: closest.source.clone(),
+                    gain_m: g,
+                    gain_interval_m: c.as_ref().and_then(|c| c.difference_interval_m),
+                    probability_better: c.map_or(f64::NAN, |c| c.probability_closer),
+                })
+            })
             .collect()
     };
     Ok(SceneStitch {
@@ -700,6 +830,8 @@ fn scene_outcome(
         contact_onset_s,
         training_versus: versus(train),
         held_out_versus: held.map(versus).unwrap_or_default(),
+        training_versus_physics_free: versus_physics_free(train),
+        held_out_versus_physics_free: held.map(versus_physics_free).unwrap_or_default(),
         scene,
         automatic,
         proposed,
@@ -718,19 +850,29 @@ fn against_best(plan: &SourceSummary, singles: &[&SourceSummary]) -> Option<Vers
                 .partial_cmp(&b.accumulated_error_m)
                 .unwrap_or(std::cmp::Ordering::Equal)
         })?;
-    let (p, b) = (plan.accumulated_error_m?, best.accumulated_error_m?);
-    let c: Option<PairedComparison> = paired(
-        (&plan.source, p, &plan.bootstrap_replicates_m),
-        (&best.source, b, &best.bootstrap_replicates_m),
-        0.95,
-    );
+    let (g, c) = gain(plan, best)?;
     Some(Versus {
         plan: plan.source.clone(),
         best_single: best.source.clone(),
-        gain_m: b - p,
+        gain_m: g,
         gain_interval_m: c.as_ref().and_then(|c| c.difference_interval_m),
         probability_better: c.map_or(f64::NAN, |c| c.probability_closer),
     })
+}
+
+/// `other`'s error minus `source`'s (positive: `source` is closer), with
+/// their paired comparison over the bootstrap replicates.
+fn gain(
+    source: &SourceSummary,
+    other: &SourceSummary,
+) -> Option<(f64, Option<PairedComparison>)> {
+    let (p, b) = (source.accumulated_error_m?, other.accumulated_error_m?);
+    let c = paired(
+        (&source.source, p, &source.bootstrap_replicates_m),
+        (&other.source, b, &other.bootstrap_replicates_m),
+        0.95,
+    );
+    Some((b - p, c))
 }
 
 fn fmt_score(s: Option<&Score>) -> String {
@@ -779,7 +921,7 @@ pub fn answer(s: &SceneStitch) -> String {
         .filter(mixes)
         .filter(|v| v.gain_m.is_finite())
         .max_by(|a, b| a.gain_m.total_cmp(&b.gain_m));
-    match best {
+    let stitching = match best {
         Some(v) if v.gain_interval_m.is_some_and(|i| i.low_m > 0.0) => format!(
             "{prefix}; stitching beats the best single engine ({}) on the {runs} runs: {} is closer by {:.3} m {} (probability {:.3}).",
             v.best_single, v.plan, v.gain_m, fmt_interval(v.gain_interval_m), v.probability_better
@@ -789,7 +931,29 @@ pub fn answer(s: &SceneStitch) -> String {
             v.best_single, v.plan, v.gain_m, fmt_interval(v.gain_interval_m), v.probability_better
         ),
         None => format!("{prefix}; no plan mixing engines was scored."),
+    };
+    let free = if s.held_out_versus_physics_free.is_empty() {
+        &s.training_versus_physics_free
+    } else {
+        &s.held_out_versus_physics_free
+    };
+    let mut text = stitching;
+    for v in free {
+        let verdict = match v.gain_interval_m {
+            Some(i) if i.low_m > 0.0 => "beats",
+            Some(i) if i.high_m < 0.0 => "does not beat (it is further than)",
+            _ => "cannot be told from",
+        };
+        text += &format!(
+            " The closest source, {}, {verdict} {}: {:.3} m closer {} (probability {:.3}).",
+            v.closest,
+            v.physics_free,
+            v.gain_m,
+            fmt_interval(v.gain_interval_m),
+            v.probability_better
+        );
     }
+    text
 }
 
 /// The report's section on stitching: the answer per scene and the table
@@ -825,7 +989,7 @@ pub fn report_section(result: &StitchStudy) -> ExtraSection {
         }
     }
     let mut paragraphs = vec![format!(
-        "Each phase of a scene simulated in the engine closest to the real arm in that phase on the training runs ({}), the state handed over at the phase boundaries; the study's proposed plan (stiff motors for free motion, MuJoCo from the phase the real cube starts to move) and any plan given with --plan beside it. Scored on the training runs and on the held-out runs ({}): accumulated wrist error, metres, 95 % bootstrap intervals; gain: best single engine's error minus the plan's on the held-out runs (positive: the plan is closer), with the probability that the plan is closer.",
+        "Each phase of a scene simulated in the engine closest to the real arm in that phase on the training runs ({}), the state handed over at the phase boundaries; the study's proposed plan (stiff motors for free motion, MuJoCo from the phase the real cube starts to move) and any plan given with --plan beside it. Scored on the training runs and on the held-out runs ({}): accumulated wrist error, metres, 95 % bootstrap intervals; gain: best single engine's error minus the plan's on the held-out runs (positive: the plan is closer), with the probability that the plan is closer. The physics-free rows are baselines: each scene says whether its closest engine or plan beats them.",
         result.training_runs,
         result.held_out_runs.as_deref().unwrap_or("none")
     )];
@@ -852,7 +1016,7 @@ pub fn report_section(result: &StitchStudy) -> ExtraSection {
 /// The Markdown table of the outcome.
 pub fn markdown(result: &StitchStudy) -> String {
     let mut md = format!(
-        "# Stitched engines against single engines\n\nStudy {}; plans chosen on the training runs ({}); scored on the training runs and on the held-out runs ({}). Accumulated error of the mean wrist, metres, with 95 % bootstrap intervals.\n",
+        "# Stitched engines against single engines\n\nStudy {}; plans chosen on the training runs ({}); scored on the training runs and on the held-out runs ({}). Accumulated error of the mean wrist, metres, with 95 % bootstrap intervals. The physics-free rows (perfect tracking of the commands, and behind a tune's fitted actuator stage) are baselines, never a phase's engine: a simulation that does not beat them adds nothing to kinematics.\n",
         result.study,
         result.training_runs,
         result.held_out_runs.as_deref().unwrap_or("none")
@@ -885,15 +1049,33 @@ pub fn markdown(result: &StitchStudy) -> String {
             );
         }
         md += "\n";
-        for (what, list) in [
-            ("training", &s.training_versus),
-            ("held-out", &s.held_out_versus),
+        for (what, list, free) in [
+            (
+                "training",
+                &s.training_versus,
+                &s.training_versus_physics_free,
+            ),
+            (
+                "held-out",
+                &s.held_out_versus,
+                &s.held_out_versus_physics_free,
+            ),
         ] {
             for v in list {
                 md += &format!(
                     "- {what}: {} vs the best single engine {}: gain {:.3} m {} (probability {:.3} that the plan is closer)\n",
                     v.plan,
                     v.best_single,
+                    v.gain_m,
+                    fmt_interval(v.gain_interval_m),
+                    v.probability_better
+                );
+            }
+            for v in free {
+                md += &format!(
+                    "- {what}: the closest source {} vs {}: gain {:.3} m {} (probability {:.3} that the simulation is closer)\n",
+                    v.closest,
+                    v.physics_free,
                     v.gain_m,
                     fmt_interval(v.gain_interval_m),
                     v.probability_better
