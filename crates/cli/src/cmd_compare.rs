@@ -116,6 +116,14 @@ pub struct Args {
     /// joint (md and json).
     #[arg(long)]
     pub joint_space: bool,
+    /// Add the physics-free rows to every scene that names a scene file:
+    /// the model with no physics (perfect tracking of the commands,
+    /// "physics-free (this tool)"), and, given a parameters file or the
+    /// --out folder of a `realitygap tune`, the model behind the tune's
+    /// fitted actuator stage ("physics-free (tuned)"). An engine that does
+    /// not beat them predicts the real arm no better than kinematics.
+    #[arg(long, value_name = "FILE|TUNE_DIR", num_args = 0..=1)]
+    pub physics_free: Option<Option<PathBuf>>,
     /// Write the output to this file instead of standard output.
     #[arg(long, short)]
     pub output: Option<PathBuf>,
@@ -129,6 +137,25 @@ pub fn run(args: Args) -> Result<()> {
         .unwrap_or("md")
         .parse()
         .map_err(anyhow::Error::msg)?;
+    // The physics-free runs live as long as the comparison.
+    let mut runs = None;
+    let added_sources = match &args.physics_free {
+        Some(params) => {
+            let dir = runs.insert(
+                tempfile::Builder::new()
+                    .prefix("realitygap-physics-free-")
+                    .tempdir()?,
+            );
+            realitygap::compare::physics_free_sources(
+                &args.study,
+                params.as_deref(),
+                dir.path(),
+                &realitygap_runner::Launcher::this_executable(),
+                &realitygap::ui::Terminal,
+            )?
+        }
+        None => Vec::new(),
+    };
     let request = CompareRequest {
         study: args.study,
         link: args.link,
@@ -136,6 +163,7 @@ pub fn run(args: Args) -> Result<()> {
         results: args.results,
         measure: args.measure.measure(),
         joint_space: args.joint_space,
+        added_sources,
     };
     let comparison = evaluate(&request)?;
     let short = args.format.is_none() && !args.verbose && args.output.is_none();

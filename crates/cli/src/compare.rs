@@ -7,7 +7,7 @@ use realitygap_analysis::compare::SceneReport;
 use realitygap_analysis::table::{self, Format};
 use realitygap_study::joint_space::JointTable;
 use realitygap_study::replay::JointSpaceRow;
-use realitygap_study::{evaluate_measured, load_study, DataSource, Measure};
+use realitygap_study::{evaluate_measured, load_study, DataSource, Measure, SourceSpec, Study};
 use std::path::{Path, PathBuf};
 
 /// What `compare` compares and how.
@@ -25,6 +25,10 @@ pub struct CompareRequest {
     pub measure: Measure,
     /// Also in joint space (`--joint-space`).
     pub joint_space: bool,
+    /// Sources added to the study's scenes (scene name, source with an
+    /// absolute results directory): the physics-free rows of
+    /// `--physics-free` ([`physics_free_sources`]).
+    pub added_sources: Vec<(String, SourceSpec)>,
 }
 
 /// An evaluated comparison.
@@ -62,7 +66,12 @@ pub fn evaluate(request: &CompareRequest) -> Result<Comparison> {
     if request.link.is_some() {
         anyhow::bail!("--link belongs to the comparison of a replay's folder (the output of `realitygap replay`)");
     }
-    let (study, roots) = load_study(&request.study, &request.data, request.results.clone())?;
+    let (mut study, roots) = load_study(&request.study, &request.data, request.results.clone())?;
+    for (scene, source) in &request.added_sources {
+        if let Some(s) = study.scenes.iter_mut().find(|s| s.name == *scene) {
+            s.sources.push(source.clone());
+        }
+    }
     let reports = evaluate_measured(&request.study, &study, &roots, &request.measure)?;
     let joint = if request.joint_space {
         Some(realitygap_study::joint_space::study_tables(
@@ -119,4 +128,130 @@ impl Comparison {
             }
         }
     }
+}
+
+/// The physics-free rows of `compare --physics-free`: the physics-free
+/// model (perfect tracking of the commands, the `ideal` engine) run once in
+/// every scene of the study at `study_path` that names a scene file, into
+/// `runs_dir/perfect`; with `params` (a parameters file, or the `--out`
+/// folder of a `realitygap tune`, whose fitted physics-free model
+/// `physics-free-actuator/tuned.toml` is taken), the model behind those
+/// parameters too, into `runs_dir/tuned`. Returned as sources to add
+/// ([`CompareRequest::added_sources`]): "physics-free (this tool)" and
+/// "physics-free (tuned)", as `reproduce` names them.
+pub fn physics_free_sources(
+    study_path: &Path,
+    params: Option<&Path>,
+    runs_dir: &Path,
+    launcher: &realitygap_runner::Launcher,
+    ui: &dyn crate::ui::Ui,
+) -> Result<Vec<(String, SourceSpec)>> {
+    use anyhow::{bail, Context};
+    use realitygap_core::engine::PHYSICS_FREE_ENGINE;
+    if !crate::compiled_engines()
+        .iter()
+        .any(|e| e.name() == PHYSICS_FREE_ENGINE)
+    {
+        bail!("--physics-free: the physics-free model ({PHYSICS_FREE_ENGINE}) is not compiled into this binary");
+    }
+    let study = Study::from_file(study_path)?;
+    let scenes: Vec<(String, PathBuf)> = study
+        .scenes
+        .iter()
+        .filter_map(|s| Some((s.name.clone(), study.folder.join(s.scene.as_ref()?))))
+        .collect();
+    if scenes.is_empty() {
+        bail!(
+            "--physics-free: no scene of {} names a scene file (`scene = ...`), so the physics-free model has no commands to follow",
+            study_path.display()
+        );
+    }
+    let tuned = params.map(fitted_physics_free).transpose()?;
+    let mut out = Vec::new();
+    for (folder, file) in [("perfect", None), ("tuned", tuned.as_ref())] {
+        if folder == "tuned" && file.is_none() {
+            continue;
+        }
+        let dir = runs_dir.join(folder);
+        let spec = realitygap_runner::BatchSpec {
+            scenes: scenes.iter().map(|(_, f)| f.clone()).collect(),
+            engines: vec![PHYSICS_FREE_ENGINE.to_string()],
+            repeats: 1,
+            out: dir.clone(),
+            robot: None,
+            packages: vec![],
+            jobs: None,
+            seed: 0,
+            perturb: vec![],
+            set: vec![],
+            timeout_s: None,
+            params: file.cloned(),
+            stitch: None,
+            allow_unstable: false,
+        };
+        crate::batch::run(
+            spec,
+            realitygap_runner::slurm::Executor::Local,
+            launcher,
+            ui,
+        )
+        .and_then(|o| o.check())
+        .with_context(|| format!("--physics-free: running the physics-free model into {}", dir.display()))?;
+        for (scene, _) in &scenes {
+            for mut source in realitygap_study::reproduce::engine_sources(
+                &dir,
+                scene,
+                &[PHYSICS_FREE_ENGINE.to_string()],
+            )? {
+                if let Some(f) = file {
+                    source.name = source.name.replace("(this tool)", "(tuned)");
+                    source.about = Some(format!(
+                        "{}, with the parameters of {}",
+                        source.about.unwrap_or_default(),
+                        f.display()
+                    ));
+                }
+                source.dir = source
+                    .dir
+                    .map(|d| dir.join(d).display().to_string());
+                out.push((scene.clone(), source));
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// The parameters file of `--physics-free FILE|TUNE_DIR`: a file as it is;
+/// a tune of the physics-free model, its `tuned.toml`; another tune, the
+/// physics-free model fitted beside it
+/// (`physics-free-actuator/tuned.toml`).
+fn fitted_physics_free(given: &Path) -> Result<PathBuf> {
+    use anyhow::bail;
+    if given.is_file() {
+        return Ok(std::path::absolute(given)?);
+    }
+    if !given.is_dir() {
+        bail!(
+            "--physics-free {}: no such parameters file or tune folder",
+            given.display()
+        );
+    }
+    let te = realitygap_study::reproduce::TunedEngine::from_dir(given)?;
+    let file = if te.engine == realitygap_core::engine::PHYSICS_FREE_ENGINE {
+        te.params
+    } else {
+        let fitted = given
+            .join(realitygap_tune::outputs::PHYSICS_FREE_DIR)
+            .join("tuned.toml");
+        if !fitted.is_file() {
+            bail!(
+                "--physics-free {}: the tune of {} holds no fitted physics-free model ({} is missing; `realitygap tune` writes it beside its own tune)",
+                given.display(),
+                te.engine,
+                fitted.display()
+            );
+        }
+        fitted
+    };
+    Ok(std::path::absolute(file)?)
 }

@@ -611,3 +611,99 @@ fn the_terminal_gets_a_summary_and_colour_only_when_wanted() {
     );
     assert!(!coloured(true).contains('\u{1b}'), "NO_COLOR wins");
 }
+
+/// `--physics-free` adds the physics-free model (perfect tracking, run
+/// from each scene file) and, from a tune's folder, the physics-free model
+/// fitted beside it; a parameters file gives the same row as its tune
+/// folder; a folder without a fitted model, or no such path, is a clear
+/// error.
+#[test]
+fn physics_free_rows_from_the_scene_files_and_a_tune_folder() {
+    let Some(data) = realitygap::paper_data_for_tests() else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    // A tune's output folder (its engine and tuned.toml) with the
+    // physics-free model fitted beside it, as `realitygap tune` writes it.
+    let tune = tmp.path().join("tune-mujoco");
+    let fitted = tune.join("physics-free-actuator");
+    std::fs::create_dir_all(&fitted).unwrap();
+    std::fs::write(tune.join("summary.json"), r#"{"engine": "mujoco"}"#).unwrap();
+    std::fs::write(tune.join("tuned.toml"), "[controller]\ndelay_s = 0.01\n").unwrap();
+    std::fs::write(fitted.join("summary.json"), r#"{"engine": "ideal"}"#).unwrap();
+    let fitted_toml = fitted.join("tuned.toml");
+    std::fs::write(
+        &fitted_toml,
+        "[controller]\ndelay_s = 0.05\n\n[actuator]\nfrequency_rad_s = 20.0\ndamping_ratio = 0.5\n",
+    )
+    .unwrap();
+    let run = |physics_free: &[&std::ffi::OsStr]| -> Value {
+        let out = bin()
+            .arg("compare")
+            .arg(root().join("assets/studies/collins2019.toml"))
+            .arg("--data")
+            .arg(&data)
+            .args(["--runs", "1-15", "--holdout", "16-20", "--format", "json"])
+            .arg("--physics-free")
+            .args(physics_free)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        serde_json::from_slice(&out.stdout).unwrap()
+    };
+    let row = |v: &Value, scene: &str, source: &str| -> Option<Value> {
+        v["rows"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["scene"] == scene && r["source"] == source)
+            .cloned()
+    };
+    let error = |v: &Value, scene: &str, source: &str| -> Option<f64> {
+        row(v, scene, source).map(|r| r["accumulated_error_m"].as_f64().unwrap())
+    };
+    let plain = run(&[]);
+    let from_dir = run(&[tune.as_os_str()]);
+    let from_file = run(&[fitted_toml.as_os_str()]);
+    for scene in SCENES {
+        let perfect = error(&plain, scene, "physics-free (this tool)").unwrap();
+        assert!(perfect.is_finite() && perfect > 0.1, "{scene}: {perfect}");
+        assert_eq!(error(&plain, scene, "physics-free (tuned)"), None);
+        // The untuned row does not depend on the tune.
+        assert_eq!(
+            error(&from_dir, scene, "physics-free (this tool)"),
+            Some(perfect)
+        );
+        let tuned = error(&from_dir, scene, "physics-free (tuned)").unwrap();
+        assert!(tuned.is_finite() && (tuned - perfect).abs() > 1e-3, "{scene}");
+        assert_eq!(error(&from_file, scene, "physics-free (tuned)"), Some(tuned));
+        // The study's own sources are all still there.
+        for source in SOURCES {
+            assert!(row(&from_dir, scene, source).is_some(), "{scene} {source}");
+        }
+    }
+    // A tune folder without a fitted physics-free model, and no such path.
+    std::fs::remove_dir_all(&fitted).unwrap();
+    for (given, says) in [
+        (tune.clone(), "holds no fitted physics-free model"),
+        (tmp.path().join("nosuch"), "no such parameters file or tune folder"),
+    ] {
+        let out = bin()
+            .arg("compare")
+            .arg(root().join("assets/studies/collins2019.toml"))
+            .arg("--data")
+            .arg(&data)
+            .arg("--physics-free")
+            .arg(&given)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success());
+        assert!(stderr.contains(says), "{stderr}");
+        assert!(stderr.contains(&given.display().to_string()), "{stderr}");
+    }
+}

@@ -336,6 +336,7 @@ fn compare<'py>(
             seed,
         },
         joint_space,
+        added_sources: Vec::new(),
     };
     let (kind, csv, markdown, json) = long_call(py, reporter, move |_| {
         let c = realitygap::compare::evaluate(&request)?;

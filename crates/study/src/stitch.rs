@@ -941,11 +941,11 @@ pub fn answer(s: &SceneStitch) -> String {
     for v in free {
         let verdict = match v.gain_interval_m {
             Some(i) if i.low_m > 0.0 => "beats",
-            Some(i) if i.high_m < 0.0 => "does not beat (it is further than)",
+            Some(i) if i.high_m < 0.0 => "is further from the real arm than",
             _ => "cannot be told from",
         };
         text += &format!(
-            " The closest source, {}, {verdict} {}: {:.3} m closer {} (probability {:.3}).",
+            " The closest source, {}, {verdict} {} (gain {:.3} m {}, probability {:.3} that it is closer).",
             v.closest,
             v.physics_free,
             v.gain_m,
