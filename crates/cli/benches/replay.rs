@@ -5,7 +5,9 @@
 //! under one constant position command, the same mechanism), per compiled
 //! engine, on the first episode of the independent writer's iiwa
 //! recordings (10 s at 1 ms: 10 000 steps). Thread CPU time, best of
-//! `REPEATS` (default 3).
+//! `REPEATS` (default 3). Also the time to load the model (what every
+//! replay of `tune --recordings` pays before its first step) and its ratio
+//! to the replay.
 //!
 //!     cargo bench -p realitygap --bench replay
 
@@ -59,8 +61,8 @@ fn main() {
     .unwrap();
     let episode = &prepared.episodes[0];
     println!(
-        "{:<8} {:>8} {:>14} {:>14} {:>9}",
-        "engine", "steps", "replay steps/s", "raw steps/s", "overhead"
+        "{:<8} {:>8} {:>14} {:>14} {:>9} {:>9} {:>16}",
+        "engine", "steps", "replay steps/s", "raw steps/s", "overhead", "load, s", "load / replay"
     );
     for engine in realitygap::compiled_engines() {
         let (scene, robot) =
@@ -83,8 +85,11 @@ fn main() {
             .unwrap()
         };
         let (mut best_replay, mut best_raw, mut steps) = (f64::INFINITY, f64::INFINITY, 0);
+        let mut best_load = f64::INFINITY;
         for _ in 0..repeats {
+            let t0 = thread_cpu_s();
             let mut sim = load();
+            best_load = best_load.min(thread_cpu_s() - t0);
             let t0 = thread_cpu_s();
             let outcome = replay(sim.as_mut(), &plan).unwrap();
             best_replay = best_replay.min(thread_cpu_s() - t0);
@@ -106,9 +111,10 @@ fn main() {
         }
         let (r, w) = (steps as f64 / best_replay, steps as f64 / best_raw);
         println!(
-            "{:<8} {steps:>8} {r:>14.0} {w:>14.0} {:>8.1}%",
+            "{:<8} {steps:>8} {r:>14.0} {w:>14.0} {:>8.1}% {best_load:>9.4} {:>16.2}",
             engine.name(),
-            100.0 * (w / r - 1.0)
+            100.0 * (w / r - 1.0),
+            best_load / best_replay
         );
     }
 }

@@ -250,6 +250,18 @@ pub fn levenberg_marquardt(
             if moved < 1e-10 {
                 break 'outer "the step vanished (at a bound or a minimum)".to_string();
             }
+            // The cost's fall the linear model predicts for this step
+            // (-2 g'd - d'Ad): the damping only shrinks it, so once it is
+            // below the tolerance no trial can gain more than that and
+            // the fit has converged (without spending the evaluations of
+            // a chain of rejected trials on it).
+            let predicted = -2.0 * gf.dot(&step) - step.dot(&(&af * &step));
+            if predicted < options.tolerance * cost {
+                break 'outer format!(
+                    "converged (the linear model predicts a gain of {:.1e} of the cost)",
+                    predicted / cost.max(f64::MIN_POSITIVE)
+                );
+            }
             evaluations += 1;
             match f(&trial) {
                 Ok(rt) if rt.len() == r.len() && cost_of(&rt) < cost => {
@@ -538,5 +550,30 @@ mod tests {
         };
         let fit = levenberg_marquardt(&g, &[0.1], FitOptions::default(), &|_, _, _| {}).unwrap();
         assert!(fit.u[0] <= 0.6 && fit.u[0] > 0.5, "{fit:?}");
+    }
+
+    /// At an optimum with a residual the parameters cannot remove, the
+    /// linear model predicts no gain worth a trial: the fit stops there,
+    /// with the Jacobian at its point, instead of spending a chain of
+    /// rejected trials (one per rise of the damping) on it.
+    #[test]
+    fn at_an_optimum_the_fit_stops_on_the_predicted_gain_without_rejected_trials() {
+        let f = |u: &[f64]| -> Result<Vec<f64>, String> {
+            let d = u[0] - 0.3;
+            Ok(vec![d, u[1] - 0.6, 0.1 + 0.5 * d * d])
+        };
+        let labels = std::sync::Mutex::new(Vec::new());
+        let fit = levenberg_marquardt(&f, &[0.3, 0.6], FitOptions::default(), &|label, _, _| {
+            labels.lock().unwrap().push(label.to_string())
+        })
+        .unwrap();
+        assert!(fit.reason.contains("predicts"), "{}", fit.reason);
+        assert_eq!(*labels.lock().unwrap(), ["start"]);
+        assert_eq!(fit.evaluations, 3);
+        assert!(fit.jacobian.is_some());
+        assert_eq!(fit.u, [0.3, 0.6]);
+        // From elsewhere it still finds the optimum.
+        let fit = levenberg_marquardt(&f, &[0.1, 0.9], FitOptions::default(), &|_, _, _| {}).unwrap();
+        assert!((fit.u[0] - 0.3).abs() < 1e-3 && (fit.u[1] - 0.6).abs() < 1e-3, "{fit:?}");
     }
 }

@@ -967,7 +967,12 @@ pub fn tune_recordings(
             Some((cost, x)) => (centre, cost, x),
             None => (centre, f64::INFINITY, u.clone()),
         };
+        // Down first; up only when down did not improve on the centre (a
+        // minimum below the centre is not also above it).
         for dir in [-1i64, 1] {
+            if dir == 1 && best.0 != centre {
+                break;
+            }
             let mut k = centre;
             loop {
                 k += dir;
