@@ -13,15 +13,24 @@ use realitygap_core::testing::rerun_in_child;
 use realitygap_engine_bullet::{BulletEngine, BulletSimulation};
 use std::path::{Path, PathBuf};
 
-/// A fresh directory under the system's temporary directory.
-fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!(
-        "realitygap-bullet-test-{}-{name}",
-        std::process::id()
-    ));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+/// A fresh directory under the system's temporary directory, removed
+/// when dropped.
+struct TempDir(tempfile::TempDir);
+
+impl std::ops::Deref for TempDir {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        self.0.path()
+    }
+}
+
+fn temp_dir(name: &str) -> TempDir {
+    TempDir(
+        tempfile::Builder::new()
+            .prefix(&format!("realitygap-bullet-test-{name}-"))
+            .tempdir()
+            .unwrap(),
+    )
 }
 
 /// A two-link arm whose upper link is a mesh `mesh_file`, as URDF text.
@@ -168,7 +177,8 @@ fn arm_with_mesh_file(dir: &Path, name: &str, content: &str) -> (Scene, RobotMod
 /// as an empty shape).
 #[test]
 fn empty_obj_mesh_is_a_clear_error() {
-    let (scene, robot) = arm_with_mesh_file(&temp_dir("obj"), "upper.obj", "this is not a mesh\n");
+    let dir = temp_dir("obj");
+    let (scene, robot) = arm_with_mesh_file(&dir, "upper.obj", "this is not a mesh\n");
     let msg = load_error(load(&scene, &robot));
     assert!(
         msg.contains("arm.urdf: link \"upper\": collision mesh"),
@@ -185,8 +195,9 @@ fn empty_obj_mesh_is_a_clear_error() {
 /// on a malformed file; well-formed ones reach it as STL).
 #[test]
 fn damaged_collada_mesh_is_a_clear_error() {
+    let dir = temp_dir("dae");
     let (scene, robot) = arm_with_mesh_file(
-        &temp_dir("dae"),
+        &dir,
         "upper.dae",
         "<COLLADA>not a mesh</COLLADA>\n",
     );
@@ -202,8 +213,9 @@ fn damaged_collada_mesh_is_a_clear_error() {
 /// Bullet's own complaint is caught.
 #[test]
 fn unknown_mesh_format_is_a_clear_error() {
+    let dir = temp_dir("ply");
     let (scene, robot) = arm_with_mesh_file(
-        &temp_dir("ply"),
+        &dir,
         "upper.ply",
         "ply\nformat ascii 1.0\nend_header\n",
     );

@@ -42,7 +42,7 @@
 use crate::least_squares::{self, FitOptions};
 use crate::space::{Dim, Scale, Space};
 use crate::{TuneSpec, Tuner};
-use anyhow::{anyhow, bail, Result};
+use anyhow::{anyhow, Result};
 use serde::Serialize;
 use std::sync::Mutex;
 
@@ -465,12 +465,20 @@ pub fn polish(
         // so that a round costs what one Levenberg-Marquardt run did and
         // the budget leaves room for the rounds after a widening.
         let mut round_iterations = fit_options.max_iterations;
+        // The errors at `u`: simulated at the round's start, then those
+        // the last pass ended on (its end is the next pass's start).
+        let mut at_u: Option<crate::objective::Errors> = None;
         for pass in 0..IRLS_PASSES {
             let count = Mutex::new(0usize);
-            let weights = match t.errors(&u) {
-                Ok(e) => e.weights(IRLS_FLOOR_M),
-                Err(m) => bail!("the polish, at its start: {m}"),
+            let errors = match at_u.take() {
+                Some(e) => e,
+                None => {
+                    report.evaluations += 1;
+                    t.errors(&u)
+                        .map_err(|m| anyhow!("the polish, at its start: {m}"))?
+                }
             };
+            let weights = errors.weights(IRLS_FLOOR_M);
             let f = |x: &[f64]| {
                 *count.lock().unwrap_or_else(|e| e.into_inner()) += 1;
                 t.errors(x).map(|e| e.residuals(Some(&weights)))
@@ -486,18 +494,21 @@ pub fn polish(
             };
             let fit = least_squares::levenberg_marquardt(&f, &u, round_options, &|_, _, _| {})
                 .map_err(|m| anyhow!("the polish: {m}"))?;
+            // The fit's evaluations, and the pass's end below.
             report.evaluations += count.into_inner().unwrap_or_else(|e| e.into_inner()) + 1;
             report.iterations += fit.iterations;
             round_iterations = round_iterations.saturating_sub(fit.iterations.max(1));
             fit_reason = fit.reason.clone();
             // The objective itself at the pass's end (the weighted cost is
             // only its model).
-            let reached = t.errors(&fit.u).map(|e| e.objective()).ok();
+            let reached = t.errors(&fit.u).ok();
             let gain = match reached {
-                Some(o) if o < objective => {
+                Some(e) if e.objective() < objective => {
+                    let o = e.objective();
                     let gain = (objective - o) / objective.max(f64::MIN_POSITIVE);
                     u = fit.u.clone();
                     objective = o;
+                    at_u = Some(e);
                     gain
                 }
                 _ => 0.0,
