@@ -73,6 +73,40 @@ impl MeasureArgs {
     }
 }
 
+/// `--physics-free [FILE|TUNE_DIR]` (shared by `compare` and `report`).
+#[derive(clap::Args, Debug, Clone)]
+pub struct PhysicsFreeArg {
+    /// Add the physics-free rows to every scene that names a scene file:
+    /// the model with no physics (perfect tracking of the commands,
+    /// "physics-free (this tool)"), and, given a parameters file or the
+    /// --out folder of a `realitygap tune`, the model behind the tune's
+    /// fitted actuator stage ("physics-free (tuned)"). An engine that does
+    /// not beat them predicts the real arm no better than kinematics.
+    #[arg(long, value_name = "FILE|TUNE_DIR", num_args = 0..=1)]
+    pub physics_free: Option<Option<PathBuf>>,
+}
+
+impl PhysicsFreeArg {
+    /// The rows' sources for the study at `study`, their runs in
+    /// `runs_dir`; none without the option.
+    pub fn sources(
+        &self,
+        study: &std::path::Path,
+        runs_dir: &std::path::Path,
+    ) -> Result<Vec<(String, realitygap_study::SourceSpec)>> {
+        match &self.physics_free {
+            Some(params) => realitygap::compare::physics_free_sources(
+                study,
+                params.as_deref(),
+                runs_dir,
+                &realitygap_runner::Launcher::this_executable(),
+                &realitygap::ui::Terminal,
+            ),
+            None => Ok(Vec::new()),
+        }
+    }
+}
+
 /// Arguments of `realitygap compare`.
 #[derive(clap::Args)]
 pub struct Args {
@@ -116,14 +150,9 @@ pub struct Args {
     /// joint (md and json).
     #[arg(long)]
     pub joint_space: bool,
-    /// Add the physics-free rows to every scene that names a scene file:
-    /// the model with no physics (perfect tracking of the commands,
-    /// "physics-free (this tool)"), and, given a parameters file or the
-    /// --out folder of a `realitygap tune`, the model behind the tune's
-    /// fitted actuator stage ("physics-free (tuned)"). An engine that does
-    /// not beat them predicts the real arm no better than kinematics.
-    #[arg(long, value_name = "FILE|TUNE_DIR", num_args = 0..=1)]
-    pub physics_free: Option<Option<PathBuf>>,
+    /// The physics-free rows.
+    #[command(flatten)]
+    pub physics_free: PhysicsFreeArg,
     /// Write the output to this file instead of standard output.
     #[arg(long, short)]
     pub output: Option<PathBuf>,
@@ -138,24 +167,10 @@ pub fn run(args: Args) -> Result<()> {
         .parse()
         .map_err(anyhow::Error::msg)?;
     // The physics-free runs live as long as the comparison.
-    let mut runs = None;
-    let added_sources = match &args.physics_free {
-        Some(params) => {
-            let dir = runs.insert(
-                tempfile::Builder::new()
-                    .prefix("realitygap-physics-free-")
-                    .tempdir()?,
-            );
-            realitygap::compare::physics_free_sources(
-                &args.study,
-                params.as_deref(),
-                dir.path(),
-                &realitygap_runner::Launcher::this_executable(),
-                &realitygap::ui::Terminal,
-            )?
-        }
-        None => Vec::new(),
-    };
+    let runs = tempfile::Builder::new()
+        .prefix("realitygap-physics-free-")
+        .tempdir()?;
+    let added_sources = args.physics_free.sources(&args.study, runs.path())?;
     let request = CompareRequest {
         study: args.study,
         link: args.link,

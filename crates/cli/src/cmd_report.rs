@@ -26,6 +26,9 @@ pub struct Args {
     /// How the gap is measured.
     #[command(flatten)]
     pub measure: MeasureArgs,
+    /// The physics-free rows (their runs go to OUT/physics-free/).
+    #[command(flatten)]
+    pub physics_free: crate::cmd_compare::PhysicsFreeArg,
     /// Folder to write the report into (created if missing).
     #[arg(long)]
     pub out: PathBuf,
@@ -34,7 +37,11 @@ pub struct Args {
 /// Runs the command.
 pub fn run(args: Args) -> Result<()> {
     let measure = args.measure.measure();
-    let (study, roots) = load_study(&args.study, &args.data, args.results.clone())?;
+    let (mut study, roots) = load_study(&args.study, &args.data, args.results.clone())?;
+    let added = args
+        .physics_free
+        .sources(&args.study, &args.out.join("physics-free"))?;
+    realitygap::compare::add_sources(&mut study, &added);
     let reports = evaluate_measured(&args.study, &study, &roots, &measure)?;
     let mut provenance = provenance_for_study(&study, &args.study, &roots, measure.mode);
     provenance.details.extend(args.data.provenance());

@@ -67,11 +67,7 @@ pub fn evaluate(request: &CompareRequest) -> Result<Comparison> {
         anyhow::bail!("--link belongs to the comparison of a replay's folder (the output of `realitygap replay`)");
     }
     let (mut study, roots) = load_study(&request.study, &request.data, request.results.clone())?;
-    for (scene, source) in &request.added_sources {
-        if let Some(s) = study.scenes.iter_mut().find(|s| s.name == *scene) {
-            s.sources.push(source.clone());
-        }
-    }
+    add_sources(&mut study, &request.added_sources);
     let reports = evaluate_measured(&request.study, &study, &roots, &request.measure)?;
     let joint = if request.joint_space {
         Some(realitygap_study::joint_space::study_tables(
@@ -126,6 +122,15 @@ impl Comparison {
                     ),
                 })
             }
+        }
+    }
+}
+
+/// Adds `sources` (scene name, source) to the study's scenes.
+pub fn add_sources(study: &mut Study, sources: &[(String, SourceSpec)]) {
+    for (scene, source) in sources {
+        if let Some(s) = study.scenes.iter_mut().find(|s| s.name == *scene) {
+            s.sources.push(source.clone());
         }
     }
 }
@@ -196,7 +201,12 @@ pub fn physics_free_sources(
             ui,
         )
         .and_then(|o| o.check())
-        .with_context(|| format!("--physics-free: running the physics-free model into {}", dir.display()))?;
+        .with_context(|| {
+            format!(
+                "--physics-free: running the physics-free model into {}",
+                dir.display()
+            )
+        })?;
         for (scene, _) in &scenes {
             for mut source in realitygap_study::reproduce::engine_sources(
                 &dir,
@@ -211,9 +221,7 @@ pub fn physics_free_sources(
                         f.display()
                     ));
                 }
-                source.dir = source
-                    .dir
-                    .map(|d| dir.join(d).display().to_string());
+                source.dir = source.dir.map(|d| dir.join(d).display().to_string());
                 out.push((scene.clone(), source));
             }
         }

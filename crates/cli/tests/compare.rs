@@ -619,9 +619,9 @@ fn the_terminal_gets_a_summary_and_colour_only_when_wanted() {
 /// error.
 #[test]
 fn physics_free_rows_from_the_scene_files_and_a_tune_folder() {
-    let Some(data) = realitygap::paper_data_for_tests() else {
+    if realitygap::paper_data_for_tests().is_none() {
         return;
-    };
+    }
     let tmp = tempfile::tempdir().unwrap();
     // A tune's output folder (its engine and tuned.toml) with the
     // physics-free model fitted beside it, as `realitygap tune` writes it.
@@ -637,23 +637,11 @@ fn physics_free_rows_from_the_scene_files_and_a_tune_folder() {
         "[controller]\ndelay_s = 0.05\n\n[actuator]\nfrequency_rad_s = 20.0\ndamping_ratio = 0.5\n",
     )
     .unwrap();
-    let run = |physics_free: &[&std::ffi::OsStr]| -> Value {
-        let out = bin()
-            .arg("compare")
-            .arg(root().join("assets/studies/collins2019.toml"))
-            .arg("--data")
-            .arg(&data)
-            .args(["--runs", "1-15", "--holdout", "16-20", "--format", "json"])
-            .arg("--physics-free")
-            .args(physics_free)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        serde_json::from_slice(&out.stdout).unwrap()
+    let run = |physics_free: &[&str]| -> Value {
+        let mut args = vec!["--runs", "1-15", "--holdout", "16-20", "--format", "json"];
+        args.push("--physics-free");
+        args.extend(physics_free);
+        serde_json::from_str(&compare(&args).unwrap().0).unwrap()
     };
     let row = |v: &Value, scene: &str, source: &str| -> Option<Value> {
         v["rows"]
@@ -667,8 +655,8 @@ fn physics_free_rows_from_the_scene_files_and_a_tune_folder() {
         row(v, scene, source).map(|r| r["accumulated_error_m"].as_f64().unwrap())
     };
     let plain = run(&[]);
-    let from_dir = run(&[tune.as_os_str()]);
-    let from_file = run(&[fitted_toml.as_os_str()]);
+    let from_dir = run(&[tune.to_str().unwrap()]);
+    let from_file = run(&[fitted_toml.to_str().unwrap()]);
     for scene in SCENES {
         let perfect = error(&plain, scene, "physics-free (this tool)").unwrap();
         assert!(perfect.is_finite() && perfect > 0.1, "{scene}: {perfect}");
@@ -679,8 +667,14 @@ fn physics_free_rows_from_the_scene_files_and_a_tune_folder() {
             Some(perfect)
         );
         let tuned = error(&from_dir, scene, "physics-free (tuned)").unwrap();
-        assert!(tuned.is_finite() && (tuned - perfect).abs() > 1e-3, "{scene}");
-        assert_eq!(error(&from_file, scene, "physics-free (tuned)"), Some(tuned));
+        assert!(
+            tuned.is_finite() && (tuned - perfect).abs() > 1e-3,
+            "{scene}"
+        );
+        assert_eq!(
+            error(&from_file, scene, "physics-free (tuned)"),
+            Some(tuned)
+        );
         // The study's own sources are all still there.
         for source in SOURCES {
             assert!(row(&from_dir, scene, source).is_some(), "{scene} {source}");
@@ -690,17 +684,15 @@ fn physics_free_rows_from_the_scene_files_and_a_tune_folder() {
     std::fs::remove_dir_all(&fitted).unwrap();
     for (given, says) in [
         (tune.clone(), "holds no fitted physics-free model"),
-        (tmp.path().join("nosuch"), "no such parameters file or tune folder"),
+        (
+            tmp.path().join("nosuch"),
+            "no such parameters file or tune folder",
+        ),
     ] {
-        let out = bin()
-            .arg("compare")
-            .arg(root().join("assets/studies/collins2019.toml"))
-            .arg("--data")
-            .arg(&data)
-            .arg("--physics-free")
-            .arg(&given)
-            .output()
-            .unwrap();
+        let out = compare_study(
+            &root().join("assets/studies/collins2019.toml"),
+            &["--physics-free", given.to_str().unwrap()],
+        );
         let stderr = String::from_utf8_lossy(&out.stderr);
         assert!(!out.status.success());
         assert!(stderr.contains(says), "{stderr}");

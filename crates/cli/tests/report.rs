@@ -173,3 +173,52 @@ fn bad_input_is_an_error_naming_it() {
     assert!(err.contains("no-such-study.toml"), "{err}");
     assert!(!out.exists(), "nothing written on error");
 }
+
+/// `report --physics-free` draws and tabulates the physics-free model
+/// (perfect tracking, run from the study's scene files into
+/// OUT/physics-free/) beside the study's sources, with the same error as
+/// `compare --physics-free` gives.
+#[test]
+fn report_with_the_physics_free_row() {
+    let Some(data) = realitygap::paper_data_for_tests() else {
+        return;
+    };
+    let out = out_dir("physics-free");
+    let output = Command::new(env!("CARGO_BIN_EXE_realitygap"))
+        .arg("report")
+        .arg(study())
+        .arg("--data")
+        .arg(&data)
+        .args(["--physics-free", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let html = std::fs::read_to_string(out.join("index.html")).unwrap();
+    let table = tbody(&html, "accumulated-error");
+    assert_eq!(table.matches("<tr>").count(), 8, "the study's 7 and one");
+    let row = table
+        .lines()
+        .find(|l| l.contains("physics-free (this tool)"))
+        .expect("the physics-free row");
+    assert!(out
+        .join("physics-free/perfect/scene3_cube_push/ideal/manifest.json")
+        .is_file());
+    // The same error as compare's.
+    let compare = Command::new(env!("CARGO_BIN_EXE_realitygap"))
+        .arg("compare")
+        .arg(study())
+        .arg("--data")
+        .arg(&data)
+        .args(["--physics-free", "--format", "json"])
+        .output()
+        .unwrap();
+    let v: serde_json::Value = serde_json::from_slice(&compare.stdout).unwrap();
+    let total = v["totals"]["physics-free (this tool)"].as_f64().unwrap();
+    assert!(row.contains(&format!("{total:.3}")), "{row} vs {total}");
+    let _ = std::fs::remove_dir_all(&out);
+}

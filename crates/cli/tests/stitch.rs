@@ -478,12 +478,17 @@ fn the_stitch_command_chooses_runs_and_scores_plans() {
         assert_ne!(tuned["training"]["error_m"], plain["training"]["error_m"]);
         // The physics-free rows: perfect tracking, and the tune's fitted
         // one (slower, so another error); baselines, never a phase's engine.
-        let free: Vec<&serde_json::Value> =
-            rows.iter().filter(|r| r["role"] == "physics-free").collect();
+        let free: Vec<&serde_json::Value> = rows
+            .iter()
+            .filter(|r| r["role"] == "physics-free")
+            .collect();
         let names: Vec<&str> = free.iter().map(|r| r["source"].as_str().unwrap()).collect();
         assert_eq!(
             names,
-            ["physics-free (this tool)", "physics-free (this tool, tuned)"],
+            [
+                "physics-free (this tool)",
+                "physics-free (this tool, tuned)"
+            ],
             "{}",
             s["scene"]
         );
@@ -501,9 +506,7 @@ fn the_stitch_command_chooses_runs_and_scores_plans() {
         assert_eq!(against.len(), 2);
         for a in against {
             let row = |name: &serde_json::Value| {
-                rows.iter()
-                    .find(|r| r["source"] == *name)
-                    .unwrap()["held_out"]["error_m"]
+                rows.iter().find(|r| r["source"] == *name).unwrap()["held_out"]["error_m"]
                     .as_f64()
                     .unwrap()
             };

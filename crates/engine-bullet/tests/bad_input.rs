@@ -11,7 +11,7 @@ use realitygap_core::robot::{PackageResolver, RobotModel};
 use realitygap_core::scene::Scene;
 use realitygap_core::testing::rerun_in_child;
 use realitygap_engine_bullet::{BulletEngine, BulletSimulation};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// A fresh directory under the system's temporary directory, removed
 /// when dropped.
@@ -196,11 +196,7 @@ fn empty_obj_mesh_is_a_clear_error() {
 #[test]
 fn damaged_collada_mesh_is_a_clear_error() {
     let dir = temp_dir("dae");
-    let (scene, robot) = arm_with_mesh_file(
-        &dir,
-        "upper.dae",
-        "<COLLADA>not a mesh</COLLADA>\n",
-    );
+    let (scene, robot) = arm_with_mesh_file(&dir, "upper.dae", "<COLLADA>not a mesh</COLLADA>\n");
     let msg = load_error(load(&scene, &robot));
     assert!(
         msg.contains("arm.urdf: link \"upper\": collision mesh"),
@@ -214,11 +210,8 @@ fn damaged_collada_mesh_is_a_clear_error() {
 #[test]
 fn unknown_mesh_format_is_a_clear_error() {
     let dir = temp_dir("ply");
-    let (scene, robot) = arm_with_mesh_file(
-        &dir,
-        "upper.ply",
-        "ply\nformat ascii 1.0\nend_header\n",
-    );
+    let (scene, robot) =
+        arm_with_mesh_file(&dir, "upper.ply", "ply\nformat ascii 1.0\nend_header\n");
     let msg = load_error(load(&scene, &robot));
     assert!(msg.contains("arm.urdf"), "{msg}");
     assert!(msg.contains("upper"), "{msg}");

@@ -241,13 +241,7 @@ pub fn stitch_study(opts: &StitchOptions, runner: &Runner) -> Result<StitchStudy
     let fit = evaluate(&with_engines, &roots, &training)?;
     let mut plans = Vec::new();
     for s in &scenes {
-        plans.push(plan_scene(
-            opts,
-            runner,
-            s,
-            (&fit, &with_engines),
-            engines,
-        )?);
+        plans.push(plan_scene(opts, runner, s, (&fit, &with_engines), engines)?);
     }
     let stitched: Vec<(String, Vec<String>)> = plans
         .iter()
@@ -799,23 +793,19 @@ fn scene_outcome(
                 .filter_map(|row| r.sources.iter().find(|s| s.source == row.source))
                 .collect()
         };
-        let Some(closest) = of(false)
-            .into_iter()
-            .filter(|s| s.accumulated_error_m.is_some_and(f64::is_finite))
-            .min_by(|a, b| a.accumulated_error_m.unwrap().total_cmp(&b.accumulated_error_m.unwrap()))
-        else {
+        let Some(closest) = closest(&of(false)) else {
             return Vec::new();
         };
         of(true)
             .into_iter()
             .filter_map(|free| {
-                let (g, c) = gain(closest, free)?;
+                let (gain_m, gain_interval_m, probability_better) = gain(closest, free)?;
                 Some(AgainstPhysicsFree {
                     physics_free: free.source.clone(),
                     closest: closest.source.clone(),
-                    gain_m: g,
-                    gain_interval_m: c.as_ref().and_then(|c| c.difference_interval_m),
-                    probability_better: c.map_or(f64::NAN, |c| c.probability_closer),
+                    gain_m,
+                    gain_interval_m,
+                    probability_better,
                 })
             })
             .collect()
@@ -842,37 +832,45 @@ fn scene_outcome(
 /// A plan against the single engine with the smallest error, over the
 /// paired bootstrap replicates.
 fn against_best(plan: &SourceSummary, singles: &[&SourceSummary]) -> Option<Versus> {
-    let best = singles
+    let best = closest(singles)?;
+    let (gain_m, gain_interval_m, probability_better) = gain(plan, best)?;
+    Some(Versus {
+        plan: plan.source.clone(),
+        best_single: best.source.clone(),
+        gain_m,
+        gain_interval_m,
+        probability_better,
+    })
+}
+
+/// The source with the smallest finite accumulated error.
+fn closest<'a>(sources: &[&'a SourceSummary]) -> Option<&'a SourceSummary> {
+    sources
         .iter()
+        .copied()
         .filter(|s| s.accumulated_error_m.is_some_and(f64::is_finite))
         .min_by(|a, b| {
             a.accumulated_error_m
                 .partial_cmp(&b.accumulated_error_m)
                 .unwrap_or(std::cmp::Ordering::Equal)
-        })?;
-    let (g, c) = gain(plan, best)?;
-    Some(Versus {
-        plan: plan.source.clone(),
-        best_single: best.source.clone(),
-        gain_m: g,
-        gain_interval_m: c.as_ref().and_then(|c| c.difference_interval_m),
-        probability_better: c.map_or(f64::NAN, |c| c.probability_closer),
-    })
+        })
 }
 
-/// `other`'s error minus `source`'s (positive: `source` is closer), with
-/// their paired comparison over the bootstrap replicates.
-fn gain(
-    source: &SourceSummary,
-    other: &SourceSummary,
-) -> Option<(f64, Option<PairedComparison>)> {
+/// `other`'s error minus `source`'s (positive: `source` is closer), the
+/// interval of that difference over the paired bootstrap replicates, and
+/// the probability that `source` is closer.
+fn gain(source: &SourceSummary, other: &SourceSummary) -> Option<(f64, Option<Interval>, f64)> {
     let (p, b) = (source.accumulated_error_m?, other.accumulated_error_m?);
-    let c = paired(
+    let c: Option<PairedComparison> = paired(
         (&source.source, p, &source.bootstrap_replicates_m),
         (&other.source, b, &other.bootstrap_replicates_m),
         0.95,
     );
-    Some((b - p, c))
+    Some((
+        b - p,
+        c.as_ref().and_then(|c| c.difference_interval_m),
+        c.map_or(f64::NAN, |c| c.probability_closer),
+    ))
 }
 
 fn fmt_score(s: Option<&Score>) -> String {

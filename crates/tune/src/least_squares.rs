@@ -573,7 +573,11 @@ mod tests {
         assert!(fit.jacobian.is_some());
         assert_eq!(fit.u, [0.3, 0.6]);
         // From elsewhere it still finds the optimum.
-        let fit = levenberg_marquardt(&f, &[0.1, 0.9], FitOptions::default(), &|_, _, _| {}).unwrap();
-        assert!((fit.u[0] - 0.3).abs() < 1e-3 && (fit.u[1] - 0.6).abs() < 1e-3, "{fit:?}");
+        let fit =
+            levenberg_marquardt(&f, &[0.1, 0.9], FitOptions::default(), &|_, _, _| {}).unwrap();
+        assert!(
+            (fit.u[0] - 0.3).abs() < 1e-3 && (fit.u[1] - 0.6).abs() < 1e-3,
+            "{fit:?}"
+        );
     }
 }
