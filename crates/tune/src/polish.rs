@@ -236,9 +236,16 @@ pub struct Polished {
 }
 
 /// The physical limits a parameter's bounds may be widened to, from its
-/// key's last part; `None` for a key without one (never widened).
+/// key's last part; `None` for a key without one (never widened). An
+/// object's mass is none: it is weighed, not fitted, and a search that
+/// lightens it (MuJoCo's and DART's wrist-only tunes took the study's
+/// 88 g cube down to 1 g, which then flew 4.8 m) is buying wrist error with
+/// an impossible object; its bounds stay where the space puts them.
 pub fn physical_limits(key: &str) -> Option<(f64, f64)> {
     let field = key.rsplit('.').next().unwrap_or(key);
+    if key.starts_with("objects.") && field == "mass_kg" {
+        return None;
+    }
     Some(match (key, field) {
         ("controller.delay_s", _) => (0.0, 0.5),
         ("controller.max_accel_deg_s2", _) => (1.0, 1.0e5),
@@ -752,6 +759,9 @@ mod tests {
         let o3 = dim("joints.j2.offset_deg", -3.0, 10.0, Scale::Linear);
         assert!(widen(&o3, true).is_none(), "already at the limit");
         assert!(widen(&dim("objects.cube.unknown", 0.0, 1.0, Scale::Linear), true).is_none());
+        let mass = dim("objects.cube.mass_kg", 0.05, 0.15, Scale::Linear);
+        assert!(widen(&mass, false).is_none(), "a weighed mass stays");
+        assert!(widen(&mass, true).is_none(), "a weighed mass stays");
         let delay = dim("controller.delay_s", 0.0, 0.15, Scale::Linear);
         assert_eq!(widen(&delay, true).unwrap().high, 0.3);
     }
