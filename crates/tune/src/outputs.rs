@@ -926,6 +926,14 @@ fn comparison_md(c: &Comparison) -> String {
                 f(u),
                 f(v)
             ));
+            if let (Some([r, _]), Some([d, _])) = (real, v) {
+                if *d > 3.0 * r + 0.05 {
+                    t.push_str(&format!(
+                        "\n**Warning:** the tuned cube moves {d:.3} m, {:.0} times the real {r:.3} m. The objective sees the cube only through its cube term (`--cube-weight`), so the tuned cube and contact values are not measurements of the real ones; do not reuse them for contact.\n",
+                        d / r.max(1e-9)
+                    ));
+                }
+            }
         }
     }
     t
@@ -1082,4 +1090,47 @@ pub fn markdown(s: &Summary) -> String {
         ));
     }
     m
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn with_push(tuned_m: f64) -> Comparison {
+        Comparison {
+            runs: "16-20".into(),
+            scenes: vec![SceneComparison {
+                scene: "scene3_cube_push".into(),
+                untuned: None,
+                tuned: None,
+                cube_final_m: None,
+                cube_push: Some([
+                    Some([0.098, 0.9]),
+                    Some([0.114, 90.0]),
+                    Some([tuned_m, 0.0]),
+                ]),
+            }],
+            total_untuned: None,
+            total_tuned: None,
+            objective_m: [75.0, 12.0],
+            baselines: vec![],
+        }
+    }
+
+    /// A tuned cube that moves far more than the real one is flagged: its
+    /// values are not measurements when the objective does not hold it.
+    #[test]
+    fn a_tuned_cube_that_flies_is_flagged_and_a_near_push_is_not() {
+        let far = comparison_md(&with_push(6.143));
+        assert!(
+            far.contains("**Warning:** the tuned cube moves 6.143 m, 63 times the real 0.098 m"),
+            "{far}"
+        );
+        for near in [0.033, 0.098, 0.3] {
+            assert!(
+                !comparison_md(&with_push(near)).contains("Warning"),
+                "{near}"
+            );
+        }
+    }
 }
