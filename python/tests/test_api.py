@@ -93,6 +93,20 @@ def test_compare_table_equals_the_commands_table_csv(cli, tmp_path):
     assert "MuJoCo" in table.to_string()
 
 
+def test_compare_with_the_physics_free_rows_equals_the_command(cli, tmp_path):
+    fitted = tmp_path / "fitted.toml"
+    fitted.write_text("[controller]\ndelay_s = 0.05\n\n[actuator]\nfrequency_rad_s = 20.0\ndamping_ratio = 0.5\n")
+    cmp = rg.compare(rg.builtin_study(), physics_free=fitted, progress=False)
+    expected = cli(
+        "compare", rg.builtin_study(), "--physics-free", str(fitted), "--format", "csv"
+    ).stdout
+    assert cmp.csv == expected
+    sources = set(cmp.table["source"])
+    assert {"physics-free (this tool)", "physics-free (tuned)"} <= sources, sources
+    plain = rg.compare(rg.builtin_study(), physics_free=True, progress=False)
+    assert "physics-free (this tool)" in plain.csv and "physics-free (tuned)" not in plain.csv
+
+
 def test_compare_measures_and_series():
     cmp = rg.compare(series=True, progress=False)
     m = cmp.measures

@@ -299,7 +299,8 @@ fn version() -> &'static str {
 #[pyfunction]
 #[pyo3(signature = (study, *, data="builtin", results=None, mode="default", alignment=None,
     registration=None, save_registration=None, runs=None, holdout=None, bootstrap=None,
-    seed=2019, link=None, joint_space=false, series=false, reporter=None))]
+    seed=2019, link=None, joint_space=false, series=false, physics_free=false,
+    physics_free_params=None, reporter=None))]
 #[allow(clippy::too_many_arguments)]
 fn compare<'py>(
     py: Python<'py>,
@@ -317,10 +318,17 @@ fn compare<'py>(
     link: Option<String>,
     joint_space: bool,
     series: bool,
+    physics_free: bool,
+    physics_free_params: Option<PathBuf>,
     reporter: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let mode = parse_mode(mode).map_err(|e| RealityGapError::new_err(format!("mode: {e}")))?;
-    let request = realitygap::compare::CompareRequest {
+    let launcher = if physics_free || physics_free_params.is_some() {
+        Some(launcher(py)?)
+    } else {
+        None
+    };
+    let mut request = realitygap::compare::CompareRequest {
         study,
         link,
         data: data_source(data)?,
@@ -338,7 +346,23 @@ fn compare<'py>(
         joint_space,
         added_sources: Vec::new(),
     };
-    let (kind, csv, markdown, json) = long_call(py, reporter, move |_| {
+    let (kind, csv, markdown, json) = long_call(py, reporter, move |ui| {
+        // The physics-free runs live as long as the comparison.
+        let mut runs = None;
+        if let Some(launcher) = &launcher {
+            let dir = runs.insert(
+                tempfile::Builder::new()
+                    .prefix("realitygap-physics-free-")
+                    .tempdir()?,
+            );
+            request.added_sources = realitygap::compare::physics_free_sources(
+                &request.study,
+                physics_free_params.as_deref(),
+                dir.path(),
+                launcher,
+                ui,
+            )?;
+        }
         let c = realitygap::compare::evaluate(&request)?;
         let csv = match &c {
             realitygap::compare::Comparison::Study { reports, .. } => {

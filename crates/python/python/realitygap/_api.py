@@ -272,6 +272,7 @@ def compare(
     link: Optional[str] = None,
     joint_space: bool = False,
     series: bool = False,
+    physics_free: Union[bool, PathLike] = False,
     progress: Any = True,
 ) -> Comparison:
     """Compares sources against a reference (``realitygap compare``).
@@ -284,7 +285,10 @@ def compare(
     ``save_registration``, ``runs`` and ``holdout`` (``"1-15"``,
     ``"16-20"``), ``bootstrap`` (resamples; 0: no intervals), ``seed``,
     ``link`` (a replay's folder), ``joint_space``; ``series``: keep the
-    per-step series (:meth:`Comparison.series`)."""
+    per-step series (:meth:`Comparison.series`); ``physics_free``: ``True``
+    adds the physics-free model (perfect tracking) to every scene that
+    names a scene file, a parameters file or a :func:`tune` folder adds the
+    physics-free model fitted beside that tune too (``--physics-free``)."""
     r = _reporter(progress)
     out = _native.compare(
         _path(study) if study is not None else builtin_study(),
@@ -301,6 +305,8 @@ def compare(
         link=link,
         joint_space=joint_space,
         series=series,
+        physics_free=physics_free is not False,
+        physics_free_params=None if isinstance(physics_free, bool) else os.fspath(physics_free),
         reporter=r,
     )
     return Comparison(out["kind"], out["csv"], out["markdown"], out["json"])

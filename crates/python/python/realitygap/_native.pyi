@@ -29,6 +29,8 @@ def compare(
     link: Optional[str] = None,
     joint_space: bool = False,
     series: bool = False,
+    physics_free: bool = False,
+    physics_free_params: Optional[str] = None,
     reporter: Optional[Any] = None,
 ) -> Dict[str, str]: ...
 def load_run(dir: str, run: Optional[str] = None) -> Dict[str, Any]:
