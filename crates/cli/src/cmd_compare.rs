@@ -166,11 +166,20 @@ pub fn run(args: Args) -> Result<()> {
         .unwrap_or("md")
         .parse()
         .map_err(anyhow::Error::msg)?;
-    // The physics-free runs live as long as the comparison.
-    let runs = tempfile::Builder::new()
-        .prefix("realitygap-physics-free-")
-        .tempdir()?;
-    let added_sources = args.physics_free.sources(&args.study, runs.path())?;
+    // The physics-free runs (only with --physics-free) live as long as the
+    // comparison.
+    let (_runs, added_sources) = match &args.physics_free.physics_free {
+        Some(params) => {
+            let (runs, sources) = realitygap::compare::physics_free_sources_in_temp(
+                &args.study,
+                params.as_deref(),
+                &realitygap_runner::Launcher::this_executable(),
+                &realitygap::ui::Terminal,
+            )?;
+            (Some(runs), sources)
+        }
+        None => (None, Vec::new()),
+    };
     let request = CompareRequest {
         study: args.study,
         link: args.link,

@@ -229,6 +229,21 @@ pub fn physics_free_sources(
     Ok(out)
 }
 
+/// [`physics_free_sources`] with the runs in a temporary folder, which
+/// the caller keeps as long as it compares them.
+pub fn physics_free_sources_in_temp(
+    study_path: &Path,
+    params: Option<&Path>,
+    launcher: &realitygap_runner::Launcher,
+    ui: &dyn crate::ui::Ui,
+) -> Result<(tempfile::TempDir, Vec<(String, SourceSpec)>)> {
+    let runs = tempfile::Builder::new()
+        .prefix("realitygap-physics-free-")
+        .tempdir()?;
+    let sources = physics_free_sources(study_path, params, runs.path(), launcher, ui)?;
+    Ok((runs, sources))
+}
+
 /// The parameters file of `--physics-free FILE|TUNE_DIR`: a file as it is;
 /// a tune of the physics-free model, its `tuned.toml`; another tune, the
 /// physics-free model fitted beside it

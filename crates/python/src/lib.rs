@@ -348,20 +348,16 @@ fn compare<'py>(
     };
     let (kind, csv, markdown, json) = long_call(py, reporter, move |ui| {
         // The physics-free runs live as long as the comparison.
-        let mut runs = None;
+        let mut _runs = None;
         if let Some(launcher) = &launcher {
-            let dir = runs.insert(
-                tempfile::Builder::new()
-                    .prefix("realitygap-physics-free-")
-                    .tempdir()?,
-            );
-            request.added_sources = realitygap::compare::physics_free_sources(
+            let (runs, sources) = realitygap::compare::physics_free_sources_in_temp(
                 &request.study,
                 physics_free_params.as_deref(),
-                dir.path(),
                 launcher,
                 ui,
             )?;
+            _runs = Some(runs);
+            request.added_sources = sources;
         }
         let c = realitygap::compare::evaluate(&request)?;
         let csv = match &c {
