@@ -105,6 +105,12 @@ def test_compare_with_the_physics_free_rows_equals_the_command(cli, tmp_path):
     assert {"physics-free (this tool)", "physics-free (tuned)"} <= sources, sources
     plain = rg.compare(rg.builtin_study(), physics_free=True, progress=False)
     assert "physics-free (this tool)" in plain.csv and "physics-free (tuned)" not in plain.csv
+    # Perfect tracking is a row by default; False leaves both out, as the
+    # command's --no-physics-free does.
+    assert rg.compare(rg.builtin_study(), progress=False).csv == plain.csv
+    none = rg.compare(rg.builtin_study(), physics_free=False, progress=False)
+    assert "physics-free" not in none.csv
+    assert none.csv == cli("compare", rg.builtin_study(), "--no-physics-free", "--format", "csv").stdout
 
 
 def test_compare_measures_and_series():

@@ -73,37 +73,50 @@ impl MeasureArgs {
     }
 }
 
-/// `--physics-free [FILE|TUNE_DIR]` (shared by `compare` and `report`).
+/// `--physics-free [FILE|TUNE_DIR]` and `--no-physics-free` (shared by
+/// `compare` and `report`).
 #[derive(clap::Args, Debug, Clone)]
 pub struct PhysicsFreeArg {
-    /// Add the physics-free rows to every scene that names a scene file:
-    /// the model with no physics (perfect tracking of the commands,
-    /// "physics-free (this tool)"), and, given a parameters file or the
+    /// The physics-free rows. By default every study whose scenes name
+    /// scene files gets the model with no physics (perfect tracking of the
+    /// commands, "physics-free (this tool)"), unless it already has a
+    /// physics-free source. With this option that row is required (an
+    /// error when it cannot be made), and, given a parameters file or the
     /// --out folder of a `realitygap tune`, the model behind the tune's
-    /// fitted actuator stage ("physics-free (tuned)"). An engine that does
-    /// not beat them predicts the real arm no better than kinematics.
+    /// fitted actuator stage is added ("physics-free (tuned)"). An engine
+    /// that does not beat them predicts the real arm no better than
+    /// kinematics.
     #[arg(long, value_name = "FILE|TUNE_DIR", num_args = 0..=1)]
     pub physics_free: Option<Option<PathBuf>>,
+    /// Leave the physics-free rows out.
+    #[arg(long, conflicts_with = "physics_free")]
+    pub no_physics_free: bool,
 }
 
 impl PhysicsFreeArg {
+    /// Which rows these options ask for.
+    pub fn rows(&self) -> realitygap::compare::PhysicsFreeRows {
+        use realitygap::compare::PhysicsFreeRows;
+        match (&self.physics_free, self.no_physics_free) {
+            (_, true) => PhysicsFreeRows::None,
+            (Some(params), false) => PhysicsFreeRows::Asked(params.clone()),
+            (None, false) => PhysicsFreeRows::Default,
+        }
+    }
+
     /// The rows' sources for the study at `study`, their runs in
-    /// `runs_dir`; none without the option.
+    /// `runs_dir`.
     pub fn sources(
         &self,
         study: &std::path::Path,
         runs_dir: &std::path::Path,
     ) -> Result<Vec<(String, realitygap_study::SourceSpec)>> {
-        match &self.physics_free {
-            Some(params) => realitygap::compare::physics_free_sources(
-                study,
-                params.as_deref(),
-                runs_dir,
-                &realitygap_runner::Launcher::this_executable(),
-                &realitygap::ui::Terminal,
-            ),
-            None => Ok(Vec::new()),
-        }
+        self.rows().sources(
+            study,
+            runs_dir,
+            &realitygap_runner::Launcher::this_executable(),
+            &realitygap::ui::Terminal,
+        )
     }
 }
 
@@ -166,20 +179,12 @@ pub fn run(args: Args) -> Result<()> {
         .unwrap_or("md")
         .parse()
         .map_err(anyhow::Error::msg)?;
-    // The physics-free runs (only with --physics-free) live as long as the
-    // comparison.
-    let (_runs, added_sources) = match &args.physics_free.physics_free {
-        Some(params) => {
-            let (runs, sources) = realitygap::compare::physics_free_sources_in_temp(
-                &args.study,
-                params.as_deref(),
-                &realitygap_runner::Launcher::this_executable(),
-                &realitygap::ui::Terminal,
-            )?;
-            (Some(runs), sources)
-        }
-        None => (None, Vec::new()),
-    };
+    // The physics-free runs live as long as the comparison.
+    let (_runs, added_sources) = args.physics_free.rows().sources_in_temp(
+        &args.study,
+        &realitygap_runner::Launcher::this_executable(),
+        &realitygap::ui::Terminal,
+    )?;
     let request = CompareRequest {
         study: args.study,
         link: args.link,

@@ -229,19 +229,83 @@ pub fn physics_free_sources(
     Ok(out)
 }
 
-/// [`physics_free_sources`] with the runs in a temporary folder, which
-/// the caller keeps as long as it compares them.
-pub fn physics_free_sources_in_temp(
-    study_path: &Path,
-    params: Option<&Path>,
-    launcher: &realitygap_runner::Launcher,
-    ui: &dyn crate::ui::Ui,
-) -> Result<(tempfile::TempDir, Vec<(String, SourceSpec)>)> {
-    let runs = tempfile::Builder::new()
-        .prefix("realitygap-physics-free-")
-        .tempdir()?;
-    let sources = physics_free_sources(study_path, params, runs.path(), launcher, ui)?;
-    Ok((runs, sources))
+/// Which physics-free rows `compare` and `report` add to a study.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum PhysicsFreeRows {
+    /// None (`--no-physics-free`).
+    None,
+    /// Perfect tracking, when the study can have it ([`Self::applies`]);
+    /// nothing otherwise.
+    Default,
+    /// Perfect tracking, and with a parameters file or tune folder the
+    /// fitted model too (`--physics-free [FILE|TUNE_DIR]`); an error when
+    /// they cannot be made.
+    Asked(Option<PathBuf>),
+}
+
+impl PhysicsFreeRows {
+    /// Whether the default row applies to the study file at `study_path`:
+    /// the physics-free model is compiled in, some scene names a scene
+    /// file, and no scene has a physics-free source yet (a `reproduce`
+    /// folder's study has them). A replay's folder, or a study that cannot
+    /// be read, gets none (the comparison then reports what is wrong).
+    pub fn applies(study_path: &Path) -> bool {
+        use realitygap_core::engine::PHYSICS_FREE_ENGINE;
+        if is_replay_folder(study_path)
+            || !crate::compiled_engines()
+                .iter()
+                .any(|e| e.name() == PHYSICS_FREE_ENGINE)
+        {
+            return false;
+        }
+        let Ok(study) = Study::from_file(study_path) else {
+            return false;
+        };
+        study.scenes.iter().any(|s| s.scene.is_some())
+            && !study
+                .scenes
+                .iter()
+                .flat_map(|s| &s.sources)
+                .any(|source| realitygap_report::verdict::is_physics_free(&source.name))
+    }
+
+    /// The rows' sources for the study at `study_path`, their runs under
+    /// `runs_dir` ([`physics_free_sources`]).
+    pub fn sources(
+        &self,
+        study_path: &Path,
+        runs_dir: &Path,
+        launcher: &realitygap_runner::Launcher,
+        ui: &dyn crate::ui::Ui,
+    ) -> Result<Vec<(String, SourceSpec)>> {
+        match self {
+            Self::None => Ok(Vec::new()),
+            Self::Default if !Self::applies(study_path) => Ok(Vec::new()),
+            Self::Default => physics_free_sources(study_path, None, runs_dir, launcher, ui),
+            Self::Asked(params) => {
+                physics_free_sources(study_path, params.as_deref(), runs_dir, launcher, ui)
+            }
+        }
+    }
+
+    /// [`Self::sources`] with the runs in a temporary folder (made only
+    /// when there are rows), which the caller keeps as long as it compares
+    /// them.
+    pub fn sources_in_temp(
+        &self,
+        study_path: &Path,
+        launcher: &realitygap_runner::Launcher,
+        ui: &dyn crate::ui::Ui,
+    ) -> Result<(Option<tempfile::TempDir>, Vec<(String, SourceSpec)>)> {
+        if *self == Self::None || (*self == Self::Default && !Self::applies(study_path)) {
+            return Ok((None, Vec::new()));
+        }
+        let runs = tempfile::Builder::new()
+            .prefix("realitygap-physics-free-")
+            .tempdir()?;
+        let sources = self.sources(study_path, runs.path(), launcher, ui)?;
+        Ok((Some(runs), sources))
+    }
 }
 
 /// The parameters file of `--physics-free FILE|TUNE_DIR`: a file as it is;

@@ -49,8 +49,15 @@ fn study_mode_json_has_every_cell_and_the_cube_figure() {
     };
     let v: Value = serde_json::from_str(&out).unwrap();
     let rows = v["rows"].as_array().unwrap();
-    assert_eq!(rows.len(), 21);
+    // The study's 7 sources and the physics-free model, in 3 scenes.
+    assert_eq!(rows.len(), 24);
     for scene in SCENES {
+        let free = rows
+            .iter()
+            .find(|r| r["scene"] == scene && r["source"] == "physics-free (this tool)")
+            .unwrap();
+        let e = free["accumulated_error_m"].as_f64().unwrap();
+        assert!(e.is_finite() && e > 1.0 && e < 200.0, "{scene}: {e}");
         for source in SOURCES {
             let row = rows
                 .iter()
@@ -144,7 +151,7 @@ fn every_format_renders() {
     let (csv, _) = compare(&["--format", "csv"]).unwrap();
     let lines: Vec<&str> = csv.lines().collect();
     assert!(lines[0].starts_with("source,scene,accumulated_error_m"));
-    assert_eq!(lines.len(), 1 + 21 + 7);
+    assert_eq!(lines.len(), 1 + 24 + 8);
     let (tex, _) = compare(&["--format", "latex", "--mode", "study"]).unwrap();
     assert!(
         tex.contains("\\begin{tabular}") && tex.contains("V-Rep ODE & $"),
@@ -280,7 +287,10 @@ fn real_start_frames_do_not_depend_on_the_simulated_sources() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let full = compare_study(&study_copy(dir.path(), &SOURCES), &["--format", "json"]);
+    let full = compare_study(
+        &study_copy(dir.path(), &SOURCES),
+        &["--format", "json", "--no-physics-free"],
+    );
     assert!(
         full.status.success(),
         "{}",
@@ -289,7 +299,7 @@ fn real_start_frames_do_not_depend_on_the_simulated_sources() {
     let one_dir = tempfile::tempdir().unwrap();
     let one = compare_study(
         &study_copy(one_dir.path(), &["PyBullet"]),
-        &["--format", "json"],
+        &["--format", "json", "--no-physics-free"],
     );
     assert!(
         one.status.success(),
@@ -639,7 +649,6 @@ fn physics_free_rows_from_the_scene_files_and_a_tune_folder() {
     .unwrap();
     let run = |physics_free: &[&str]| -> Value {
         let mut args = vec!["--runs", "1-15", "--holdout", "16-20", "--format", "json"];
-        args.push("--physics-free");
         args.extend(physics_free);
         serde_json::from_str(&compare(&args).unwrap().0).unwrap()
     };
@@ -654,13 +663,29 @@ fn physics_free_rows_from_the_scene_files_and_a_tune_folder() {
     let error = |v: &Value, scene: &str, source: &str| -> Option<f64> {
         row(v, scene, source).map(|r| r["accumulated_error_m"].as_f64().unwrap())
     };
-    let plain = run(&[]);
-    let from_dir = run(&[tune.to_str().unwrap()]);
-    let from_file = run(&[fitted_toml.to_str().unwrap()]);
+    let plain = run(&["--physics-free"]);
+    let by_default = run(&[]);
+    let without = run(&["--no-physics-free"]);
+    let from_dir = run(&["--physics-free", tune.to_str().unwrap()]);
+    let from_file = run(&["--physics-free", fitted_toml.to_str().unwrap()]);
     for scene in SCENES {
         let perfect = error(&plain, scene, "physics-free (this tool)").unwrap();
         assert!(perfect.is_finite() && perfect > 0.1, "{scene}: {perfect}");
         assert_eq!(error(&plain, scene, "physics-free (tuned)"), None);
+        // Perfect tracking is a row by default; --no-physics-free leaves
+        // it out, and the study's own rows are the same either way.
+        assert_eq!(
+            row(&by_default, scene, "physics-free (this tool)"),
+            row(&plain, scene, "physics-free (this tool)")
+        );
+        assert_eq!(error(&without, scene, "physics-free (this tool)"), None);
+        for source in SOURCES {
+            assert_eq!(
+                row(&without, scene, source),
+                row(&by_default, scene, source),
+                "{scene} {source}"
+            );
+        }
         // The untuned row does not depend on the tune.
         assert_eq!(
             error(&from_dir, scene, "physics-free (this tool)"),
@@ -698,4 +723,62 @@ fn physics_free_rows_from_the_scene_files_and_a_tune_folder() {
         assert!(stderr.contains(says), "{stderr}");
         assert!(stderr.contains(&given.display().to_string()), "{stderr}");
     }
+}
+
+/// A study that has a physics-free source already (as a `reproduce`
+/// folder's study has) gets no second one by default.
+#[test]
+fn no_second_physics_free_row_by_default() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = root().join("assets/scenes/scene1_single_joint.toml");
+    let runs = tmp.path().join("runs");
+    let out = bin()
+        .args(["run", scene.to_str().unwrap(), "--engine", "ideal", "--out"])
+        .arg(&runs)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let study = tmp.path().join("study.toml");
+    std::fs::write(
+        &study,
+        format!(
+            r#"name = "has its physics-free row"
+[[scenes]]
+name = "scene1_single_joint"
+scene = "{}"
+steps = 120
+[scenes.reference]
+name = "reference"
+format = "store"
+dir = "runs/scene1_single_joint/ideal"
+[[scenes.sources]]
+name = "physics-free (this tool)"
+format = "store"
+dir = "runs/scene1_single_joint/ideal"
+"#,
+            scene.display()
+        ),
+    )
+    .unwrap();
+    let out = bin()
+        .arg("compare")
+        .arg(&study)
+        .args(["--data", "none", "--format", "csv"])
+        .output()
+        .unwrap();
+    let csv = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let rows = csv
+        .lines()
+        .filter(|l| l.starts_with("physics-free (this tool),scene1_single_joint,"))
+        .count();
+    assert_eq!(rows, 1, "{csv}");
 }

@@ -68,7 +68,13 @@ fn report_on_the_paper_data() {
         );
     }
     let table = tbody(&html, "accumulated-error");
-    assert_eq!(table.matches("<tr>").count(), 7, "one row per source");
+    // The study's 7 sources and, by default, the physics-free model (its
+    // runs under OUT/physics-free/).
+    assert_eq!(table.matches("<tr>").count(), 8, "one row per source");
+    assert!(table.contains("physics-free (this tool)"), "{table}");
+    assert!(out
+        .join("physics-free/perfect/scene1_single_joint/ideal/manifest.json")
+        .is_file());
     assert_eq!(
         table.matches("class=\"num best\"").count(),
         4,

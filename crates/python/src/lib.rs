@@ -299,7 +299,7 @@ fn version() -> &'static str {
 #[pyfunction]
 #[pyo3(signature = (study, *, data="builtin", results=None, mode="default", alignment=None,
     registration=None, save_registration=None, runs=None, holdout=None, bootstrap=None,
-    seed=2019, link=None, joint_space=false, series=false, physics_free=false,
+    seed=2019, link=None, joint_space=false, series=false, physics_free=true,
     physics_free_params=None, reporter=None))]
 #[allow(clippy::too_many_arguments)]
 fn compare<'py>(
@@ -323,10 +323,15 @@ fn compare<'py>(
     reporter: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let mode = parse_mode(mode).map_err(|e| RealityGapError::new_err(format!("mode: {e}")))?;
-    let launcher = if physics_free || physics_free_params.is_some() {
-        Some(launcher(py)?)
-    } else {
+    let rows = match (physics_free, physics_free_params) {
+        (false, _) => realitygap::compare::PhysicsFreeRows::None,
+        (true, None) => realitygap::compare::PhysicsFreeRows::Default,
+        (true, Some(params)) => realitygap::compare::PhysicsFreeRows::Asked(Some(params)),
+    };
+    let launcher = if rows == realitygap::compare::PhysicsFreeRows::None {
         None
+    } else {
+        Some(launcher(py)?)
     };
     let mut request = realitygap::compare::CompareRequest {
         study,
@@ -350,13 +355,8 @@ fn compare<'py>(
         // The physics-free runs live as long as the comparison.
         let mut _runs = None;
         if let Some(launcher) = &launcher {
-            let (runs, sources) = realitygap::compare::physics_free_sources_in_temp(
-                &request.study,
-                physics_free_params.as_deref(),
-                launcher,
-                ui,
-            )?;
-            _runs = Some(runs);
+            let (runs, sources) = rows.sources_in_temp(&request.study, launcher, ui)?;
+            _runs = runs;
             request.added_sources = sources;
         }
         let c = realitygap::compare::evaluate(&request)?;

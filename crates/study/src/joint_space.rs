@@ -146,7 +146,17 @@ pub fn joint_table(
                 m.iter().map(|v| v / c.max(1) as f64).collect()
             })
             .collect();
-        rows.extend(row_of(&source.name, runs.len(), &mean, &real_mean, dof));
+        // A source that is the physics-free model itself (its angles are
+        // the kinematic reference's) is the kinematic row: shown once.
+        let kinematic = loaded.spec.kinematic.as_ref().is_some_and(|k| {
+            k.angles_rad.len() >= steps
+                && mean.iter().zip(&k.angles_rad).all(|(m, q)| {
+                    m.len() == q.len() && m.iter().zip(q).all(|(a, b)| (a - b).abs() < 1e-9)
+                })
+        });
+        if !kinematic {
+            rows.extend(row_of(&source.name, runs.len(), &mean, &real_mean, dof));
+        }
     }
     let id = |i: &usize| real[*i].id.clone();
     Ok(JointTable {

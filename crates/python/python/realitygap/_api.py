@@ -272,7 +272,7 @@ def compare(
     link: Optional[str] = None,
     joint_space: bool = False,
     series: bool = False,
-    physics_free: Union[bool, PathLike] = False,
+    physics_free: Union[bool, PathLike] = True,
     progress: Any = True,
 ) -> Comparison:
     """Compares sources against a reference (``realitygap compare``).
@@ -285,10 +285,13 @@ def compare(
     ``save_registration``, ``runs`` and ``holdout`` (``"1-15"``,
     ``"16-20"``), ``bootstrap`` (resamples; 0: no intervals), ``seed``,
     ``link`` (a replay's folder), ``joint_space``; ``series``: keep the
-    per-step series (:meth:`Comparison.series`); ``physics_free``: ``True``
-    adds the physics-free model (perfect tracking) to every scene that
-    names a scene file, a parameters file or a :func:`tune` folder adds the
-    physics-free model fitted beside that tune too (``--physics-free``)."""
+    per-step series (:meth:`Comparison.series`); ``physics_free``: by
+    default (``True``) the physics-free model (perfect tracking) is added
+    to every scene of a study whose scenes name scene files, unless it
+    already has a physics-free row; a parameters file or a :func:`tune`
+    folder adds the physics-free model fitted beside that tune too
+    (``--physics-free``); ``False`` leaves them out
+    (``--no-physics-free``)."""
     r = _reporter(progress)
     out = _native.compare(
         _path(study) if study is not None else builtin_study(),

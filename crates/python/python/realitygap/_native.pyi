@@ -29,7 +29,7 @@ def compare(
     link: Optional[str] = None,
     joint_space: bool = False,
     series: bool = False,
-    physics_free: bool = False,
+    physics_free: bool = True,
     physics_free_params: Optional[str] = None,
     reporter: Optional[Any] = None,
 ) -> Dict[str, str]: ...
