@@ -407,6 +407,48 @@ fn a_killed_tune_resumes_to_the_same_history() {
     assert!(e.contains("holds a different tune"), "{e}");
 }
 
+/// Without a weighed cube (scene 1 has none), the space's object and
+/// contact keys are held at the scenes' own values: not searched, not in
+/// the tuned file, and named in the summary.
+#[test]
+fn object_and_contact_keys_are_held_when_the_cube_is_not_weighed() {
+    let tmp = synthetic();
+    let d = tmp.path();
+    let space = std::fs::read_to_string(d.join("space.toml")).unwrap();
+    std::fs::write(
+        d.join("space.toml"),
+        format!(
+            "{space}\"contact.time_constant_s\" = {{ low = 0.01, high = 0.1, scale = \"log\", start = 0.02 }}\n\
+             \"objects.cube.friction\" = {{ low = 0.1, high = 1.5, start = 1.0 }}\n"
+        ),
+    )
+    .unwrap();
+    let out = d.join("out");
+    let s = tune(d, out.to_str().unwrap(), "12");
+    assert_eq!(
+        s["held"],
+        serde_json::json!(["contact.time_constant_s", "objects.cube.friction"])
+    );
+    let keys: Vec<&str> = s["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["key"].as_str().unwrap())
+        .collect();
+    assert_eq!(keys, ["joints.m1n6s300_joint_2.kv", "controller.delay_s"]);
+    let tuned = std::fs::read_to_string(out.join("tuned.toml")).unwrap();
+    assert!(
+        !tuned.contains("[contact]") && !tuned.contains("[objects"),
+        "{tuned}"
+    );
+    let md = std::fs::read_to_string(out.join("summary.md")).unwrap();
+    assert!(
+        md.contains("Held at the scenes' own values, not searched")
+            && md.contains("contact.time_constant_s, objects.cube.friction"),
+        "{md}"
+    );
+}
+
 #[test]
 fn a_diverging_candidate_is_scored_as_failed_and_the_search_goes_on() {
     let tmp = synthetic();

@@ -373,6 +373,25 @@ pub fn fit(
     })
 }
 
+/// Whether a key belongs to the objects or the contact
+/// (`objects.*`, `contact.*`).
+pub fn is_object_or_contact_key(key: &str) -> bool {
+    key.starts_with("objects.") || key.starts_with("contact.")
+}
+
+/// `space` with the objects' and the contact's keys held at the scenes'
+/// own values when no scene of `target` weighs its cube (`--cube-weight
+/// 0`, or no cube): the wrist alone then sees them only as far as the hand
+/// touches the cube, below the real runs' noise on the study, and a search
+/// that is free to move them ends where it likes (MuJoCo's wrist-only
+/// tune flung the cube 6.1 m, against the real 0.1 m). `None` when the cube
+/// is weighed or the space has none of those keys.
+pub fn cube_unseen(target: &Target, space: &Space) -> Option<Space> {
+    let weighed = target.scenes.iter().any(|s| s.cube && s.cube_weight > 0.0);
+    let any = space.dims.iter().any(|d| is_object_or_contact_key(&d.key));
+    (!weighed && any).then(|| space.holding(is_object_or_contact_key))
+}
+
 /// Runs a whole tune: [`fit`], the physics-free model behind its own
 /// fitted actuator stage ([`TuneSpec::baseline_space`], in
 /// `OUT/physics-free-actuator/`), the final scores and every output file.
@@ -384,6 +403,27 @@ pub fn tune(
     note: &(dyn Fn(String) + Sync),
 ) -> Result<TuneResult> {
     let started = Instant::now();
+    let held_spec;
+    let spec = match cube_unseen(target, &spec.space) {
+        Some(space) => {
+            note(format!(
+                "held at the scenes' own values, as the objective does not weigh the cube (--cube-weight 0): {}",
+                space.held.join(", ")
+            ));
+            held_spec = TuneSpec {
+                engine: spec.engine.clone(),
+                space,
+                fit_registration: spec.fit_registration,
+                set: spec.set.clone(),
+                search: spec.search,
+                out: spec.out.clone(),
+                polish: spec.polish,
+                baseline_space: spec.baseline_space.clone(),
+            };
+            &held_spec
+        }
+        None => spec,
+    };
     let fitted = fit(target, simulator, spec, progress, note)?;
     realitygap_runner::interrupt::check()?;
     let baseline = match &spec.baseline_space {

@@ -202,6 +202,11 @@ pub struct Summary {
     pub engine: String,
     /// The space file.
     pub space: String,
+    /// Keys of the space file held at the scenes' own values, not searched
+    /// (the objects' and the contact's when the objective does not weigh
+    /// the cube).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub held: Vec<String>,
     /// Engine settings every evaluation ran at.
     pub settings: Vec<(String, String)>,
     /// The objective, in words.
@@ -696,6 +701,7 @@ pub fn finish(
     let summary = Summary {
         engine: spec.engine.clone(),
         space: spec.space.source.display().to_string(),
+        held: spec.space.held.clone(),
         settings,
         objective: objective_text(tuner),
         seed: spec.search.seed,
@@ -964,6 +970,14 @@ pub fn markdown(s: &Summary) -> String {
         s.evaluations_to_5pct.map_or("n/a".into(), |n| n.to_string()),
         s.best_objective_m,
     ));
+    if !s.held.is_empty() {
+        m.push_str(&format!(
+            "- Held at the scenes' own values, not searched (the objective does not weigh the cube; give `--cube-weight` above 0 to fit them): {}.
+
+",
+            s.held.join(", ")
+        ));
+    }
     let p = &s.polish;
     if p.rounds > 0 {
         m.push_str(&format!(

@@ -327,6 +327,7 @@ pub fn default_space(
         dims,
         settings: Default::default(),
         registration: None,
+        held: Vec::new(),
     })
 }
 

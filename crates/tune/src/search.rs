@@ -438,6 +438,7 @@ mod tests {
                 })
                 .collect(),
             settings: Default::default(),
+            held: Vec::new(),
             registration: None,
         }
     }

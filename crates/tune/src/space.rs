@@ -98,6 +98,10 @@ pub struct Space {
     /// Engine settings by engine (`[engine.NAME]`).
     #[serde(skip)]
     pub settings: BTreeMap<String, EngineSettings>,
+    /// Keys of the file that are not searched but held at the scenes' own
+    /// values ([`Space::holding`]).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub held: Vec<String>,
     /// The registration's bounds, when the registration is fitted too.
     pub registration: Option<RegistrationBounds>,
 }
@@ -253,7 +257,22 @@ impl Space {
             dims,
             settings,
             registration,
+            held: Vec::new(),
         })
+    }
+
+    /// The space without the parameters whose keys `hold` picks: they are
+    /// not searched, the scenes' own values stand, and their keys are
+    /// listed in [`Space::held`].
+    pub fn holding(&self, hold: impl Fn(&str) -> bool) -> Space {
+        let (held, dims): (Vec<Dim>, Vec<Dim>) =
+            self.dims.iter().cloned().partition(|d| hold(&d.key));
+        let mut space = Space {
+            dims,
+            ..self.clone()
+        };
+        space.held.extend(held.into_iter().map(|d| d.key));
+        space
     }
 
     /// Number of search coordinates: the parameters, then six for the
@@ -503,6 +522,27 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("registration.rotation_deg"), "{e}");
+    }
+
+    #[test]
+    fn holding_takes_the_picked_keys_out_and_names_them() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("space.toml");
+        std::fs::write(
+            &path,
+            "[params]\n\"controller.delay_s\" = { low = 0.0, high = 0.1, start = 0.0 }\n\
+             \"contact.time_constant_s\" = { low = 0.01, high = 0.1, start = 0.02 }\n\
+             \"actuator.damping_ratio\" = { low = 0.2, high = 2.0, start = 1.0 }\n",
+        )
+        .unwrap();
+        let space = Space::from_file(&path).unwrap();
+        let held = space.holding(|k| k.starts_with("contact."));
+        let keys: Vec<&str> = held.dims.iter().map(|d| d.key.as_str()).collect();
+        assert_eq!(keys, ["controller.delay_s", "actuator.damping_ratio"]);
+        assert_eq!(held.held, ["contact.time_constant_s"]);
+        assert!(space.held.is_empty());
+        // Holding nothing changes nothing.
+        assert_eq!(space.holding(|_| false), space);
     }
 
     #[test]
