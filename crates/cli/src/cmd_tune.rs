@@ -77,7 +77,8 @@ pub struct Args {
     pub jobs: Option<usize>,
     /// Weight of the cube's final position error in the objective, per
     /// compared step of its scene (1: a miss counts like a wrist error of
-    /// the same size held through the scene; 0: the wrist alone).
+    /// the same size held through the scene; 0: the wrist alone, and the
+    /// space's object and contact keys are then held at the scenes' values).
     #[arg(long, default_value_t = realitygap_tune::objective::CUBE_WEIGHT_PER_STEP, value_name = "W")]
     pub cube_weight: f64,
     /// Keep the measurement's registration estimate instead of fitting the

@@ -62,6 +62,22 @@ pub struct TuneSpec {
     pub baseline_space: Option<Space>,
 }
 
+impl TuneSpec {
+    /// The same tune over another space.
+    pub fn with_space(&self, space: Space) -> TuneSpec {
+        TuneSpec {
+            engine: self.engine.clone(),
+            space,
+            fit_registration: self.fit_registration,
+            set: self.set.clone(),
+            search: self.search,
+            out: self.out.clone(),
+            polish: self.polish,
+            baseline_space: self.baseline_space.clone(),
+        }
+    }
+}
+
 /// What the command prints and the files hold.
 pub struct TuneResult {
     /// The search.
@@ -279,14 +295,8 @@ impl Fitted {
     /// The spec of the polished space (bounds widened where they were).
     pub fn polished_spec(&self, spec: &TuneSpec) -> TuneSpec {
         TuneSpec {
-            engine: spec.engine.clone(),
-            space: self.polished.space.clone(),
-            fit_registration: spec.fit_registration,
-            set: spec.set.clone(),
-            search: spec.search,
-            out: spec.out.clone(),
-            polish: spec.polish,
             baseline_space: None,
+            ..spec.with_space(self.polished.space.clone())
         }
     }
 }
@@ -410,16 +420,7 @@ pub fn tune(
                 "held at the scenes' own values, as the objective does not weigh the cube (--cube-weight 0): {}",
                 space.held.join(", ")
             ));
-            held_spec = TuneSpec {
-                engine: spec.engine.clone(),
-                space,
-                fit_registration: spec.fit_registration,
-                set: spec.set.clone(),
-                search: spec.search,
-                out: spec.out.clone(),
-                polish: spec.polish,
-                baseline_space: spec.baseline_space.clone(),
-            };
+            held_spec = spec.with_space(space);
             &held_spec
         }
         None => spec,

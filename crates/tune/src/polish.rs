@@ -284,17 +284,11 @@ fn widen(d: &Dim, high_side: bool) -> Option<Dim> {
     moved.then_some(w)
 }
 
-/// The tuner of `spec` with another space.
+/// The tuner of `spec` with another space (and no physics-free row).
 fn with_space(spec: &TuneSpec, space: Space) -> TuneSpec {
     TuneSpec {
-        engine: spec.engine.clone(),
-        space,
-        fit_registration: spec.fit_registration,
-        set: spec.set.clone(),
-        search: spec.search,
-        out: spec.out.clone(),
-        polish: spec.polish,
         baseline_space: None,
+        ..spec.with_space(space)
     }
 }
 
