@@ -269,6 +269,23 @@ impl PhysicsFreeRows {
                 .any(|source| realitygap_report::verdict::is_physics_free(&source.name))
     }
 
+    /// Whether these rows are made for the study at `study_path`.
+    fn made_for(&self, study_path: &Path) -> bool {
+        match self {
+            Self::None => false,
+            Self::Default => Self::applies(study_path),
+            Self::Asked(_) => true,
+        }
+    }
+
+    /// The parameters of the fitted row, when it is asked for.
+    fn params(&self) -> Option<&Path> {
+        match self {
+            Self::Asked(params) => params.as_deref(),
+            _ => None,
+        }
+    }
+
     /// The rows' sources for the study at `study_path`, their runs under
     /// `runs_dir` ([`physics_free_sources`]).
     pub fn sources(
@@ -278,14 +295,10 @@ impl PhysicsFreeRows {
         launcher: &realitygap_runner::Launcher,
         ui: &dyn crate::ui::Ui,
     ) -> Result<Vec<(String, SourceSpec)>> {
-        match self {
-            Self::None => Ok(Vec::new()),
-            Self::Default if !Self::applies(study_path) => Ok(Vec::new()),
-            Self::Default => physics_free_sources(study_path, None, runs_dir, launcher, ui),
-            Self::Asked(params) => {
-                physics_free_sources(study_path, params.as_deref(), runs_dir, launcher, ui)
-            }
+        if !self.made_for(study_path) {
+            return Ok(Vec::new());
         }
+        physics_free_sources(study_path, self.params(), runs_dir, launcher, ui)
     }
 
     /// [`Self::sources`] with the runs in a temporary folder (made only
@@ -297,13 +310,13 @@ impl PhysicsFreeRows {
         launcher: &realitygap_runner::Launcher,
         ui: &dyn crate::ui::Ui,
     ) -> Result<(Option<tempfile::TempDir>, Vec<(String, SourceSpec)>)> {
-        if *self == Self::None || (*self == Self::Default && !Self::applies(study_path)) {
+        if !self.made_for(study_path) {
             return Ok((None, Vec::new()));
         }
         let runs = tempfile::Builder::new()
             .prefix("realitygap-physics-free-")
             .tempdir()?;
-        let sources = self.sources(study_path, runs.path(), launcher, ui)?;
+        let sources = physics_free_sources(study_path, self.params(), runs.path(), launcher, ui)?;
         Ok((Some(runs), sources))
     }
 }

@@ -417,7 +417,7 @@ pub fn tune(
     let spec = match cube_unseen(target, &spec.space) {
         Some(space) => {
             note(format!(
-                "held at the scenes' own values, as the objective does not weigh the cube (--cube-weight 0): {}",
+                "held at the scenes' own values, as the objective does not weigh a cube (--cube-weight 0, or no cube): {}",
                 space.held.join(", ")
             ));
             held_spec = spec.with_space(space);
