@@ -229,6 +229,9 @@ pub fn physics_free_sources(
     Ok(out)
 }
 
+/// Sources added to a study's scenes: (scene name, source).
+pub type AddedSources = Vec<(String, SourceSpec)>;
+
 /// Which physics-free rows `compare` and `report` add to a study.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum PhysicsFreeRows {
@@ -309,7 +312,7 @@ impl PhysicsFreeRows {
         study_path: &Path,
         launcher: &realitygap_runner::Launcher,
         ui: &dyn crate::ui::Ui,
-    ) -> Result<(Option<tempfile::TempDir>, Vec<(String, SourceSpec)>)> {
+    ) -> Result<(Option<tempfile::TempDir>, AddedSources)> {
         if !self.made_for(study_path) {
             return Ok((None, Vec::new()));
         }
