@@ -215,6 +215,50 @@ fn recovers_known_parameters_and_the_tuned_file_reproduces_the_objective() {
         "rerun {acc} against tune {tuned}"
     );
     assert!((acc - best).abs() < 1e-9, "rerun {acc} against best {best}");
+
+    // The timestep check scored the tuned parameters at half the space's
+    // step: what `run --set mujoco.timestep_s=0.0025` and compare give.
+    let check = &s["timestep_check"];
+    assert_eq!(check["timestep_s"].as_f64(), Some(0.005), "{check}");
+    assert_eq!(check["halved_s"].as_f64(), Some(0.0025), "{check}");
+    assert!(check["holds"].is_boolean(), "{check}");
+    let half = d.join("half");
+    ok(realitygap(&[
+        "run",
+        scene1().to_str().unwrap(),
+        "--engine",
+        "mujoco",
+        "--params",
+        out.join("tuned.toml").to_str().unwrap(),
+        "--set",
+        "mujoco.timestep_s=0.0025",
+        "--out",
+        half.to_str().unwrap(),
+    ]));
+    let study3 = d.join("study3.toml");
+    let text = std::fs::read_to_string(d.join("study.toml")).unwrap()
+        + "[[scenes.sources]]\nname = \"half\"\nformat = \"store\"\ndir = \"half/scene1_single_joint/mujoco\"\n";
+    std::fs::write(&study3, text).unwrap();
+    let o = ok(realitygap(&[
+        "compare",
+        study3.to_str().unwrap(),
+        "--format",
+        "json",
+    ]));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let at_half = find_number(&v, "accumulated_error_m").unwrap();
+    let checked = check["halved"]["value_m"].as_f64().unwrap();
+    assert!(
+        (at_half - checked).abs() < 1e-9,
+        "half step {at_half} against the check's {checked}"
+    );
+    // A finer step is another integration: the score moves.
+    assert!((at_half - acc).abs() > 1e-6, "{at_half} against {acc}");
+    let md = std::fs::read_to_string(out.join("summary.md")).unwrap();
+    assert!(
+        md.contains("Timestep check: at half the timestep (0.0025 s instead of 0.005 s)"),
+        "{md}"
+    );
 }
 
 /// After CMA-ES the polish gives intervals that cover the known kv, the

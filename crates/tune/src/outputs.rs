@@ -195,6 +195,35 @@ pub struct Comparison {
     pub baselines: Vec<BaselineRow>,
 }
 
+/// The tuned parameters simulated again at half the tuned timestep and
+/// scored on the same runs (the held-out ones, else the training ones):
+/// does the fit describe the arm, or also the integration at that step?
+#[derive(Debug, Clone, Serialize)]
+pub struct TimestepCheck {
+    /// The engine's `timestep_s` the tune ran at.
+    pub timestep_s: f64,
+    /// Half of it, the step of the check.
+    pub halved_s: f64,
+    /// The runs scored, e.g. `16-20`.
+    pub runs: String,
+    /// The tuned total at the tuned timestep.
+    pub tuned: Option<Scored>,
+    /// The tuned total at half the timestep (`None`: a scene could not be
+    /// simulated or scored there, see `failed`).
+    pub halved: Option<Scored>,
+    /// The total at half the timestep minus the tuned total: value and 95 %
+    /// paired bootstrap interval over the same runs.
+    pub halved_minus_m: Option<[f64; 3]>,
+    /// The real runs' noise of the training objective at the optimum (the
+    /// polish's), metres: the size of a change that matters.
+    pub noise_m: Option<f64>,
+    /// Whether the fit holds at half the step: the difference's interval
+    /// covers zero or the difference is within the noise.
+    pub holds: Option<bool>,
+    /// Why there is no score at half the step, if there is none.
+    pub failed: Option<String>,
+}
+
 /// `summary.json`.
 #[derive(Debug, Clone, Serialize)]
 pub struct Summary {
@@ -255,6 +284,9 @@ pub struct Summary {
     /// The answer in words: does the tuned engine beat the physics-free
     /// rows on the held-out runs (on the training runs without)?
     pub verdict: String,
+    /// The tuned parameters at half the timestep (`None`: the settings
+    /// name no `timestep_s`, so each scene kept its own).
+    pub timestep_check: Option<TimestepCheck>,
 }
 
 /// The registrations of a tune.
@@ -681,15 +713,35 @@ pub fn finish(
     };
     let mut training = comparison(tuner, &a, &b, runs_text(&train_sel.runs));
     training.baselines = baseline_rows(tuner, &rows, &b, &train_sel)?;
-    let holdout = match tuner.target.holdout_selection() {
+    let (holdout, held_out_tuned) = match tuner.target.holdout_selection() {
         Some(sel) => {
             let (a, b) = evaluate_both(tuner, &untuned, &tuned, &registration, &sel)?;
             let mut c = comparison(tuner, &a, &b, runs_text(&sel.holdout));
             c.baselines = baseline_rows(tuner, &rows, &b, &sel)?;
-            Some(c)
+            (Some(c), Some((sel, b)))
         }
-        None => None,
+        None => (None, None),
     };
+    realitygap_runner::interrupt::check()?;
+    let noise_m = polished
+        .report
+        .identifiability
+        .as_ref()
+        .or(fitted.before.as_ref())
+        .and_then(|r| r.noise_m);
+    let (check_sel, check_tuned, check_runs) = match &held_out_tuned {
+        Some((sel, b)) => (sel, b, runs_text(&sel.holdout)),
+        None => (&train_sel, &b, runs_text(&train_sel.runs)),
+    };
+    let timestep_check = timestep_check(
+        tuner,
+        &params,
+        &registration,
+        check_sel,
+        check_tuned,
+        check_runs,
+        noise_m,
+    )?;
     let verdict = verdict_text(&spec.engine, holdout.as_ref().unwrap_or(&training));
     let wall = started.elapsed().as_secs_f64();
     let fresh = end.history.len().saturating_sub(end.replayed);
@@ -734,9 +786,145 @@ pub fn finish(
         },
         baseline: baseline.map(|b| b.summary.clone()),
         verdict,
+        timestep_check,
     };
     let files = write_files(tuner, end, &summary, &params, &registration)?;
     Ok((summary, files))
+}
+
+/// The engine setting a [`TimestepCheck`] halves.
+pub const TIMESTEP_KEY: &str = "timestep_s";
+
+/// Simulates the tuned `params` at half their timestep and scores them
+/// on `selection` against `tuned` (the same runs at the tuned step).
+fn timestep_check(
+    tuner: &Tuner<'_>,
+    params: &PhysicalParams,
+    registration: &Registration,
+    selection: &RunSelection,
+    tuned: &Reports,
+    runs: String,
+    noise_m: Option<f64>,
+) -> Result<Option<TimestepCheck>> {
+    let engine = &tuner.spec.engine;
+    let Some(timestep_s) = params
+        .engine_settings
+        .get(engine)
+        .and_then(|s| s.get(TIMESTEP_KEY))
+        .and_then(|v| v.as_f64())
+    else {
+        return Ok(None);
+    };
+    let halved_s = timestep_s / 2.0;
+    let mut half = params.clone();
+    if let Some(s) = half.engine_settings.get_mut(engine) {
+        s.insert(
+            TIMESTEP_KEY.to_string(),
+            realitygap_core::engine::SettingValue::Float(halved_s),
+        );
+    }
+    let mut check = TimestepCheck {
+        timestep_s,
+        halved_s,
+        runs,
+        tuned: total(tuned),
+        halved: None,
+        halved_minus_m: None,
+        noise_m,
+        holds: None,
+        failed: None,
+    };
+    let trajs = match tuner.simulator.simulate(&tuner.target.scenes, &half) {
+        Ok(t) => t,
+        Err(m) => {
+            check.failed = Some(m);
+            return Ok(Some(check));
+        }
+    };
+    let t = tuner.target;
+    let reports = Reports {
+        reports: t.evaluate(
+            &t.sources("tuned", trajs),
+            RegistrationChoice::Given {
+                registration: *registration,
+                origin: "tuned".into(),
+            },
+            selection,
+            Some(RESAMPLES),
+        )?,
+    };
+    let unscored: Vec<String> = reports
+        .reports
+        .iter()
+        .zip(&t.scenes)
+        .filter(|(r, _)| scored(r).is_none())
+        .map(|(r, s)| {
+            let why = r
+                .sources
+                .first()
+                .and_then(|x| {
+                    x.runs_flagged
+                        .iter()
+                        .flat_map(|f| &f.flags)
+                        .find(|f| f.excludes())
+                })
+                .map_or("no score".to_string(), |f| f.describe());
+            format!("{}: {why}", s.name)
+        })
+        .collect();
+    if !unscored.is_empty() {
+        check.failed = Some(unscored.join("; "));
+        return Ok(Some(check));
+    }
+    // The row "tuned" of baseline_row is the halved run: its difference
+    // is halved minus tuned.
+    let row = baseline_row("halved", tuned, &reports);
+    check.halved = total(&reports);
+    check.halved_minus_m = row.tuned_minus_m;
+    check.holds = row.tuned_minus_m.map(|d| fit_holds(d, noise_m));
+    Ok(Some(check))
+}
+
+/// Whether a change `[value, low, high]` of the total (metres) leaves a
+/// fit as it was: its paired interval covers zero, or it is within the
+/// real runs' noise `noise_m`.
+fn fit_holds([d, lo, hi]: [f64; 3], noise_m: Option<f64>) -> bool {
+    (lo <= 0.0 && hi >= 0.0) || noise_m.is_some_and(|n| d.abs() <= n)
+}
+
+/// The timestep check in words.
+pub fn timestep_text(c: &TimestepCheck) -> String {
+    let at = format!(
+        "at half the timestep ({} s instead of {} s)",
+        c.halved_s, c.timestep_s
+    );
+    if let Some(why) = &c.failed {
+        return format!(
+            "Timestep check: {at} the tuned parameters could not be scored on runs {} ({why}). The fit depends on the timestep: use it at {} s only (tuned.toml carries it).",
+            c.runs, c.timestep_s
+        );
+    }
+    let (Some(h), Some([d, lo, hi])) = (&c.halved, c.halved_minus_m) else {
+        return format!(
+            "Timestep check: {at} the tuned parameters have no total on runs {}.",
+            c.runs
+        );
+    };
+    let noise = c.noise_m.map_or(String::new(), |n| {
+        format!(", the real runs' noise {n:.2} m")
+    });
+    let head = format!(
+        "Timestep check: {at} the tuned parameters score {:.3} m on runs {} ({d:+.3} m [{lo:+.3}, {hi:+.3}]{noise})",
+        h.value_m, c.runs
+    );
+    if c.holds == Some(true) {
+        format!("{head}: the fit holds at a finer step.")
+    } else {
+        format!(
+            "{head}: the fit depends on the timestep, part of it is the integration at {} s. Use it at that step only (tuned.toml carries it), or tune at the step you will run.",
+            c.timestep_s
+        )
+    }
 }
 
 /// `randomize.toml`: the fitted parameters' 95 % intervals as ranges for
@@ -1024,6 +1212,9 @@ pub fn markdown(s: &Summary) -> String {
         m.push_str(&format!("\n## Held-out runs ({})\n\n", h.runs));
         m.push_str(&comparison_md(h));
     }
+    if let Some(c) = &s.timestep_check {
+        m.push_str(&format!("\n{}\n", timestep_text(c)));
+    }
     m.push_str(
         "\n## Parameters\n\n| key | value | 95 % interval | bounds searched | scale | start |\n|---|---|---|---|---|---|\n",
     );
@@ -1129,6 +1320,53 @@ mod tests {
             objective_m: [75.0, 12.0],
             baselines: vec![],
         }
+    }
+
+    fn check(d: [f64; 3], noise_m: Option<f64>) -> TimestepCheck {
+        TimestepCheck {
+            timestep_s: 0.001,
+            halved_s: 0.0005,
+            runs: "16-20".into(),
+            tuned: None,
+            halved: Some(Scored {
+                value_m: 11.5 + d[0],
+                interval_m: None,
+            }),
+            halved_minus_m: Some(d),
+            noise_m,
+            holds: Some(fit_holds(d, noise_m)),
+            failed: None,
+        }
+    }
+
+    /// The check's words: a change within the noise or with an interval
+    /// over zero holds; DART's measured +1.20 m at 0.5 ms does not.
+    #[test]
+    fn a_fit_holds_at_half_the_step_only_within_the_noise() {
+        let dart = timestep_text(&check([1.20, 1.05, 1.31], Some(0.28)));
+        assert!(
+            dart.contains("score 12.700 m on runs 16-20 (+1.200 m [+1.050, +1.310], the real runs' noise 0.28 m): the fit depends on the timestep, part of it is the integration at 0.001 s"),
+            "{dart}"
+        );
+        for (d, noise) in [
+            ([0.24, 0.20, 0.27], Some(0.28)),
+            ([0.6, -0.1, 1.2], None),
+            ([-0.05, -0.06, -0.04], Some(0.26)),
+        ] {
+            let t = timestep_text(&check(d, noise));
+            assert!(t.ends_with("the fit holds at a finer step."), "{t}");
+        }
+        assert!(!fit_holds([0.3, 0.2, 0.4], None));
+        assert!(!fit_holds([-0.5, -0.6, -0.4], Some(0.3)));
+        let failed = TimestepCheck {
+            failed: Some("scene3_cube_push: unstable from sample 285".into()),
+            ..check([0.0; 3], None)
+        };
+        assert!(
+            timestep_text(&failed).contains("could not be scored on runs 16-20 (scene3_cube_push: unstable from sample 285). The fit depends on the timestep"),
+            "{}",
+            timestep_text(&failed)
+        );
     }
 
     /// A tuned cube that moves far more than the real one is flagged: its
