@@ -110,7 +110,7 @@ impl PhysicsFreeArg {
         &self,
         study: &std::path::Path,
         runs_dir: &std::path::Path,
-    ) -> Result<Vec<(String, realitygap_study::SourceSpec)>> {
+    ) -> Result<realitygap::compare::AddedSources> {
         self.rows().sources(
             study,
             runs_dir,

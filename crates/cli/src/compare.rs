@@ -28,7 +28,7 @@ pub struct CompareRequest {
     /// Sources added to the study's scenes (scene name, source with an
     /// absolute results directory): the physics-free rows of
     /// `--physics-free` ([`physics_free_sources`]).
-    pub added_sources: Vec<(String, SourceSpec)>,
+    pub added_sources: AddedSources,
 }
 
 /// An evaluated comparison.
@@ -150,7 +150,7 @@ pub fn physics_free_sources(
     runs_dir: &Path,
     launcher: &realitygap_runner::Launcher,
     ui: &dyn crate::ui::Ui,
-) -> Result<Vec<(String, SourceSpec)>> {
+) -> Result<AddedSources> {
     use anyhow::{bail, Context};
     use realitygap_core::engine::PHYSICS_FREE_ENGINE;
     if !crate::compiled_engines()
@@ -297,7 +297,7 @@ impl PhysicsFreeRows {
         runs_dir: &Path,
         launcher: &realitygap_runner::Launcher,
         ui: &dyn crate::ui::Ui,
-    ) -> Result<Vec<(String, SourceSpec)>> {
+    ) -> Result<AddedSources> {
         if !self.made_for(study_path) {
             return Ok(Vec::new());
         }

@@ -143,6 +143,24 @@ fn mujoco_recovers_the_writers_parameters_with_the_gains_known() {
     for f in ["tuned.toml", "space.toml", "history.csv", "summary.md"] {
         assert!(out.join(f).is_file(), "{f}");
     }
+    // The timestep check replayed the held-out episodes at half the
+    // scene's 1 ms; its score at the fit's step is the held-out one.
+    let c = &s["timestep_check"];
+    println!("timestep check: {c}");
+    assert_eq!(c["timestep_s"].as_f64(), Some(dt), "{c}");
+    assert_eq!(c["halved_s"].as_f64(), Some(dt / 2.0), "{c}");
+    assert_eq!(c["episodes"], "held-out", "{c}");
+    assert_eq!(c["tuned"]["rms_deg"].as_f64(), Some(tuned), "{c}");
+    let halved = c["halved"]["rms_deg"].as_f64().unwrap();
+    assert!(halved.is_finite() && halved != tuned, "{c}");
+    // And it does not hold: the fitted armature took in dt kv (above), so
+    // at half the step the arm is lighter than the recordings' by dt kv / 2.
+    assert_eq!(c["holds"], false, "{c}");
+    let md = std::fs::read_to_string(out.join("summary.md")).unwrap();
+    assert!(
+        md.contains("Timestep check: at half the step (0.0005 s instead of 0.001 s)"),
+        "{md}"
+    );
     // The tuned file replays: `replay --params tuned.toml` on the held-out
     // episodes gives the tune's held-out figure.
     let tuned_file = std::fs::read_to_string(out.join("tuned.toml")).unwrap();

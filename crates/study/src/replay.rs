@@ -389,11 +389,9 @@ pub fn replay_one(
     let options = RunOptions::default();
     let (scene, robot) =
         prepare(engine, &prepared.scene, &prepared.robot, params).map_err(|e| e.to_string())?;
-    let settings = scene
-        .engine_settings
-        .get(engine.name())
-        .cloned()
-        .unwrap_or_default();
+    // The scene's settings with the parameters' `[engine.NAME]` over them,
+    // as `replay --params` runs them.
+    let settings = params.settings_over(engine.name(), &scene.settings_for(engine.name()));
     let mut sim = load_prepared(engine, &scene, &robot, &settings, params, &options)
         .map_err(|e| e.to_string())?;
     refuse_unstable(engine, sim.as_ref(), &options).map_err(|e| e.to_string())?;

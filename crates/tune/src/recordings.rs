@@ -156,6 +156,28 @@ pub struct Identifiability {
     pub residuals: (usize, f64),
 }
 
+/// The tuned parameters replayed again at half the engine's timestep
+/// (the held-out episodes, else the training ones): does the fit hold at
+/// a finer step?
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RecordingsTimestepCheck {
+    /// The timestep of the fit, s.
+    pub timestep_s: f64,
+    /// Half of it, s.
+    pub halved_s: f64,
+    /// `held-out` or `training`: the episodes scored.
+    pub episodes: String,
+    /// The tuned engine's score there at the fit's step.
+    pub tuned: Option<SetScore>,
+    /// Its score at half the step.
+    pub halved: Option<SetScore>,
+    /// Whether the fit holds: the RMS at half the step lies within the
+    /// tuned RMS's 95 % interval over episodes (`None` without one).
+    pub holds: Option<bool>,
+    /// Episodes that could not be replayed at half the step, with why.
+    pub failed: Vec<String>,
+}
+
 /// `summary.json`.
 #[derive(Debug, Clone, Serialize)]
 pub struct RecordingsSummary {
@@ -190,6 +212,8 @@ pub struct RecordingsSummary {
     /// The answer in words: does the tuned engine beat the physics-free
     /// model on the held-out episodes?
     pub verdict: String,
+    /// The tuned parameters at half the timestep.
+    pub timestep_check: RecordingsTimestepCheck,
 }
 
 /// The result of a tune.
@@ -742,12 +766,9 @@ pub fn tune_recordings(
     .with_context(|| format!("writing {}", space_path.display()))?;
     files.push(space_path);
 
-    let settings = prepared
-        .scene
-        .engine_settings
-        .get(engine.name())
-        .cloned()
-        .unwrap_or_default();
+    let settings = spec
+        .known
+        .settings_over(engine.name(), &prepared.scene.settings_for(engine.name()));
     let dt = engine
         .check_settings(&settings)
         .map_err(|e| anyhow!("{e}"))?;
@@ -1105,6 +1126,55 @@ pub fn tune_recordings(
         ));
     }
     let verdict = verdict(&scores);
+    let timestep_check = {
+        let mut half = tuned.clone();
+        half.engine_settings
+            .entry(name.to_string())
+            .or_default()
+            .insert(
+                crate::outputs::TIMESTEP_KEY.to_string(),
+                realitygap_core::engine::SettingValue::Float(p.dt / 2.0),
+            );
+        let on_holdout = !p.holdout.is_empty();
+        let which = if on_holdout { &p.holdout } else { &p.train };
+        let mut failed = Vec::new();
+        let runs: Vec<(usize, Trajectory)> = which
+            .iter()
+            .filter_map(|&k| match p.replay(&prepared.episodes[k], &half) {
+                Ok(t) => Some((k, t)),
+                Err(m) => {
+                    failed.push(format!("{}: {m}", prepared.episodes[k].id));
+                    None
+                }
+            })
+            .collect();
+        let halved = if failed.is_empty() {
+            set_score(prepared, &runs)
+        } else {
+            None
+        };
+        let at_step = &scores[1];
+        let tuned_score = if on_holdout {
+            at_step.holdout.clone()
+        } else {
+            at_step.train.clone()
+        };
+        let holds = match (&tuned_score, &halved) {
+            (Some(t), Some(h)) => t
+                .interval_deg
+                .map(|(lo, hi)| h.rms_deg >= lo && h.rms_deg <= hi),
+            _ => Some(false).filter(|_| !failed.is_empty()),
+        };
+        RecordingsTimestepCheck {
+            timestep_s: p.dt,
+            halved_s: p.dt / 2.0,
+            episodes: if on_holdout { "held-out" } else { "training" }.into(),
+            tuned: tuned_score,
+            halved,
+            holds,
+            failed,
+        }
+    };
     let evaluations = *p.evaluations.lock().unwrap_or_else(|e| e.into_inner());
     let summary = RecordingsSummary {
         engine: format!("{} {}", engine.name(), engine.version()),
@@ -1130,6 +1200,7 @@ pub fn tune_recordings(
         reason,
         wall_time_s: started.elapsed().as_secs_f64(),
         verdict,
+        timestep_check,
     };
     let tuned_path = spec.out.join("tuned.toml");
     let mut tuned_file = tuned.clone();
@@ -1268,6 +1339,40 @@ fn fmt_interval(i: Option<(f64, f64)>, digits: usize) -> String {
     }
 }
 
+/// The timestep check in words.
+pub fn recordings_timestep_text(c: &RecordingsTimestepCheck) -> String {
+    let at = format!(
+        "Timestep check: at half the step ({} s instead of {} s) the tuned parameters",
+        c.halved_s, c.timestep_s
+    );
+    if !c.failed.is_empty() {
+        return format!(
+            "{at} could not replay every {} episode ({}): the fit depends on the timestep; use it at {} s only.",
+            c.episodes,
+            c.failed.join("; "),
+            c.timestep_s
+        );
+    }
+    let (Some(t), Some(h)) = (&c.tuned, &c.halved) else {
+        return format!("{at} have no score on the {} episodes.", c.episodes);
+    };
+    let head = format!(
+        "{at} replay the {} episodes at a joint RMS of {:.4} deg (at the fit's step {:.4} {})",
+        c.episodes,
+        h.rms_deg,
+        t.rms_deg,
+        fmt_interval(t.interval_deg, 4)
+    );
+    match c.holds {
+        Some(true) => format!("{head}: the fit holds at a finer step."),
+        Some(false) => format!(
+            "{head}: the fit depends on the timestep, part of it is the integration at {} s; use it at that step (tuned.toml carries the engine's settings when you gave them), or tune at the step you will run.",
+            c.timestep_s
+        ),
+        None => format!("{head}; with one episode there is no interval to tell."),
+    }
+}
+
 /// `summary.md`.
 pub fn summary_markdown(s: &RecordingsSummary) -> String {
     let mut m = format!(
@@ -1302,6 +1407,7 @@ pub fn summary_markdown(s: &RecordingsSummary) -> String {
             cell(&sc.holdout)
         );
     }
+    let _ = writeln!(m, "\n{}", recordings_timestep_text(&s.timestep_check));
     m.push_str("\n## Parameters (95 % intervals from the Jacobian at the optimum)\n\n| key | untuned | fitted | interval | bounds |\n|---|---:|---:|---|---|\n");
     for p in &s.params {
         let _ = writeln!(
