@@ -234,6 +234,9 @@ struct WorldImpl
   std::vector<BodyNode*> bodies;
   std::vector<Joint*> joints;
   std::vector<SkeletonPtr> objects;
+  /// The controlled joints' Coulomb friction torques as given (N m); what
+  /// DART gets is scaled each step (see `World::set_drives`).
+  std::vector<double> friction;
   bool finished = false;
 
   BodyNode* body(bool object, std::size_t i) const
@@ -483,6 +486,10 @@ void World::set_joint_friction(std::size_t joint, double friction)
         std::isfinite(friction) && friction >= 0.0,
         "the friction must be >= 0 and finite");
     mImpl->joint(joint)->setCoulombFriction(0, friction);
+    auto& f = mImpl->friction;
+    if (f.size() < mImpl->joints.size())
+      f.resize(mImpl->joints.size(), 0.0);
+    f[joint] = friction;
   });
 }
 
@@ -519,6 +526,33 @@ void World::set_drives(
         command.size() == n && damping.size() == n && stiffness.size() == n
             && rest.size() == n,
         "one drive per controlled joint is needed");
+    // Joint friction beside the implicit damping. DART's friction is a
+    // constraint of its impulse step, which sees the joint's inertia
+    // without the implicit damping D (servo kv, joint damping, armature /
+    // dt): over a step it then takes away (1 + dt D / I) times the torque
+    // the damping gives back, and a sliding joint sees that much more
+    // friction (breakaway too), more the larger the step. Giving DART the
+    // friction divided by (1 + dt D (M^-1)_jj) makes the torque the one
+    // asked for, at any step (the engine's README has the figures). M^-1
+    // is inverted here from DART's mass matrix: DART's own inverse is
+    // computed with unit joint forces, which on FORCE actuators overwrite
+    // the commands.
+    std::vector<double> scaled;
+    const auto& f = m.friction;
+    if (std::any_of(f.begin(), f.end(), [](double x) { return x > 0.0; }))
+    {
+      const double dt = m.world->getTimeStep();
+      const Eigen::MatrixXd inv = m.robot->getMassMatrix().inverse();
+      scaled.assign(n, 0.0);
+      for (std::size_t i = 0; i < n && i < f.size(); ++i)
+      {
+        const std::size_t k = m.joints[i]->getIndexInSkeleton(0);
+        const double d = damping[i];
+        scaled[i] = f[i] > 0.0 && std::isfinite(d) && d >= 0.0
+            ? f[i] / (1.0 + dt * d * inv(k, k))
+            : f[i];
+      }
+    }
     for (std::size_t i = 0; i < n; ++i)
     {
       // Finite, and gains >= 0 (NaN fails too).
@@ -539,6 +573,8 @@ void World::set_drives(
         j->setSpringStiffness(0, stiffness[i]);
       if (j->getRestPosition(0) != rest[i])
         j->setRestPosition(0, rest[i]);
+      if (i < scaled.size() && j->getCoulombFriction(0) != scaled[i])
+        j->setCoulombFriction(0, scaled[i]);
     }
   });
 }

@@ -110,6 +110,48 @@ fn frictionloss_holds_the_joint() {
     assert!(stuck < 1e-9, "{stuck}");
 }
 
+/// The rotor (inertia 0.01 kg m^2, no gravity torque) sliding under a
+/// stiff velocity servo (kv 10, 1 rad/s asked) against dry friction of 2
+/// N m: its steady rate is 1 - 2 / 10 = 0.8 rad/s at any timestep. DART's
+/// friction constraint does not see the servo's implicit damping, so
+/// without the shim's correction it took 1 + dt kv / I times the friction
+/// (0.6 rad/s at 1 ms, 0.75 at 0.25 ms).
+#[test]
+fn friction_beside_the_servo_does_not_depend_on_the_timestep() {
+    let (rotor, robot) = realitygap_core::conformance::rotor();
+    let rate = |timestep_s: f64| {
+        let params = PhysicalParams::from_toml_str(
+            "[joints.spin]\nkv = 10.0\nfrictionloss = 2.0\n",
+            Path::new("/params/params.toml"),
+        )
+        .unwrap();
+        let (s, r) = prepare(&DartEngine, &rotor, &robot, &params).unwrap();
+        let mut settings = EngineSettings::new();
+        settings.insert(
+            "timestep_s".into(),
+            realitygap_core::engine::SettingValue::Float(timestep_s),
+        );
+        let mut sim =
+            load_prepared(&DartEngine, &s, &r, &settings, &params, &RunOptions::default())
+                .unwrap();
+        sim.set_joint_commands(&[ServoCommand::velocity(1.0)])
+            .unwrap();
+        let steps = (0.2 / timestep_s).round() as u64;
+        sim.step_n(steps).unwrap();
+        let mut a = [0.0];
+        sim.joint_angles_rad(&mut a);
+        sim.step_n(steps).unwrap();
+        let mut b = [0.0];
+        sim.joint_angles_rad(&mut b);
+        (b[0] - a[0]) / 0.2
+    };
+    for dt in [0.005, 0.001, 0.00025] {
+        let v = rate(dt);
+        report(&format!("friction_servo_rate_dt_{dt}"), v, "0.8 rad/s");
+        assert!((v - 0.8).abs() < 0.002, "at {dt} s: {v} rad/s");
+    }
+}
+
 /// The cube dropped from 0.2 m above its rest: the highest it climbs after
 /// its first impact, m.
 fn bounce_m(toml: &str) -> f64 {
