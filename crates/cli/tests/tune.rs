@@ -183,33 +183,10 @@ fn recovers_known_parameters_and_the_tuned_file_reproduces_the_objective() {
     // `run --params tuned.toml` as it is, then compare: the training
     // objective of summary.json, bit for bit (the tune's own settings are
     // in the file).
-    let rerun = d.join("rerun");
-    ok(realitygap(&[
-        "run",
-        scene1().to_str().unwrap(),
-        "--engine",
-        "mujoco",
-        "--params",
-        out.join("tuned.toml").to_str().unwrap(),
-        "--out",
-        rerun.to_str().unwrap(),
-    ]));
-    let study2 = d.join("study2.toml");
-    let text = std::fs::read_to_string(d.join("study.toml")).unwrap()
-        + "[[scenes.sources]]\nname = \"rerun\"\nformat = \"store\"\ndir = \"rerun/scene1_single_joint/mujoco\"\n";
-    std::fs::write(&study2, text).unwrap();
-    let o = ok(realitygap(&[
-        "compare",
-        study2.to_str().unwrap(),
-        "--format",
-        "json",
-    ]));
-    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-    let text = v.to_string();
+    let acc = rerun_scored(d, &out.join("tuned.toml"), "rerun", &[]);
     let tuned = s["training"]["scenes"][0]["tuned"]["value_m"]
         .as_f64()
         .unwrap();
-    let acc = find_number(&v, "accumulated_error_m").unwrap_or_else(|| panic!("{text}"));
     assert!(
         (acc - tuned).abs() < 1e-9,
         "rerun {acc} against tune {tuned}"
@@ -222,31 +199,12 @@ fn recovers_known_parameters_and_the_tuned_file_reproduces_the_objective() {
     assert_eq!(check["timestep_s"].as_f64(), Some(0.005), "{check}");
     assert_eq!(check["halved_s"].as_f64(), Some(0.0025), "{check}");
     assert!(check["holds"].is_boolean(), "{check}");
-    let half = d.join("half");
-    ok(realitygap(&[
-        "run",
-        scene1().to_str().unwrap(),
-        "--engine",
-        "mujoco",
-        "--params",
-        out.join("tuned.toml").to_str().unwrap(),
-        "--set",
-        "mujoco.timestep_s=0.0025",
-        "--out",
-        half.to_str().unwrap(),
-    ]));
-    let study3 = d.join("study3.toml");
-    let text = std::fs::read_to_string(d.join("study.toml")).unwrap()
-        + "[[scenes.sources]]\nname = \"half\"\nformat = \"store\"\ndir = \"half/scene1_single_joint/mujoco\"\n";
-    std::fs::write(&study3, text).unwrap();
-    let o = ok(realitygap(&[
-        "compare",
-        study3.to_str().unwrap(),
-        "--format",
-        "json",
-    ]));
-    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-    let at_half = find_number(&v, "accumulated_error_m").unwrap();
+    let at_half = rerun_scored(
+        d,
+        &out.join("tuned.toml"),
+        "half",
+        &["--set", "mujoco.timestep_s=0.0025"],
+    );
     let checked = check["halved"]["value_m"].as_f64().unwrap();
     assert!(
         (at_half - checked).abs() < 1e-9,
@@ -369,6 +327,40 @@ fn the_polish_gives_intervals_and_a_randomisation_file_that_run_accepts() {
         e.contains("bad.toml:2") && e.contains("`high` is missing"),
         "{e}"
     );
+}
+
+/// `run --params PARAMS EXTRA` of scene 1 in MuJoCo into `d/NAME`, then
+/// `compare` of it against the synthetic study's reference: its
+/// accumulated error, metres.
+fn rerun_scored(d: &Path, params: &Path, name: &str, extra: &[&str]) -> f64 {
+    let dir = d.join(name);
+    let scene = scene1();
+    let mut args = vec![
+        "run",
+        scene.to_str().unwrap(),
+        "--engine",
+        "mujoco",
+        "--params",
+        params.to_str().unwrap(),
+        "--out",
+        dir.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    ok(realitygap(&args));
+    let study = d.join(format!("study-{name}.toml"));
+    let text = std::fs::read_to_string(d.join("study.toml")).unwrap()
+        + &format!(
+            "[[scenes.sources]]\nname = \"{name}\"\nformat = \"store\"\ndir = \"{name}/scene1_single_joint/mujoco\"\n"
+        );
+    std::fs::write(&study, text).unwrap();
+    let o = ok(realitygap(&[
+        "compare",
+        study.to_str().unwrap(),
+        "--format",
+        "json",
+    ]));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    find_number(&v, "accumulated_error_m").unwrap_or_else(|| panic!("{v}"))
 }
 
 /// The first number under `key` in the sources of a compare JSON.

@@ -131,9 +131,15 @@ fn friction_beside_the_servo_does_not_depend_on_the_timestep() {
             "timestep_s".into(),
             realitygap_core::engine::SettingValue::Float(timestep_s),
         );
-        let mut sim =
-            load_prepared(&DartEngine, &s, &r, &settings, &params, &RunOptions::default())
-                .unwrap();
+        let mut sim = load_prepared(
+            &DartEngine,
+            &s,
+            &r,
+            &settings,
+            &params,
+            &RunOptions::default(),
+        )
+        .unwrap();
         sim.set_joint_commands(&[ServoCommand::velocity(1.0)])
             .unwrap();
         let steps = (0.2 / timestep_s).round() as u64;
