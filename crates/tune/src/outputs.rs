@@ -525,6 +525,30 @@ fn untuned_params(tuner: &Tuner<'_>) -> PhysicalParams {
     p
 }
 
+/// The source `name` (its trajectories `trajs`) scored on `selection`
+/// under `registration` (`origin` says whose), with the final scores'
+/// bootstrap intervals.
+fn score_source(
+    tuner: &Tuner<'_>,
+    name: &str,
+    trajs: Vec<realitygap_core::Trajectory>,
+    registration: Registration,
+    origin: &str,
+    selection: &RunSelection,
+) -> Result<Reports> {
+    let t = tuner.target;
+    let reports = t.evaluate(
+        &t.sources(name, trajs),
+        RegistrationChoice::Given {
+            registration,
+            origin: origin.into(),
+        },
+        selection,
+        Some(RESAMPLES),
+    )?;
+    Ok(Reports { reports })
+}
+
 fn evaluate_both(
     tuner: &Tuner<'_>,
     untuned: &[realitygap_core::Trajectory],
@@ -532,26 +556,24 @@ fn evaluate_both(
     registration: &Registration,
     selection: &RunSelection,
 ) -> Result<(Reports, Reports)> {
-    let t = tuner.target;
-    let u = t.evaluate(
-        &t.sources("untuned", untuned.to_vec()),
-        RegistrationChoice::Given {
-            registration: t.base_registration,
-            origin: "the measurement's estimate".into(),
-        },
+    let base = tuner.target.base_registration;
+    let u = score_source(
+        tuner,
+        "untuned",
+        untuned.to_vec(),
+        base,
+        "the measurement's estimate",
         selection,
-        Some(RESAMPLES),
     )?;
-    let v = t.evaluate(
-        &t.sources("tuned", tuned.to_vec()),
-        RegistrationChoice::Given {
-            registration: *registration,
-            origin: "tuned".into(),
-        },
+    let v = score_source(
+        tuner,
+        "tuned",
+        tuned.to_vec(),
+        *registration,
+        "tuned",
         selection,
-        Some(RESAMPLES),
     )?;
-    Ok((Reports { reports: u }, Reports { reports: v }))
+    Ok((u, v))
 }
 
 fn param_results(dims: &[Dim], values: &[f64]) -> Vec<ParamResult> {
@@ -591,19 +613,10 @@ fn baseline_rows(
     tuned: &Reports,
     selection: &RunSelection,
 ) -> Result<Vec<BaselineRow>> {
-    let t = tuner.target;
     rows.iter()
         .map(|(name, trajs, reg)| {
-            let r = t.evaluate(
-                &t.sources(name, trajs.clone()),
-                RegistrationChoice::Given {
-                    registration: *reg,
-                    origin: name.clone(),
-                },
-                selection,
-                Some(RESAMPLES),
-            )?;
-            Ok(baseline_row(name, &Reports { reports: r }, tuned))
+            let r = score_source(tuner, name, trajs.clone(), *reg, name, selection)?;
+            Ok(baseline_row(name, &r, tuned))
         })
         .collect()
 }
@@ -842,17 +855,7 @@ fn timestep_check(
         }
     };
     let t = tuner.target;
-    let reports = Reports {
-        reports: t.evaluate(
-            &t.sources("tuned", trajs),
-            RegistrationChoice::Given {
-                registration: *registration,
-                origin: "tuned".into(),
-            },
-            selection,
-            Some(RESAMPLES),
-        )?,
-    };
+    let reports = score_source(tuner, "tuned", trajs, *registration, "tuned", selection)?;
     let unscored: Vec<String> = reports
         .reports
         .iter()
