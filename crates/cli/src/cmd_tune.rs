@@ -41,8 +41,9 @@ pub struct Args {
     /// integrator = "Euler").
     #[arg(long)]
     pub efforts: bool,
-    /// Levenberg-Marquardt iterations at most: the whole fit with
-    /// --recordings (default 30); each round of the study tune's polish (its reweighting passes together)
+    /// Levenberg-Marquardt iterations at most: with --recordings, the
+    /// Jacobians each fit computes by differences (default 30; Broyden's
+    /// updates between them are not counted); each round of the study tune's polish (its reweighting passes together)
     /// after CMA-ES (default 10; 0: no polish, no intervals).
     #[arg(long, value_name = "N")]
     pub iterations: Option<usize>,

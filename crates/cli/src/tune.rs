@@ -33,8 +33,8 @@ pub struct TuneRequest {
     pub scene: Option<PathBuf>,
     /// With `recordings`: fit the recorded efforts too.
     pub efforts: bool,
-    /// Levenberg-Marquardt iterations at most: the fit of `recordings`
-    /// (default 30), each round of the study tune's polish (default 10).
+    /// Levenberg-Marquardt iterations at most: the Jacobians each fit of
+    /// `recordings` computes by differences (default 30), each round of the study tune's polish (default 10).
     pub iterations: Option<usize>,
     /// The study's recordings.
     pub data: DataSource,

@@ -437,6 +437,7 @@ pub fn polish(
         step: 1e-3,
         tolerance: 1e-4,
         jobs: spec.search.jobs,
+        ..FitOptions::default()
     };
     let mut widen_rounds = 0;
     let mut last_probe;

@@ -53,6 +53,7 @@ use realitygap_core::params::{ParamKey, PhysicalParams};
 use realitygap_core::trajectory::CommandKind;
 use realitygap_core::{Engine, Trajectory};
 use realitygap_study::replay::{kinematic_run, replay_one, Episode, Prepared};
+use nalgebra::DMatrix;
 use serde::Serialize;
 use std::fmt::Write as _;
 use std::io::Write as _;
@@ -203,11 +204,16 @@ pub struct RecordingsSummary {
     pub scores: Vec<SourceScores>,
     /// Residual evaluations (each replays every training episode).
     pub evaluations: usize,
-    /// Levenberg-Marquardt iterations, all rounds.
+    /// Jacobians computed by differences (Levenberg-Marquardt's
+    /// iterations), all rounds; between them, accepted steps update the
+    /// last one (Broyden).
     pub iterations: usize,
     /// Why the last fit stopped.
     pub reason: String,
-    /// Wall time, s.
+    /// Wall time of the search, s: from the start to the intervals (the
+    /// delay's scan, the fits, the profile, the Jacobian at the optimum).
+    pub search_time_s: f64,
+    /// Wall time, s: the search, then the scores and the timestep check.
     pub wall_time_s: f64,
     /// The answer in words: does the tuned engine beat the physics-free
     /// model on the held-out episodes?
@@ -908,16 +914,18 @@ pub fn tune_recordings(
         let params = p.params(x)?;
         p.residuals(&params)
     };
-    let fit = least_squares::levenberg_marquardt(
-        &f,
-        &u,
-        FitOptions {
-            max_iterations: spec.max_iterations,
-            jobs: spec.jobs,
-            ..FitOptions::default()
-        },
-        &|phase, x, cost| p.record(phase, &p.values(x), cost),
-    )
+    // Between Jacobians (one replay per coordinate each), accepted steps
+    // update the last one (Broyden); convergence is declared on one
+    // computed at the optimum, which also gives the intervals.
+    let options = FitOptions {
+        max_iterations: spec.max_iterations,
+        jobs: spec.jobs,
+        secant: true,
+        ..FitOptions::default()
+    };
+    let fit = least_squares::levenberg_marquardt(&f, &u, options, &|phase, x, cost| {
+        p.record(phase, &p.values(x), cost)
+    })
     .map_err(|m| anyhow!("the fit failed: {m}"))?;
     let mut iterations = fit.iterations;
     let mut reason = fit.reason.clone();
@@ -945,26 +953,38 @@ pub fn tune_recordings(
             v.remove(c);
             v
         };
-        let mut profile: Vec<(i64, f64, Vec<f64>)> = Vec::new();
-        let mut at = |k: i64, from: &[f64]| -> Result<Option<(f64, Vec<f64>)>> {
+        // The Jacobian without the delay's column, and back with it
+        // unknown (computed by the fit that gets it).
+        let drop_column = |j: &DMatrix<f64>| j.clone().remove_column(c);
+        let add_column = |j: &DMatrix<f64>| j.clone().insert_column(c, f64::NAN);
+        type Point = (f64, Vec<f64>, Option<DMatrix<f64>>);
+        let mut profile: Vec<(i64, Point)> = Vec::new();
+        let mut at = |k: i64, from: &Point| -> Result<Option<Point>> {
             let delay = k as f64 * p.dt;
             if delay < d.low - 1e-12 || delay > d.high + 1e-12 {
                 return Ok(None);
             }
-            if let Some((_, cost, x)) = profile.iter().find(|e| e.0 == k) {
-                return Ok(Some((*cost, x.clone())));
+            if let Some((_, point)) = profile.iter().find(|e| e.0 == k) {
+                return Ok(Some(point.clone()));
             }
             p.set_phase(format!("the delay's profile: {:.1} ms", delay * 1e3));
             let g = |x: &[f64]| -> Result<Vec<f64>, String> {
                 let params = p.params(&insert(x, delay))?;
                 p.residuals(&params)
             };
-            let fk = least_squares::levenberg_marquardt(
+            // A rough fit: it starts from the neighbour's Jacobian, updated
+            // step by step, and computes one afresh only when that cannot
+            // find a step down; the profile compares whole steps, whose
+            // costs differ by far more than the fit's last gains.
+            let fk = least_squares::levenberg_marquardt_from(
                 &g,
-                &others(from),
+                &others(&from.1),
+                from.2.clone(),
                 FitOptions {
-                    max_iterations: spec.max_iterations.min(10),
+                    max_iterations: 1,
                     jobs: spec.jobs,
+                    secant: true,
+                    certify: false,
                     ..FitOptions::default()
                 },
                 &|phase, x, cost| {
@@ -977,17 +997,22 @@ pub fn tune_recordings(
             );
             match fk {
                 Ok(fk) => {
-                    let x = insert(&fk.u, delay);
-                    profile.push((k, fk.cost, x.clone()));
-                    Ok(Some((fk.cost, x)))
+                    let point = (fk.cost, insert(&fk.u, delay), fk.last_jacobian);
+                    profile.push((k, point.clone()));
+                    Ok(Some(point))
                 }
                 Err(_) => Ok(None),
             }
         };
         let centre = (d.value(u[c]) / p.dt).round() as i64;
-        let mut best = match at(centre, &u)? {
-            Some((cost, x)) => (centre, cost, x),
-            None => (centre, f64::INFINITY, u.clone()),
+        let first: Point = (
+            f64::INFINITY,
+            u.clone(),
+            fit.last_jacobian.as_ref().map(drop_column),
+        );
+        let mut best = match at(centre, &first)? {
+            Some(point) => (centre, point),
+            None => (centre, first),
         };
         // Down first; up only when down did not improve on the centre (a
         // minimum below the centre is not also above it).
@@ -998,23 +1023,20 @@ pub fn tune_recordings(
             let mut k = centre;
             loop {
                 k += dir;
-                let from = best.2.clone();
+                let from = best.1.clone();
                 match at(k, &from)? {
-                    Some((cost, x)) if cost < best.1 => best = (k, cost, x),
+                    Some(point) if point.0 < best.1 .0 => best = (k, point),
                     _ => break,
                 }
             }
         }
-        if best.1 < fit.cost {
+        if best.1 .0 < fit.cost {
             p.set_phase("Levenberg-Marquardt from the profile's best delay".into());
-            let polished = least_squares::levenberg_marquardt(
+            let polished = least_squares::levenberg_marquardt_from(
                 &f,
-                &best.2,
-                FitOptions {
-                    max_iterations: spec.max_iterations,
-                    jobs: spec.jobs,
-                    ..FitOptions::default()
-                },
+                &best.1 .1,
+                best.1 .2.as_ref().map(add_column),
+                options,
                 &|phase, x, cost| p.record(phase, &p.values(x), cost),
             )
             .map_err(|m| anyhow!("the fit failed: {m}"))?;
@@ -1073,6 +1095,7 @@ pub fn tune_recordings(
         residuals: (spread.n, spread.n_eff),
     };
 
+    let search_time_s = started.elapsed().as_secs_f64();
     // Scores: untuned, tuned, the physics-free model.
     p.set_phase("scoring".into());
     let tuned = p.params(&u).map_err(|m| anyhow!(m))?;
@@ -1198,6 +1221,7 @@ pub fn tune_recordings(
         evaluations,
         iterations,
         reason,
+        search_time_s,
         wall_time_s: started.elapsed().as_secs_f64(),
         verdict,
         timestep_check,
@@ -1442,8 +1466,8 @@ pub fn summary_markdown(s: &RecordingsSummary) -> String {
     }
     let _ = writeln!(
         m,
-        "\nResiduals: {} (one per joint and sample), autocorrelated {:.4} from one sample to the next, counted as {:.0} independent ones for the intervals.\n\n{} evaluations (each replays every training episode), {} Levenberg-Marquardt iterations, {:.1} s; the last fit stopped at {}.",
-        i.residuals.0, i.residual_autocorrelation, i.residuals.1, s.evaluations, s.iterations, s.wall_time_s, s.reason
+        "\nResiduals: {} (one per joint and sample), autocorrelated {:.4} from one sample to the next, counted as {:.0} independent ones for the intervals.\n\n{} evaluations (each replays every training episode), {} Jacobians by differences (Levenberg-Marquardt, Broyden's updates between them), {:.1} s of search ({:.1} s with the scores and the timestep check); the last fit stopped at {}.",
+        i.residuals.0, i.residual_autocorrelation, i.residuals.1, s.evaluations, s.iterations, s.search_time_s, s.wall_time_s, s.reason
     );
     m
 }
