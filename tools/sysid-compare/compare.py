@@ -465,8 +465,8 @@ def main() -> None:
     notes = {
         "problem": "the writer's simulated iiwa (truth.json), episodes 1-2 fitted (2 x 10 s, 200 Hz joint states, 100 Hz commands), kp and kd known",
         "armature": "compared as fitted + dt kd (both use MuJoCo's implicitfast, which integrates the kv servo implicitly; the writer's PD is explicit)",
-        "evaluations": "realitygap: summary.json's count (every replay of both training episodes: delay scan, Jacobian columns, rejected steps, the delay's profile); mujoco.sysid: parameter vectors passed to its residual (each rolls out both episodes)",
-        "wall time": "realitygap: the search as summary.json reports it (the held-out scoring excluded); mujoco.sysid: sysid.optimize only",
+        "evaluations": "realitygap: summary.json's count (every replay of both training episodes: delay scan, Jacobian columns, secant and rejected steps, the delay's profile); mujoco.sysid: parameter vectors passed to its residual (each rolls out both episodes)",
+        "wall time": "realitygap: the search as summary.json reports it (search_time_s: the scores and the timestep check excluded); mujoco.sysid: sysid.optimize only",
         "machine": f"{os.cpu_count()} cores, shared with other work; {args.jobs} threads/jobs for each tool, both at the script's priority (nice {os.nice(0)})",
     }
     for variant in peers:

@@ -490,6 +490,8 @@ struct Problem<'a> {
     effort_weights: Option<Vec<f64>>,
     progress: &'a (dyn Fn(RecordingsProgress) + Sync),
     phase: Mutex<String>,
+    /// `jobs` threads, for the evaluations made outside a Jacobian.
+    pool: rayon::ThreadPool,
 }
 
 impl Problem<'_> {
@@ -528,14 +530,28 @@ impl Problem<'_> {
         Ok(trajectory)
     }
 
-    /// Joint-angle residuals (degrees) of the training episodes.
+    /// Joint-angle residuals (degrees) of the training episodes, replayed
+    /// in parallel: on the threads of the pool it is called from (a
+    /// Jacobian's columns), else on the tune's own (`jobs`), so that a
+    /// single evaluation (a step of the fit) uses every core too.
     fn residuals(&self, params: &PhysicalParams) -> Result<Vec<f64>, String> {
+        use rayon::prelude::*;
+        let replay_all = || -> Vec<Result<Trajectory, String>> {
+            self.train
+                .par_iter()
+                .map(|&k| self.replay(&self.spec.prepared.episodes[k], params))
+                .collect()
+        };
+        let sims = if rayon::current_thread_index().is_some() {
+            replay_all()
+        } else {
+            self.pool.install(replay_all)
+        };
         let mut r = Vec::with_capacity(self.samples);
         let result = (|| {
-            for &k in &self.train {
+            for (&k, sim) in self.train.iter().zip(sims) {
                 let e = &self.spec.prepared.episodes[k];
-                let sim = self.replay(e, params)?;
-                push_residuals(&e.real, &sim, self.effort_weights.as_deref(), &mut r)
+                push_residuals(&e.real, &sim?, self.effort_weights.as_deref(), &mut r)
                     .map_err(|m| format!("episode '{}': {m}", e.id))?;
             }
             Ok(())
@@ -867,6 +883,7 @@ pub fn tune_recordings(
         progress,
         phase: Mutex::new("start".into()),
         space,
+        pool: least_squares::pool(spec.jobs),
     };
     let p = &problem;
     // The untuned start: every key at its start value.
@@ -916,14 +933,20 @@ pub fn tune_recordings(
     };
     // Between Jacobians (one replay per coordinate each), accepted steps
     // update the last one (Broyden); convergence is declared on one
-    // computed at the optimum, which also gives the intervals.
+    // computed at the optimum, which also gives the intervals. With the
+    // delay's profile to follow, the first fit need not be certified: the
+    // last fit, from the profile's best point, is.
     let options = FitOptions {
         max_iterations: spec.max_iterations,
         jobs: spec.jobs,
         secant: true,
         ..FitOptions::default()
     };
-    let fit = least_squares::levenberg_marquardt(&f, &u, options, &|phase, x, cost| {
+    let first_options = FitOptions {
+        certify: p.delay.is_none(),
+        ..options
+    };
+    let fit = least_squares::levenberg_marquardt(&f, &u, first_options, &|phase, x, cost| {
         p.record(phase, &p.values(x), cost)
     })
     .map_err(|m| anyhow!("the fit failed: {m}"))?;
@@ -1030,21 +1053,26 @@ pub fn tune_recordings(
                 }
             }
         }
-        if best.1 .0 < fit.cost {
-            p.set_phase("Levenberg-Marquardt from the profile's best delay".into());
-            let polished = least_squares::levenberg_marquardt_from(
-                &f,
-                &best.1 .1,
-                best.1 .2.as_ref().map(add_column),
-                options,
-                &|phase, x, cost| p.record(phase, &p.values(x), cost),
-            )
-            .map_err(|m| anyhow!("the fit failed: {m}"))?;
-            iterations += polished.iterations;
-            reason.clone_from(&polished.reason);
-            u.clone_from(&polished.u);
-            fit = polished;
-        }
+        // The last fit, with the delay free again, from the best point:
+        // the profile's, or the first fit's.
+        let (from, guess) = if best.1 .0 < fit.cost {
+            (best.1 .1.clone(), best.1 .2.as_ref().map(add_column))
+        } else {
+            (u.clone(), fit.last_jacobian.clone())
+        };
+        p.set_phase("Levenberg-Marquardt from the profile's best delay".into());
+        let polished = least_squares::levenberg_marquardt_from(
+            &f,
+            &from,
+            guess,
+            options,
+            &|phase, x, cost| p.record(phase, &p.values(x), cost),
+        )
+        .map_err(|m| anyhow!("the fit failed: {m}"))?;
+        iterations += polished.iterations;
+        reason.clone_from(&polished.reason);
+        u.clone_from(&polished.u);
+        fit = polished;
     }
     // The Jacobian at the optimum, for the intervals.
     p.set_phase("intervals".into());
