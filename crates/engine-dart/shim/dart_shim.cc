@@ -237,6 +237,13 @@ struct WorldImpl
   /// The controlled joints' Coulomb friction torques as given (N m); what
   /// DART gets is scaled each step (see `World::set_drives`).
   std::vector<double> friction;
+  /// Scratch of `World::set_drives`, kept so that a step allocates
+  /// nothing: the friction DART gets, the mass matrix's factorisation and
+  /// a unit vector with its solve.
+  std::vector<double> scaled;
+  Eigen::LDLT<Eigen::MatrixXd> mass;
+  Eigen::VectorXd unit;
+  Eigen::VectorXd column;
   bool finished = false;
 
   BodyNode* body(bool object, std::size_t i) const
@@ -537,20 +544,35 @@ void World::set_drives(
     // is inverted here from DART's mass matrix: DART's own inverse is
     // computed with unit joint forces, which on FORCE actuators overwrite
     // the commands.
-    std::vector<double> scaled;
+    // (M^-1)_jj is column j of an LDLT solve with the j-th unit vector:
+    // one factorisation per step, into storage kept from the last.
+    auto& scaled = m.scaled;
+    scaled.clear();
     const auto& f = m.friction;
     if (std::any_of(f.begin(), f.end(), [](double x) { return x > 0.0; }))
     {
       const double dt = m.world->getTimeStep();
-      const Eigen::MatrixXd inv = m.robot->getMassMatrix().inverse();
+      m.mass.compute(m.robot->getMassMatrix());
+      const Eigen::Index dofs = m.mass.rows();
+      if (m.unit.size() != dofs)
+      {
+        m.unit = Eigen::VectorXd::Zero(dofs);
+        m.column.resize(dofs);
+      }
       scaled.assign(n, 0.0);
       for (std::size_t i = 0; i < n && i < f.size(); ++i)
       {
-        const std::size_t k = m.joints[i]->getIndexInSkeleton(0);
         const double d = damping[i];
-        scaled[i] = f[i] > 0.0 && std::isfinite(d) && d >= 0.0
-            ? f[i] / (1.0 + dt * d * inv(k, k))
-            : f[i];
+        if (!(f[i] > 0.0 && std::isfinite(d) && d >= 0.0))
+        {
+          scaled[i] = f[i];
+          continue;
+        }
+        const auto k = static_cast<Eigen::Index>(m.joints[i]->getIndexInSkeleton(0));
+        m.unit[k] = 1.0;
+        m.column.noalias() = m.mass.solve(m.unit);
+        m.unit[k] = 0.0;
+        scaled[i] = f[i] / (1.0 + dt * d * m.column[k]);
       }
     }
     for (std::size_t i = 0; i < n; ++i)
