@@ -36,6 +36,11 @@ use std::fmt;
 /// engines are compared as physics (stitching plans, handovers).
 pub const PHYSICS_FREE_ENGINE: &str = "ideal";
 
+/// The engine setting every engine has: its fixed step, seconds
+/// (`[engine.NAME] timestep_s`, `--set NAME.timestep_s=...`). `frontier`
+/// sweeps it and `tune` halves it to check a fit.
+pub const TIMESTEP_KEY: &str = "timestep_s";
+
 /// Engine settings by key, as written in a scene's `[engine.NAME]` table or
 /// given on the command line (`--set key=value`). The engine checks them.
 pub type EngineSettings = BTreeMap<String, SettingValue>;

@@ -2,11 +2,13 @@
 //! typed, read through core's one parse path ([`SettingsReader`]).
 
 use crate::{DEFAULT_TIMESTEP_S, ENGINE_NAME};
-use realitygap_core::engine::{EngineError, EngineSettings, SettingInfo, SettingsReader};
+use realitygap_core::engine::{
+    EngineError, EngineSettings, SettingInfo, SettingsReader, TIMESTEP_KEY,
+};
 
 /// The settings accepted in `[engine.bullet]` and by `--set`.
 pub const SETTINGS: &[SettingInfo] = &[
-    SettingInfo { key: "timestep_s", help: "fixed timestep, s (> 0); default 0.01 (the study's PyBullet)" },
+    SettingInfo { key: TIMESTEP_KEY, help: "fixed timestep, s (> 0); default 0.01 (the study's PyBullet)" },
     SettingInfo {
         key: "solver_iterations",
         help: "numSolverIterations: constraint solver iterations per step (>= 1); default 50",
@@ -144,7 +146,7 @@ impl BulletSettings {
         let unit = |x: f64| (0.0..=1.0).contains(&x);
         Ok(BulletSettings {
             timestep_s: r
-                .number("timestep_s", positive, "a number > 0 (s)")?
+                .number(TIMESTEP_KEY, positive, "a number > 0 (s)")?
                 .unwrap_or(d.timestep_s),
             solver_iterations: r
                 .integer("solver_iterations", 1, i32::MAX as i64)?

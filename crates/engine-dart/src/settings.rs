@@ -6,7 +6,9 @@
 //! collision detector, 1 ms steps) and DART's own otherwise (the Dantzig
 //! LCP solver with PGS as its fallback).
 
-use realitygap_core::engine::{EngineError, EngineSettings, SettingInfo, SettingsReader};
+use realitygap_core::engine::{
+    EngineError, EngineSettings, SettingInfo, SettingsReader, TIMESTEP_KEY,
+};
 
 /// The engine's name on the command line and in result directories.
 pub const ENGINE_NAME: &str = "dart";
@@ -18,7 +20,7 @@ pub const DEFAULT_TIMESTEP_S: f64 = 0.001;
 /// The settings accepted in `[engine.dart]` and by `--set`.
 pub const SETTINGS: &[SettingInfo] = &[
     SettingInfo {
-        key: "timestep_s",
+        key: TIMESTEP_KEY,
         help: "integration timestep, s (> 0 and finite); default 0.001 (Gazebo's)",
     },
     SettingInfo {
@@ -123,7 +125,7 @@ impl DartSettings {
         Ok(DartSettings {
             timestep_s: r
                 .number(
-                    "timestep_s",
+                    TIMESTEP_KEY,
                     |v| v.is_finite() && v > 0.0,
                     "greater than 0 s and finite",
                 )?

@@ -3,7 +3,9 @@
 
 use crate::ENGINE_NAME;
 use mujoco_rs::mujoco_c;
-use realitygap_core::engine::{EngineError, EngineSettings, SettingInfo, SettingsReader};
+use realitygap_core::engine::{
+    EngineError, EngineSettings, SettingInfo, SettingsReader, TIMESTEP_KEY,
+};
 
 /// MuJoCo's own default timestep, s (used when the settings give none and
 /// the model is built from URDF).
@@ -12,7 +14,7 @@ pub const MUJOCO_DEFAULT_TIMESTEP_S: f64 = 0.002;
 /// The settings accepted in `[engine.mujoco]` and by `--set`.
 pub const SETTINGS: &[SettingInfo] = &[
     SettingInfo {
-        key: "timestep_s",
+        key: TIMESTEP_KEY,
         help: "integration timestep, s (> 0); default 0.002, or the MJCF file's own",
     },
     SettingInfo {
@@ -78,7 +80,7 @@ impl MujocoSettings {
             Ok(r.integer(key, min, i32::MAX as i64)?.map(|v| v as i32))
         };
         Ok(MujocoSettings {
-            timestep_s: r.number("timestep_s", positive, "> 0 s and finite")?,
+            timestep_s: r.number(TIMESTEP_KEY, positive, "> 0 s and finite")?,
             integrator: r.choice(
                 "integrator",
                 &[

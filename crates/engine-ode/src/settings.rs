@@ -7,7 +7,9 @@
 //! surface layer); the timestep is the 0.01 s (the PyBullet rate
 //! of the study), the stepper the exact `dWorldStep`.
 
-use realitygap_core::engine::{EngineError, EngineSettings, SettingInfo, SettingsReader};
+use realitygap_core::engine::{
+    EngineError, EngineSettings, SettingInfo, SettingsReader, TIMESTEP_KEY,
+};
 
 /// The engine's name on the command line and in result directories.
 pub const ENGINE_NAME: &str = "ode";
@@ -17,7 +19,7 @@ pub const DEFAULT_TIMESTEP_S: f64 = 0.01;
 
 /// The settings accepted in `[engine.ode]` and by `--set`.
 pub const SETTINGS: &[SettingInfo] = &[
-    SettingInfo { key: "timestep_s", help: "integration timestep, s (> 0); default 0.01" },
+    SettingInfo { key: TIMESTEP_KEY, help: "integration timestep, s (> 0); default 0.01" },
     SettingInfo {
         key: "stepper",
         help: "world_step (dWorldStep: exact Dantzig LCP, O(n^3)) | quick_step (dWorldQuickStep: iterative SOR); default world_step",
@@ -170,7 +172,7 @@ impl OdeSettings {
         Ok(OdeSettings {
             timestep_s: r
                 .number(
-                    "timestep_s",
+                    TIMESTEP_KEY,
                     |v| finite(v) && v > 0.0,
                     "greater than 0 s and finite",
                 )?

@@ -1,7 +1,9 @@
 //! The engine settings (`[engine.physx]` in a scene file, `--set` on the
 //! command line): parsing, checking, defaults.
 
-use realitygap_core::engine::{EngineError, EngineSettings, SettingInfo, SettingsReader};
+use realitygap_core::engine::{
+    EngineError, EngineSettings, SettingInfo, SettingsReader, TIMESTEP_KEY,
+};
 
 use crate::ENGINE_NAME;
 
@@ -44,7 +46,7 @@ impl Solver {
 /// The settings accepted in `[engine.physx]` and by `--set`.
 pub const SETTINGS: &[SettingInfo] = &[
     SettingInfo {
-        key: "timestep_s",
+        key: TIMESTEP_KEY,
         help: "integration timestep, s (> 0, at most 1); default 0.005",
     },
     SettingInfo {
@@ -111,7 +113,7 @@ impl PhysxSettings {
         };
         Ok(PhysxSettings {
             timestep_s: r
-                .number("timestep_s", |v| v > 0.0 && v <= 1.0, "> 0 and at most 1 s")?
+                .number(TIMESTEP_KEY, |v| v > 0.0 && v <= 1.0, "> 0 and at most 1 s")?
                 .unwrap_or(d.timestep_s),
             solver: r
                 .choice("solver", &[("pgs", Solver::Pgs), ("tgs", Solver::Tgs)])?

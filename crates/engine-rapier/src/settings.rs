@@ -1,7 +1,9 @@
 //! The engine settings (`[engine.rapier]` in a scene file, `--set` on the
 //! command line): parsing, checking, defaults.
 
-use realitygap_core::engine::{EngineError, EngineSettings, SettingInfo, SettingsReader};
+use realitygap_core::engine::{
+    EngineError, EngineSettings, SettingInfo, SettingsReader, TIMESTEP_KEY,
+};
 
 use crate::ENGINE_NAME;
 
@@ -49,7 +51,7 @@ impl MeshShape {
 
 /// The settings accepted in `[engine.rapier]` and by `--set`.
 pub const SETTINGS: &[SettingInfo] = &[
-    SettingInfo { key: "timestep_s", help: "integration timestep, s (> 0, at most 1); default 0.01" },
+    SettingInfo { key: TIMESTEP_KEY, help: "integration timestep, s (> 0, at most 1); default 0.01" },
     SettingInfo {
         key: "solver_iterations",
         help: "solver iterations (substeps) per step (1 to 10000); default 4 (Rapier's)",
@@ -109,7 +111,7 @@ impl RapierSettings {
         };
         Ok(RapierSettings {
             timestep_s: r
-                .number("timestep_s", |v| v > 0.0 && v <= 1.0, "> 0 and at most 1 s")?
+                .number(TIMESTEP_KEY, |v| v > 0.0 && v <= 1.0, "> 0 and at most 1 s")?
                 .unwrap_or(d.timestep_s),
             solver_iterations: count("solver_iterations", 1, d.solver_iterations)?,
             internal_pgs_iterations: count(

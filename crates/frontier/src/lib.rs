@@ -59,7 +59,7 @@ use realitygap_analysis::compare::{CompareOptions, RunInput, SourceRuns};
 use realitygap_core::controller::{
     load_prepared, run_scene_with, ControlParams, RunOptions, RunOutcome, RunStatus,
 };
-use realitygap_core::engine::{Engine, EngineSettings, SettingValue};
+use realitygap_core::engine::{Engine, EngineSettings, SettingValue, TIMESTEP_KEY};
 use realitygap_core::params::PhysicalParams;
 use realitygap_core::robot::{PackageResolver, RobotModel};
 use realitygap_core::scene::Scene;
@@ -192,7 +192,7 @@ fn ints(values: &[i64]) -> Vec<SettingValue> {
 /// control period; choices are listed from cheapest to most exact, so the
 /// last one is the reference's.
 pub fn default_grid(engine: &str) -> Result<Vec<Overlay>> {
-    let ts = |v: &[f64]| ("timestep_s".to_string(), floats(v));
+    let ts = |v: &[f64]| (TIMESTEP_KEY.to_string(), floats(v));
     let coarse = [0.01, 0.005, 0.0025, 0.001];
     Ok(match engine {
         "mujoco" => cross(&[
@@ -237,10 +237,10 @@ pub fn default_grid(engine: &str) -> Result<Vec<Overlay>> {
 fn fineness(p: &Overlay, order: &[(String, Vec<SettingValue>)]) -> Vec<f64> {
     let mut key = vec![-p
         .iter()
-        .find(|(k, _)| k == "timestep_s")
+        .find(|(k, _)| k == TIMESTEP_KEY)
         .and_then(|(_, v)| v.as_f64())
         .unwrap_or(f64::INFINITY)];
-    for (k, values) in order.iter().filter(|(k, _)| k != "timestep_s") {
+    for (k, values) in order.iter().filter(|(k, _)| k != TIMESTEP_KEY) {
         let v = p.iter().find(|(pk, _)| pk == k).map(|(_, v)| v);
         key.push(match v {
             Some(SettingValue::Text(_)) | Some(SettingValue::Bool(_)) => {
@@ -336,7 +336,7 @@ pub fn set_args(engine: &str, point: &Overlay) -> Vec<String> {
 fn label(point: &Overlay) -> (String, String) {
     let group: Vec<String> = point
         .iter()
-        .filter(|(k, _)| k != "timestep_s")
+        .filter(|(k, _)| k != TIMESTEP_KEY)
         .map(|(k, v)| match v {
             SettingValue::Text(t) => t.clone(),
             v => format!("{k}={v}"),
@@ -349,7 +349,7 @@ fn label(point: &Overlay) -> (String, String) {
     };
     let ts = point
         .iter()
-        .find(|(k, _)| k == "timestep_s")
+        .find(|(k, _)| k == TIMESTEP_KEY)
         .map(|(_, v)| format!(" {v} s"))
         .unwrap_or_default();
     (format!("{group}{ts}"), group)
@@ -722,14 +722,14 @@ fn converge(
             .collect()
     };
     let mut overlay = finest.clone();
-    if !overlay.iter().any(|(k, _)| k == "timestep_s") {
+    if !overlay.iter().any(|(k, _)| k == TIMESTEP_KEY) {
         let ts = cases
             .first()
             .map(|c| settings_for(c, engine, &overlay))
             .transpose()?
             .and_then(|s| engine.check_settings(&s).ok())
             .unwrap_or(engine.default_timestep_s());
-        overlay.push(("timestep_s".into(), SettingValue::Float(ts)));
+        overlay.push((TIMESTEP_KEY.into(), SettingValue::Float(ts)));
     }
     let mut point = measure("reference", &overlay, repeats)?;
     let mut trajectories = trajectories_of(&point)?;
@@ -739,7 +739,9 @@ fn converge(
         let finer: Overlay = overlay
             .iter()
             .map(|(k, v)| match (k.as_str(), v.as_f64()) {
-                ("timestep_s", Some(ts)) => (k.clone(), SettingValue::Float(ts / 2.0)),
+                (key, Some(ts)) if key == TIMESTEP_KEY => {
+                    (k.clone(), SettingValue::Float(ts / 2.0))
+                }
                 _ => (k.clone(), v.clone()),
             })
             .collect();
@@ -759,7 +761,7 @@ fn converge(
         let change = by_scene.iter().copied().fold(0.0, f64::max);
         let ts = finer
             .iter()
-            .find(|(k, _)| k == "timestep_s")
+            .find(|(k, _)| k == TIMESTEP_KEY)
             .and_then(|(_, v)| v.as_f64())
             .unwrap_or(f64::NAN);
         say(format!(

@@ -715,7 +715,9 @@ mod tests {
             plain.evaluations
         );
         assert!(fit.iterations < plain.iterations, "{fit:?}");
-        let j = fit.jacobian.expect("a certified fit ends on a fresh Jacobian");
+        let j = fit
+            .jacobian
+            .expect("a certified fit ends on a fresh Jacobian");
         let r = f(&fit.u).unwrap();
         let fd = jacobian(&f, &fit.u, &r, FitOptions::default().step, 1).unwrap();
         assert!((j - fd).norm() < 1e-12);
@@ -737,7 +739,12 @@ mod tests {
         )
         .unwrap();
         assert_eq!(rough.iterations, 0, "{rough:?}");
-        assert!(rough.cost < 1.01 * plain.cost, "{} vs {}", rough.cost, plain.cost);
+        assert!(
+            rough.cost < 1.01 * plain.cost,
+            "{} vs {}",
+            rough.cost,
+            plain.cost
+        );
         assert!(rough.jacobian.is_none() && rough.last_jacobian.is_some());
     }
 

@@ -806,7 +806,7 @@ pub fn finish(
 }
 
 /// The engine setting a [`TimestepCheck`] halves.
-pub const TIMESTEP_KEY: &str = "timestep_s";
+pub use realitygap_core::engine::TIMESTEP_KEY;
 
 /// Simulates the tuned `params` at half their timestep and scores them
 /// on `selection` against `tuned` (the same runs at the tuned step).

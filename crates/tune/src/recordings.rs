@@ -46,6 +46,7 @@
 use crate::least_squares::{self, FitOptions};
 use crate::space::{params_of, Dim, Scale, Space};
 use anyhow::{anyhow, bail, Context, Result};
+use nalgebra::DMatrix;
 use realitygap_analysis::bootstrap::percentile_interval;
 use realitygap_analysis::selection::RunSelection;
 use realitygap_core::controller::{RunStatus, SplitMix64};
@@ -53,7 +54,6 @@ use realitygap_core::params::{ParamKey, PhysicalParams};
 use realitygap_core::trajectory::CommandKind;
 use realitygap_core::{Engine, Trajectory};
 use realitygap_study::replay::{kinematic_run, replay_one, Episode, Prepared};
-use nalgebra::DMatrix;
 use serde::Serialize;
 use std::fmt::Write as _;
 use std::io::Write as _;
@@ -1183,7 +1183,7 @@ pub fn tune_recordings(
             .entry(name.to_string())
             .or_default()
             .insert(
-                crate::outputs::TIMESTEP_KEY.to_string(),
+                realitygap_core::engine::TIMESTEP_KEY.to_string(),
                 realitygap_core::engine::SettingValue::Float(p.dt / 2.0),
             );
         let on_holdout = !p.holdout.is_empty();
