@@ -304,6 +304,42 @@ fn compile(scene: &Scene, robot: &RobotModel) -> Result<MjModel, EngineError> {
     }
 }
 
+/// Stops the robot's links colliding with each other (`self_collision =
+/// false`) with MuJoCo's contact bits: a pair of geoms may touch when one's
+/// `contype` shares a bit with the other's `conaffinity`. Robot geoms get
+/// type 2 and affinity 1, the environment's (the world body's, the ground,
+/// and the scene objects') type 1 and affinity 3: the robot touches the
+/// environment, the environment itself, but never the robot. A geom that
+/// collides with nothing stays so, and the bodies' bits (what the broad
+/// phase prunes by) are recomputed.
+fn without_self_collision(model: &mut MjModel) {
+    let environment: Vec<bool> = (0..model.ffi().nbody as usize)
+        .map(|b| {
+            b == 0
+                || model
+                    .id_to_name(MjtObjBase::mjOBJ_BODY, b)
+                    .is_some_and(|n| n.starts_with(mjcf::OBJECT_BODY_PREFIX))
+        })
+        .collect();
+    let bodies: Vec<usize> = model.geom_bodyid().iter().map(|&b| b as usize).collect();
+    for (g, &b) in bodies.iter().enumerate() {
+        if model.geom_contype()[g] == 0 && model.geom_conaffinity()[g] == 0 {
+            continue;
+        }
+        let (t, a) = if environment[b] { (1, 3) } else { (2, 1) };
+        model.geom_contype_mut()[g] = t;
+        model.geom_conaffinity_mut()[g] = a;
+    }
+    let nbody = environment.len();
+    let (mut t, mut a) = (vec![0; nbody], vec![0; nbody]);
+    for (g, &b) in bodies.iter().enumerate() {
+        t[b] |= model.geom_contype()[g];
+        a[b] |= model.geom_conaffinity()[g];
+    }
+    model.body_contype_mut().copy_from_slice(&t);
+    model.body_conaffinity_mut().copy_from_slice(&a);
+}
+
 /// Multiplies every body's mass and inertia and every geom's sliding
 /// friction by the variation's factors.
 fn apply_variation(model: &mut MjModel, variation: &ModelVariation) {
@@ -470,6 +506,9 @@ impl MujocoSimulation {
             Some(p) => ModelSource::AsIs(p),
             None => ModelSource::Generated,
         };
+        if options.self_collision == Some(false) {
+            without_self_collision(&mut model);
+        }
         let mut set_const = model_params::apply(&mut model, scene, params, source)?;
         if !variation.is_identity() {
             apply_variation(&mut model, variation);

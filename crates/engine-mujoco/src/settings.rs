@@ -45,6 +45,10 @@ pub const SETTINGS: &[SettingInfo] = &[
         key: "noslip_iterations",
         help: "no-slip solver iterations (>= 0); default 0",
     },
+    SettingInfo {
+        key: "self_collision",
+        help: "the robot's links collide with each other (never a link with its parent): true | false; default true (MuJoCo's own); false as in Bullet, ODE and DART",
+    },
 ];
 
 /// The MuJoCo settings of one run, checked; `None` keeps the model's own
@@ -67,6 +71,9 @@ pub struct MujocoSettings {
     pub impratio: Option<f64>,
     /// No-slip solver iterations (>= 0).
     pub noslip_iterations: Option<i32>,
+    /// Whether the robot's links collide with each other (`None`: they
+    /// do, MuJoCo's own rule).
+    pub self_collision: Option<bool>,
 }
 
 impl MujocoSettings {
@@ -112,6 +119,7 @@ impl MujocoSettings {
             )?,
             impratio: r.number("impratio", positive, "> 0 and finite")?,
             noslip_iterations: whole("noslip_iterations", 0)?,
+            self_collision: r.boolean("self_collision")?,
         })
     }
 

@@ -86,3 +86,67 @@ fn mico2_runs_scenes_2_and_3_close_to_the_official_model() {
     assert!(last3 < 1e-3, "scene 3 ends {:.3} mm apart", last3 * 1e3);
     assert!(max3 < 0.05, "scene 3: {:.3} mm apart", max3 * 1e3);
 }
+
+/// `self_collision = false`: by MuJoCo's contact rule (a pair may touch
+/// when one geom's `contype` shares a bit with the other's `conaffinity`)
+/// no two robot geoms can touch, every robot geom can touch the ground and
+/// the cube, and the cube still rests on the ground.
+#[test]
+fn without_self_collision_the_robot_touches_only_its_surroundings() {
+    use realitygap_core::engine::SettingValue;
+    let s = scene("scene3_cube_push");
+    let robot = mico2();
+    let settings: EngineSettings = [("self_collision".to_string(), SettingValue::Bool(false))]
+        .into_iter()
+        .collect();
+    let mut sim = MujocoSimulation::load(&s, &robot, &settings, &ModelVariation::default())
+        .unwrap();
+    let m = sim.model();
+    let (t, a, body) = (m.geom_contype(), m.geom_conaffinity(), m.geom_bodyid());
+    let name = |b: i32| {
+        m.id_to_name(mujoco_rs::prelude::MjtObjBase::mjOBJ_BODY, b as usize)
+            .unwrap_or("world")
+            .to_string()
+    };
+    let may_touch = |g: usize, h: usize| (t[g] & a[h]) != 0 || (t[h] & a[g]) != 0;
+    let robot_geoms: Vec<usize> = (0..t.len())
+        .filter(|&g| body[g] != 0 && !name(body[g]).starts_with("object:"))
+        .collect();
+    let ground = (0..t.len()).find(|&g| body[g] == 0).expect("a ground geom");
+    let cube = (0..t.len())
+        .find(|&g| name(body[g]) == "object:cube")
+        .expect("the cube's geom");
+    assert!(robot_geoms.len() > 5, "{robot_geoms:?}");
+    for &g in &robot_geoms {
+        assert!(may_touch(g, ground) && may_touch(g, cube), "geom {g}");
+        for &h in robot_geoms.iter().filter(|&&h| body[h] != body[g]) {
+            assert!(!may_touch(g, h), "geoms {g} and {h}");
+        }
+    }
+    assert!(may_touch(cube, ground));
+    // The bodies' bits (the broad phase's) follow their geoms'.
+    for &g in &robot_geoms {
+        assert_eq!(m.body_contype()[body[g] as usize], 2);
+    }
+    sim.step_raw(10);
+    let contacts = sim.contacts();
+    assert!(
+        contacts
+            .iter()
+            .any(|(x, y)| (x == "object:cube") != (y == "object:cube")),
+        "the cube rests on the ground: {contacts:?}"
+    );
+    // MuJoCo's own rule by default: robot links may touch.
+    let default = MujocoSimulation::load(
+        &s,
+        &robot,
+        &EngineSettings::new(),
+        &ModelVariation::default(),
+    )
+    .unwrap();
+    let m = default.model();
+    let (t, a) = (m.geom_contype(), m.geom_conaffinity());
+    assert!(robot_geoms
+        .iter()
+        .all(|&g| (t[g] & a[robot_geoms[0]]) != 0));
+}
