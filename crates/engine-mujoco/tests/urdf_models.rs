@@ -99,8 +99,8 @@ fn without_self_collision_the_robot_touches_only_its_surroundings() {
     let settings: EngineSettings = [("self_collision".to_string(), SettingValue::Bool(false))]
         .into_iter()
         .collect();
-    let mut sim = MujocoSimulation::load(&s, &robot, &settings, &ModelVariation::default())
-        .unwrap();
+    let mut sim =
+        MujocoSimulation::load(&s, &robot, &settings, &ModelVariation::default()).unwrap();
     let m = sim.model();
     let (t, a, body) = (m.geom_contype(), m.geom_conaffinity(), m.geom_bodyid());
     let name = |b: i32| {
@@ -146,7 +146,5 @@ fn without_self_collision_the_robot_touches_only_its_surroundings() {
     .unwrap();
     let m = default.model();
     let (t, a) = (m.geom_contype(), m.geom_conaffinity());
-    assert!(robot_geoms
-        .iter()
-        .all(|&g| (t[g] & a[robot_geoms[0]]) != 0));
+    assert!(robot_geoms.iter().all(|&g| (t[g] & a[robot_geoms[0]]) != 0));
 }
