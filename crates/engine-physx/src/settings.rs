@@ -65,6 +65,10 @@ pub const SETTINGS: &[SettingInfo] = &[
         key: "contact_offset_m",
         help: "distance at which shapes start generating contacts, m (> 0, at most 0.1); default 0.002",
     },
+    SettingInfo {
+        key: "self_collision",
+        help: "the robot's links collide with each other (an articulation's own rule: never a link with its parent): true | false; default true (PhysX's); false as in Bullet, ODE and DART",
+    },
 ];
 
 /// Checked engine settings, every field filled with its default when not
@@ -81,6 +85,8 @@ pub struct PhysxSettings {
     pub velocity_iterations: u32,
     /// Contact offset of every shape, m (rest offset 0).
     pub contact_offset_m: f64,
+    /// Whether the robot's links collide with each other.
+    pub self_collision: bool,
 }
 
 /// The default contact offset, m. PhysX's default (0.02 m for a length
@@ -96,6 +102,7 @@ impl Default for PhysxSettings {
             position_iterations: DEFAULT_POSITION_ITERATIONS,
             velocity_iterations: DEFAULT_VELOCITY_ITERATIONS,
             contact_offset_m: DEFAULT_CONTACT_OFFSET_M,
+            self_collision: true,
         }
     }
 }
@@ -127,6 +134,9 @@ impl PhysxSettings {
                     "> 0 and at most 0.1 m",
                 )?
                 .unwrap_or(d.contact_offset_m),
+            self_collision: r
+                .boolean("self_collision")?
+                .unwrap_or(d.self_collision),
         })
     }
 }

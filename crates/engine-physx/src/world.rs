@@ -311,6 +311,13 @@ fn empty_world(locked: &Locked<'_>, recipe: &Recipe<'_>) -> Result<World, String
             PxArticulationFlag::FixBase,
             true,
         );
+        if !s.self_collision {
+            PxArticulationReducedCoordinate_setArticulationFlag_mut(
+                a,
+                PxArticulationFlag::DisableSelfCollision,
+                true,
+            );
+        }
         // Drive force limits in newtons and newton metres (PhysX's default
         // reads them as impulses per step).
         PxArticulationReducedCoordinate_setArticulationFlag_mut(

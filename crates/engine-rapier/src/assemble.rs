@@ -44,8 +44,8 @@ use crate::shapes::ShapeBuilder;
 use rapier3d::dynamics::{GenericJointBuilder, JointAxesMask, JointAxis, MotorModel};
 use rapier3d::math::{Pose as RPose, Rotation, Vector};
 use rapier3d::prelude::{
-    CoefficientCombineRule, ColliderBuilder, MassProperties, MultibodyJointHandle, PhysicsWorld,
-    RigidBodyBuilder, RigidBodyHandle,
+    CoefficientCombineRule, ColliderBuilder, Group, InteractionGroups, InteractionTestMode,
+    MassProperties, MultibodyJointHandle, PhysicsWorld, RigidBodyBuilder, RigidBodyHandle,
 };
 use realitygap_core::engine::ModelVariation;
 use realitygap_core::params::PhysicalParams;
@@ -54,6 +54,16 @@ use realitygap_core::robot::plan::{self as shared, GroupSplit, RigidGroups, Trac
 use realitygap_core::robot::{JointKind, RobotModel};
 use realitygap_core::scene::{ObjectShape, Scene};
 use std::collections::HashMap;
+
+/// The robot's colliders without self-collision: members of group 2 that
+/// interact with every group but 2. Everything else keeps Rapier's default
+/// (every group, with every group), so the robot touches the ground and
+/// the objects, never itself.
+const ROBOT_WITHOUT_SELF_COLLISION: InteractionGroups = InteractionGroups::new(
+    Group::GROUP_2,
+    Group::ALL.difference(Group::GROUP_2),
+    InteractionTestMode::And,
+);
 
 /// A controlled joint in the assembled world.
 #[derive(Debug, Clone)]
@@ -301,10 +311,13 @@ fn add_bodies(
                         )
                     })?;
                 let pose = to_rapier_pose(&link_offset.compose(&collision.origin)) * shape_pose;
-                let collider = ColliderBuilder::new(shape)
+                let mut collider = ColliderBuilder::new(shape)
                     .position(pose)
                     .density(0.0)
                     .friction(friction(None, variation));
+                if !settings.self_collision {
+                    collider = collider.collision_groups(ROBOT_WITHOUT_SELF_COLLISION);
+                }
                 world
                     .colliders
                     .insert_with_parent(collider.build(), body, &mut world.bodies);

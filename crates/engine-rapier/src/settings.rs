@@ -68,6 +68,10 @@ pub const SETTINGS: &[SettingInfo] = &[
         key: "mesh_shape",
         help: "collision shape of URDF meshes: convex_hull | trimesh; default convex_hull",
     },
+    SettingInfo {
+        key: "self_collision",
+        help: "the robot's links collide with each other (never two joined by a joint): true | false; default true (Rapier's); false as in Bullet, ODE and DART",
+    },
 ];
 
 /// Checked engine settings, every field filled with its default when not
@@ -84,6 +88,8 @@ pub struct RapierSettings {
     pub stabilization_iterations: usize,
     /// Collision shape of URDF meshes.
     pub mesh_shape: MeshShape,
+    /// Whether the robot's links collide with each other.
+    pub self_collision: bool,
 }
 
 impl Default for RapierSettings {
@@ -94,6 +100,7 @@ impl Default for RapierSettings {
             internal_pgs_iterations: DEFAULT_INTERNAL_PGS_ITERATIONS,
             stabilization_iterations: DEFAULT_STABILIZATION_ITERATIONS,
             mesh_shape: MeshShape::ConvexHull,
+            self_collision: true,
         }
     }
 }
@@ -133,6 +140,9 @@ impl RapierSettings {
                     ],
                 )?
                 .unwrap_or(d.mesh_shape),
+            self_collision: r
+                .boolean("self_collision")?
+                .unwrap_or(d.self_collision),
         })
     }
 }

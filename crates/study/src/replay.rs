@@ -175,6 +175,11 @@ pub fn scene_toml(robot: &RobotModel, urdf: &Path, link: &str, duration_s: f64) 
             "ode" => {
                 let _ = writeln!(s, "servo = \"kv\"");
             }
+            // No self-collision, as MuJoCo above (Bullet, ODE and DART have
+            // none by default).
+            "rapier" | "physx" => {
+                let _ = writeln!(s, "self_collision = false");
+            }
             _ => {}
         }
         s.push('\n');

@@ -20,7 +20,7 @@
 //! | [`rotor`] | each kind of joint command against its analytic response; commands across a state round trip; bad commands |
 //! | [`model`] | every link's tracked pose against the URDF's forward kinematics (both robot models); the initial state |
 //! | [`errors`] | bad settings, scene and robot mismatches, bad meshes and inertias, bad angles and states, divergence |
-//! | [`physics`] | state round trips, handover into a fresh simulation, and each physical parameter's effect (or its refusal) |
+//! | [`physics`] | state round trips, handover into a fresh simulation, each physical parameter's effect (or its refusal), self-collision on and off |
 //! | [`scenes`] | the study's three scenes with both robot models, the KUKA iiwa's scenes |
 //!
 //! What the kit cannot see from core — other engines — is checked in the
@@ -678,6 +678,7 @@ macro_rules! engine_test_kit {
             physics::contact_softness,
             physics::cube_mass,
             physics::masses,
+            physics::self_collision,
             scenes::scene1_mico2,
             scenes::scene1_official,
             scenes::stock_settings,

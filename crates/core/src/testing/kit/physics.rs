@@ -607,3 +607,115 @@ pub fn cube_moved(out: &RunOutcome) -> Vec3 {
     let c = testing::cube(out);
     *c.last().unwrap() - c[0]
 }
+
+/// Two links of a robot that are not joined by a joint, overlapping by
+/// 5 mm at rest: the base's box and the tip's box, the tip held by a
+/// velocity servo on a horizontal joint 0.1 m beside the overlap, without
+/// gravity. Where they collide, the contact pushes the tip up and turns its
+/// joint; where they do not, it stays at rest.
+const OVERLAP_URDF: &str = r#"<?xml version="1.0"?>
+<robot name="overlap">
+  <link name="base">
+    <inertial><mass value="5.0"/><inertia ixx="0.1" iyy="0.1" izz="0.1" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><origin xyz="0 0 0.05"/><geometry><box size="0.4 0.4 0.1"/></geometry></collision>
+  </link>
+  <joint name="lift" type="revolute">
+    <parent link="base"/><child link="arm"/>
+    <origin xyz="0 0 0.3" rpy="0 0 0"/><axis xyz="0 0 1"/>
+    <limit lower="-3.0" upper="3.0" effort="50" velocity="10"/>
+  </joint>
+  <link name="arm">
+    <inertial><mass value="0.5"/><inertia ixx="0.001" iyy="0.001" izz="0.001" ixy="0" ixz="0" iyz="0"/></inertial>
+  </link>
+  <joint name="fold" type="revolute">
+    <parent link="arm"/><child link="tip"/>
+    <origin xyz="0 0 0" rpy="0 0 0"/><axis xyz="1 0 0"/>
+    <limit lower="-3.0" upper="3.0" effort="50" velocity="10"/>
+  </joint>
+  <link name="tip">
+    <inertial><origin xyz="0 0.1 -0.155"/><mass value="0.5"/><inertia ixx="0.001" iyy="0.001" izz="0.001" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><origin xyz="0 0.1 -0.155"/><geometry><box size="0.1 0.1 0.1"/></geometry></collision>
+  </link>
+</robot>
+"#;
+
+/// Self-collision: a robot's links that are not joined by a joint collide
+/// with `self_collision = true` and pass through each other with `false`
+/// (the setting where the engine has it; an engine without it must never
+/// collide a robot with itself). Measured on [`OVERLAP_URDF`] over 0.5 s:
+/// the held joint's largest angle.
+pub fn self_collision(engine: &dyn Engine, spec: &KitSpec) {
+    if !spec.dynamics {
+        return;
+    }
+    let dir = TempDir::new(engine.name(), "self-collision");
+    let urdf = dir.path("overlap.urdf");
+    std::fs::write(&urdf, OVERLAP_URDF).unwrap();
+    let text = r#"
+name = "overlap"
+description = "two links not joined by a joint, overlapping at rest"
+duration_s = 0.5
+gravity_m_s2 = [0.0, 0.0, 0.0]
+[robot]
+urdf = "overlap.urdf"
+base_position_m = [0.0, 0.0, 0.0]
+[controller]
+gain_per_s = 1.0
+max_speed_deg_s = 1.0
+period_s = 0.01
+[[actuator]]
+joint = "lift"
+kv = 5.0
+force_limit = 50.0
+[[actuator]]
+joint = "fold"
+kv = 0.2
+force_limit = 50.0
+[[schedule]]
+t_s = 0.0
+targets_deg = {}
+[[track]]
+role = "tip"
+link = "tip"
+"#;
+    let scene = crate::scene::Scene::from_toml_str(text, &dir.path("overlap.toml")).unwrap();
+    let robot =
+        crate::robot::RobotModel::from_urdf_file(&urdf, &crate::robot::PackageResolver::new())
+            .unwrap();
+    let has = engine
+        .settings_help()
+        .iter()
+        .any(|i| i.key == "self_collision");
+    let largest = |extra: &[&str]| -> f64 {
+        let settings = settings_for(engine, spec, &scene, extra);
+        let mut sim = engine
+            .load(&scene, &robot, &settings, &ModelVariation::default())
+            .unwrap_or_else(|e| panic!("{}: {e}", engine.name()));
+        let steps = (0.5 / sim.timestep_s()).round() as u64;
+        let mut q = vec![0.0; sim.joint_count()];
+        let mut most: f64 = 0.0;
+        for _ in 0..steps {
+            sim.set_joint_velocity_targets(&[0.0, 0.0]);
+            sim.step().unwrap();
+            sim.joint_angles_rad(&mut q);
+            most = most.max(q[1].abs());
+        }
+        most
+    };
+    let apart = largest(if has { &["self_collision=false"] } else { &[] });
+    report(engine, "self_collision_off_rad", apart, 1e-6);
+    assert!(
+        apart <= 1e-6,
+        "{}: without self-collision the overlapping links moved the held joint {apart:e} rad",
+        engine.name()
+    );
+    if has {
+        let pushed = largest(&["self_collision=true"]);
+        report(engine, "self_collision_on_rad", pushed, 1e-3);
+        assert!(
+            pushed > 1e-3,
+            "{}: with self-collision the overlapping links did not push each other apart ({pushed:e} rad)",
+            engine.name()
+        );
+    }
+}
