@@ -134,9 +134,7 @@ impl PhysxSettings {
                     "> 0 and at most 0.1 m",
                 )?
                 .unwrap_or(d.contact_offset_m),
-            self_collision: r
-                .boolean("self_collision")?
-                .unwrap_or(d.self_collision),
+            self_collision: r.boolean("self_collision")?.unwrap_or(d.self_collision),
         })
     }
 }

@@ -140,9 +140,7 @@ impl RapierSettings {
                     ],
                 )?
                 .unwrap_or(d.mesh_shape),
-            self_collision: r
-                .boolean("self_collision")?
-                .unwrap_or(d.self_collision),
+            self_collision: r.boolean("self_collision")?.unwrap_or(d.self_collision),
         })
     }
 }
