@@ -163,12 +163,14 @@ mod tests {
             ("position_iterations", "8"),
             ("velocity_iterations", "0"),
             ("contact_offset_m", "0.01"),
+            ("self_collision", "false"),
         ]))
         .unwrap();
         assert_eq!(s.timestep_s, 0.001);
         assert_eq!(s.solver, Solver::Pgs);
         assert_eq!((s.position_iterations, s.velocity_iterations), (8, 0));
         assert_eq!(s.contact_offset_m, 0.01);
+        assert!(!s.self_collision && PhysxSettings::default().self_collision);
     }
 
     #[test]

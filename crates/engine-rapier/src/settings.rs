@@ -174,6 +174,7 @@ mod tests {
             ("internal_pgs_iterations", SettingValue::Integer(3)),
             ("stabilization_iterations", SettingValue::Integer(0)),
             ("mesh_shape", SettingValue::Text("TriMesh".into())),
+            ("self_collision", SettingValue::Bool(false)),
         ]))
         .unwrap();
         assert_eq!(
@@ -183,7 +184,8 @@ mod tests {
                 solver_iterations: 8,
                 internal_pgs_iterations: 3,
                 stabilization_iterations: 0,
-                mesh_shape: MeshShape::TriMesh
+                mesh_shape: MeshShape::TriMesh,
+                self_collision: false,
             }
         );
         // An integer timestep is a number too.
