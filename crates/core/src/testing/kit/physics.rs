@@ -613,7 +613,7 @@ pub fn cube_moved(out: &RunOutcome) -> Vec3 {
 /// velocity servo on a horizontal joint 0.1 m beside the overlap, without
 /// gravity. Where they collide, the contact pushes the tip up and turns its
 /// joint; where they do not, it stays at rest.
-const OVERLAP_URDF: &str = r#"<?xml version="1.0"?>
+pub const OVERLAP_URDF: &str = r#"<?xml version="1.0"?>
 <robot name="overlap">
   <link name="base">
     <inertial><mass value="5.0"/><inertia ixx="0.1" iyy="0.1" izz="0.1" ixy="0" ixz="0" iyz="0"/></inertial>
