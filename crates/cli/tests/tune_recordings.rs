@@ -143,6 +143,16 @@ fn mujoco_recovers_the_writers_parameters_with_the_gains_known() {
     for f in ["tuned.toml", "space.toml", "history.csv", "summary.md"] {
         assert!(out.join(f).is_file(), "{f}");
     }
+    // The search's replays (deterministic: Broyden's updates between
+    // Jacobians; 143 measured, 473 with a Jacobian per step) and its time
+    // within the whole.
+    let evaluations = s["evaluations"].as_u64().unwrap();
+    assert!(evaluations < 250, "{evaluations} replays");
+    let (search, wall) = (
+        s["search_time_s"].as_f64().unwrap(),
+        s["wall_time_s"].as_f64().unwrap(),
+    );
+    assert!(search > 0.0 && search <= wall, "{search} s of {wall} s");
     // The timestep check replayed the held-out episodes at half the
     // scene's 1 ms; its score at the fit's step is the held-out one.
     let c = &s["timestep_check"];
