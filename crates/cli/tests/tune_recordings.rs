@@ -144,10 +144,14 @@ fn mujoco_recovers_the_writers_parameters_with_the_gains_known() {
         assert!(out.join(f).is_file(), "{f}");
     }
     // The search's replays (deterministic: Broyden's updates between
-    // Jacobians; 143 measured, 473 with a Jacobian per step) and its time
-    // within the whole.
+    // Jacobians, a coarse delay scan refined beside its best, the last
+    // Jacobian kept when the fit ends within a tenth of a standard
+    // deviation of it; 111 measured, 473 with a Jacobian per step): fewer
+    // than the 131 parameter vectors `mujoco.sysid` needs on this problem
+    // with the delay given (tools/sysid-compare). And its time within the
+    // whole.
     let evaluations = s["evaluations"].as_u64().unwrap();
-    assert!(evaluations < 250, "{evaluations} replays");
+    assert!(evaluations < 131, "{evaluations} replays");
     let (search, wall) = (
         s["search_time_s"].as_f64().unwrap(),
         s["wall_time_s"].as_f64().unwrap(),

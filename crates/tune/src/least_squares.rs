@@ -48,6 +48,15 @@ pub struct FitOptions {
     /// the point: off, an updated one may end the fit (a rough fit, such
     /// as one point of a profile).
     pub certify: bool,
+    /// With `certify`: a fit whose every coordinate lies within this many
+    /// of its standard deviations of the point of the last Jacobian
+    /// computed by differences is certified on that Jacobian (it would
+    /// give the same intervals) instead of computing another one. 0: off.
+    pub settle: f64,
+    /// The residuals interleave this many series (joints, sample by
+    /// sample): the lag of their autocorrelation, for the standard
+    /// deviations `settle` measures in (see [`spread`]).
+    pub series: usize,
 }
 
 impl Default for FitOptions {
@@ -59,6 +68,8 @@ impl Default for FitOptions {
             jobs: 1,
             secant: false,
             certify: true,
+            settle: 0.0,
+            series: 1,
         }
     }
 }
@@ -205,27 +216,36 @@ pub fn levenberg_marquardt(
     options: FitOptions,
     on_evaluation: &(dyn Fn(&str, &[f64], f64) + Sync),
 ) -> Result<Fit, String> {
-    levenberg_marquardt_from(f, u0, None, options, on_evaluation)
+    levenberg_marquardt_from(f, u0, None, None, options, on_evaluation)
 }
 
 /// [`levenberg_marquardt`] with a first guess of the Jacobian at `u0`
 /// (residuals x coordinates; used with [`FitOptions::secant`], as an
 /// updated Jacobian is): a neighbouring fit's, say. Columns of the guess
 /// that are not finite are computed by differences at the start; a guess
-/// of the wrong shape is ignored.
+/// of the wrong shape is ignored. `r0`, the residuals at `u0` when they
+/// are known (a scan's best point), saves the first evaluation; they are
+/// ignored when `u0` lies outside the unit box.
 pub fn levenberg_marquardt_from(
     f: &Residuals,
     u0: &[f64],
+    r0: Option<Vec<f64>>,
     guess: Option<DMatrix<f64>>,
     options: FitOptions,
     on_evaluation: &(dyn Fn(&str, &[f64], f64) + Sync),
 ) -> Result<Fit, String> {
     let mut u: Vec<f64> = u0.iter().map(|x| x.clamp(0.0, 1.0)).collect();
-    let mut r = f(&u).map_err(|m| format!("at the start: {m}"))?;
+    let mut evaluations = 0usize;
+    let mut r = match r0.filter(|_| u == u0) {
+        Some(r) => r,
+        None => {
+            evaluations += 1;
+            f(&u).map_err(|m| format!("at the start: {m}"))?
+        }
+    };
     let mut cost = cost_of(&r);
     on_evaluation("start", &u, cost);
     let start_cost = cost;
-    let mut evaluations = 1usize;
     let mut lambda = 1e-3;
     let mut iterations = 0;
     let n = u.len();
@@ -249,6 +269,9 @@ pub fn levenberg_marquardt_from(
     let mut fresh = false;
     let mut refresh = jac.is_none();
     let mut updates = 0usize;
+    // With `settle`: the last Jacobian computed by differences, its point
+    // and the standard deviations it gives the coordinates.
+    let mut anchor: Option<Anchor> = None;
     if let Some(j) = jac.as_mut() {
         let missing: Vec<usize> = (0..n)
             .filter(|&i| j.column(i).iter().any(|x| !x.is_finite()))
@@ -278,6 +301,16 @@ pub fn levenberg_marquardt_from(
             iterations += 1;
             fresh = true;
             updates = 0;
+            if options.secant && options.certify && options.settle > 0.0 {
+                if let Some(j) = jac.as_ref() {
+                    let sd = spread(j, &r, options.series).sd_u;
+                    anchor = Some(Anchor {
+                        u: u.clone(),
+                        jacobian: j.clone(),
+                        sd,
+                    });
+                }
+            }
         }
         let Some(j) = jac.as_ref() else {
             break "no Jacobian".to_string();
@@ -292,8 +325,8 @@ pub fn levenberg_marquardt_from(
             .filter(|&i| !((u[i] <= 0.0 && g[i] > 0.0) || (u[i] >= 1.0 && g[i] < 0.0)))
             .collect();
         // What an updated Jacobian cannot conclude, one computed at `u`
-        // decides.
-        let unsure = !fresh && options.certify;
+        // (or, with `settle`, near enough) decides.
+        let unsure = !fresh && options.certify && !settled(&u, &anchor, options.settle);
         if free.is_empty() {
             if unsure {
                 refresh = true;
@@ -383,7 +416,7 @@ pub fn levenberg_marquardt_from(
                     cost = new_cost;
                     lambda = (lambda / 3.0).max(1e-9);
                     if gain < options.tolerance {
-                        if unsure {
+                        if unsure && !settled(&u, &anchor, options.settle) {
                             refresh = true;
                             continue 'outer;
                         }
@@ -415,17 +448,50 @@ pub fn levenberg_marquardt_from(
             }
         }
     };
+    // A fit certified near its last Jacobian computed by differences ends
+    // on that one.
+    let (jacobian, reason) = if fresh {
+        (jac.clone(), reason)
+    } else if options.certify && settled(&u, &anchor, options.settle) {
+        let within = format!(
+            "{reason}; every coordinate within {} standard deviations of the last Jacobian's point",
+            options.settle
+        );
+        (anchor.map(|a| a.jacobian), within)
+    } else {
+        (None, reason)
+    };
     Ok(Fit {
         u,
         residuals: r,
         cost,
         start_cost,
-        jacobian: jac.clone().filter(|_| fresh),
+        jacobian,
         last_jacobian: jac,
         iterations,
         evaluations,
         reason,
     })
+}
+
+/// The last Jacobian computed by differences (for [`FitOptions::settle`]).
+struct Anchor {
+    u: Vec<f64>,
+    jacobian: DMatrix<f64>,
+    sd: Vec<f64>,
+}
+
+/// Whether every coordinate of `u` lies within `settle` standard
+/// deviations of the anchor's point (never when `settle` is 0 or a
+/// deviation is not finite).
+fn settled(u: &[f64], anchor: &Option<Anchor>, settle: f64) -> bool {
+    settle > 0.0
+        && anchor.as_ref().is_some_and(|a| {
+            u.iter()
+                .zip(&a.u)
+                .zip(&a.sd)
+                .all(|((x, y), sd)| sd.is_finite() && (x - y).abs() <= settle * sd)
+        })
 }
 
 /// Broyden's update of `j` (at `u0`, residuals `r0`) with the step to `u1`
@@ -729,6 +795,7 @@ mod tests {
         let rough = levenberg_marquardt_from(
             &f,
             &[0.58, 0.37, 0.68],
+            None,
             Some(guess),
             FitOptions {
                 max_iterations: 0,
@@ -746,6 +813,68 @@ mod tests {
             plain.cost
         );
         assert!(rough.jacobian.is_none() && rough.last_jacobian.is_some());
+    }
+
+    /// With `settle`, a secant fit that ends within a tenth of a standard
+    /// deviation of its last Jacobian's point is certified on that one:
+    /// the same optimum and intervals for fewer evaluations. Residuals
+    /// known at the start save its evaluation.
+    #[test]
+    fn a_fit_ending_near_its_last_jacobian_is_certified_on_it() {
+        let truth = [0.6, 0.35, 0.7];
+        let mut noise = realitygap_core::controller::SplitMix64::new(5);
+        let data: Vec<(f64, f64)> = (0..200)
+            .map(|i| {
+                let t = i as f64 * 0.02;
+                (t, model(&truth, t) + 0.01 * (noise.uniform() - 0.5))
+            })
+            .collect();
+        let f = |u: &[f64]| -> Result<Vec<f64>, String> {
+            Ok(data.iter().map(|(t, y)| model(u, *t) - y).collect())
+        };
+        let start = [0.2, 0.8, 0.2];
+        // A tight tolerance: after its last Jacobian, the fit still takes
+        // steps whose gains are far below what the data can resolve.
+        let secant = FitOptions {
+            secant: true,
+            tolerance: 1e-10,
+            ..FitOptions::default()
+        };
+        let full = levenberg_marquardt(&f, &start, secant, &|_, _, _| {}).unwrap();
+        let settled = levenberg_marquardt(
+            &f,
+            &start,
+            FitOptions {
+                settle: 0.1,
+                ..secant
+            },
+            &|_, _, _| {},
+        )
+        .unwrap();
+        assert!(
+            settled.reason.contains("standard deviations"),
+            "{}",
+            settled.reason
+        );
+        assert!(
+            settled.evaluations < full.evaluations,
+            "{} vs {}",
+            settled.evaluations,
+            full.evaluations
+        );
+        let a = spread(full.jacobian.as_ref().unwrap(), &full.residuals, 1);
+        let b = spread(settled.jacobian.as_ref().unwrap(), &settled.residuals, 1);
+        for i in 0..3 {
+            assert!((settled.u[i] - full.u[i]).abs() < 0.1 * a.sd_u[i], "{i}");
+            assert!((b.sd_u[i] / a.sd_u[i] - 1.0).abs() < 0.05, "{a:?} vs {b:?}");
+        }
+        // Off (0), the same fit computes a Jacobian at its end.
+        assert!(full.reason.starts_with("converged") && !full.reason.contains("deviations"));
+        let r0 = f(&start).unwrap();
+        let known =
+            levenberg_marquardt_from(&f, &start, Some(r0), None, secant, &|_, _, _| {}).unwrap();
+        assert_eq!(known.evaluations + 1, full.evaluations);
+        assert_eq!(known.u, full.u);
     }
 
     /// At an optimum with a residual the parameters cannot remove, the

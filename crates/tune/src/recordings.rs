@@ -24,11 +24,13 @@
 //!   integrated servo applies; an implicit one (MuJoCo's implicitfast)
 //!   applies another, so efforts are for explicit-servo scenes.
 //! - **Search.** The command delay first, scanned over its range at the
-//!   untuned parameters (a gradient search from a delay far from the truth
-//!   can settle where a wrong delay and wrong damping make up for each
-//!   other); then Levenberg-Marquardt ([`crate::least_squares`]) on every
+//!   untuned parameters, about 10 values and then the two midpoints beside
+//!   the best (a gradient search from a delay far from the truth can
+//!   settle where a wrong delay and wrong damping make up for each other);
+//!   then Levenberg-Marquardt ([`crate::least_squares`]) on every
 //!   parameter, the delay included (a replay is continuous in the delay:
-//!   between two engine steps it blends them, [`realitygap_core::replay`]).
+//!   between two engine steps it blends them, [`realitygap_core::replay`]),
+//!   and the delay's profile at whole engine steps around the fit.
 //! - **Intervals.** Each fitted parameter's 95 % interval from the
 //!   Jacobian at the optimum (Gauss-Newton, with the residual count
 //!   reduced for their autocorrelation). The identifiability report names
@@ -900,6 +902,7 @@ pub fn tune_recordings(
     // gradient search from a delay far from the truth can settle where a
     // wrong delay and wrong damping make up for each other. A resumed tune
     // starts from its best point instead.
+    let mut start_residuals = None;
     if let Some(values) = &resumed {
         u = p
             .continuous
@@ -914,16 +917,37 @@ pub fn tune_recordings(
             .iter()
             .position(|&i| p.space.dims[i].key == DELAY_KEY)
             .ok_or_else(|| anyhow!("the delay is not a coordinate"))?;
+        // A coarse grid, then the midpoints beside its best value: the
+        // resolution of a grid twice as fine, for about half its replays.
         let grid = delay_grid(d, p.dt);
         p.set_phase(format!("the delay over {} values", grid.len()));
-        let costs = delay_costs(p, &u, c, &grid)?;
-        if let Some((best, _)) = grid
+        let mut scanned: Vec<(f64, Vec<f64>)> = grid
             .iter()
-            .zip(&costs)
-            .filter_map(|(g, k)| k.map(|k| (*g, k)))
-            .min_by(|a, b| a.1.total_cmp(&b.1))
-        {
-            u[c] = d.unit(best);
+            .zip(delay_residuals(p, &u, c, &grid)?)
+            .filter_map(|(g, r)| r.map(|r| (*g, r)))
+            .collect();
+        if let Some(i) = best_of(&scanned).and_then(|b| grid.iter().position(|g| *g == b.0)) {
+            let mid = |a: f64, b: f64| ((a + b) / 2.0 / p.dt).round() * p.dt;
+            let refine: Vec<f64> = [i.checked_sub(1), Some(i + 1).filter(|&j| j < grid.len())]
+                .into_iter()
+                .flatten()
+                .map(|j| mid(grid[i], grid[j]))
+                .filter(|x| !grid.iter().any(|g| (g - x).abs() < 1e-12))
+                .collect();
+            p.set_phase(format!(
+                "the delay, {} values beside the best",
+                refine.len()
+            ));
+            scanned.extend(
+                refine
+                    .iter()
+                    .zip(delay_residuals(p, &u, c, &refine)?)
+                    .filter_map(|(g, r)| r.map(|r| (*g, r))),
+            );
+        }
+        if let Some((best, r)) = best_of(&scanned) {
+            u[c] = d.unit(*best);
+            start_residuals = Some(r.clone());
         }
     }
     p.set_phase("Levenberg-Marquardt".into());
@@ -935,20 +959,30 @@ pub fn tune_recordings(
     // update the last one (Broyden); convergence is declared on one
     // computed at the optimum, which also gives the intervals. With the
     // delay's profile to follow, the first fit need not be certified: the
-    // last fit, from the profile's best point, is.
+    // last fit, from the profile's best point, is. A fit that ends within
+    // a tenth of a standard deviation of its last Jacobian's point (in
+    // every coordinate) is certified on that Jacobian: another one there
+    // would move no interval by more than that.
     let options = FitOptions {
         max_iterations: spec.max_iterations,
         jobs: spec.jobs,
         secant: true,
+        settle: 0.1,
+        series: joints,
         ..FitOptions::default()
     };
     let first_options = FitOptions {
         certify: p.delay.is_none(),
         ..options
     };
-    let fit = least_squares::levenberg_marquardt(&f, &u, first_options, &|phase, x, cost| {
-        p.record(phase, &p.values(x), cost)
-    })
+    let fit = least_squares::levenberg_marquardt_from(
+        &f,
+        &u,
+        start_residuals,
+        None,
+        first_options,
+        &|phase, x, cost| p.record(phase, &p.values(x), cost),
+    )
     .map_err(|m| anyhow!("the fit failed: {m}"))?;
     let mut iterations = fit.iterations;
     let mut reason = fit.reason.clone();
@@ -980,7 +1014,8 @@ pub fn tune_recordings(
         // unknown (computed by the fit that gets it).
         let drop_column = |j: &DMatrix<f64>| j.clone().remove_column(c);
         let add_column = |j: &DMatrix<f64>| j.clone().insert_column(c, f64::NAN);
-        type Point = (f64, Vec<f64>, Option<DMatrix<f64>>);
+        // A profile point: cost, coordinates, Jacobian, residuals.
+        type Point = (f64, Vec<f64>, Option<DMatrix<f64>>, Vec<f64>);
         let mut profile: Vec<(i64, Point)> = Vec::new();
         let mut at = |k: i64, from: &Point| -> Result<Option<Point>> {
             let delay = k as f64 * p.dt;
@@ -1002,6 +1037,7 @@ pub fn tune_recordings(
             let fk = least_squares::levenberg_marquardt_from(
                 &g,
                 &others(&from.1),
+                None,
                 from.2.clone(),
                 FitOptions {
                     max_iterations: 1,
@@ -1020,7 +1056,12 @@ pub fn tune_recordings(
             );
             match fk {
                 Ok(fk) => {
-                    let point = (fk.cost, insert(&fk.u, delay), fk.last_jacobian);
+                    let point = (
+                        fk.cost,
+                        insert(&fk.u, delay),
+                        fk.last_jacobian,
+                        fk.residuals,
+                    );
                     profile.push((k, point.clone()));
                     Ok(Some(point))
                 }
@@ -1032,6 +1073,7 @@ pub fn tune_recordings(
             f64::INFINITY,
             u.clone(),
             fit.last_jacobian.as_ref().map(drop_column),
+            Vec::new(),
         );
         let mut best = match at(centre, &first)? {
             Some(point) => (centre, point),
@@ -1055,15 +1097,17 @@ pub fn tune_recordings(
         }
         // The last fit, with the delay free again, from the best point:
         // the profile's, or the first fit's.
-        let (from, guess) = if best.1 .0 < fit.cost {
-            (best.1 .1.clone(), best.1 .2.as_ref().map(add_column))
+        let (from, residuals, guess) = if best.1 .0 < fit.cost {
+            let (_, from, j, r) = best.1;
+            (from, r, j.as_ref().map(add_column))
         } else {
-            (u.clone(), fit.last_jacobian.clone())
+            (u.clone(), fit.residuals.clone(), fit.last_jacobian.clone())
         };
         p.set_phase("Levenberg-Marquardt from the profile's best delay".into());
         let polished = least_squares::levenberg_marquardt_from(
             &f,
             &from,
+            Some(residuals),
             guess,
             options,
             &|phase, x, cost| p.record(phase, &p.values(x), cost),
@@ -1297,12 +1341,12 @@ fn best_of_history(path: &Path, header: &str, dims: usize) -> Option<Vec<f64>> {
         .map(|b| b.1)
 }
 
-/// The delays of the first scan: the range in about 20 steps, on the
+/// The delays of the first scan: the range in about 10 steps, on the
 /// engine-step grid.
 fn delay_grid(d: &Dim, dt: f64) -> Vec<f64> {
     let snap = |x: f64| (x / dt).round() * dt;
     let (lo, hi) = (snap(d.low).max(d.low), snap(d.high).min(d.high));
-    let step = snap(((hi - lo) / 20.0).max(dt)).max(dt);
+    let step = snap(((hi - lo) / 10.0).max(dt)).max(dt);
     let mut grid = Vec::new();
     let mut x = lo;
     while x <= hi + 1e-12 {
@@ -1313,16 +1357,18 @@ fn delay_grid(d: &Dim, dt: f64) -> Vec<f64> {
     grid
 }
 
-/// The training cost at `u` with coordinate `c` (the delay) at each of
-/// `grid`, in parallel; `None` where the replay failed.
-fn delay_costs(p: &Problem, u: &[f64], c: usize, grid: &[f64]) -> Result<Vec<Option<f64>>> {
+/// The training residuals at `u` with coordinate `c` (the delay) at each
+/// of `grid`, in parallel on the tune's threads; `None` where the replay
+/// failed.
+fn delay_residuals(
+    p: &Problem,
+    u: &[f64],
+    c: usize,
+    grid: &[f64],
+) -> Result<Vec<Option<Vec<f64>>>> {
     use rayon::prelude::*;
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(p.spec.jobs.max(1))
-        .build()
-        .context("starting the evaluation threads")?;
     let d = &p.space.dims[p.continuous[c]];
-    Ok(pool.install(|| {
+    Ok(p.pool.install(|| {
         grid.par_iter()
             .map(|&delay| {
                 let mut x = u.to_vec();
@@ -1332,7 +1378,7 @@ fn delay_costs(p: &Problem, u: &[f64], c: usize, grid: &[f64]) -> Result<Vec<Opt
                     Ok(r) => {
                         let cost: f64 = r.iter().map(|v| v * v).sum();
                         p.record("delay scan", &p.values(&x), cost);
-                        Some(cost)
+                        Some(r)
                     }
                     Err(_) => {
                         p.record("delay scan failed", &p.values(&x), f64::INFINITY);
@@ -1342,6 +1388,14 @@ fn delay_costs(p: &Problem, u: &[f64], c: usize, grid: &[f64]) -> Result<Vec<Opt
             })
             .collect()
     }))
+}
+
+/// The scanned delay with the lowest cost, and its residuals.
+fn best_of(scanned: &[(f64, Vec<f64>)]) -> Option<&(f64, Vec<f64>)> {
+    let cost = |r: &[f64]| -> f64 { r.iter().map(|v| v * v).sum() };
+    scanned
+        .iter()
+        .min_by(|a, b| cost(&a.1).total_cmp(&cost(&b.1)))
 }
 
 fn verdict(scores: &[SourceScores]) -> String {
@@ -1529,8 +1583,8 @@ mod tests {
             start: 0.0,
         };
         let grid = delay_grid(&d, 1e-3);
-        assert_eq!(grid.len(), 21);
-        assert!((grid[1] - 0.005).abs() < 1e-12);
+        assert_eq!(grid.len(), 11);
+        assert!((grid[1] - 0.01).abs() < 1e-12);
         for x in grid {
             assert!(((x / 1e-3).round() * 1e-3 - x).abs() < 1e-12);
         }
