@@ -504,7 +504,8 @@ fn broyden(j: &mut DMatrix<f64>, u1: &[f64], u0: &[f64], r1: &[f64], r0: &[f64])
     }
     let dr = DVector::from_iterator(r0.len(), r1.iter().zip(r0).map(|(a, b)| a - b));
     let miss = dr - &*j * &du;
-    *j += miss * du.transpose() / norm2;
+    // In place: no residuals-by-coordinates outer product is allocated.
+    j.ger(1.0 / norm2, &miss, &du, 1.0);
 }
 
 /// The spread of the fitted coordinates: their covariance in normalised
