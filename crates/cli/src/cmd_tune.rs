@@ -76,10 +76,13 @@ pub struct Args {
     /// Parallel evaluations (default: the number of cores).
     #[arg(long, short = 'j', value_name = "N")]
     pub jobs: Option<usize>,
-    /// Weight of the cube's final position error in the objective, per
+    /// Weight of the cube's final pose error in the objective, per
     /// compared step of its scene (1: a miss counts like a wrist error of
     /// the same size held through the scene; 0: the wrist alone, and the
     /// space's object and contact keys are then held at the scenes' values).
+    /// The pose error is the distance between the simulated and the real
+    /// cube's final positions plus the angle between their turns times
+    /// half the cube's edge.
     #[arg(long, default_value_t = realitygap_tune::objective::CUBE_WEIGHT_PER_STEP, value_name = "W")]
     pub cube_weight: f64,
     /// Keep the measurement's registration estimate instead of fitting the

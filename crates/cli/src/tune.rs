@@ -54,7 +54,8 @@ pub struct TuneRequest {
     pub seed: u64,
     /// Parallel evaluations (default: the number of cores).
     pub jobs: Option<usize>,
-    /// Weight of the cube's final position error.
+    /// Weight of the cube's final pose error (position, and turn times
+    /// half the cube's edge).
     pub cube_weight: f64,
     /// Keep the measurement's registration estimate.
     pub keep_registration: bool,

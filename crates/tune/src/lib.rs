@@ -180,6 +180,7 @@ impl Tuner<'_> {
             n.push(format!("{}_accumulated_m", s.name));
             if s.cube {
                 n.push(format!("{}_cube_final_m", s.name));
+                n.push(format!("{}_cube_turn_deg", s.name));
             }
         }
         n
@@ -192,6 +193,7 @@ impl Tuner<'_> {
             p.push(sc.map_or(f64::NAN, |x| x.accumulated_m));
             if s.cube {
                 p.push(sc.and_then(|x| x.cube_final_m).unwrap_or(f64::NAN));
+                p.push(sc.and_then(|x| x.cube_turn_deg).unwrap_or(f64::NAN));
             }
         }
         p

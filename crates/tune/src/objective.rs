@@ -3,11 +3,15 @@
 //! **Objective** (metres): the accumulated wrist error of every scene of
 //! the study against the real arm's mean over the training runs (the
 //! measure `compare` reports), summed over the scenes, plus, in every
-//! scene with a cube, the distance between the simulated and the real
-//! cube's final positions times the scene's compared steps
-//! ([`CUBE_WEIGHT_PER_STEP`] = 1 per step by default, so a 0.05 m miss of
-//! the cube counts like a 0.05 m wrist error held through the whole scene;
-//! `tune --cube-weight` changes it). The
+//! scene with a cube, the cube's final pose error times the scene's
+//! compared steps ([`CUBE_WEIGHT_PER_STEP`] = 1 per step by default, so a
+//! 0.05 m miss of the cube counts like a 0.05 m wrist error held through
+//! the whole scene; `tune --cube-weight` changes it). The pose error is
+//! the distance between the simulated and the real cube's final positions
+//! plus how far the difference of their turns moves the cube's face
+//! centres (the angle between the two rotations from the start, in
+//! radians, times half the cube's longest edge): a cube pushed to the
+//! right place but tipped over is not a right push. The
 //! real runs are aligned and registered exactly as `compare` does; the
 //! registration of a candidate is its own (the measurement's estimate,
 //! moved by the candidate's registration offset when the space fits it).
@@ -34,7 +38,7 @@ use realitygap_study::{LoadedScene, Roots, Study};
 use serde::Serialize;
 use std::path::PathBuf;
 
-/// The default weight of a cube's final position error, per compared step
+/// The default weight of a cube's final pose error, per compared step
 /// of its scene.
 pub const CUBE_WEIGHT_PER_STEP: f64 = 1.0;
 
@@ -56,9 +60,12 @@ pub struct TargetScene {
     pub steps: usize,
     /// True when the scene has a cube (its final position is measured).
     pub cube: bool,
-    /// The weight of the cube's final position error in the objective
-    /// (m per m; 0 without a cube).
+    /// The weight of the cube's final pose error in the objective (m per
+    /// m; 0 without a cube).
     pub cube_weight: f64,
+    /// The lever of the cube's turn error: half the longest edge of the
+    /// tracked cube (0 when the scene's cube is not a box it knows).
+    pub cube_lever_m: f64,
 }
 
 /// The real arm a tune fits: the study's scenes with their real runs.
@@ -75,7 +82,7 @@ pub struct Target {
     pub base_registration: Registration,
     /// The control period, s.
     pub period_s: f64,
-    /// The weight of a cube's final position error per compared step.
+    /// The weight of a cube's final pose error per compared step.
     pub cube_weight_per_step: f64,
     /// The training runs selected and aligned once: every candidate is
     /// scored against the same real runs.
@@ -92,6 +99,10 @@ pub struct SceneScore {
     /// Distance between the simulated and the real cube's final
     /// positions, metres (scenes with a cube).
     pub cube_final_m: Option<f64>,
+    /// Angle between the simulated and the real cube's rotations from
+    /// their starts, degrees (scenes with a cube).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cube_turn_deg: Option<f64>,
 }
 
 /// A candidate's objective.
@@ -169,6 +180,11 @@ impl Target {
                     scene_file.display()
                 );
             }
+            let cube_lever_m = if s.cube.is_some() {
+                cube_lever(&scene_file)?
+            } else {
+                0.0
+            };
             scenes.push(TargetScene {
                 name: s.name.clone(),
                 scene_file,
@@ -179,6 +195,7 @@ impl Target {
                 } else {
                     0.0
                 },
+                cube_lever_m,
             });
         }
         let loaded = study.load(roots)?;
@@ -339,7 +356,7 @@ impl Target {
     /// `registration`, on the training runs: the square root of each
     /// compared step's wrist distance (0 where a step is not compared),
     /// then, per scene with a cube, the square root of its weighted final
-    /// position error. Their squares sum to [`Target::score`]'s objective.
+    /// pose error. Their squares sum to [`Target::score`]'s objective.
     pub fn residuals(
         &self,
         trajectories: Vec<Trajectory>,
@@ -351,7 +368,7 @@ impl Target {
     /// The errors of one simulated trajectory per scene, registered by
     /// `registration`, on the training runs: each compared step's wrist
     /// error (the simulated mean minus the reference's), then, per scene
-    /// with a cube, its weighted final position error.
+    /// with a cube, its weighted final pose error.
     pub fn errors(
         &self,
         trajectories: Vec<Trajectory>,
@@ -379,7 +396,9 @@ impl Target {
             }));
             if let Some(sc) = score.scenes.iter().find(|x| x.scene == s.name) {
                 if let Some(c) = sc.cube_final_m {
-                    out.cube.push((s.cube_weight * c).max(0.0));
+                    let turn = sc.cube_turn_deg.unwrap_or(0.0).to_radians();
+                    out.cube
+                        .push((s.cube_weight * (c + s.cube_lever_m * turn)).max(0.0));
                 }
             }
         }
@@ -394,7 +413,7 @@ pub struct Errors {
     /// Per compared step of every scene, the wrist error (metres); `None`
     /// where a step is not compared.
     pub wrist: Vec<Option<[f64; 3]>>,
-    /// Per scene with a cube, its weighted final position error.
+    /// Per scene with a cube, its weighted final pose error.
     pub cube: Vec<f64>,
 }
 
@@ -458,6 +477,34 @@ fn norm(e: &[f64; 3]) -> f64 {
     (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt()
 }
 
+/// The angle, degrees, between two rotations of a cube from its start,
+/// each given as its change of roll, pitch and yaw (degrees; the study's
+/// cube starts level, so these are its end orientation's angles).
+pub fn turn_between_deg(a: [f64; 3], b: [f64; 3]) -> f64 {
+    let q =
+        |r: [f64; 3]| Quat::from_euler_rpy(r[0].to_radians(), r[1].to_radians(), r[2].to_radians());
+    q(a).angle_to(q(b)).to_degrees()
+}
+
+/// Half the longest edge of the box a scene tracks as its cube (the
+/// `[[track]]` with role `cube`): the lever of the cube's turn error. 0
+/// when the scene tracks no such box.
+fn cube_lever(scene_file: &std::path::Path) -> Result<f64> {
+    use realitygap_core::scene::{ObjectShape, Scene, TrackTarget};
+    let scene = Scene::from_file(scene_file)
+        .with_context(|| format!("reading scene {}", scene_file.display()))?;
+    let name = scene.tracked.iter().find_map(|t| match &t.target {
+        TrackTarget::Object(o) if t.role == "cube" => Some(o.clone()),
+        _ => None,
+    });
+    Ok(name
+        .and_then(|n| scene.objects.iter().find(|o| o.name == n))
+        .map(|o| match o.shape {
+            ObjectShape::Box { size_m } => size_m.x.max(size_m.y).max(size_m.z) / 2.0,
+        })
+        .unwrap_or(0.0))
+}
+
 /// The objective from the reports of one source per scene.
 pub fn score_of(reports: &[SceneReport], scenes: &[TargetScene]) -> Score {
     let mut out = Vec::new();
@@ -484,12 +531,15 @@ pub fn score_of(reports: &[SceneReport], scenes: &[TargetScene]) -> Score {
             ));
         };
         total += acc;
+        let mut cube_turn_deg = None;
         let cube_final_m = if s.cube {
             match (&src.cube, &r.reference.cube) {
                 (Some(c), Some(rc)) => {
                     let d = Vec3::from_array(c.final_position_m)
                         .distance(Vec3::from_array(rc.final_position_m));
-                    total += s.cube_weight * d;
+                    let turn = turn_between_deg(c.rpy_change_deg, rc.rpy_change_deg);
+                    total += s.cube_weight * (d + s.cube_lever_m * turn.to_radians());
+                    cube_turn_deg = Some(turn);
                     Some(d)
                 }
                 _ => return Score::failed(format!("scene {}: the cube was not measured", s.name)),
@@ -501,6 +551,7 @@ pub fn score_of(reports: &[SceneReport], scenes: &[TargetScene]) -> Score {
             scene: s.name.clone(),
             accumulated_m: acc,
             cube_final_m,
+            cube_turn_deg,
         });
     }
     Score {
@@ -599,5 +650,34 @@ impl Simulator {
             allow_unstable: false,
             replay: None,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::Path;
+
+    #[test]
+    fn the_turn_between_two_cube_rotations_is_their_geodesic_angle() {
+        assert_eq!(turn_between_deg([0.0; 3], [0.0; 3]), 0.0);
+        // A yaw of 24.6 degrees against a level, unturned cube.
+        assert!((turn_between_deg([0.0, 0.0, 24.6], [0.0; 3]) - 24.6).abs() < 1e-9);
+        // The same turn either way, and across the wrap at 180 degrees.
+        assert!((turn_between_deg([0.0, 0.0, 179.0], [0.0, 0.0, -179.0]) - 2.0).abs() < 1e-9);
+        // A cube tipped on its side (90 degrees of roll) against one that
+        // turned 90 degrees about the vertical: 120 degrees apart.
+        assert!((turn_between_deg([90.0, 0.0, 0.0], [0.0, 0.0, 90.0]) - 120.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn the_cube_lever_is_half_the_tracked_box_longest_edge() {
+        let scenes = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/scenes");
+        let lever = cube_lever(&scenes.join("scene3_cube_push.toml")).unwrap();
+        assert!((lever - 0.0375).abs() < 1e-12, "{lever}");
+        // A scene without a tracked cube: no lever.
+        assert_eq!(cube_lever(&scenes.join("iiwa_reach.toml")).unwrap(), 0.0);
+        let e = cube_lever(&scenes.join("no_such_scene.toml")).unwrap_err();
+        assert!(format!("{e:#}").contains("no_such_scene.toml"), "{e:#}");
     }
 }

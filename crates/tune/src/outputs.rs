@@ -169,7 +169,8 @@ pub struct SceneComparison {
     pub untuned: Option<Scored>,
     /// The tuned engine's.
     pub tuned: Option<Scored>,
-    /// The cube's final position error, untuned and tuned, metres.
+    /// The cube's final position error (distance), untuned and tuned,
+    /// metres.
     pub cube_final_m: Option<[Option<f64>; 2]>,
     /// The cube's final displacement (m) and largest rotation change
     /// (degrees): real, untuned, tuned.
@@ -991,7 +992,7 @@ fn objective_text(tuner: &Tuner<'_>) -> String {
         .filter(|s| s.cube)
         .map(|s| {
             format!(
-                "{} x the cube's final position error in {}",
+                "{} x the cube's final pose error in {} (the distance between the final positions plus the turn between the final rotations times half the cube's edge)",
                 s.cube_weight, s.name
             )
         })

@@ -4,7 +4,8 @@
 //!
 //! - **Residuals.** The objective is the accumulated wrist error, a sum of
 //!   per-step distances `d_k = |e_k| >= 0` (`e_k` the wrist error), plus
-//!   `w * c` for a cube's final position error `c`. The polish minimises
+//!   `w * c` for a cube's final pose error `c` (position, and turn times
+//!   half the cube's edge). The polish minimises
 //!   it by iteratively reweighted least squares: each pass fixes weights
 //!   `1 / sqrt(max(d_k, floor))` at its start and runs
 //!   Levenberg-Marquardt ([`crate::least_squares`]) on the weighted error
