@@ -675,16 +675,24 @@ mod tests {
         4.0 * u[0] * (-(2.0 * u[1]) * t).exp() + u[2] - 0.5
     }
 
-    #[test]
-    fn fits_a_curve_and_its_intervals_cover_the_truth() {
-        let truth = [0.6, 0.35, 0.7];
-        let mut noise = realitygap_core::controller::SplitMix64::new(3);
-        let data: Vec<(f64, f64)> = (0..200)
+    /// The curve's true coordinates.
+    const TRUTH: [f64; 3] = [0.6, 0.35, 0.7];
+
+    /// 200 samples of the curve at `TRUTH` over 4 s, with uniform reading
+    /// noise of 0.01 (seeded).
+    fn noisy_curve(seed: u64) -> Vec<(f64, f64)> {
+        let mut noise = realitygap_core::controller::SplitMix64::new(seed);
+        (0..200)
             .map(|i| {
                 let t = i as f64 * 0.02;
-                (t, model(&truth, t) + 0.01 * (noise.uniform() - 0.5))
+                (t, model(&TRUTH, t) + 0.01 * (noise.uniform() - 0.5))
             })
-            .collect();
+            .collect()
+    }
+
+    #[test]
+    fn fits_a_curve_and_its_intervals_cover_the_truth() {
+        let data = noisy_curve(3);
         let f = |u: &[f64]| -> Result<Vec<f64>, String> {
             Ok(data.iter().map(|(t, y)| model(u, *t) - y).collect())
         };
@@ -702,7 +710,7 @@ mod tests {
         let r = f(&fit.u).unwrap();
         let j = jacobian(&f, &fit.u, &r, 1e-6, 1).unwrap();
         let s = spread(&j, &r, 1);
-        for (i, want) in truth.iter().enumerate() {
+        for (i, want) in TRUTH.iter().enumerate() {
             assert!(
                 (fit.u[i] - want).abs() < 3.0 * s.sd_u[i] + 1e-4,
                 "coordinate {i}: {} vs {want} (sd {})",
@@ -822,14 +830,7 @@ mod tests {
     /// known at the start save its evaluation.
     #[test]
     fn a_fit_ending_near_its_last_jacobian_is_certified_on_it() {
-        let truth = [0.6, 0.35, 0.7];
-        let mut noise = realitygap_core::controller::SplitMix64::new(5);
-        let data: Vec<(f64, f64)> = (0..200)
-            .map(|i| {
-                let t = i as f64 * 0.02;
-                (t, model(&truth, t) + 0.01 * (noise.uniform() - 0.5))
-            })
-            .collect();
+        let data = noisy_curve(5);
         let f = |u: &[f64]| -> Result<Vec<f64>, String> {
             Ok(data.iter().map(|(t, y)| model(u, *t) - y).collect())
         };
