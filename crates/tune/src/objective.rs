@@ -396,9 +396,8 @@ impl Target {
             }));
             if let Some(sc) = score.scenes.iter().find(|x| x.scene == s.name) {
                 if let Some(c) = sc.cube_final_m {
-                    let turn = sc.cube_turn_deg.unwrap_or(0.0).to_radians();
-                    out.cube
-                        .push((s.cube_weight * (c + s.cube_lever_m * turn)).max(0.0));
+                    let e = cube_pose_error_m(c, sc.cube_turn_deg.unwrap_or(0.0), s.cube_lever_m);
+                    out.cube.push((s.cube_weight * e).max(0.0));
                 }
             }
         }
@@ -486,6 +485,13 @@ pub fn turn_between_deg(a: [f64; 3], b: [f64; 3]) -> f64 {
     q(a).angle_to(q(b)).to_degrees()
 }
 
+/// The cube's final pose error, metres: the distance between the final
+/// positions plus the turn between the final rotations (degrees) at the
+/// lever `lever_m`.
+fn cube_pose_error_m(distance_m: f64, turn_deg: f64, lever_m: f64) -> f64 {
+    distance_m + lever_m * turn_deg.to_radians()
+}
+
 /// Half the longest edge of the box a scene tracks as its cube (the
 /// `[[track]]` with role `cube`): the lever of the cube's turn error. 0
 /// when the scene tracks no such box.
@@ -538,7 +544,7 @@ pub fn score_of(reports: &[SceneReport], scenes: &[TargetScene]) -> Score {
                     let d = Vec3::from_array(c.final_position_m)
                         .distance(Vec3::from_array(rc.final_position_m));
                     let turn = turn_between_deg(c.rpy_change_deg, rc.rpy_change_deg);
-                    total += s.cube_weight * (d + s.cube_lever_m * turn.to_radians());
+                    total += s.cube_weight * cube_pose_error_m(d, turn, s.cube_lever_m);
                     cube_turn_deg = Some(turn);
                     Some(d)
                 }
