@@ -10,8 +10,8 @@
 #
 # Needs the release binary (`cargo build --release`); REALITYGAP overrides
 # its path. Budget: BUDGET (default 40) evaluations for the search and as
-# many for the polish; SEED (default 1) the search's seed. Prints the table
-# and writes OUT/table.md.
+# many for the polish; SEED (default 1) the search's seed; RESTARTS=1 runs
+# `tune --restarts`. Prints the table and writes OUT/table.md.
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
 root="$(cd "$here/../.." && pwd)"
@@ -25,6 +25,8 @@ export REALITYGAP_ASSETS="${REALITYGAP_ASSETS:-$root/assets}"
 scene="$root/assets/scenes/scene1_single_joint.toml"
 budget="${BUDGET:-40}"
 seed="${SEED:-1}"
+restarts=()
+[ "${RESTARTS:-0}" = 1 ] && restarts=(--restarts)
 
 # Engines whose servo has a gain (joints.<joint>.kv); the others' motors are
 # stiff velocity constraints, so only the actuator stage and delay are known.
@@ -67,7 +69,7 @@ dir = "runs/scene1_single_joint/$e"
 EOF
   start=$(date +%s.%N)
   "$bin" tune "$d/study.toml" --engine "$e" --space "$d/space.toml" --out "$d/tuned" \
-    --budget "$budget" --seed "$seed" --jobs 2 > "$d/tune.log" 2>&1 \
+    --budget "$budget" --seed "$seed" "${restarts[@]}" --jobs 2 > "$d/tune.log" 2>&1 \
     || { echo "$e: tune failed (see $d/tune.log)" >&2; continue; }
   echo "$(date +%s.%N) - $start" | bc > "$d/wall_s"
 done

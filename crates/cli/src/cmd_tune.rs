@@ -73,6 +73,14 @@ pub struct Args {
     /// Seed of the search.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Restart the search when it stalls before the budget is spent (its
+    /// best falls by less than the real runs' noise over CMA-ES's history
+    /// length, 10 + 30 n / lambda generations): from a random point of the
+    /// space with twice the population (IPOP-CMA-ES), until the budget is
+    /// spent. For an objective with more than one optimum; the polish
+    /// starts from the best point of all the runs
+    #[arg(long)]
+    pub restarts: bool,
     /// Parallel evaluations (default: the number of cores).
     #[arg(long, short = 'j', value_name = "N")]
     pub jobs: Option<usize>,
@@ -131,6 +139,7 @@ pub fn run(args: Args) -> Result<()> {
         holdout: args.holdout,
         budget: args.budget,
         seed: args.seed,
+        restarts: args.restarts,
         jobs: args.jobs,
         cube_weight: args.cube_weight,
         keep_registration: args.keep_registration,

@@ -52,6 +52,8 @@ pub struct TuneRequest {
     pub budget: usize,
     /// Seed of the search.
     pub seed: u64,
+    /// Restart a stalled search (IPOP-CMA-ES).
+    pub restarts: bool,
     /// Parallel evaluations (default: the number of cores).
     pub jobs: Option<usize>,
     /// Weight of the cube's final pose error (position, and turn times
@@ -91,6 +93,7 @@ impl Default for TuneRequest {
             holdout: None,
             budget: 600,
             seed: 1,
+            restarts: false,
             jobs: None,
             cube_weight: realitygap_tune::objective::CUBE_WEIGHT_PER_STEP,
             keep_registration: false,
@@ -204,6 +207,8 @@ pub fn tune(request: &TuneRequest, launcher: &Launcher, ui: &dyn Ui) -> Result<T
             budget: args.budget,
             seed: args.seed,
             jobs,
+            restarts: args.restarts,
+            stall_m: None,
         },
         out: args.out.clone(),
         polish: realitygap_tune::polish::PolishOptions {

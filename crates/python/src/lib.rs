@@ -579,8 +579,8 @@ fn replay<'py>(
 #[pyfunction]
 #[pyo3(signature = (*, engine, out, study=None, recordings=None, params=None, scene=None,
     efforts=false, iterations=None, data="builtin", space=None, runs=None, holdout=None,
-    budget=600, seed=1, jobs=None, cube_weight=None, keep_registration=false, settings=None,
-    set=Vec::new(), robot=None, packages=Vec::new(), reporter=None))]
+    budget=600, seed=1, restarts=false, jobs=None, cube_weight=None, keep_registration=false,
+    settings=None, set=Vec::new(), robot=None, packages=Vec::new(), reporter=None))]
 #[allow(clippy::too_many_arguments)]
 fn tune<'py>(
     py: Python<'py>,
@@ -598,6 +598,7 @@ fn tune<'py>(
     holdout: Option<String>,
     budget: usize,
     seed: u64,
+    restarts: bool,
     jobs: Option<usize>,
     cube_weight: Option<f64>,
     keep_registration: bool,
@@ -628,6 +629,7 @@ fn tune<'py>(
         holdout,
         budget,
         seed,
+        restarts,
         jobs,
         cube_weight: cube_weight.unwrap_or(defaults.cube_weight),
         keep_registration,

@@ -97,6 +97,9 @@ struct Resume {
     settings: Vec<(String, String)>,
     fit_registration: bool,
     seed: u64,
+    /// Absent from the files of tunes made before restarts existed.
+    #[serde(default)]
+    restarts: bool,
     train: Option<String>,
     holdout: Option<String>,
     cube_weight_per_step: f64,
@@ -253,6 +256,7 @@ fn resume_state(spec: &TuneSpec, target: &Target) -> Resume {
             .collect(),
         fit_registration: spec.fit_registration,
         seed: spec.search.seed,
+        restarts: spec.search.restarts,
         train: target.train.runs.as_ref().map(|r| r.text.clone()),
         holdout: target.holdout.as_ref().map(|r| r.text.clone()),
         cube_weight_per_step: target.cube_weight_per_step,
@@ -362,10 +366,15 @@ pub fn fit(
             ..spec.space.clone()
         }
     };
+    // The objective's own noise tells a stalled search (with restarts).
+    let options = search::SearchOptions {
+        stall_m: before.as_ref().and_then(|r| r.noise_m),
+        ..spec.search
+    };
     let end = search(
         &space,
         &mut history,
-        spec.search,
+        options,
         &|u| tuner.evaluate(u),
         &|u| tuner.values(u),
         progress,

@@ -82,6 +82,40 @@ pub struct SearchOptions {
     pub seed: u64,
     /// Parallel evaluations.
     pub jobs: usize,
+    /// Restart a search that has stalled (or that CMA-ES itself ended)
+    /// before the budget is spent, from a random point with twice the
+    /// population (IPOP-CMA-ES), until the budget is spent.
+    pub restarts: bool,
+    /// The objective's own noise (metres), when known: a search whose best
+    /// has improved by less over [`stall_window`] generations has stalled.
+    /// Without it, a thousandth of the best.
+    pub stall_m: Option<f64>,
+}
+
+/// The generations over which a search must improve by more than the
+/// noise not to have stalled: CMA-ES's own history length for its
+/// flat-fitness test, `10 + ceil(30 n / lambda)` for `n` coordinates and
+/// `lambda` candidates per generation.
+pub fn stall_window(n: usize, lambda: usize) -> usize {
+    10 + (30 * n).div_ceil(lambda.max(1))
+}
+
+/// CMA-ES's default population for `n` coordinates, `4 + floor(3 ln n)`.
+pub fn default_population(n: usize) -> usize {
+    4 + (3.0 * (n.max(1) as f64).ln()).floor() as usize
+}
+
+/// Whether a run whose best objective after each generation is `bests`
+/// has stalled: over the last [`stall_window`] generations it fell by
+/// less than `stall_m` (a thousandth of the best without it).
+pub fn stalled(bests: &[f64], window: usize, stall_m: Option<f64>) -> bool {
+    if bests.len() <= window {
+        return false;
+    }
+    let now = bests[bests.len() - 1];
+    let then = bests[bests.len() - 1 - window];
+    let tolerance = stall_m.unwrap_or(1e-3 * now.abs());
+    then - now < tolerance
 }
 
 /// Progress of a search, reported after every evaluation.
@@ -389,28 +423,82 @@ pub fn search(
         });
         objective
     };
-    let mut cma = CMAESOptions::new(space.start_unit(), SIGMA0)
-        .seed(options.seed)
-        .max_function_evals(options.budget.max(1))
-        .build(objective)
-        .map_err(|e| anyhow::anyhow!("CMA-ES rejected its options: {e:?}"))?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(options.jobs.max(1))
         .build()
         .context("starting the evaluation threads")?;
+    let n = space.start_unit().len();
+    let budget = options.budget.max(1);
     let mut all: Vec<Evaluation> = Vec::new();
+    // Runs of CMA-ES: one, or with restarts as many as the budget allows.
+    let mut run = 0u32;
+    let mut spent = 0usize;
+    let mut first_generation = 0usize;
+    let mut restarted: Vec<String> = Vec::new();
     let reason = loop {
-        generation.store(cma.generation(), Ordering::SeqCst);
-        let end = pool.install(|| cma.next_parallel());
-        // An interrupted generation is not recorded: its evaluations were
-        // cut short; the finished generations stay in the history.
-        realitygap_runner::interrupt::check()?;
-        let gen = generation.load(Ordering::SeqCst);
-        let new = std::mem::take(&mut *fresh.lock().unwrap_or_else(|p| p.into_inner()));
-        record_generation(history, gen, new, &mut all)?;
-        if let Some(t) = end {
-            break stop_reason(&t.reasons, options.budget);
+        let lambda = default_population(n) << run;
+        let start = if run == 0 {
+            space.start_unit()
+        } else {
+            // A point drawn uniformly in the space, from the seed and the
+            // run, so that a resumed search restarts where it did.
+            let mut rng = realitygap_core::controller::SplitMix64::new(
+                options.seed ^ u64::from(run).wrapping_mul(0x9E37_79B9_7F4A_7C15),
+            );
+            (0..n).map(|_| rng.uniform()).collect()
+        };
+        let mut cma = CMAESOptions::new(start, SIGMA0)
+            .seed(options.seed.wrapping_add(u64::from(run)))
+            .population_size(lambda)
+            .max_function_evals(budget - spent)
+            .build(&objective)
+            .map_err(|e| anyhow::anyhow!("CMA-ES rejected its options: {e:?}"))?;
+        let window = stall_window(n, lambda);
+        let mut bests: Vec<f64> = Vec::new();
+        let end = loop {
+            let gen = first_generation + cma.generation();
+            generation.store(gen, Ordering::SeqCst);
+            let end = pool.install(|| cma.next_parallel());
+            // An interrupted generation is not recorded: its evaluations were
+            // cut short; the finished generations stay in the history.
+            realitygap_runner::interrupt::check()?;
+            let new = std::mem::take(&mut *fresh.lock().unwrap_or_else(|p| p.into_inner()));
+            record_generation(history, gen, new, &mut all)?;
+            if let Some(t) = end {
+                break Some(t);
+            }
+            bests.push(
+                cma.overall_best_individual()
+                    .map_or(f64::INFINITY, |i| i.value),
+            );
+            if options.restarts && stalled(&bests, window, options.stall_m) {
+                break None;
+            }
+        };
+        spent += cma.function_evals();
+        first_generation += cma.generation();
+        let why = match &end {
+            Some(t) => stop_reason(&t.reasons, options.budget),
+            None => format!("stalled for {window} generations"),
+        };
+        let budget_spent = end.as_ref().is_some_and(|t| {
+            t.reasons
+                .iter()
+                .any(|r| matches!(r, TerminationReason::MaxFunctionEvals))
+        });
+        // Another run needs room for a few generations of its population.
+        if !options.restarts || budget_spent || budget - spent < 4 * (lambda * 2) {
+            break if restarted.is_empty() {
+                why
+            } else {
+                format!("{}; then {why}", restarted.join("; "))
+            };
         }
+        restarted.push(format!(
+            "run {} ({lambda} candidates a generation) {why}, restarted at evaluation {spent}",
+            run + 1
+        ));
+        run += 1;
     };
     all.sort_by_key(|e| e.index);
     Ok(SearchEnd {
@@ -472,6 +560,16 @@ mod tests {
     }
 
     fn run(dir: &Path, budget: usize, jobs: usize) -> SearchEnd {
+        run_on(dir, budget, jobs, false, &bowl)
+    }
+
+    fn run_on(
+        dir: &Path,
+        budget: usize,
+        jobs: usize,
+        restarts: bool,
+        f: &(dyn Fn(&[f64]) -> Outcome + Sync),
+    ) -> SearchEnd {
         let mut h = History::open(
             &dir.join("history.csv"),
             &["part_m".into()],
@@ -486,12 +584,78 @@ mod tests {
                 budget,
                 seed: 7,
                 jobs,
+                restarts,
+                stall_m: None,
             },
-            &bowl,
+            f,
             &values,
             &|_| {},
         )
         .unwrap()
+    }
+
+    /// Two optima: a wide basin around the start (its floor at 1) and a
+    /// narrower, deeper one in a corner (its floor at 0).
+    fn two_basins(u: &[f64]) -> Outcome {
+        let d2 = |c: [f64; 3]| u.iter().zip(c).map(|(a, b)| (a - b) * (a - b)).sum::<f64>();
+        let o = (1.0 + d2([0.55, 0.5, 0.45])).min(WIDTH * d2([0.1, 0.1, 0.9]));
+        Outcome {
+            objective: o,
+            parts: vec![o],
+            failed: None,
+        }
+    }
+    const WIDTH: f64 = 8.0;
+
+    #[test]
+    fn a_stall_is_a_best_that_fell_by_less_than_the_noise_over_the_window() {
+        let falling: Vec<f64> = (0..30).map(|g| 10.0 - g as f64).collect();
+        assert!(!stalled(&falling, 25, Some(0.5)));
+        assert!(
+            !stalled(&falling[..25], 25, Some(100.0)),
+            "too short to tell"
+        );
+        let flat: Vec<f64> = (0..30).map(|g| 1.0 + 0.001 / (g + 1) as f64).collect();
+        assert!(stalled(&flat, 25, Some(0.05)));
+        assert!(!stalled(&flat, 25, Some(1e-4)));
+        // Without the noise: a thousandth of the best.
+        assert!(stalled(&flat, 25, None));
+        assert_eq!(stall_window(4, 8), 25);
+        assert_eq!(default_population(4), 8);
+    }
+
+    #[test]
+    fn restarts_leave_a_local_optimum_and_resume_where_they_stopped() {
+        let a = tempfile::tempdir().unwrap();
+        let once = run_on(a.path(), 2000, 2, false, &two_basins);
+        assert!(once.best().unwrap().objective > 0.9, "{:?}", once.best());
+        let b = tempfile::tempdir().unwrap();
+        let again = run_on(b.path(), 2000, 2, true, &two_basins);
+        assert!(again.reason.contains("restarted"), "{}", again.reason);
+        assert!(again.best().unwrap().objective < 1e-3, "{:?}", again.best());
+        // Generations are numbered on across the runs.
+        let gens: Vec<usize> = again.history.iter().map(|e| e.generation).collect();
+        assert!(gens.windows(2).all(|w| w[1] == w[0] || w[1] == w[0] + 1));
+        // Cut after a restart, the search resumes to the same history.
+        let text = std::fs::read_to_string(b.path().join("history.csv")).unwrap();
+        let last = *gens.last().unwrap();
+        let kept: Vec<&str> = text
+            .lines()
+            .filter(|l| {
+                l.split(',')
+                    .nth(1)
+                    .and_then(|g| g.parse::<usize>().ok())
+                    .is_none_or(|g| g + 3 < last)
+            })
+            .collect();
+        let c = tempfile::tempdir().unwrap();
+        std::fs::write(c.path().join("history.csv"), kept.join("\n") + "\n").unwrap();
+        let resumed = run_on(c.path(), 2000, 1, true, &two_basins);
+        assert!(
+            same(&resumed.history, &again.history),
+            "the resumed search differs"
+        );
+        assert_eq!(resumed.reason, again.reason);
     }
 
     #[test]

@@ -688,6 +688,7 @@ def tune(
     recordings: Optional[PathLike] = None,
     budget: int = 600,
     seed: int = 1,
+    restarts: bool = False,
     runs: Optional[str] = None,
     holdout: Optional[str] = None,
     jobs: Optional[int] = None,
@@ -707,7 +708,8 @@ def tune(
 ) -> TuneResult:
     """Calibrates ``engine`` (``realitygap tune``) into ``out``: against a
     study's real runs (``study``, default the built-in study) with CMA-ES
-    over ``budget`` evaluations, then untuned against tuned on the
+    over ``budget`` evaluations (``restarts``: restart a stalled search
+    from a random point with twice the population), then untuned against tuned on the
     training and held-out runs with intervals; or against a robot's own
     recorded episodes (``recordings``: a results directory of ``realitygap
     import``; ``params``: known parameters, ``scene``, ``efforts``,
@@ -732,6 +734,7 @@ def tune(
         holdout=holdout,
         budget=budget,
         seed=seed,
+        restarts=restarts,
         jobs=jobs,
         cube_weight=cube_weight,
         keep_registration=keep_registration,

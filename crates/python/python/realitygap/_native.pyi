@@ -83,6 +83,7 @@ def tune(
     holdout: Optional[str] = None,
     budget: int = 600,
     seed: int = 1,
+    restarts: bool = False,
     jobs: Optional[int] = None,
     cube_weight: Optional[float] = None,
     keep_registration: bool = False,
