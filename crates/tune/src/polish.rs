@@ -34,7 +34,12 @@
 //!   with the residuals' autocorrelation counted
 //!   ([`crate::least_squares::spread`]) gives 1.96 standard deviations.
 //!   Both are local (a quadratic model at the optimum), clipped to the
-//!   bounds searched.
+//!   bounds searched. In a space of at most [`PROFILE_MAX_COORDINATES`]
+//!   coordinates, with the real runs' spread, each end is then profiled:
+//!   the parameter is held there, the others are refitted, and the end
+//!   moves to where the objective itself has risen by `T`
+//!   ([`profiled_ends`]), which follows a valley the quadratic model does
+//!   not.
 //! - **Identifiability.** The same Jacobian, at the start point before the
 //!   search and at the optimum after it, names the parameters whose effect
 //!   is below the noise (their interval spans the whole range) and the
@@ -687,11 +692,33 @@ pub fn polish(
         ),
     };
     report.interval_basis = basis;
+    // In a small space, with the real runs' noise, each end is profiled:
+    // the objective itself, the others refitted ([`profiled_ends`]).
+    let ends = match ident.noise_m {
+        Some(n) if n > 0.0 && gn > 0.0 && u.len() <= PROFILE_MAX_COORDINATES => {
+            note(format!(
+                "profiling the intervals' ends: {} coordinates",
+                u.len()
+            ));
+            let (ends, evaluations) =
+                profiled_ends(&t, &u, objective, 1.96 * n, k, &spread, fit_options);
+            report.evaluations += evaluations;
+            report.interval_basis.push_str(
+                "; each end profiled: where the objective, the other parameters refitted, has risen by that much",
+            );
+            ends
+        }
+        _ => vec![[None, None]; u.len()],
+    };
     for (c, key) in names.iter().enumerate() {
         let sd = spread.sd_u[c];
         let (interval, clipped) = if sd.is_finite() {
-            let (a, b) = (u[c] - k * sd, u[c] + k * sd);
-            let clipped = a < 0.0 || b > 1.0;
+            let (a, b) = (
+                ends[c][0].unwrap_or(u[c] - k * sd),
+                ends[c][1].unwrap_or(u[c] + k * sd),
+            );
+            // An end profiled all the way to a bound lies on it.
+            let clipped = a <= 1e-12 || b >= 1.0 - 1e-12;
             let at = |x: f64| {
                 let mut v = u.to_vec();
                 v[c] = x.clamp(0.0, 1.0);
@@ -726,6 +753,276 @@ pub fn polish(
     })
 }
 
+/// Spaces of at most this many coordinates get profiled intervals
+/// ([`profiled_ends`]); larger ones keep the local model's, as a profile
+/// costs a few refits per end.
+pub const PROFILE_MAX_COORDINATES: usize = 6;
+
+/// Trials per profiled end at most.
+const PROFILE_TRIALS: usize = 3;
+
+/// Levenberg-Marquardt iterations of each profile point's refit at most.
+const PROFILE_ITERATIONS: usize = 8;
+
+/// One end of an interval being profiled: the distance `h` (normalised
+/// units of its coordinate) from the optimum to try next, and the rises
+/// measured (infinite: the engine failed there).
+#[derive(Debug, Clone, PartialEq)]
+struct End {
+    h: f64,
+    /// The distance to the bound on this side.
+    room: f64,
+    /// (distance, rise) measured, in order.
+    points: Vec<(f64, f64)>,
+    done: bool,
+}
+
+impl End {
+    fn new(h: f64, room: f64) -> End {
+        End {
+            h: h.min(room),
+            room,
+            points: Vec::new(),
+            done: false,
+        }
+    }
+
+    /// The rise's power of the distance, from the last two finite
+    /// positive rises measured (2, a quadratic, with fewer), within 1 and
+    /// 3.
+    fn power(&self) -> f64 {
+        let ok: Vec<&(f64, f64)> = self
+            .points
+            .iter()
+            .filter(|(_, r)| r.is_finite() && *r > 0.0)
+            .collect();
+        match ok.as_slice() {
+            [.., (h1, r1), (h2, r2)] if (h2 / h1).ln().abs() > 1e-9 => {
+                ((r2 / r1).ln() / (h2 / h1).ln()).clamp(1.0, 3.0)
+            }
+            _ => 2.0,
+        }
+    }
+
+    /// The farthest distance where the rise stayed within `t`, and the
+    /// nearest where it did not.
+    fn bracket(&self, t: f64) -> (Option<(f64, f64)>, Option<(f64, f64)>) {
+        let inside = self
+            .points
+            .iter()
+            .filter(|(_, r)| *r <= t)
+            .max_by(|a, b| a.0.total_cmp(&b.0))
+            .copied();
+        let outside = self
+            .points
+            .iter()
+            .filter(|(_, r)| *r > t)
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+            .copied();
+        (inside, outside)
+    }
+
+    /// Records the rise `rise` at the current distance for the threshold
+    /// `t`, and moves to the next distance to try: where the rise, as a
+    /// power of the distance ([`End::power`]), reaches `t`, within a
+    /// quarter and four times the distance, and inside what is bracketed.
+    fn record(&mut self, rise: f64, t: f64) {
+        let h = self.h;
+        self.points.push((h, rise));
+        if (rise <= t && h >= self.room) || (rise.is_finite() && (rise - t).abs() <= 0.1 * t) {
+            // Within the threshold all the way to the bound, or within 10 %
+            // of the threshold: no other point is needed.
+            self.done = true;
+            return;
+        }
+        let next = if !rise.is_finite() {
+            h / 2.0
+        } else if rise > 0.0 {
+            h * (t / rise).powf(1.0 / self.power())
+        } else {
+            4.0 * h
+        };
+        let mut next = next.clamp(h / 4.0, 4.0 * h).min(self.room);
+        if let (Some((a, _)), Some((b, _))) = self.bracket(t) {
+            if !(next > a && next < b) {
+                next = 0.5 * (a + b);
+            }
+        }
+        self.h = next;
+    }
+
+    /// The end's distance: between the farthest point inside and the
+    /// nearest outside, where the power law through them reaches `t`;
+    /// beyond the farthest point inside by the rise's power (never beyond
+    /// twice it), or short of the nearest outside the same way.
+    fn distance(&self, t: f64) -> f64 {
+        let p = self.power();
+        match self.bracket(t) {
+            (Some((a, ra)), Some((b, rb))) => {
+                if rb.is_finite() && ra > 0.0 {
+                    let q = ((rb / ra).ln() / (b / a).ln()).max(1e-9);
+                    (a * (t / ra).powf(1.0 / q)).clamp(a, b)
+                } else if rb.is_finite() {
+                    (b * (t / rb).powf(1.0 / p)).clamp(a, b)
+                } else {
+                    a
+                }
+            }
+            (Some((a, ra)), None) => {
+                if a >= self.room || ra <= 0.0 {
+                    a
+                } else {
+                    (a * (t / ra).powf(1.0 / p)).min(2.0 * a).min(self.room)
+                }
+            }
+            (None, Some((b, rb))) if rb.is_finite() => b * (t / rb).powf(1.0 / p),
+            (None, Some((b, _))) => b / 2.0,
+            (None, None) => self.h,
+        }
+    }
+}
+
+/// The objective's rise over `objective` at `x` with coordinate `c` held
+/// and the others refitted from `x` (one reweighted Levenberg-Marquardt
+/// pass of [`PROFILE_ITERATIONS`] iterations at most), infinite where the
+/// engine fails; and the evaluations made.
+fn profile_rise(
+    t: &Tuner<'_>,
+    x: &[f64],
+    c: usize,
+    objective: f64,
+    options: FitOptions,
+) -> (f64, usize) {
+    let Ok(start) = t.errors(x) else {
+        return (f64::INFINITY, 1);
+    };
+    let mut best = start.objective();
+    let others: Vec<usize> = (0..x.len()).filter(|&o| o != c).collect();
+    if others.is_empty() {
+        return (best - objective, 1);
+    }
+    let weights = start.weights(IRLS_FLOOR_M);
+    let full = |y: &[f64]| -> Vec<f64> {
+        let mut z = x.to_vec();
+        for (i, &o) in others.iter().enumerate() {
+            z[o] = y[i];
+        }
+        z
+    };
+    let count = Mutex::new(0usize);
+    let f = |y: &[f64]| {
+        *count.lock().unwrap_or_else(|e| e.into_inner()) += 1;
+        t.errors(&full(y)).map(|e| e.residuals(Some(&weights)))
+    };
+    let y0: Vec<f64> = others.iter().map(|&o| x[o]).collect();
+    let options = FitOptions {
+        max_iterations: PROFILE_ITERATIONS,
+        ..options
+    };
+    let mut evaluations = 1;
+    if let Ok(fit) = least_squares::levenberg_marquardt(&f, &y0, options, &|_, _, _| {}) {
+        evaluations += 1;
+        if let Ok(e) = t.errors(&full(&fit.u)) {
+            best = best.min(e.objective());
+        }
+    }
+    evaluations += count.into_inner().unwrap_or_else(|e| e.into_inner());
+    (best - objective, evaluations)
+}
+
+/// Profiles each interval's ends: coordinate `c` is held at a distance
+/// from the optimum `u` and the others refitted ([`profile_rise`]),
+/// starting where the local model refits them (`corr[o][c] sd_o / sd_c`
+/// per unit of `c`); the end is where the objective has risen by
+/// `threshold`. The model's end (`k sd_c`) is tried first, then where the
+/// rise, as a power of the distance, reaches the threshold
+/// ([`PROFILE_TRIALS`] at most). Returns each coordinate's ends in
+/// normalised units (`None`: no interval) and the evaluations made.
+fn profiled_ends(
+    t: &Tuner<'_>,
+    u: &[f64],
+    objective: f64,
+    threshold: f64,
+    k: f64,
+    spread: &least_squares::Spread,
+    options: FitOptions,
+) -> (Vec<[Option<f64>; 2]>, usize) {
+    use rayon::prelude::*;
+    let n = u.len();
+    let sd = &spread.sd_u;
+    let mut ends = vec![[None, None]; n];
+    // (coordinate, slot, side, the direction the others move in).
+    let mut tasks: Vec<(usize, usize, f64, Vec<f64>)> = Vec::new();
+    for c in 0..n {
+        let h = k * sd[c];
+        if !(h.is_finite() && h > 0.0) {
+            continue;
+        }
+        let w: Vec<f64> = (0..n)
+            .map(|o| {
+                let w = if o == c {
+                    1.0
+                } else {
+                    spread.correlation[o][c] * sd[o] / sd[c]
+                };
+                if w.is_finite() {
+                    w
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        for (slot, side) in [(0usize, -1.0f64), (1, 1.0)] {
+            let room = if side > 0.0 { 1.0 - u[c] } else { u[c] };
+            if room <= 0.0 {
+                ends[c][slot] = Some(u[c]);
+            } else {
+                tasks.push((c, slot, side, w.clone()));
+            }
+        }
+    }
+    // The ends are profiled side by side: `--jobs` at a time here, all at
+    // once on Slurm (so that their evaluations gather into arrays), each
+    // refit's Jacobian one column at a time.
+    let threads = if t.simulator.slurm.is_some() {
+        tasks.len()
+    } else {
+        t.spec.search.jobs
+    };
+    let options = FitOptions { jobs: 1, ..options };
+    let profiled: Vec<(f64, usize)> = least_squares::pool(threads).install(|| {
+        tasks
+            .par_iter()
+            .map(|(c, _, side, w)| {
+                let (c, side) = (*c, *side);
+                let room = if side > 0.0 { 1.0 - u[c] } else { u[c] };
+                let mut end = End::new(k * sd[c], room);
+                let mut evaluations = 0;
+                for _ in 0..PROFILE_TRIALS {
+                    if end.done {
+                        break;
+                    }
+                    let x: Vec<f64> = u
+                        .iter()
+                        .zip(w)
+                        .map(|(a, b)| (a + side * end.h * b).clamp(0.0, 1.0))
+                        .collect();
+                    let (rise, used) = profile_rise(t, &x, c, objective, options);
+                    evaluations += used;
+                    end.record(rise, threshold);
+                }
+                (u[c] + side * end.distance(threshold), evaluations)
+            })
+            .collect()
+    });
+    let mut evaluations = 0;
+    for ((c, slot, _, _), (at, used)) in tasks.iter().zip(profiled) {
+        ends[*c][*slot] = Some(at);
+        evaluations += used;
+    }
+    (ends, evaluations)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -738,6 +1035,52 @@ mod tests {
             scale,
             start: low,
         }
+    }
+
+    /// Profiles one end against `rise` (the objective's rise at a
+    /// distance) from the model's distance `h0`, as [`profiled_ends`] does.
+    fn profile(rise: &dyn Fn(f64) -> f64, h0: f64, room: f64, t: f64) -> (f64, usize) {
+        let mut end = End::new(h0, room);
+        let mut n = 0;
+        while n < PROFILE_TRIALS && !end.done {
+            end.record(rise(end.h), t);
+            n += 1;
+        }
+        (end.distance(t), n)
+    }
+
+    #[test]
+    fn a_profiled_end_is_where_the_rise_reaches_the_threshold() {
+        let t = 0.1;
+        // A quadratic rise reaching t at 0.2: from a model twice too wide
+        // or twice too narrow, the second point is the end.
+        let quad = |h: f64| t * (h / 0.2).powi(2);
+        for h0 in [0.4, 0.1] {
+            let (d, n) = profile(&quad, h0, 1.0, t);
+            assert!((d - 0.2).abs() < 1e-12, "{h0}: {d}");
+            assert_eq!(n, 2);
+        }
+        // The model right: one point.
+        assert_eq!(profile(&quad, 0.205, 1.0, t).1, 1);
+        // A rise linear in the distance (not the model's quadratic).
+        let v = |h: f64| t * h / 0.2;
+        for h0 in [0.1, 0.5] {
+            let (d, _) = profile(&v, h0, 1.0, t);
+            assert!((d - 0.2).abs() < 0.02, "{h0}: {d}");
+        }
+        // Flat to the bound: the end is the bound.
+        assert_eq!(profile(&|_| 0.0, 0.1, 0.3, t), (0.3, 2));
+        // Within the threshold at the bound after a rise: the bound.
+        assert_eq!(profile(&|h: f64| t * (h / 0.4).powi(2), 0.1, 0.3, t).0, 0.3);
+        // The engine fails beyond 0.15: the end stays before the failure.
+        let fails = |h: f64| {
+            if h > 0.15 {
+                f64::INFINITY
+            } else {
+                t * (h / 0.5).powi(2)
+            }
+        };
+        assert!(profile(&fails, 0.2, 1.0, t).0 <= 0.15);
     }
 
     #[test]
