@@ -38,7 +38,7 @@
 //!   coordinates, with the real runs' spread, each end is then profiled:
 //!   the parameter is held there, the others are refitted, and the end
 //!   moves to where the objective itself has risen by `T`
-//!   ([`profiled_ends`]), which follows a valley the quadratic model does
+//!   (`profiled_ends`), which follows a valley the quadratic model does
 //!   not.
 //! - **Identifiability.** The same Jacobian, at the start point before the
 //!   search and at the optimum after it, names the parameters whose effect
@@ -754,7 +754,7 @@ pub fn polish(
 }
 
 /// Spaces of at most this many coordinates get profiled intervals
-/// ([`profiled_ends`]); larger ones keep the local model's, as a profile
+/// (`profiled_ends`); larger ones keep the local model's, as a profile
 /// costs a few refits per end.
 pub const PROFILE_MAX_COORDINATES: usize = 6;
 
@@ -763,6 +763,10 @@ const PROFILE_TRIALS: usize = 3;
 
 /// Levenberg-Marquardt iterations of each profile point's refit at most.
 const PROFILE_ITERATIONS: usize = 8;
+
+/// A profiled point: its distance from the optimum and the objective's
+/// rise there.
+type Point = (f64, f64);
 
 /// One end of an interval being profiled: the distance `h` (normalised
 /// units of its coordinate) from the optimum to try next, and the rises
@@ -806,7 +810,7 @@ impl End {
 
     /// The farthest distance where the rise stayed within `t`, and the
     /// nearest where it did not.
-    fn bracket(&self, t: f64) -> (Option<(f64, f64)>, Option<(f64, f64)>) {
+    fn bracket(&self, t: f64) -> (Option<Point>, Option<Point>) {
         let inside = self
             .points
             .iter()
@@ -852,9 +856,10 @@ impl End {
     }
 
     /// The end's distance: between the farthest point inside and the
-    /// nearest outside, where the power law through them reaches `t`;
-    /// beyond the farthest point inside by the rise's power (never beyond
-    /// twice it), or short of the nearest outside the same way.
+    /// nearest outside, where the power law through them reaches `t`; the
+    /// farthest point inside when none was outside (no farther than what
+    /// was shown); short of the nearest outside by the rise's power when
+    /// none was inside.
     fn distance(&self, t: f64) -> f64 {
         let p = self.power();
         match self.bracket(t) {
@@ -868,13 +873,8 @@ impl End {
                     a
                 }
             }
-            (Some((a, ra)), None) => {
-                if a >= self.room || ra <= 0.0 {
-                    a
-                } else {
-                    (a * (t / ra).powf(1.0 / p)).min(2.0 * a).min(self.room)
-                }
-            }
+            // Nothing measured beyond: the end is no farther than shown.
+            (Some((a, _)), None) => a,
             (None, Some((b, rb))) if rb.is_finite() => b * (t / rb).powf(1.0 / p),
             (None, Some((b, _))) => b / 2.0,
             (None, None) => self.h,
