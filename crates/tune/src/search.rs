@@ -594,6 +594,24 @@ mod tests {
         .unwrap()
     }
 
+    /// Writes into `to` the history in `from` as a kill would leave it:
+    /// the header and the generations before `generation`. Returns the
+    /// rows kept.
+    fn cut_history(from: &Path, to: &Path, generation: usize) -> usize {
+        let text = std::fs::read_to_string(from.join("history.csv")).unwrap();
+        let kept: Vec<&str> = text
+            .lines()
+            .filter(|l| {
+                l.split(',')
+                    .nth(1)
+                    .and_then(|g| g.parse::<usize>().ok())
+                    .is_none_or(|g| g < generation)
+            })
+            .collect();
+        std::fs::write(to.join("history.csv"), kept.join("\n") + "\n").unwrap();
+        kept.len() - 1
+    }
+
     /// Two optima: a wide basin around the start (its floor at 1) and a
     /// narrower, deeper one in a corner (its floor at 0).
     fn two_basins(u: &[f64]) -> Outcome {
@@ -637,19 +655,9 @@ mod tests {
         let gens: Vec<usize> = again.history.iter().map(|e| e.generation).collect();
         assert!(gens.windows(2).all(|w| w[1] == w[0] || w[1] == w[0] + 1));
         // Cut after a restart, the search resumes to the same history.
-        let text = std::fs::read_to_string(b.path().join("history.csv")).unwrap();
         let last = *gens.last().unwrap();
-        let kept: Vec<&str> = text
-            .lines()
-            .filter(|l| {
-                l.split(',')
-                    .nth(1)
-                    .and_then(|g| g.parse::<usize>().ok())
-                    .is_none_or(|g| g + 3 < last)
-            })
-            .collect();
         let c = tempfile::tempdir().unwrap();
-        std::fs::write(c.path().join("history.csv"), kept.join("\n") + "\n").unwrap();
+        cut_history(b.path(), c.path(), last - 3);
         let resumed = run_on(c.path(), 2000, 1, true, &two_basins);
         assert!(
             same(&resumed.history, &again.history),
@@ -701,18 +709,9 @@ mod tests {
         // A kill after some generations leaves whole generations in the
         // file (each is appended at once); keep the first 5 of them.
         let text = std::fs::read_to_string(whole.path().join("history.csv")).unwrap();
-        let kept: Vec<&str> = text
-            .lines()
-            .filter(|l| {
-                l.split(',')
-                    .nth(1)
-                    .and_then(|g| g.parse::<usize>().ok())
-                    .is_none_or(|g| g < 5)
-            })
-            .collect();
-        std::fs::write(cut.path().join("history.csv"), kept.join("\n") + "\n").unwrap();
+        let kept = cut_history(whole.path(), cut.path(), 5);
         let resumed = run(cut.path(), 120, 1);
-        assert_eq!(resumed.replayed, kept.len() - 1);
+        assert_eq!(resumed.replayed, kept);
         assert!(resumed.replayed > 0);
         assert!(
             same(&resumed.history, &full.history),
