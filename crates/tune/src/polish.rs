@@ -951,8 +951,9 @@ fn profiled_ends(
     let n = u.len();
     let sd = &spread.sd_u;
     let mut ends = vec![[None, None]; n];
-    // (coordinate, slot, side, the direction the others move in).
-    let mut tasks: Vec<(usize, usize, f64, Vec<f64>)> = Vec::new();
+    // (coordinate, slot, side, the end at the model's distance, the
+    // direction the others move in).
+    let mut tasks: Vec<(usize, usize, f64, End, Vec<f64>)> = Vec::new();
     for c in 0..n {
         let h = k * sd[c];
         if !(h.is_finite() && h > 0.0) {
@@ -977,7 +978,7 @@ fn profiled_ends(
             if room <= 0.0 {
                 ends[c][slot] = Some(u[c]);
             } else {
-                tasks.push((c, slot, side, w.clone()));
+                tasks.push((c, slot, side, End::new(h, room), w.clone()));
             }
         }
     }
@@ -993,10 +994,8 @@ fn profiled_ends(
     let profiled: Vec<(f64, usize)> = least_squares::pool(threads).install(|| {
         tasks
             .par_iter()
-            .map(|(c, _, side, w)| {
-                let (c, side) = (*c, *side);
-                let room = if side > 0.0 { 1.0 - u[c] } else { u[c] };
-                let mut end = End::new(k * sd[c], room);
+            .map(|(c, _, side, end, w)| {
+                let (c, side, mut end) = (*c, *side, end.clone());
                 let mut evaluations = 0;
                 for _ in 0..PROFILE_TRIALS {
                     if end.done {
@@ -1016,7 +1015,7 @@ fn profiled_ends(
             .collect()
     });
     let mut evaluations = 0;
-    for ((c, slot, _, _), (at, used)) in tasks.iter().zip(profiled) {
+    for ((c, slot, _, _, _), (at, used)) in tasks.iter().zip(profiled) {
         ends[*c][*slot] = Some(at);
         evaluations += used;
     }
