@@ -884,8 +884,9 @@ impl End {
 
 /// The objective's rise over `objective` at `x` with coordinate `c` held
 /// and the others refitted from `x` (one reweighted Levenberg-Marquardt
-/// pass of [`PROFILE_ITERATIONS`] iterations at most), infinite where the
-/// engine fails; and the evaluations made.
+/// pass of [`PROFILE_ITERATIONS`] iterations at most): the lowest
+/// objective of any point the refit simulated, infinite where the engine
+/// fails at `x`; and the evaluations made.
 fn profile_rise(
     t: &Tuner<'_>,
     x: &[f64],
@@ -909,24 +910,30 @@ fn profile_rise(
         }
         z
     };
-    let count = Mutex::new(0usize);
+    // Every point the refit simulates holds `c` where the profile puts
+    // it, so the lowest objective among them all (the Jacobian's columns
+    // too) bounds the profile from above: the refit's end needs no
+    // simulation of its own.
+    let seen = Mutex::new((0usize, best));
     let f = |y: &[f64]| {
-        *count.lock().unwrap_or_else(|e| e.into_inner()) += 1;
-        t.errors(&full(y)).map(|e| e.residuals(Some(&weights)))
+        let e = t.errors(&full(y));
+        let mut seen = seen.lock().unwrap_or_else(|e| e.into_inner());
+        seen.0 += 1;
+        let e = e?;
+        seen.1 = seen.1.min(e.objective());
+        Ok(e.residuals(Some(&weights)))
     };
     let y0: Vec<f64> = others.iter().map(|&o| x[o]).collect();
     let options = FitOptions {
         max_iterations: PROFILE_ITERATIONS,
         ..options
     };
-    let mut evaluations = 1;
-    if let Ok(fit) = least_squares::levenberg_marquardt(&f, &y0, options, &|_, _, _| {}) {
-        evaluations += 1;
-        if let Ok(e) = t.errors(&full(&fit.u)) {
-            best = best.min(e.objective());
-        }
-    }
-    evaluations += count.into_inner().unwrap_or_else(|e| e.into_inner());
+    // The start's residuals are known: the refit does not simulate it again.
+    let r0 = Some(start.residuals(Some(&weights)));
+    let _ = least_squares::levenberg_marquardt_from(&f, &y0, r0, None, options, &|_, _, _| {});
+    let (count, lowest) = seen.into_inner().unwrap_or_else(|e| e.into_inner());
+    best = best.min(lowest);
+    let evaluations = 1 + count;
     (best - objective, evaluations)
 }
 
