@@ -366,9 +366,13 @@ pub fn fit(
             ..spec.space.clone()
         }
     };
-    // The objective's own noise tells a stalled search (with restarts).
+    // The objective's own noise tells a stalled search (with restarts),
+    // unless the caller gave one.
     let options = search::SearchOptions {
-        stall_m: before.as_ref().and_then(|r| r.noise_m),
+        stall_m: spec
+            .search
+            .stall_m
+            .or_else(|| before.as_ref().and_then(|r| r.noise_m)),
         ..spec.search
     };
     let end = search(

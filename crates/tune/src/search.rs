@@ -86,9 +86,10 @@ pub struct SearchOptions {
     /// before the budget is spent, from a random point with twice the
     /// population (IPOP-CMA-ES), until the budget is spent.
     pub restarts: bool,
-    /// The objective's own noise (metres), when known: a search whose best
-    /// has improved by less over [`stall_window`] generations has stalled.
-    /// Without it, a thousandth of the best.
+    /// The objective's own noise (metres): a search whose best has
+    /// improved by less over [`stall_window`] generations has stalled.
+    /// `None`: the real runs' noise when the tune's identifiability check
+    /// measured it (`fit` fills it in), else a thousandth of the best.
     pub stall_m: Option<f64>,
 }
 
