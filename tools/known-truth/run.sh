@@ -11,7 +11,8 @@
 # Needs the release binary (`cargo build --release`); REALITYGAP overrides
 # its path. Budget: BUDGET (default 40) evaluations for the search and as
 # many for the polish; SEED (default 1) the search's seed; RESTARTS=1 runs
-# `tune --restarts`. Prints the table and writes OUT/table.md.
+# `tune --restarts`; NOISE_SEED (default 0) the seed of the runs' offsets
+# and reading noise (`run --seed`). Prints the table and writes OUT/table.md.
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
 root="$(cd "$here/../.." && pwd)"
@@ -25,6 +26,7 @@ export REALITYGAP_ASSETS="${REALITYGAP_ASSETS:-$root/assets}"
 scene="$root/assets/scenes/scene1_single_joint.toml"
 budget="${BUDGET:-40}"
 seed="${SEED:-1}"
+noise_seed="${NOISE_SEED:-0}"
 restarts=()
 [ "${RESTARTS:-0}" = 1 ] && restarts=(--restarts)
 
@@ -53,7 +55,7 @@ for e in "${engines[@]}"; do
       echo '"joints.m1n6s300_joint_2.kv" = { low = 4.0, high = 400.0, scale = "log", start = 40.0 }'
     fi
   } > "$d/space.toml"
-  "$bin" run "$scene" --engine "$e" --params "$d/known.toml" --repeats 6 \
+  "$bin" run "$scene" --engine "$e" --params "$d/known.toml" --repeats 6 --seed "$noise_seed" \
     --perturb initial_offset_deg=0.3,sensor_noise_deg=0.05 --out "$d/runs" > "$d/run.log" 2>&1 \
     || { echo "$e: the known-truth runs failed (see $d/run.log)" >&2; continue; }
   cat > "$d/study.toml" <<EOF
