@@ -85,9 +85,11 @@ pub struct Args {
     #[arg(long, short = 'j', value_name = "N")]
     pub jobs: Option<usize>,
     /// Weight of the cube's final pose error in the objective, per
-    /// compared step of its scene (1: a miss counts like a wrist error of
-    /// the same size held through the scene; 0: the wrist alone, and the
-    /// space's object and contact keys are then held at the scenes' values).
+    /// compared step of its scene (0.1: a miss counts like a wrist error of
+    /// the same size held through a tenth of the scene, so 1 cm in the
+    /// study's scene 3 weighs about the real runs' noise; 0: the wrist
+    /// alone, and the space's object and contact keys are then held at the
+    /// scenes' values).
     /// The pose error is the distance between the simulated and the real
     /// cube's final positions plus the angle between their turns times
     /// half the cube's edge.
