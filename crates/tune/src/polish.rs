@@ -777,7 +777,7 @@ struct End {
     /// The distance to the bound on this side.
     room: f64,
     /// (distance, rise) measured, in order.
-    points: Vec<(f64, f64)>,
+    points: Vec<Point>,
     done: bool,
 }
 
@@ -795,7 +795,7 @@ impl End {
     /// positive rises measured (2, a quadratic, with fewer), within 1 and
     /// 3.
     fn power(&self) -> f64 {
-        let ok: Vec<&(f64, f64)> = self
+        let ok: Vec<&Point> = self
             .points
             .iter()
             .filter(|(_, r)| r.is_finite() && *r > 0.0)
@@ -897,10 +897,9 @@ fn profile_rise(
     let Ok(start) = t.errors(x) else {
         return (f64::INFINITY, 1);
     };
-    let mut best = start.objective();
     let others: Vec<usize> = (0..x.len()).filter(|&o| o != c).collect();
     if others.is_empty() {
-        return (best - objective, 1);
+        return (start.objective() - objective, 1);
     }
     let weights = start.weights(IRLS_FLOOR_M);
     let full = |y: &[f64]| -> Vec<f64> {
@@ -914,7 +913,7 @@ fn profile_rise(
     // it, so the lowest objective among them all (the Jacobian's columns
     // too) bounds the profile from above: the refit's end needs no
     // simulation of its own.
-    let seen = Mutex::new((0usize, best));
+    let seen = Mutex::new((0usize, start.objective()));
     let f = |y: &[f64]| {
         let e = t.errors(&full(y));
         let mut seen = seen.lock().unwrap_or_else(|e| e.into_inner());
@@ -932,9 +931,7 @@ fn profile_rise(
     let r0 = Some(start.residuals(Some(&weights)));
     let _ = least_squares::levenberg_marquardt_from(&f, &y0, r0, None, options, &|_, _, _| {});
     let (count, lowest) = seen.into_inner().unwrap_or_else(|e| e.into_inner());
-    best = best.min(lowest);
-    let evaluations = 1 + count;
-    (best - objective, evaluations)
+    (lowest - objective, 1 + count)
 }
 
 /// Profiles each interval's ends: coordinate `c` is held at a distance
