@@ -4,6 +4,7 @@
 //! error, as tests want.
 
 pub mod bench;
+pub mod fuzz;
 pub mod kit;
 
 use crate::controller::RunOutcome;

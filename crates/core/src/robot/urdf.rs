@@ -532,9 +532,15 @@ impl Ctx<'_> {
     }
 }
 
+/// The deepest nesting of elements read. A URDF nests 4 or 5 levels (its
+/// extensions a few more); the XML reader and deserializer behind urdf-rs
+/// recurse per level, and some thousands of levels overflow the stack.
+pub(crate) const MAX_XML_DEPTH: usize = 256;
+
 /// Checks that `xml` is well-formed XML (tags nest and close, attributes
-/// parse), returning the byte offset and a description of the first problem.
-/// urdf-rs reports such problems without a position.
+/// parse) and nests at most [`MAX_XML_DEPTH`] levels, returning the byte
+/// offset and a description of the first problem. urdf-rs reports such
+/// problems without a position.
 fn check_well_formed(xml: &str) -> Result<(), (usize, String)> {
     use quick_xml::events::Event;
     let mut reader = quick_xml::Reader::from_str(xml);
@@ -558,6 +564,12 @@ fn check_well_formed(xml: &str) -> Result<(), (usize, String)> {
                 check_attributes(&e)?;
                 if open.is_empty() {
                     roots += 1;
+                }
+                if open.len() >= MAX_XML_DEPTH {
+                    return Err((
+                        before,
+                        format!("elements nested more than {MAX_XML_DEPTH} levels deep"),
+                    ));
                 }
                 open.push((
                     String::from_utf8_lossy(e.name().as_ref()).into_owned(),
@@ -702,6 +714,42 @@ mod tests {
         assert_eq!(element_lines(xml, "joint", "a"), vec![6]);
         assert_eq!(element_lines(xml, "joint", "x"), Vec::<usize>::new());
         assert_eq!(element_lines(xml, "link", "a"), Vec::<usize>::new());
+    }
+
+    /// Found by the damage campaign (crates/core/tests/fuzz.rs): a URDF
+    /// element wrapped in 20 000 others overflowed urdf-rs' stack (an
+    /// abort). Deeper than MAX_XML_DEPTH is an error with the place; up to
+    /// it, urdf-rs reads the file on a test thread's stack.
+    #[test]
+    fn deep_nesting_is_an_error_not_a_stack_overflow() {
+        let nested = |depth: usize| {
+            format!(
+                "<robot name=\"r\">\n<link name=\"a\">\n{}{}</link>\n</robot>\n",
+                "<x>".repeat(depth),
+                "</x>".repeat(depth)
+            )
+        };
+        let resolver = PackageResolver::new();
+        let e = build(
+            &nested(20_000),
+            Path::new("deep.urdf"),
+            Path::new("."),
+            &resolver,
+        )
+        .unwrap_err()
+        .to_string();
+        assert_eq!(
+            e,
+            "deep.urdf:3:763: elements nested more than 256 levels deep",
+        );
+        let model = build(
+            &nested(MAX_XML_DEPTH - 2),
+            Path::new("deep.urdf"),
+            Path::new("."),
+            &resolver,
+        )
+        .unwrap();
+        assert_eq!(model.links.len(), 1);
     }
 
     #[test]
