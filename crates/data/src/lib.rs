@@ -29,9 +29,10 @@ pub use error::ImportError;
 pub use qualisys::QualisysOptions;
 pub use recorded::{QuatOrder, RecordedOptions};
 pub use runstore::{
-    discover, format_commands_csv, format_run_csv, parse_commands_csv, parse_run_csv, read_run_csv,
-    sanitize_run_id, validate_run_id, EngineInfo, Manifest, RunEntry, RunStatus, RunStore,
-    SourceKind, StoreError,
+    discover, format_commands_csv, format_run_csv, format_velocities_csv, parse_commands_csv,
+    parse_run_csv, parse_velocities_csv, read_run_csv, sanitize_run_id, validate_run_id, BodyTwist,
+    EngineInfo, Manifest, RunEntry, RunStatus, RunStore, RunVelocities, SourceKind, StoreError,
+    VelocityTrack,
 };
 
 use realitygap_core::Trajectory;

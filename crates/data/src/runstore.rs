@@ -6,6 +6,9 @@
 //!   runs/<run id>.csv    the run's trajectory
 //!   runs/<run id>.commands.csv   the joint commands it was driven by, at their
 //!                        own timestamps (runs of a joint recording only)
+//!   runs/<run id>.velocities.csv the bodies' recorded velocities (runs of a
+//!                        free object whose source records them, such as
+//!                        the ContactNets tosses)
 //! ```
 //!
 //! One directory holds one source (an engine, the real arm, a recorded
@@ -42,8 +45,12 @@ use std::path::{Path, PathBuf};
 
 mod commandcsv;
 mod runcsv;
+mod velocitycsv;
 pub use commandcsv::{format_commands_csv, parse_commands_csv};
 pub use runcsv::{format_run_csv, parse_run_csv, read_run_csv, run_columns};
+pub use velocitycsv::{
+    format_velocities_csv, parse_velocities_csv, BodyTwist, RunVelocities, VelocityTrack,
+};
 
 /// File name of the manifest in a results directory.
 pub const MANIFEST_FILE: &str = "manifest.json";
@@ -121,6 +128,11 @@ pub struct RunEntry {
     /// (`runs/<id>.commands.csv`), for a run driven by recorded commands.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub commands_file: Option<String>,
+    /// Path of the run's velocities file relative to the directory
+    /// (`runs/<id>.velocities.csv`), for a run whose bodies' velocities
+    /// were recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub velocities_file: Option<String>,
     /// Files the run was imported from (empty for simulated runs).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub origin: Vec<String>,
@@ -147,6 +159,7 @@ impl RunEntry {
             id: id.into(),
             file: String::new(),
             commands_file: None,
+            velocities_file: None,
             origin: Vec::new(),
             status: RunStatus::Ok,
             message: None,
@@ -393,17 +406,48 @@ impl RunStore {
     /// `entry.file` is set by the store.
     pub fn write_run(
         &mut self,
-        mut entry: RunEntry,
+        entry: RunEntry,
         trajectory: &Trajectory,
     ) -> Result<(), StoreError> {
+        self.write_run_with_velocities(entry, trajectory, &[])
+    }
+
+    /// Stores a run as [`RunStore::write_run`] does, with its bodies'
+    /// recorded velocities in `runs/<id>.velocities.csv` (each track's role
+    /// one of the trajectory's bodies, one entry per sample); no tracks
+    /// writes no velocities file (and removes one an earlier run left).
+    pub fn write_run_with_velocities(
+        &mut self,
+        mut entry: RunEntry,
+        trajectory: &Trajectory,
+        velocities: &[VelocityTrack],
+    ) -> Result<(), StoreError> {
         validate_run_id(&entry.id)?;
-        let text = format_run_csv(trajectory).map_err(|e| match e {
+        let with_id = |e: StoreError| match e {
             StoreError::InvalidTrajectory { message, .. } => StoreError::InvalidTrajectory {
                 id: entry.id.clone(),
                 message,
             },
             other => other,
-        })?;
+        };
+        let text = format_run_csv(trajectory).map_err(with_id)?;
+        if let Some(t) = velocities
+            .iter()
+            .find(|t| trajectory.body(&t.role).is_none())
+        {
+            return Err(with_id(StoreError::InvalidTrajectory {
+                id: String::new(),
+                message: format!(
+                    "velocities of body '{}', which the trajectory does not track",
+                    t.role
+                ),
+            }));
+        }
+        let velocity_text = if velocities.is_empty() {
+            None
+        } else {
+            Some(format_velocities_csv(&trajectory.time_s, velocities).map_err(with_id)?)
+        };
         entry.file = format!("{RUNS_DIR}/{}.csv", entry.id);
         let runs = self.dir.join(RUNS_DIR);
         fs::create_dir_all(&runs).map_err(io_err("create", &runs))?;
@@ -421,6 +465,17 @@ impl RunStore {
                 entry.commands_file = None;
             }
         }
+        let velocities_file = format!("{RUNS_DIR}/{}.velocities.csv", entry.id);
+        match velocity_text {
+            Some(v) => {
+                write_atomic(&self.dir.join(&velocities_file), v.as_bytes())?;
+                entry.velocities_file = Some(velocities_file);
+            }
+            None => {
+                remove_if_there(&self.dir.join(&velocities_file))?;
+                entry.velocities_file = None;
+            }
+        }
         write_atomic(&self.dir.join(&entry.file), text.as_bytes())?;
         self.upsert(entry);
         self.save_manifest()
@@ -433,7 +488,8 @@ impl RunStore {
         entry.status = RunStatus::Failed;
         entry.file = String::new();
         entry.commands_file = None;
-        for suffix in ["csv", "commands.csv"] {
+        entry.velocities_file = None;
+        for suffix in ["csv", "commands.csv", "velocities.csv"] {
             remove_if_there(
                 &self
                     .dir
@@ -443,6 +499,80 @@ impl RunStore {
         }
         self.upsert(entry);
         self.save_manifest()
+    }
+
+    /// The recorded velocities of run `id`'s bodies (empty when it has
+    /// none), checked against its trajectory: the same sample times, and
+    /// bodies it tracks.
+    pub fn read_run_velocities(&self, id: &str) -> Result<Vec<VelocityTrack>, StoreError> {
+        let entry = self.run(id).ok_or_else(|| StoreError::UnknownRun {
+            dir: self.dir.clone(),
+            id: id.to_string(),
+        })?;
+        let Some(file) = &entry.velocities_file else {
+            return Ok(Vec::new());
+        };
+        let path = self.inside(id, file)?;
+        let bytes = fs::read(&path).map_err(io_err("read", &path))?;
+        let velocities = parse_velocities_csv(&bytes, &path)?;
+        let trajectory = self.read_run(id)?;
+        if velocities.time_s.len() != trajectory.len() {
+            return Err(ImportError::new(
+                &path,
+                format!(
+                    "{} samples, but the run's trajectory has {}",
+                    velocities.time_s.len(),
+                    trajectory.len()
+                ),
+            )
+            .into());
+        }
+        if let Some(i) =
+            (0..trajectory.len()).find(|&i| velocities.time_s[i] != trajectory.time_s[i])
+        {
+            // Line i + 2: after the header, 1-based.
+            return Err(ImportError::at_line(
+                &path,
+                i + 2,
+                format!(
+                    "time {} s, but the run's sample {i} is at {} s",
+                    velocities.time_s[i], trajectory.time_s[i]
+                ),
+            )
+            .with_column(1)
+            .with_field("t_s")
+            .into());
+        }
+        if let Some(t) = velocities
+            .bodies
+            .iter()
+            .find(|t| trajectory.body(&t.role).is_none())
+        {
+            return Err(ImportError::new(
+                &path,
+                format!("body '{}' is not one of the run's tracked bodies", t.role),
+            )
+            .into());
+        }
+        Ok(velocities.bodies)
+    }
+
+    /// The path of a file named in run `id`'s entry, which must be inside
+    /// the directory.
+    fn inside(&self, id: &str, file: &str) -> Result<PathBuf, StoreError> {
+        let rel = Path::new(file);
+        if rel.is_absolute()
+            || rel
+                .components()
+                .any(|c| !matches!(c, std::path::Component::Normal(_)))
+        {
+            return Err(StoreError::NoTrajectory {
+                dir: self.dir.clone(),
+                id: id.to_string(),
+                message: format!("its file '{file}' is not a path inside the directory"),
+            });
+        }
+        Ok(self.dir.join(rel))
     }
 
     /// Reads the trajectory of run `id`.
@@ -462,19 +592,7 @@ impl RunStore {
                 entry.status
             )));
         }
-        let inside = |file: &str| {
-            let rel = Path::new(file);
-            if rel.is_absolute()
-                || rel
-                    .components()
-                    .any(|c| !matches!(c, std::path::Component::Normal(_)))
-            {
-                return Err(no(format!(
-                    "its file '{file}' is not a path inside the directory"
-                )));
-            }
-            Ok(self.dir.join(rel))
-        };
+        let inside = |file: &str| self.inside(id, file);
         let path = inside(&entry.file)?;
         let bytes = fs::read(&path).map_err(io_err("read", &path))?;
         let mut trajectory = parse_run_csv(&bytes, &path)?;

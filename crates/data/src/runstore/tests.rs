@@ -366,3 +366,89 @@ fn discover_finds_results_directories() {
     assert_eq!(discover(&root.join("a")), vec![root.join("a")]);
     assert!(discover(&root.join("missing")).is_empty());
 }
+
+#[test]
+fn store_keeps_velocities_beside_the_run() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("real");
+    let mut store = RunStore::create_or_open(&dir, "real", SourceKind::Real, None).unwrap();
+    let t = sample_trajectory();
+    let twist = |a: f64| {
+        Some(BodyTwist {
+            linear_m_s: Vec3::new(a, -1.0, 1.0 / 3.0),
+            angular_body_rad_s: Vec3::new(0.5, a, -2e-9),
+        })
+    };
+    let cube = VelocityTrack {
+        role: "cube".into(),
+        twists: vec![twist(1.0), twist(2.0), None, twist(-4.0)],
+    };
+    store
+        .write_run_with_velocities(RunEntry::new("7"), &t, std::slice::from_ref(&cube))
+        .unwrap();
+    assert_eq!(
+        store.run("7").unwrap().velocities_file.as_deref(),
+        Some("runs/7.velocities.csv")
+    );
+    // The run CSV is the one write_run writes: every reader reads it as before.
+    assert_eq!(
+        std::fs::read_to_string(dir.join("runs/7.csv")).unwrap(),
+        format_run_csv(&t).unwrap()
+    );
+    let reopened = RunStore::open(&dir).unwrap();
+    assert_eq!(reopened.read_run("7").unwrap(), t);
+    assert_eq!(
+        reopened.read_run_velocities("7").unwrap(),
+        vec![cube.clone()]
+    );
+
+    // Velocities that do not fit the trajectory are refused, naming the run.
+    let mut short = cube.clone();
+    short.twists.pop();
+    let e = store
+        .write_run_with_velocities(RunEntry::new("8"), &t, &[short])
+        .unwrap_err();
+    assert!(
+        e.to_string()
+            .starts_with("run '8': velocities of body 'cube' have 3 samples"),
+        "{e}"
+    );
+    let ghost = VelocityTrack {
+        role: "ball".into(),
+        ..cube.clone()
+    };
+    let e = store
+        .write_run_with_velocities(RunEntry::new("8"), &t, &[ghost])
+        .unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("'ball', which the trajectory does not track"),
+        "{e}"
+    );
+    assert!(store.run("8").is_none());
+
+    // A velocities file whose times are not the run's is a located error.
+    let path = dir.join("runs/7.velocities.csv");
+    let text = std::fs::read_to_string(&path).unwrap();
+    std::fs::write(&path, text.replacen("\n0.05,", "\n0.06,", 1)).unwrap();
+    let e = reopened.read_run_velocities("7").unwrap_err().to_string();
+    assert!(
+        e.ends_with(
+            "7.velocities.csv:3: column 1 (t_s): time 0.06 s, but the run's sample 1 is at 0.05 s"
+        ),
+        "{e}"
+    );
+
+    // Rewritten without velocities, or failed: no stale file.
+    store
+        .write_run_with_velocities(RunEntry::new("7"), &t, std::slice::from_ref(&cube))
+        .unwrap();
+    store.write_run(RunEntry::new("7"), &t).unwrap();
+    assert!(!path.exists());
+    assert_eq!(store.read_run_velocities("7").unwrap(), vec![]);
+    store
+        .write_run_with_velocities(RunEntry::new("7"), &t, std::slice::from_ref(&cube))
+        .unwrap();
+    store.record_failed_run(RunEntry::new("7")).unwrap();
+    assert!(!path.exists());
+}
