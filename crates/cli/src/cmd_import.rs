@@ -1,7 +1,8 @@
 //! `realitygap import`: bring real (Qualisys motion capture) and recorded
-//! simulator trajectories into a results directory, one run per file; and a
+//! simulator trajectories into a results directory, one run per file; a
 //! robot's own joint recordings (ROS 2 bags, CSV, LeRobot datasets), one run
-//! per episode.
+//! per episode; and the ContactNets cube tosses, one run of a free object
+//! per toss.
 
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand, ValueEnum};
@@ -41,6 +42,32 @@ pub enum ImportCommand {
     /// episode_index, observation.state as the joint positions and action
     /// as the commands.
     Lerobot(LerobotArgs),
+    /// The ContactNets cube tosses (Pfrommer, Halm, Posa, CoRL 2020; BSD
+    /// 3-Clause): a folder of N.pt files, PyTorch's legacy format, each a
+    /// 1 x T x 19 tensor. One real run of the cube per toss, its id the
+    /// toss's number: the pose in metres at t = k dt, and the linear (world
+    /// frame, m/s) and angular (body frame, rad/s) velocity in
+    /// runs/<id>.velocities.csv. Nothing is written unless every toss reads.
+    Contactnets(ContactnetsArgs),
+}
+
+/// Arguments of `import contactnets`.
+#[derive(Args)]
+pub struct ContactnetsArgs {
+    /// The folder of tosses: N.pt files (N the toss's number), and an
+    /// experiment.json if any; nothing else.
+    dir: PathBuf,
+    /// Results directory to create or add to.
+    #[arg(long)]
+    out: PathBuf,
+    /// The experiment's constants: dt (s), g (half-widths/s²), mass, mu,
+    /// restitution [default: DIR/experiment.json, else
+    /// DIR/../experiment.json, else the published values].
+    #[arg(long, value_name = "FILE")]
+    experiment: Option<PathBuf>,
+    /// Source name written into the manifest.
+    #[arg(long, default_value = "real")]
+    source: String,
 }
 
 /// The robot a joint recording is of, and where its runs go.
@@ -267,7 +294,53 @@ pub fn run(cmd: ImportCommand) -> Result<()> {
         ImportCommand::Rosbag(args) => import_rosbag(args),
         ImportCommand::Csv(args) => import_csv(args),
         ImportCommand::Lerobot(args) => import_lerobot(args),
+        ImportCommand::Contactnets(args) => import_contactnets(args),
     }
+}
+
+fn import_contactnets(args: ContactnetsArgs) -> Result<()> {
+    let started = std::time::Instant::now();
+    let imported = realitygap_contactnets::import(
+        &args.dir,
+        args.experiment.as_deref(),
+        &args.out,
+        &args.source,
+    )?;
+    let e = &imported.experiment;
+    println!(
+        "constants from {}: dt {:.6} s ({:.0} Hz), g {:.2} half-widths/s², so one half-width is {:.4} m and the cube's edge {:.4} m",
+        e.file
+            .as_ref()
+            .map_or("the published values".to_string(), |f| f.display().to_string()),
+        e.dt_s,
+        e.frequency_hz(),
+        e.g_half_widths_s2,
+        e.half_width_m(),
+        e.edge_m()
+    );
+    for w in &imported.warnings {
+        println!("warning: {w}");
+    }
+    let samples = imported.runs.iter().map(|r| r.1);
+    let (shortest, longest) = (
+        samples.clone().min().unwrap_or(0),
+        samples.max().unwrap_or(0),
+    );
+    println!(
+        "imported {} tosses ({shortest}-{longest} samples, {:.2}-{:.2} s) as real runs of the cube into {} (source '{}'{}) in {:.2} s",
+        imported.runs.len(),
+        shortest.saturating_sub(1) as f64 * e.dt_s,
+        longest.saturating_sub(1) as f64 * e.dt_s,
+        args.out.display(),
+        args.source,
+        if imported.replaced > 0 {
+            format!(", {} replaced", imported.replaced)
+        } else {
+            String::new()
+        },
+        started.elapsed().as_secs_f64()
+    );
+    Ok(())
 }
 
 /// The robot of a joint recording, and its moving joints' names.
