@@ -10,7 +10,7 @@ use realitygap_core::{CommandKind, RobotModel};
 use realitygap_data::qualisys::{self, QualisysOptions};
 use realitygap_data::recorded::{self, QuatOrder, RecordedOptions};
 use realitygap_data::{ImportError, SourceKind};
-use realitygap_recordings::csvfile::CsvOptions;
+use realitygap_recordings::csvfile::{parse_column_patterns, ColumnPattern, CsvOptions};
 use realitygap_recordings::rosbag::RosbagOptions;
 use realitygap_recordings::Recording;
 use realitygap_study::import::{import_files, ImportTarget};
@@ -33,10 +33,21 @@ pub enum ImportCommand {
     /// trajectory_msgs/msg/JointTrajectory). One run per bag, or per episode
     /// with --split-gap.
     Rosbag(RosbagArgs),
-    /// CSV joint recordings, one file per episode: a time column (time_s,
-    /// time, t, timestamp, __time) and columns named <joint>/position,
+    ///
+    /// Timestamps: a joint state's time is its header.stamp (the bag's log
+    /// time, when the recorder received it, only where the stamp is zero);
+    /// two joint states at one time are an error naming the message. A
+    /// JointTrajectory point's time is its header.stamp (or log time) plus
+    /// time_from_start; a Float64MultiArray has no stamp, so its log time is
+    /// used. Commands may share a time: the later one in the bag holds.
+    /// CSV joint recordings, one file per episode: a time column (a header
+    /// stamp; or time_s, t_s, time, t, timestamp, stamp, __time in seconds;
+    /// %time or *_ns in nanoseconds) and columns named <joint>/position,
     /// <joint>/velocity, <joint>/effort and <joint>/<kind>_command (any
-    /// prefix before the joint, as PlotJuggler exports a bag).
+    /// prefix before the joint, as PlotJuggler exports a bag), or a
+    /// JointState flattened as `rostopic echo -p` or `ros2 topic echo --csv`
+    /// write it; other names with --columns patterns. Two rows at one time
+    /// are an error naming the line.
     Csv(CsvArgs),
     /// A LeRobot dataset (v3, or v2 with the same columns): one run per
     /// episode_index, observation.state as the joint positions and action
@@ -126,7 +137,8 @@ pub struct RosbagArgs {
     #[command(flatten)]
     target: RobotTarget,
     /// The sensor_msgs/msg/JointState topic [default: the only one, else
-    /// /joint_states].
+    /// /joint_states]. Its times are the header stamps (log times where a
+    /// stamp is zero).
     #[arg(long, value_name = "TOPIC")]
     joint_states: Option<String>,
     /// The command topic [default: the only Float64MultiArray or
@@ -241,6 +253,13 @@ enum QuatOrderArg {
 pub struct RecordedArgs {
     /// The recorded files; each is one run, named after its file stem.
     #[arg(required = true)]
+    /// Columns named by a pattern, comma-separated PATTERN=FIELD entries
+    /// where {joint} stands for each joint's name and FIELD is position,
+    /// velocity, effort or <kind>_command; time=NAME names the time column.
+    /// E.g. 'q_{joint}_rad=position,qd_{joint}_rad_s=velocity,effort_{joint}_n_m=effort,cmd_q_{joint}_rad=position_command';
+    /// repeatable.
+    #[arg(long = "columns", value_name = "PATTERN=FIELD,...", value_parser = parse_patterns)]
+    patterns: Vec<Patterns>,
     files: Vec<PathBuf>,
     /// Name of the simulator that produced them (e.g. VRepODE).
     #[arg(long)]
@@ -248,6 +267,15 @@ pub struct RecordedArgs {
     /// Order of the quaternion numbers in each row.
     #[arg(long, value_enum)]
     quat_order: QuatOrderArg,
+/// The patterns of one `--columns` list.
+#[derive(Clone)]
+struct Patterns(Vec<ColumnPattern>);
+
+/// Parses a `--columns` list.
+fn parse_patterns(s: &str) -> Result<Patterns, String> {
+    parse_column_patterns(s).map(Patterns)
+}
+
     /// Results directory to create or add to.
     #[arg(long)]
     out: PathBuf,
@@ -591,6 +619,7 @@ fn import_recorded(args: RecordedArgs) -> Result<()> {
         bail!(
             "--control-period must be a positive number of seconds, not {}",
             args.control_period
+        patterns: args.patterns.iter().flat_map(|p| p.0.clone()).collect(),
         );
     }
     if !(args.norm_tolerance.is_finite() && args.norm_tolerance >= 0.0) {

@@ -113,6 +113,44 @@ pub(crate) fn check_time(
 }
 
 /// Seconds (finite) to nanoseconds, rounded; `None` beyond ±292 years.
+/// Checks that joint-state time `t_ns` read at `place` comes after
+/// `previous`: going back is an error ([`check_time`]), and so is a
+/// repeated time, since two samples 0 s apart are no motion a replay could
+/// follow (commands may repeat a time: the later one holds).
+pub(crate) fn check_state_time(
+    file: &Path,
+    place: &str,
+    previous: Option<i64>,
+    t_ns: i64,
+) -> Result<(), ImportError> {
+    check_time(file, place, previous, t_ns)?;
+    if previous == Some(t_ns) {
+        return Err(ImportError::new(
+            file,
+            format!(
+                "the timestamp {} s repeats the previous sample's: two joint states at one time",
+                ns_text(t_ns)
+            ),
+        )
+        .with_field(place));
+    }
+    Ok(())
+}
+
+/// Nanoseconds as seconds in decimal, exactly (`1700000000.495`, `-0.5`,
+/// `12`), for messages: a stamp since the epoch as f64 would print
+/// `1700000000.4950001`.
+pub(crate) fn ns_text(ns: i64) -> String {
+    let sign = if ns < 0 { "-" } else { "" };
+    let abs = ns.unsigned_abs();
+    let (s, frac) = (abs / 1_000_000_000, abs % 1_000_000_000);
+    if frac == 0 {
+        return format!("{sign}{s}");
+    }
+    let digits = format!("{frac:09}");
+    format!("{sign}{s}.{}", digits.trim_end_matches('0'))
+}
+
 pub(crate) fn seconds_to_ns(t_s: f64) -> Option<i64> {
     let ns = (t_s * NS_PER_S).round();
     (ns.is_finite() && ns.abs() < 9.2e18).then_some(ns as i64)

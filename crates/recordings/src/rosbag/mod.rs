@@ -3,8 +3,10 @@
 //!
 //! - **Joint states**: the `sensor_msgs/msg/JointState` topic (the only one,
 //!   else `/joint_states`, else `--joint-states`). Times are the messages'
-//!   header stamps (the bag's log time where a stamp is zero). Positions are
-//!   required; velocities and efforts are kept when every message has them.
+//!   header stamps (the bag's log time, when the recorder received the
+//!   message, only where a stamp is zero). Positions are required;
+//!   velocities and efforts are kept when every message has them. Two joint
+//!   states at one time are an error naming the message.
 //! - **Commands**: the one topic of type `std_msgs/msg/Float64MultiArray`
 //!   (a forward command controller's `~/commands`) or
 //!   `trajectory_msgs/msg/JointTrajectory`, else `--commands`. A
@@ -17,14 +19,15 @@
 //!   joints; each point is a command at header stamp (or log time) plus
 //!   `time_from_start`, of the kind of its first non-empty field (positions,
 //!   velocities, efforts); a new message replaces the points of earlier ones
-//!   from its first point on, as a trajectory controller does.
+//!   from its first point on, as a trajectory controller does. Commands may
+//!   share a time: the later one in the bag holds.
 //! - **Episodes**: one per bag, or split where the joint states stop for
 //!   more than `--split-gap` seconds.
 
 pub mod msgs;
 pub mod storage;
 
-use crate::recording::{check_row, check_time, Commands, JointStates, Recording};
+use crate::recording::{check_row, check_time, ns_text, Commands, JointStates, Recording};
 use msgs::{decode, Float64MultiArray, JointState, JointTrajectory};
 use realitygap_core::CommandKind;
 use realitygap_data::ImportError;
@@ -323,12 +326,24 @@ fn read_states(path: &Path, bag: &Bag, topic: usize) -> Result<JointStates, Impo
             }
             Ok(order.iter().map(|&k| v[k]).collect())
         };
-        let t = if msg.header.stamp.ns() != 0 {
-            msg.header.stamp.ns()
+        let (t, clock) = if msg.header.stamp.ns() != 0 {
+            (msg.header.stamp.ns(), "header stamp")
         } else {
-            m.log_time_ns
+            (m.log_time_ns, "log time")
         };
-        check_time(file, &at, states.time_ns.last().copied(), t)?;
+        let previous = states.time_ns.last().copied();
+        check_time(file, &at, previous, t)?;
+        if previous == Some(t) {
+            return Err(ImportError::new(
+                file,
+                format!(
+                    "its {clock} {} s repeats message {}'s: two joint states at one time",
+                    ns_text(t),
+                    index - 1
+                ),
+            )
+            .with_field(at));
+        }
         let position = pick(&msg.position, "position")?;
         check_row(file, &at, "position", &states.names, &position)?;
         if has_velocity {

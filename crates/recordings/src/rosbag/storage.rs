@@ -147,71 +147,293 @@ fn topic_index(bag: &mut Bag, file: &Path, topic: Topic) -> Result<usize, Import
 }
 
 /// Nanoseconds (unsigned, as stored) as i64, or an error.
-fn log_time(file: &Path, topic: &str, ns: u64) -> Result<i64, ImportError> {
+fn log_time_ns(file: &Path, topic: &str, ns: u64) -> Result<i64, ImportError> {
     i64::try_from(ns).map_err(|_| {
         ImportError::new(file, format!("log time {ns} ns is beyond the year 2262"))
             .with_field(topic)
     })
 }
 
-/// The topic of an MCAP channel.
-fn topic_of(channel: &mcap::Channel) -> Topic {
-    Topic {
-        name: channel.topic.clone(),
-        type_name: channel
-            .schema
-            .as_ref()
-            .map(|s| s.name.clone())
-            .unwrap_or_default(),
-        encoding: channel.message_encoding.clone(),
+/// The largest record an MCAP file of `file_len` bytes is allowed to hold,
+/// once decompressed: 16 times the file and 16 MiB more. Every length the
+/// file states (records, chunks, their compressed and decompressed sizes,
+/// the strings and byte arrays inside records) is checked against it, or
+/// against the record that holds it, before anything is allocated for it: a
+/// damaged length field is an error, never a huge allocation.
+pub fn mcap_record_limit(file_len: usize) -> usize {
+    file_len.saturating_mul(16).saturating_add(16 << 20)
+}
+
+/// The MCAP magic, at both ends of a file.
+const MCAP_MAGIC: &[u8] = b"\x89MCAP0\r\n";
+
+/// MCAP record opcodes read here.
+mod op {
+    pub const FOOTER: u8 = 0x02;
+    pub const SCHEMA: u8 = 0x03;
+    pub const CHANNEL: u8 = 0x04;
+    pub const MESSAGE: u8 = 0x05;
+    pub const CHUNK: u8 = 0x06;
+}
+
+fn u64_at(b: &[u8], p: usize) -> u64 {
+    b.get(p..p + 8)
+        .map_or(0, |b| u64::from_le_bytes(b.try_into().unwrap_or([0; 8])))
+}
+
+/// Checks the length fields of an MCAP file's records outside chunks
+/// before they are read: every record fits in the file, and every chunk's
+/// compression name and records fit in the chunk, its uncompressed size in
+/// [`mcap_record_limit`] (an uncompressed chunk's size is its records'
+/// length). A file without the magic is left to the reader to refuse, a
+/// truncated one to say where it ends.
+pub fn check_mcap_lengths(bytes: &[u8]) -> Result<(), String> {
+    if !bytes.starts_with(MCAP_MAGIC) {
+        return Ok(());
+    }
+    let limit = mcap_record_limit(bytes.len()) as u64;
+    let mut pos = MCAP_MAGIC.len();
+    while bytes.len() - pos >= 9 {
+        let opcode = bytes[pos];
+        let len = u64_at(bytes, pos + 1);
+        let body = pos + 9;
+        let left = (bytes.len() - body) as u64;
+        if len > left {
+            return Err(format!(
+                "the record at byte {pos} (opcode {opcode:#04x}) claims {len} bytes, {left} are left in the file"
+            ));
+        }
+        let record = &bytes[body..body + len as usize];
+        if opcode == op::CHUNK {
+            let at = |m: String| format!("the chunk at byte {pos}: {m}");
+            if record.len() < 40 {
+                return Err(at(format!(
+                    "{} bytes, shorter than a chunk's header",
+                    record.len()
+                )));
+            }
+            let uncompressed = u64_at(record, 16);
+            let name_len = u64::from(u32::from_le_bytes(
+                record[28..32].try_into().unwrap_or([0; 4]),
+            ));
+            if 32 + name_len + 8 > record.len() as u64 {
+                return Err(at(format!(
+                    "its compression name claims {name_len} bytes of its {}",
+                    record.len()
+                )));
+            }
+            let name_end = 32 + name_len as usize;
+            let records = u64_at(record, name_end);
+            let room = (record.len() - name_end - 8) as u64;
+            if records > room {
+                return Err(at(format!(
+                    "its records claim {records} bytes, it holds {room}"
+                )));
+            }
+            if name_len == 0 && uncompressed != records {
+                return Err(at(format!(
+                    "its {records} bytes of records are not compressed, but it claims {uncompressed} bytes uncompressed"
+                )));
+            }
+            if uncompressed > limit {
+                return Err(at(format!(
+                    "it claims {uncompressed} bytes uncompressed, more than this {}-byte file can hold (at most {limit})",
+                    bytes.len()
+                )));
+            }
+        }
+        pos = body + len as usize;
+        if opcode == op::FOOTER {
+            // The closing magic follows.
+            break;
+        }
+    }
+    Ok(())
+}
+
+/// The fields of an MCAP record, read in order, each within the record.
+struct Fields<'a> {
+    record: &'a [u8],
+    pos: usize,
+}
+
+impl<'a> Fields<'a> {
+    fn take(&mut self, n: usize, what: &str) -> Result<&'a [u8], String> {
+        let bytes = self
+            .pos
+            .checked_add(n)
+            .and_then(|end| self.record.get(self.pos..end))
+            .ok_or_else(|| {
+                format!(
+                    "its {what} claims {n} bytes, {} are left in the record",
+                    self.record.len().saturating_sub(self.pos)
+                )
+            })?;
+        self.pos += n;
+        Ok(bytes)
+    }
+
+    fn u16(&mut self, what: &str) -> Result<u16, String> {
+        let b = self.take(2, what)?;
+        Ok(u16::from_le_bytes([b[0], b[1]]))
+    }
+
+    fn u32(&mut self, what: &str) -> Result<u32, String> {
+        let b = self.take(4, what)?;
+        Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    }
+
+    /// A u32 length, then that many bytes.
+    fn prefixed(&mut self, what: &str) -> Result<&'a [u8], String> {
+        let n = self.u32(what)? as usize;
+        self.take(n, what)
+    }
+
+    fn text(&mut self, what: &str) -> Result<String, String> {
+        let b = self.prefixed(what)?;
+        std::str::from_utf8(b)
+            .map(str::to_string)
+            .map_err(|_| format!("its {what} is not UTF-8"))
     }
 }
 
 /// Reads the messages of one MCAP file.
+///
+/// The file is checked first ([`check_mcap_lengths`]); then `mcap`'s
+/// linear reader, with [`mcap_record_limit`] on every record, splits it
+/// into records and decompresses the chunks, and the schema, channel and
+/// message records are parsed here, every length within its record (the
+/// crate's own parsers allocate a string's stated length first: up to 4
+/// GiB from a damaged field).
 fn read_mcap(
     file: &Path,
     index: usize,
     bag: &mut Bag,
     keep: &dyn Fn(&Topic) -> bool,
 ) -> Result<(), ImportError> {
+    use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
     let bytes = fs::read(file).map_err(|e| ImportError::new(file, format!("cannot read: {e}")))?;
-    let stream = mcap::MessageStream::new(&bytes)
-        .map_err(|e| ImportError::new(file, format!("not an MCAP file: {e}")))?;
+    check_mcap_lengths(&bytes)
+        .map_err(|m| ImportError::new(file, format!("the MCAP file is damaged: {m}")))?;
+    let mut reader = LinearReader::new_with_options(
+        LinearReaderOptions::default().with_record_length_limit(mcap_record_limit(bytes.len())),
+    );
+    let mut rest: &[u8] = &bytes;
+    let mut schemas: HashMap<u16, String> = HashMap::new();
     // Channel id -> (topic index, kept).
     let mut channels: HashMap<u16, (usize, bool)> = HashMap::new();
-    for (count, message) in stream.enumerate() {
-        let message = message.map_err(|e| {
-            ImportError::new(
-                file,
-                format!("the MCAP file is damaged or incomplete after {count} messages: {e}"),
-            )
-        })?;
-        let channel = &message.channel;
-        let (topic, kept) = match channels.get(&channel.id) {
-            Some(&known) => known,
-            None => {
-                let topic = topic_of(channel);
-                let kept = keep(&topic);
-                let i = topic_index(bag, file, topic)?;
-                channels.insert(channel.id, (i, kept));
-                (i, kept)
+    let mut count = 0usize;
+    let damaged = |count: usize, at: usize, m: String| {
+        ImportError::new(
+            file,
+            format!(
+                "the MCAP file is damaged or incomplete after {count} messages (read up to byte {at} of {}): {m}",
+                bytes.len()
+            ),
+        )
+    };
+    while let Some(event) = reader.next_event() {
+        let at = bytes.len() - rest.len();
+        let (opcode, data) = match event {
+            Ok(LinearReadEvent::ReadRequest(need)) => {
+                let n = need.min(rest.len());
+                reader.insert(n).copy_from_slice(&rest[..n]);
+                reader.notify_read(n);
+                rest = &rest[n..];
+                continue;
             }
+            Ok(LinearReadEvent::Record { opcode, data }) => (opcode, data),
+            Err(e) if count == 0 && at <= MCAP_MAGIC.len() => {
+                return Err(ImportError::new(file, format!("not an MCAP file: {e}")))
+            }
+            Err(e) => return Err(damaged(count, at, e.to_string())),
         };
-        if kept {
-            let t = log_time(file, &channel.topic, message.log_time)?;
-            bag.messages.push(Stored {
-                topic,
-                log_time_ns: t,
-                data: message.data.into_owned(),
-                file: index,
-            });
-        }
-    }
-    // Topics declared in the summary without messages are topics too.
-    if let Ok(Some(summary)) = mcap::Summary::read(&bytes) {
-        for channel in summary.channels.values() {
-            let topic = topic_of(channel);
-            topic_index(bag, file, topic)?;
+        let mut f = Fields {
+            record: data,
+            pos: 0,
+        };
+        match opcode {
+            op::SCHEMA => {
+                let parsed = (|| {
+                    let id = f.u16("id")?;
+                    let name = f.text("name")?;
+                    f.text("encoding")?;
+                    f.prefixed("data")?;
+                    Ok::<_, String>((id, name))
+                })()
+                .map_err(|m| damaged(count, at, format!("a schema record: {m}")))?;
+                schemas.insert(parsed.0, parsed.1);
+            }
+            op::CHANNEL => {
+                let (id, topic) = (|| {
+                    let id = f.u16("id")?;
+                    let schema = f.u16("schema id")?;
+                    let name = f.text("topic")?;
+                    let encoding = f.text("message encoding")?;
+                    f.prefixed("metadata")?;
+                    let type_name = match schema {
+                        0 => String::new(),
+                        s => schemas
+                            .get(&s)
+                            .cloned()
+                            .ok_or_else(|| format!("channel {id} ({name}) names schema {s}, which no schema record before it defines"))?,
+                    };
+                    Ok::<_, String>((
+                        id,
+                        Topic {
+                            name,
+                            type_name,
+                            encoding,
+                        },
+                    ))
+                })()
+                .map_err(|m| damaged(count, at, format!("a channel record: {m}")))?;
+                let i = topic_index(bag, file, topic.clone())?;
+                let kept = keep(&topic);
+                match channels.get(&id) {
+                    Some(&(j, _)) if j != i => {
+                        return Err(damaged(
+                            count,
+                            at,
+                            format!(
+                                "channel {id} is defined twice, as {} and as {}",
+                                bag.topics[j].name, topic.name
+                            ),
+                        ))
+                    }
+                    _ => {
+                        channels.insert(id, (i, kept));
+                    }
+                }
+            }
+            op::MESSAGE => {
+                let (channel, log_time) = (|| {
+                    let channel = f.u16("channel id")?;
+                    f.take(4, "sequence")?;
+                    let log_time = u64_at(f.take(8, "log time")?, 0);
+                    f.take(8, "publish time")?;
+                    Ok::<_, String>((channel, log_time))
+                })()
+                .map_err(|m| damaged(count, at, format!("a message record: {m}")))?;
+                let &(topic, kept) = channels.get(&channel).ok_or_else(|| {
+                    damaged(
+                        count,
+                        at,
+                        format!("a message of channel {channel}, which no channel record before it defines"),
+                    )
+                })?;
+                if kept {
+                    let t = log_time_ns(file, &bag.topics[topic].name, log_time)?;
+                    bag.messages.push(Stored {
+                        topic,
+                        log_time_ns: t,
+                        data: data[f.pos..].to_vec(),
+                        file: index,
+                    });
+                }
+                count += 1;
+            }
+            _ => {}
         }
     }
     Ok(())
@@ -260,34 +482,45 @@ fn read_sqlite(
             ids.insert(id, (i, kept));
         }
     }
+    // A message's length is read (from its record header, without its
+    // bytes) and checked against the file's size before its bytes are
+    // copied: a damaged database cannot make a copy larger than itself.
+    let file_len = fs::metadata(file).map(|m| m.len()).unwrap_or(0);
     let mut stmt = db
-        .prepare("SELECT topic_id, timestamp, data FROM messages ORDER BY timestamp, id")
+        .prepare(
+            "SELECT topic_id, timestamp, length(data), data, id FROM messages ORDER BY timestamp, id",
+        )
         .map_err(err)?;
-    let rows = stmt
-        .query_map([], |r| {
-            Ok((
-                r.get::<_, i64>(0)?,
-                r.get::<_, i64>(1)?,
-                r.get::<_, Vec<u8>>(2)?,
-            ))
-        })
-        .map_err(err)?;
-    for row in rows {
-        let (topic_id, t, data) = row.map_err(err)?;
+    let mut rows = stmt.query([]).map_err(err)?;
+    while let Some(r) = rows.next().map_err(err)? {
+        let topic_id = r.get::<_, i64>(0).map_err(err)?;
+        let t = r.get::<_, i64>(1).map_err(err)?;
+        let id = r.get::<_, Option<i64>>(4).map_err(err)?.unwrap_or(-1);
         let &(topic, kept) = ids.get(&topic_id).ok_or_else(|| {
             ImportError::new(
                 file,
-                format!("a message of topic id {topic_id}, which the topics table does not list"),
+                format!("message id {id} is of topic id {topic_id}, which the topics table does not list"),
             )
         })?;
-        if kept {
-            bag.messages.push(Stored {
-                topic,
-                log_time_ns: t,
-                data,
-                file: index,
-            });
+        if !kept {
+            continue;
         }
+        let len = r.get::<_, Option<i64>>(2).map_err(err)?.unwrap_or(0);
+        if u64::try_from(len).map_or(true, |l| l > file_len) {
+            return Err(ImportError::new(
+                file,
+                format!(
+                    "message id {id} claims {len} bytes, more than the whole file ({file_len} bytes): the database is damaged"
+                ),
+            ));
+        }
+        let data = r.get::<_, Vec<u8>>(3).map_err(err)?;
+        bag.messages.push(Stored {
+            topic,
+            log_time_ns: t,
+            data,
+            file: index,
+        });
     }
     Ok(())
 }
