@@ -146,3 +146,81 @@ fn bad_recordings_fail_with_a_located_message_and_write_nothing() {
         "{stderr}"
     );
 }
+
+/// The checks of issue 45 as a user types them: the CSV of 29 columns
+/// with one `--columns` pattern, a LeRobot dataset missing a data file, a
+/// bag and a CSV with repeated times, an MCAP file with a bit flipped in a
+/// chunk's size (it aborted the process), and `--help` saying which
+/// timestamp a bag's joint states take.
+#[test]
+fn the_issue_45_checks_as_a_user_types_them() {
+    let f = fixtures();
+    let base = scratch("import-recordings-tests", "issue45");
+    let urdf = urdf();
+    let out_dir = base.join("pattern");
+    let out = realitygap(&[
+        "import",
+        "csv",
+        &path(&f.join("csv_styles/pattern.csv")),
+        "--columns",
+        "q_{joint}_rad=position,qd_{joint}_rad_s=velocity,effort_{joint}_n_m=effort,cmd_q_{joint}_rad=position_command",
+        "--robot",
+        &urdf,
+        "--out",
+        &path(&out_dir),
+    ]);
+    let stdout = text(&out.stdout);
+    assert!(out.status.success(), "{stdout}{}", text(&out.stderr));
+    assert!(
+        stdout.contains("pattern: 200 samples, 0.99 s at 200 Hz, 7 joints, velocities, efforts, 200 position commands"),
+        "{stdout}"
+    );
+    let cases: [(&str, PathBuf, &str); 4] = [
+        (
+            "lerobot",
+            f.join("bad/lerobot_missing_file"),
+            "data/chunk-000/file-001.parquet: the data file is missing",
+        ),
+        (
+            "csv",
+            f.join("bad/csv_duplicate_time.csv"),
+            "csv_duplicate_time.csv:32: column 1 (time_s): the timestamp 0.145 s repeats the previous sample's",
+        ),
+        (
+            "rosbag",
+            f.join("bad/duplicate_stamp"),
+            "/joint_states message 100: its header stamp 1700000000.495 s repeats message 99's",
+        ),
+        (
+            "rosbag",
+            f.join("bad/mcap_chunk_bitflip/record_length_bit61.mcap"),
+            "record_length_bit61.mcap: the MCAP file is damaged: the record at byte 43 (opcode 0x06) claims 2305843009213734904 bytes",
+        ),
+    ];
+    for (k, (format, input, want)) in cases.iter().enumerate() {
+        let out_dir = base.join(format!("bad{k}"));
+        let out = realitygap(&[
+            "import",
+            format,
+            &path(input),
+            "--robot",
+            &urdf,
+            "--out",
+            &path(&out_dir),
+        ]);
+        let stderr = text(&out.stderr);
+        assert_eq!(
+            out.status.code(),
+            Some(1),
+            "{format} {}: {stderr}",
+            input.display()
+        );
+        assert!(stderr.contains(want), "{stderr}");
+        assert!(!out_dir.exists(), "nothing written for {}", input.display());
+    }
+    let help = text(&realitygap(&["import", "rosbag", "--help"]).stdout);
+    assert!(
+        help.contains("a joint state's time is its header.stamp (the bag's log time, when the recorder received it, only where the stamp is zero)"),
+        "{help}"
+    );
+}
