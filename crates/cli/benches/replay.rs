@@ -46,6 +46,7 @@ fn main() {
             urdf: &urdf,
             robot: &robot,
             link,
+            joints: &Default::default(),
         },
     )
     .unwrap();

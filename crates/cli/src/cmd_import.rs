@@ -32,7 +32,6 @@ pub enum ImportCommand {
     /// sent (std_msgs/msg/Float64MultiArray or
     /// trajectory_msgs/msg/JointTrajectory). One run per bag, or per episode
     /// with --split-gap.
-    Rosbag(RosbagArgs),
     ///
     /// Timestamps: a joint state's time is its header.stamp (the bag's log
     /// time, when the recorder received it, only where the stamp is zero);
@@ -40,6 +39,7 @@ pub enum ImportCommand {
     /// JointTrajectory point's time is its header.stamp (or log time) plus
     /// time_from_start; a Float64MultiArray has no stamp, so its log time is
     /// used. Commands may share a time: the later one in the bag holds.
+    Rosbag(RosbagArgs),
     /// CSV joint recordings, one file per episode: a time column (a header
     /// stamp; or time_s, t_s, time, t, timestamp, stamp, __time in seconds;
     /// %time or *_ns in nanoseconds) and columns named <joint>/position,
@@ -103,6 +103,63 @@ pub struct RobotTarget {
     /// Source name written into the manifest.
     #[arg(long, default_value = "real")]
     source: String,
+    /// Where to hold a moving joint of the URDF that the recording does
+    /// not name (a gripper's finger, say): JOINT=VALUE in rad (m for a
+    /// prismatic joint); repeatable. Such joints are held at 0 otherwise,
+    /// with one warning line naming them; mimic joints follow their leader.
+    #[arg(long = "hold", value_name = "JOINT=VALUE", value_parser = parse_hold)]
+    hold: Vec<(String, f64)>,
+    /// A recorded joint name to replace by the URDF's: RECORDED=URDF
+    /// (repeatable).
+    #[arg(long = "rename", value_name = "RECORDED=URDF", value_parser = parse_column)]
+    rename: Vec<(String, String)>,
+}
+
+impl RobotTarget {
+    /// The renames and held positions, checked against each other.
+    fn joint_match(&self) -> Result<realitygap_recordings::JointMatch> {
+        let mut hold = std::collections::BTreeMap::new();
+        for (j, v) in &self.hold {
+            if hold.insert(j.clone(), *v).is_some() {
+                bail!("--hold names joint '{j}' twice");
+            }
+        }
+        Ok(realitygap_recordings::JointMatch {
+            rename: self.rename.clone(),
+            hold,
+        })
+    }
+
+    /// The robot's moving joints under the names the recording uses
+    /// (the renames undone), for the importers' early checks.
+    fn recorded_names(&self, urdf_names: &[String]) -> Vec<String> {
+        urdf_names
+            .iter()
+            .map(|n| {
+                self.rename
+                    .iter()
+                    .find(|(_, to)| to == n)
+                    .map_or_else(|| n.clone(), |(from, _)| from.clone())
+            })
+            .collect()
+    }
+}
+
+/// Parses `JOINT=VALUE` (a finite number).
+fn parse_hold(s: &str) -> Result<(String, f64), String> {
+    let (joint, value) = s
+        .rsplit_once('=')
+        .filter(|(j, _)| !j.trim().is_empty())
+        .ok_or_else(|| {
+            format!("expected JOINT=VALUE (e.g. \"panda_finger_joint1=0.04\"), found {s:?}")
+        })?;
+    let v: f64 = value.trim().parse().map_err(|_| {
+        format!("{s:?}: {value:?} is not a number (rad, or m for a prismatic joint)")
+    })?;
+    if !v.is_finite() {
+        return Err(format!("{s:?}: the position must be finite"));
+    }
+    Ok((joint.trim().to_string(), v))
 }
 
 /// Kind of recorded commands.
@@ -170,11 +227,27 @@ pub struct CsvArgs {
     files: Vec<PathBuf>,
     #[command(flatten)]
     target: RobotTarget,
+    /// Columns named by a pattern, comma-separated PATTERN=FIELD entries
+    /// where {joint} stands for each joint's name and FIELD is position,
+    /// velocity, effort or <kind>_command; time=NAME names the time column.
+    /// E.g. 'q_{joint}_rad=position,qd_{joint}_rad_s=velocity,effort_{joint}_n_m=effort,cmd_q_{joint}_rad=position_command';
+    /// repeatable.
+    #[arg(long = "columns", value_name = "PATTERN=FIELD,...", value_parser = parse_patterns)]
+    patterns: Vec<Patterns>,
     /// A column that follows no naming convention: ROLE=NAME, ROLE being
     /// `time` or <joint>/<field> (field position, velocity, effort,
     /// position_command, velocity_command, effort_command); repeatable.
     #[arg(long = "column", value_name = "ROLE=NAME", value_parser = parse_column)]
     columns: Vec<(String, String)>,
+}
+
+/// The patterns of one `--columns` list.
+#[derive(Clone)]
+struct Patterns(Vec<ColumnPattern>);
+
+/// Parses a `--columns` list.
+fn parse_patterns(s: &str) -> Result<Patterns, String> {
+    parse_column_patterns(s).map(Patterns)
 }
 
 /// Arguments of `import lerobot`.
@@ -253,13 +326,6 @@ enum QuatOrderArg {
 pub struct RecordedArgs {
     /// The recorded files; each is one run, named after its file stem.
     #[arg(required = true)]
-    /// Columns named by a pattern, comma-separated PATTERN=FIELD entries
-    /// where {joint} stands for each joint's name and FIELD is position,
-    /// velocity, effort or <kind>_command; time=NAME names the time column.
-    /// E.g. 'q_{joint}_rad=position,qd_{joint}_rad_s=velocity,effort_{joint}_n_m=effort,cmd_q_{joint}_rad=position_command';
-    /// repeatable.
-    #[arg(long = "columns", value_name = "PATTERN=FIELD,...", value_parser = parse_patterns)]
-    patterns: Vec<Patterns>,
     files: Vec<PathBuf>,
     /// Name of the simulator that produced them (e.g. VRepODE).
     #[arg(long)]
@@ -267,15 +333,6 @@ pub struct RecordedArgs {
     /// Order of the quaternion numbers in each row.
     #[arg(long, value_enum)]
     quat_order: QuatOrderArg,
-/// The patterns of one `--columns` list.
-#[derive(Clone)]
-struct Patterns(Vec<ColumnPattern>);
-
-/// Parses a `--columns` list.
-fn parse_patterns(s: &str) -> Result<Patterns, String> {
-    parse_column_patterns(s).map(Patterns)
-}
-
     /// Results directory to create or add to.
     #[arg(long)]
     out: PathBuf,
@@ -375,6 +432,9 @@ fn import_contactnets(args: ContactnetsArgs) -> Result<()> {
 fn load_robot(target: &RobotTarget) -> Result<(RobotModel, Vec<String>)> {
     let packages = realitygap_runner::prepare::resolver(&target.packages)?;
     let robot = RobotModel::from_urdf_file(&target.robot, &packages)?;
+    for n in &robot.notes {
+        println!("note: {n}");
+    }
     let names = robot
         .actuated_joints()
         .iter()
@@ -389,10 +449,13 @@ fn store_episodes(
     target: &RobotTarget,
 ) -> Result<()> {
     let (robot, joints) = load_robot(target)?;
-    let link = realitygap_recordings::end_effector(&robot, target.link.as_deref())
+    let joint_match = target.joint_match()?;
+    let recordings = read(&target.recorded_names(&joints))?;
+    let (_, plan) =
+        realitygap_recordings::plan_joints(&recordings, &robot, &target.robot, &joint_match)?;
+    let link = realitygap_recordings::end_effector_of(&robot, target.link.as_deref(), &plan.driven)
         .map_err(|e| anyhow::anyhow!("{}: {e}", target.robot.display()))?;
-    let recordings = read(&joints)?;
-    let runs = realitygap_recordings::store(
+    let stored = realitygap_recordings::store(
         &recordings,
         &realitygap_recordings::StoreTarget {
             out: &target.out,
@@ -400,8 +463,13 @@ fn store_episodes(
             urdf: &target.robot,
             robot: &robot,
             link,
+            joints: &joint_match,
         },
     )?;
+    if let Some(w) = stored.plan.warning(&robot) {
+        println!("warning: {w}");
+    }
+    let runs = stored.runs;
     for (run, rec) in runs.iter().zip(&recordings) {
         let t = &run.trajectory;
         let duration = t.time_s.last().copied().unwrap_or(0.0);
@@ -478,6 +546,7 @@ fn import_rosbag(args: RosbagArgs) -> Result<()> {
 fn import_csv(args: CsvArgs) -> Result<()> {
     let opts = CsvOptions {
         columns: args.columns.clone(),
+        patterns: args.patterns.iter().flat_map(|p| p.0.clone()).collect(),
     };
     store_episodes(
         |_| {
@@ -619,7 +688,6 @@ fn import_recorded(args: RecordedArgs) -> Result<()> {
         bail!(
             "--control-period must be a positive number of seconds, not {}",
             args.control_period
-        patterns: args.patterns.iter().flat_map(|p| p.0.clone()).collect(),
         );
     }
     if !(args.norm_tolerance.is_finite() && args.norm_tolerance >= 0.0) {

@@ -20,8 +20,11 @@ pub struct Args {
     /// Where a ROS package is, for package:// URIs: NAME=DIR (repeatable).
     #[arg(long = "package", value_name = "NAME=DIR")]
     packages: Vec<String>,
-    /// Engines to replay in (repeatable) [default: every compiled engine].
-    #[arg(long = "engine", value_name = "NAME")]
+    /// Engines to replay in (repeatable) [default: every compiled engine];
+    /// `all-except:A,B` or `-A` leaves engines out. The physics-free model
+    /// (`ideal`) is a row of every replay. An engine that cannot honour a
+    /// key of --params is not replayed: its row says why.
+    #[arg(long = "engine", value_name = "NAME", allow_hyphen_values = true)]
     engines: Vec<String>,
     /// Typed physical parameters: the servo gains (joints.<joint>.kp, kv),
     /// damping, armature, frictionloss, force limits, controller.delay_s.
@@ -31,7 +34,7 @@ pub struct Args {
     /// engine settings, actuators).
     #[arg(long, value_name = "FILE")]
     scene: Option<PathBuf>,
-    /// Output folder: OUT/<engine>/ and OUT/kinematic/ results directories,
+    /// Output folder: OUT/<engine>/ and OUT/ideal/ (the physics-free model) results directories,
     /// OUT/replay.toml, OUT/replay.json (what was replayed: `compare OUT`
     /// measures it again), OUT/joint_space.md, .json, OUT/report/.
     #[arg(long)]

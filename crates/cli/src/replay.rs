@@ -51,19 +51,26 @@ pub struct Replayed {
 /// `ui`. An error when a replay failed (after everything is written).
 pub fn replay(args: &ReplayOptions, launcher: &Launcher, ui: &dyn Ui) -> Result<Replayed> {
     let params = realitygap_runner::prepare::read_params(args.params.as_deref())?;
-    let engines: Vec<_> = if args.engines.is_empty() {
-        crate::compiled_engines()
-    } else {
-        let mut chosen = Vec::new();
-        for name in &args.engines {
-            chosen.push(realitygap_runner::prepare::find_engine(
-                crate::compiled_engines,
-                name,
-            )?);
+    // The physics-free model is the `ideal` row of every replay, computed
+    // from its one definition (`kinematic_run`), never stepped as an engine.
+    let chosen = select_engines(crate::compiled_engines, &args.engines)?;
+    let mut engines = Vec::new();
+    let mut refused: Vec<(String, String)> = Vec::new();
+    for engine in chosen {
+        if engine.name() == KINEMATIC {
+            continue;
         }
-        chosen
-    };
-    if engines.is_empty() {
+        // A key of the user's parameters the engine cannot honour: its row
+        // is marked with the reason, the others run.
+        match params.check_support(engine.name(), &engine.param_support()) {
+            Ok(()) => engines.push(engine),
+            Err(e) => refused.push((engine.name().to_string(), e.to_string())),
+        }
+    }
+    for (name, why) in &refused {
+        ui.note(format!("{name}: not replayed: {why}"));
+    }
+    if engines.is_empty() && refused.is_empty() {
         bail!("no physics engine is compiled into this binary");
     }
     let request = ReplayRequest {
@@ -75,6 +82,15 @@ pub fn replay(args: &ReplayOptions, launcher: &Launcher, ui: &dyn Ui) -> Result<
         out: &args.out,
     };
     let prepared = prepare_replay(&request)?;
+    for n in &prepared.robot.notes {
+        ui.note(format!("note: {n}"));
+    }
+    if let Some(w) = prepared.held_warning() {
+        ui.note(format!("warning: {w}"));
+    }
+    for w in prepared.partial_gain_warnings(&params) {
+        ui.note(format!("warning: {w}"));
+    }
     realitygap_study::replay::write_record(&request, &prepared)?;
     let kinematic = store_kinematic(&args.out, &prepared, params.delay_s())?;
     let total = engines.len() * prepared.episodes.len();
@@ -129,11 +145,20 @@ pub fn replay(args: &ReplayOptions, launcher: &Launcher, ui: &dyn Ui) -> Result<
         .iter()
         .map(|&j| prepared.robot.joints[j].name.clone())
         .collect();
-    let table = joint_space_markdown(&rows, &names);
+    let mut table = joint_space_markdown(&rows, &names);
+    for (name, why) in &refused {
+        table.push_str(&refused_row(name, why, names.len()));
+    }
     std::fs::write(args.out.join("joint_space.md"), &table)?;
+    let mut json = serde_json::to_value(&rows)?;
+    if let Some(list) = json.as_array_mut() {
+        for (name, why) in &refused {
+            list.push(serde_json::json!({"source": name, "refused": why}));
+        }
+    }
     std::fs::write(
         args.out.join("joint_space.json"),
-        serde_json::to_string_pretty(&rows)? + "\n",
+        serde_json::to_string_pretty(&json)? + "\n",
     )?;
     let report = args.out.join("report");
     realitygap_report::joint_space::write_joint_space_report(
@@ -153,11 +178,23 @@ pub fn replay(args: &ReplayOptions, launcher: &Launcher, ui: &dyn Ui) -> Result<
     let reused = runs.iter().filter(|r| r.reused).count();
     ui.say(table.clone());
     ui.say(format!(
-        "replayed {} episodes of robot '{}' in {} engines ({} runs, {reused} kept from an earlier batch, {failed} failed); the physics-free model on {kinematic} episodes; {}; the report {}",
+        "replayed {} episodes of robot '{}' in {} engines ({} runs, {reused} kept from an earlier batch, {failed} failed{}); the physics-free model ({KINEMATIC}) on {kinematic} episodes; {}; the report {}",
         prepared.episodes.len(),
         prepared.robot.name,
         engines.len(),
         runs.len(),
+        if refused.is_empty() {
+            String::new()
+        } else {
+            format!(
+                "; not replayed, for keys of the parameters they cannot honour: {}",
+                refused
+                    .iter()
+                    .map(|(n, _)| n.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        },
         args.out.join("joint_space.md").display(),
         report.join("index.html").display()
     ));
@@ -173,4 +210,61 @@ pub fn replay(args: &ReplayOptions, launcher: &Launcher, ui: &dyn Ui) -> Result<
         table,
         index_html: report.join("index.html"),
     })
+}
+
+/// A row of the joint-space table for an engine that was not replayed.
+fn refused_row(name: &str, why: &str, joints: usize) -> String {
+    let why = why.replace('|', "/").replace('\n', " ");
+    let mut row = format!("| {name} | 0 | — | — | — | not replayed: {why} |");
+    for _ in 0..joints {
+        row.push_str(" — |");
+    }
+    row.push('\n');
+    row
+}
+
+/// The engines `--engine` chooses from `registry`: every one when none is
+/// named (or `all`); the named ones; or every one but those named
+/// `all-except:A,B` or `-A` / `!A`.
+pub fn select_engines(
+    registry: realitygap_runner::Registry,
+    names: &[String],
+) -> Result<Vec<Box<dyn realitygap_core::Engine>>> {
+    let all = registry();
+    if all.is_empty() {
+        bail!("no physics engine is compiled into this binary");
+    }
+    let known: Vec<String> = all.iter().map(|e| e.name().to_string()).collect();
+    let mut include = Vec::new();
+    let mut exclude = Vec::new();
+    for n in names {
+        let n = n.trim();
+        if let Some(list) = n
+            .strip_prefix("all-except:")
+            .or_else(|| n.strip_prefix("all-except="))
+        {
+            exclude.extend(list.split(',').map(|x| x.trim().to_string()));
+        } else if let Some(x) = n.strip_prefix('-').or_else(|| n.strip_prefix('!')) {
+            exclude.push(x.trim().to_string());
+        } else if n == "all" {
+            include.extend(known.iter().cloned());
+        } else {
+            include.push(n.to_string());
+        }
+    }
+    for n in include.iter().chain(&exclude) {
+        if !known.contains(n) {
+            bail!(
+                "unknown engine \"{n}\" in --engine (compiled in: {}; all-except:A,B or -A leaves engines out)",
+                known.join(", ")
+            );
+        }
+    }
+    Ok(all
+        .into_iter()
+        .filter(|e| {
+            let n = e.name().to_string();
+            (include.is_empty() || include.contains(&n)) && !exclude.contains(&n)
+        })
+        .collect())
 }

@@ -284,6 +284,12 @@ fn tune_recordings(args: &TuneRequest, recordings: &Path, ui: &dyn Ui) -> Result
             scene: args.scene.as_deref(),
             out: &args.out,
         })?;
+    if let Some(w) = prepared.held_warning() {
+        ui.note(format!("warning: {w}"));
+    }
+    for w in prepared.partial_gain_warnings(&known) {
+        ui.note(format!("warning: {w}"));
+    }
     let space = match &args.space {
         Some(f) => Some(Space::from_file(f)?),
         None => None,

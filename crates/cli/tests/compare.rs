@@ -569,7 +569,7 @@ fn joint_space_tables_of_the_study() {
     }
     let (md, _) = compare(&["--joint-space", "--bootstrap", "0"]).unwrap();
     assert!(
-        md.contains("## Joint space") && md.contains("| kinematic (perfect tracking) | 1 |"),
+        md.contains("## Joint space") && md.contains("| physics-free (perfect tracking) | 1 |"),
         "{md}"
     );
     let out = bin()

@@ -55,7 +55,7 @@ fn with_the_writers_parameters_the_engines_reproduce_the_recording() {
     let stdout = text(&run.stdout);
     assert!(run.status.success(), "{stdout}{}", text(&run.stderr));
     let rows = rows(&out);
-    let kinematic = rms_of(&rows, "kinematic");
+    let kinematic = rms_of(&rows, "ideal");
     assert!(
         kinematic > 0.5,
         "the physics-free model lags the arm: {kinematic}"
@@ -75,7 +75,7 @@ fn with_the_writers_parameters_the_engines_reproduce_the_recording() {
         );
     }
     // Perfect tracking leads the arm (its servo lags): a negative delay.
-    let kin = rows.iter().find(|r| r["source"] == "kinematic").unwrap();
+    let kin = rows.iter().find(|r| r["source"] == "ideal").unwrap();
     assert!(
         kin["delay_ms"]
             .as_array()
@@ -91,7 +91,7 @@ fn with_the_writers_parameters_the_engines_reproduce_the_recording() {
     assert!(cmp.status.success(), "{}", text(&cmp.stderr));
     let js: Value = serde_json::from_str(&text(&cmp.stdout)).unwrap();
     let sources = js["sources"].as_array().unwrap();
-    assert_eq!(sources[0]["source"], "kinematic");
+    assert_eq!(sources[0]["source"], "ideal");
     for r in &rows {
         let s = sources.iter().find(|s| s["source"] == r["source"]).unwrap();
         assert!(
@@ -142,7 +142,7 @@ fn with_the_writers_parameters_the_engines_reproduce_the_recording() {
     // The report: the table and a figure per joint, inlined.
     let html = std::fs::read_to_string(out.join("report/index.html")).unwrap();
     assert!(
-        html.contains("<th>kinematic</th>") && html.contains("<th>mujoco</th>"),
+        html.contains("<th>ideal</th>") && html.contains("<th>mujoco</th>"),
         "{html}"
     );
     assert_eq!(html.matches("<svg role=\"img\"").count(), 7, "{html}");
@@ -196,31 +196,60 @@ fn every_engine_replays_at_its_defaults_and_refusals_are_named() {
     assert!(run.status.success(), "{stdout}{}", text(&run.stderr));
     let rows = rows(&out);
     let engines = realitygap::compiled_engines();
-    assert_eq!(rows.len(), engines.len() + 1, "{stdout}");
+    // The physics-free model (`ideal`) is one row, not an engine replayed
+    // beside it.
+    assert_eq!(rows.len(), engines.len(), "{stdout}");
     for e in &engines {
         let rms = rms_of(&rows, e.name());
         assert!(rms.is_finite() && rms < 5.0, "{}: {rms}", e.name());
     }
-    // A key an engine cannot honour fails that engine's runs by name.
+    // A key an engine cannot honour leaves that engine's row marked with
+    // the located reason; the others replay and the command succeeds.
+    // Engines are left out with `all-except:`.
     let params = truth_params(&dir, &[]);
+    let out = dir.join("physx");
     let run = realitygap(&[
         "replay",
         &path(&real),
         "--engine",
-        "physx",
+        "all-except:bullet,dart,ode,rapier",
         "--params",
         &path(&params),
         "--out",
-        &path(&dir.join("physx")),
+        &path(&out),
     ]);
-    let stderr = text(&run.stderr);
-    assert!(!run.status.success());
-    // The run fails in its child process with the located message.
+    let (stdout, stderr) = (text(&run.stdout), text(&run.stderr));
+    assert!(run.status.success(), "{stdout}{stderr}");
+    let rows = self::rows(&out);
+    let sources: Vec<&str> = rows.iter().filter_map(|r| r["source"].as_str()).collect();
+    assert_eq!(sources, ["ideal", "mujoco", "physx"], "{rows:?}");
+    let why = rows[2]["refused"].as_str().unwrap_or_default();
     assert!(
-        stderr.contains("in physx: failed:")
-            && stderr.contains("engine physx: parameter `joints.lbr_iiwa_joint_1.frictionloss`: ")
-            && stderr.contains(".toml:6:16"),
-        "{stderr}"
+        why.contains("engine physx: parameter `joints.lbr_iiwa_joint_1.frictionloss`: ")
+            && why.contains(".toml:6:16"),
+        "{why}"
+    );
+    assert!(stderr.contains("physx: not replayed: "), "{stderr}");
+    let table = std::fs::read_to_string(out.join("joint_space.md")).unwrap();
+    assert!(
+        table.contains("| physx | 0 | — | — | — | not replayed: "),
+        "{table}"
+    );
+    assert!(rms_of(&rows, "mujoco") < 0.05);
+    // An unknown name in an exclusion is an error that lists the engines.
+    let run = realitygap(&[
+        "replay",
+        &path(&real),
+        "--engine",
+        "-bulet",
+        "--out",
+        &path(&dir.join("typo")),
+    ]);
+    assert!(!run.status.success());
+    assert!(
+        text(&run.stderr).contains("unknown engine \"bulet\" in --engine (compiled in: "),
+        "{}",
+        text(&run.stderr)
     );
 }
 
@@ -310,7 +339,7 @@ fn recorded_efforts_replay_open_loop_in_every_engine() {
         assert!(run.status.success(), "{stdout}{stderr}");
         assert!(!stderr.contains("failed"), "{stderr}");
         assert!(
-            rows(&out).iter().all(|r| r["source"] != "kinematic"),
+            rows(&out).iter().all(|r| r["source"] != "ideal"),
             "efforts say nothing of the motion without physics: no kinematic row"
         );
         engines

@@ -352,7 +352,7 @@ pub enum EngineError {
     /// Settings that the engine knows to be numerically unstable for the
     /// loaded model ([`Simulation::stability_issues`]); refused before the
     /// run unless the run allows unstable settings.
-    #[error("engine {engine}: unstable settings for this model, refused before running: {message} (run anyway with --allow-unstable)")]
+    #[error("engine {engine}: unstable settings for this model, refused before running: {message} (`realitygap run --allow-unstable` runs such settings anyway; a tune stays within the stable range when its --space file bounds the parameter there)")]
     UnstableSettings {
         /// The engine's name.
         engine: String,

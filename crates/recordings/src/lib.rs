@@ -23,7 +23,9 @@ pub mod lerobot;
 pub mod recording;
 pub mod rosbag;
 
-pub use recording::{end_effector, Commands, JointStates, Recording};
+pub use recording::{
+    end_effector, end_effector_of, Commands, JointMatch, JointPlan, JointStates, Recording,
+};
 
 use realitygap_core::robot::RobotModel;
 use realitygap_core::Trajectory;
@@ -79,16 +81,51 @@ pub struct StoreTarget<'a> {
     pub robot: &'a RobotModel,
     /// The end-effector link whose pose is stored as the `wrist` body.
     pub link: usize,
+    /// Joint renames and held positions (`--rename`, `--hold`).
+    pub joints: &'a JointMatch,
+}
+
+/// What [`store`] stored.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Stored {
+    /// One run per episode.
+    pub runs: Vec<StoredRun>,
+    /// The joints driven and held.
+    pub plan: JointPlan,
+}
+
+/// The recordings with their joints renamed (`joints.rename`), and how
+/// they meet `robot` ([`JointPlan`], from the first episode's joints; the
+/// others must name the same).
+pub fn plan_joints(
+    recordings: &[Recording],
+    robot: &RobotModel,
+    urdf: &Path,
+    joints: &JointMatch,
+) -> Result<(Vec<Recording>, JointPlan), ImportError> {
+    let mut renamed = recordings.to_vec();
+    for r in &mut renamed {
+        r.rename_joints(&joints.rename)?;
+    }
+    let first = renamed
+        .first()
+        .map(|r| r.states.names.clone())
+        .unwrap_or_default();
+    let plan = JointPlan::new(robot, &first, &joints.hold)
+        .map_err(|e| ImportError::new(renamed.first().map_or(urdf, |r| r.file.as_path()), e))?;
+    Ok((renamed, plan))
 }
 
 /// Turns every recording into a run of the robot, then stores them all:
-/// one run per episode, source kind `real`, the joint names, end-effector
-/// link and URDF in the manifest's settings. Nothing is written when any
-/// recording fails.
-pub fn store(
-    recordings: &[Recording],
-    target: &StoreTarget,
-) -> Result<Vec<StoredRun>, RecordingError> {
+/// one run per episode, source kind `real`, the joint names, held joints,
+/// end-effector link and URDF in the manifest's settings. The recordings'
+/// joints are renamed first (`target.joints.rename`); the robot's moving
+/// joints they do not name are held ([`JointPlan`]). Nothing is written
+/// when any recording fails.
+pub fn store(recordings: &[Recording], target: &StoreTarget) -> Result<Stored, RecordingError> {
+    let (renamed, plan) = plan_joints(recordings, target.robot, target.urdf, target.joints)?;
+    let recordings = &renamed[..];
+    let robot = target.robot;
     let mut runs = Vec::with_capacity(recordings.len());
     for (i, r) in recordings.iter().enumerate() {
         if let Some(other) = recordings[..i].iter().find(|o| o.id == r.id) {
@@ -99,11 +136,10 @@ pub fn store(
             });
         }
         realitygap_data::validate_run_id(&r.id)?;
-        runs.push(r.to_trajectory(target.robot, target.link)?);
+        runs.push(r.to_trajectory_planned(robot, target.link, &plan)?);
     }
-    let robot = target.robot;
-    let joints: Vec<&str> = robot
-        .actuated_joints()
+    let joints: Vec<&str> = plan
+        .driven
         .iter()
         .map(|&j| robot.joints[j].name.as_str())
         .collect();
@@ -112,6 +148,7 @@ pub fn store(
         "robot": robot.name,
         "urdf": std::fs::canonicalize(target.urdf).unwrap_or_else(|_| target.urdf.to_path_buf()).display().to_string(),
         "joints": joints,
+        "held_joints": plan.held,
         "end_effector_link": robot.links[target.link].name,
     }))?;
     let mut stored = Vec::with_capacity(runs.len());
@@ -141,5 +178,5 @@ pub fn store(
             replaced,
         });
     }
-    Ok(stored)
+    Ok(Stored { runs: stored, plan })
 }

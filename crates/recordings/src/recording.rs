@@ -8,6 +8,7 @@ use realitygap_core::robot::RobotModel;
 use realitygap_core::trajectory::WRIST;
 use realitygap_core::{BodyTrack, CommandKind, JointCommands, Pose, Trajectory};
 use realitygap_data::ImportError;
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 /// Nanoseconds per second.
@@ -112,7 +113,6 @@ pub(crate) fn check_time(
     Ok(())
 }
 
-/// Seconds (finite) to nanoseconds, rounded; `None` beyond ±292 years.
 /// Checks that joint-state time `t_ns` read at `place` comes after
 /// `previous`: going back is an error ([`check_time`]), and so is a
 /// repeated time, since two samples 0 s apart are no motion a replay could
@@ -151,9 +151,191 @@ pub(crate) fn ns_text(ns: i64) -> String {
     format!("{sign}{s}.{}", digits.trim_end_matches('0'))
 }
 
+/// Seconds (finite) to nanoseconds, rounded; `None` beyond ±292 years.
 pub(crate) fn seconds_to_ns(t_s: f64) -> Option<i64> {
     let ns = (t_s * NS_PER_S).round();
     (ns.is_finite() && ns.abs() < 9.2e18).then_some(ns as i64)
+}
+
+/// How a recording's joints meet the robot's (`import --rename`,
+/// `--hold`).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct JointMatch {
+    /// Recorded joint names replaced before matching: (as recorded, the
+    /// URDF's name).
+    pub rename: Vec<(String, String)>,
+    /// Positions (rad, or m for prismatic joints) of the robot's moving
+    /// joints that the recording does not name; any other such joint is
+    /// held at 0.
+    pub hold: BTreeMap<String, f64>,
+}
+
+/// The robot's joints a recording drives, and those it holds still.
+#[derive(Debug, Clone, PartialEq)]
+pub struct JointPlan {
+    /// The recorded joints, as robot joint indices in the robot's
+    /// actuated-joint order ([`RobotModel::actuated_joints`]).
+    pub driven: Vec<usize>,
+    /// The robot's moving joints the recording does not name, each held
+    /// at its position (rad or m).
+    pub held: BTreeMap<String, f64>,
+    /// Mimic joints whose leader is held: they hold too, where the leader
+    /// puts them.
+    pub followers: Vec<String>,
+}
+
+impl JointPlan {
+    /// Matches the recorded joint names (already renamed) against the
+    /// robot's moving joints: every recorded name must be one, the others
+    /// are held at `hold`'s position or 0. A `hold` entry must name a
+    /// moving joint that the recording does not name.
+    pub fn new(
+        robot: &RobotModel,
+        recorded: &[String],
+        hold: &BTreeMap<String, f64>,
+    ) -> Result<JointPlan, String> {
+        let actuated = robot.actuated_joints();
+        let names: Vec<&str> = actuated
+            .iter()
+            .map(|&j| robot.joints[j].name.as_str())
+            .collect();
+        let source = robot.source.display();
+        for name in recorded {
+            if !names.contains(&name.as_str()) {
+                return Err(format!(
+                    "the recording names joint '{name}', which robot '{}' ({source}) does not have as a moving joint; its moving joints are {}; the recording's joints are {} (--rename RECORDED=URDF maps a name)",
+                    robot.name,
+                    names.join(", "),
+                    recorded.join(", ")
+                ));
+            }
+        }
+        for (name, value) in hold {
+            if recorded.contains(name) {
+                return Err(format!(
+                    "--hold {name}={value}: the recording names joint '{name}', so it is not held"
+                ));
+            }
+            if !names.contains(&name.as_str()) {
+                return Err(format!(
+                    "--hold {name}={value}: robot '{}' ({source}) has no moving joint '{name}'; its moving joints are {}",
+                    robot.name,
+                    names.join(", ")
+                ));
+            }
+            if !value.is_finite() {
+                return Err(format!("--hold {name}={value}: not a finite position"));
+            }
+        }
+        let mut driven = Vec::new();
+        let mut held = BTreeMap::new();
+        for (&j, name) in actuated.iter().zip(&names) {
+            if recorded.iter().any(|r| r == name) {
+                driven.push(j);
+            } else {
+                held.insert(name.to_string(), hold.get(*name).copied().unwrap_or(0.0));
+            }
+        }
+        let followers = robot
+            .joints
+            .iter()
+            .filter(|j| {
+                j.mimic
+                    .as_ref()
+                    .is_some_and(|m| held.contains_key(&robot.joints[m.joint].name))
+            })
+            .map(|j| j.name.clone())
+            .collect();
+        Ok(JointPlan {
+            driven,
+            held,
+            followers,
+        })
+    }
+
+    /// The one line that says which joints are held, when any is.
+    pub fn warning(&self, robot: &RobotModel) -> Option<String> {
+        if self.held.is_empty() {
+            return None;
+        }
+        let held: Vec<String> = self
+            .held
+            .iter()
+            .map(|(n, v)| format!("{n} at {v}"))
+            .collect();
+        Some(format!(
+            "robot '{}' has moving joints the recording does not name: held still ({}){}; --hold JOINT=VALUE (rad or m) sets where",
+            robot.name,
+            held.join(", "),
+            if self.followers.is_empty() {
+                String::new()
+            } else {
+                format!(
+                    ", with the mimic joints {} that follow them",
+                    self.followers.join(", ")
+                )
+            }
+        ))
+    }
+
+    /// Positions of every robot joint (indexed like `robot.joints`) with
+    /// the held joints at theirs and the rest at 0.
+    pub fn base_positions(&self, robot: &RobotModel) -> Vec<f64> {
+        let mut full = vec![0.0; robot.joints.len()];
+        for (name, &v) in &self.held {
+            if let Some(j) = robot.joint_by_name(name) {
+                full[j] = v;
+            }
+        }
+        full
+    }
+}
+
+impl Recording {
+    /// Replaces recorded joint names (`--rename RECORDED=URDF`) in the
+    /// states and the commands. A name the recording does not have is an
+    /// error naming the file.
+    pub fn rename_joints(&mut self, rename: &[(String, String)]) -> Result<(), ImportError> {
+        for (from, to) in rename {
+            let mut found = false;
+            for n in self.states.names.iter_mut() {
+                if n == from {
+                    *n = to.clone();
+                    found = true;
+                }
+            }
+            if let Some(c) = &mut self.commands {
+                for n in c.names.iter_mut() {
+                    if n == from {
+                        *n = to.clone();
+                        found = true;
+                    }
+                }
+            }
+            if !found {
+                return Err(ImportError::new(
+                    &self.file,
+                    format!(
+                        "--rename {from}={to}: episode '{}' names no joint '{from}'; its joints are {}",
+                        self.id,
+                        self.states.names.join(", ")
+                    ),
+                ));
+            }
+        }
+        for (i, n) in self.states.names.iter().enumerate() {
+            if self.states.names[..i].contains(n) {
+                return Err(ImportError::new(
+                    &self.file,
+                    format!(
+                        "episode '{}' names joint '{n}' twice (after --rename)",
+                        self.id
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
 }
 
 impl Recording {
@@ -218,14 +400,31 @@ impl Recording {
     /// actuated-joint order ([`RobotModel::actuated_joints`]), times in
     /// seconds from the first joint state, the commands on the same clock,
     /// and the pose of `link` (the end effector) by forward kinematics from
-    /// a base at the origin, as the body [`WRIST`].
+    /// a base at the origin, as the body [`WRIST`]. The robot's moving
+    /// joints that the recording does not name are held at 0 (see
+    /// [`Recording::to_trajectory_planned`] to hold them elsewhere).
     ///
-    /// Errors name both sides when the recording's joints and the URDF's do
-    /// not match, and refuse an episode without samples.
+    /// Errors name both sides when the recording names a joint the URDF
+    /// does not move, and refuse an episode without samples.
     pub fn to_trajectory(
         &self,
         robot: &RobotModel,
         link: usize,
+    ) -> Result<Trajectory, ImportError> {
+        let plan = JointPlan::new(robot, &self.states.names, &BTreeMap::new())
+            .map_err(|e| ImportError::new(&self.file, e))?;
+        self.to_trajectory_planned(robot, link, &plan)
+    }
+
+    /// [`Recording::to_trajectory`] with the joints driven and held as
+    /// `plan` says: the episode must name exactly the plan's driven
+    /// joints; the joint columns are theirs, and the held joints sit at
+    /// their positions in the forward kinematics.
+    pub fn to_trajectory_planned(
+        &self,
+        robot: &RobotModel,
+        link: usize,
+        plan: &JointPlan,
     ) -> Result<Trajectory, ImportError> {
         let file = &self.file;
         if self.states.time_ns.is_empty() {
@@ -234,44 +433,38 @@ impl Recording {
                 format!("episode '{}' has no joint state sample", self.id),
             ));
         }
-        let actuated = robot.actuated_joints();
-        let urdf_names: Vec<&str> = actuated
+        let driven_names: Vec<&str> = plan
+            .driven
             .iter()
             .map(|&j| robot.joints[j].name.as_str())
             .collect();
+        let recorded = JointPlan::new(robot, &self.states.names, &BTreeMap::new())
+            .map_err(|e| ImportError::new(file, e))?;
+        if recorded.driven != plan.driven {
+            return Err(ImportError::new(
+                file,
+                format!(
+                    "episode '{}' records the joints {}, the other episodes {}: import them separately",
+                    self.id,
+                    self.states.names.join(", "),
+                    driven_names.join(", ")
+                ),
+            ));
+        }
+        let urdf_names = driven_names.clone();
         let urdf_list = || urdf_names.join(", ");
         let source = robot.source.display();
-        // For each URDF actuated joint, its column in the recording.
-        let mut column = Vec::with_capacity(actuated.len());
-        for name in &self.states.names {
-            if !urdf_names.contains(&name.as_str()) {
-                return Err(ImportError::new(
-                    file,
-                    format!(
-                        "the recording names joint '{name}', which robot '{}' ({source}) does not have as a moving joint; its moving joints are {}; the recording's joints are {}",
-                        robot.name,
-                        urdf_list(),
-                        self.states.names.join(", ")
-                    ),
-                ));
-            }
-        }
-        for name in &urdf_names {
-            match self.states.names.iter().position(|n| n == name) {
-                Some(c) => column.push(c),
-                None => {
-                    return Err(ImportError::new(
-                        file,
-                        format!(
-                            "robot '{}' ({source}) has the moving joint '{name}', which the recording does not name; the recording's joints are {}; the robot's are {}",
-                            robot.name,
-                            self.states.names.join(", "),
-                            urdf_list()
-                        ),
-                    ))
-                }
-            }
-        }
+        // For each driven joint, its column in the recording.
+        let column: Vec<usize> = driven_names
+            .iter()
+            .map(|name| {
+                self.states
+                    .names
+                    .iter()
+                    .position(|n| n == name)
+                    .unwrap_or_default()
+            })
+            .collect();
         let reorder = |rows: &Vec<Vec<f64>>| -> Vec<Vec<f64>> {
             rows.iter()
                 .map(|r| column.iter().map(|&c| r[c]).collect())
@@ -280,7 +473,16 @@ impl Recording {
         let t0 = self.states.time_ns[0];
         let seconds = |t: i64| (t - t0) as f64 / NS_PER_S;
         let angles = reorder(&self.states.position);
-        let poses = robot.link_poses_from_actuated(&Pose::IDENTITY, &angles, link);
+        let mut full = plan.base_positions(robot);
+        let poses = angles
+            .iter()
+            .map(|row| {
+                for (&j, &q) in plan.driven.iter().zip(row) {
+                    full[j] = q;
+                }
+                robot.link_pose(&Pose::IDENTITY, &full, link)
+            })
+            .collect();
         let commands = match &self.commands {
             None => None,
             Some(c) => {
@@ -290,7 +492,7 @@ impl Recording {
                         ImportError::new(
                             file,
                             format!(
-                                "the commands name joint '{name}', which robot '{}' ({source}) does not have as a moving joint; its moving joints are {}",
+                                "the commands name joint '{name}', which robot '{}' ({source}) does not have as a recorded moving joint; the joints recorded are {}",
                                 robot.name,
                                 urdf_list()
                             ),
@@ -329,6 +531,18 @@ impl Recording {
 /// default the child link of its last actuated joint, followed down fixed
 /// joints while there is exactly one child.
 pub fn end_effector(robot: &RobotModel, name: Option<&str>) -> Result<usize, String> {
+    end_effector_of(robot, name, &robot.actuated_joints())
+}
+
+/// [`end_effector`] of a recording that drives the joints `driven`
+/// ([`JointPlan::driven`]): by default the child link of the last of them
+/// (a held gripper's fingers are not the end effector), followed down
+/// fixed joints while there is exactly one child.
+pub fn end_effector_of(
+    robot: &RobotModel,
+    name: Option<&str>,
+    driven: &[usize],
+) -> Result<usize, String> {
     if let Some(name) = name {
         return robot.link_by_name(name).ok_or_else(|| {
             let links: Vec<&str> = robot.links.iter().map(|l| l.name.as_str()).collect();
@@ -339,8 +553,7 @@ pub fn end_effector(robot: &RobotModel, name: Option<&str>) -> Result<usize, Str
             )
         });
     }
-    let last = robot
-        .actuated_joints()
+    let last = driven
         .last()
         .copied()
         .ok_or_else(|| format!("robot '{}' has no moving joint", robot.name))?;

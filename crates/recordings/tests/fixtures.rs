@@ -301,13 +301,14 @@ fn a_bad_episode_leaves_no_results_directory() {
         urdf: &urdf(),
         robot: &robot,
         link,
+        joints: &Default::default(),
     };
     let e = store(&recs, &target).unwrap_err().to_string();
     assert!(e.contains("joint_a"), "{e}");
     assert!(!out.exists(), "nothing is written when an episode fails");
     // Good episodes are stored and read back as they were.
     let good = bag("mcap/episode_000");
-    let runs = store(&good, &target).unwrap();
+    let runs = store(&good, &target).unwrap().runs;
     let back = realitygap_data::RunStore::open(&out).unwrap();
     let read = back.read_run(&runs[0].id).unwrap();
     assert_eq!(read, runs[0].trajectory);

@@ -24,7 +24,7 @@ use serde::Serialize;
 use std::fmt::Write as _;
 
 /// Name of the physics-free model's row.
-pub const KINEMATIC_ROW: &str = "kinematic (perfect tracking)";
+pub const KINEMATIC_ROW: &str = "physics-free (perfect tracking)";
 
 /// One source's joint-space errors in one scene.
 #[derive(Debug, Clone, PartialEq, Serialize)]

@@ -9,7 +9,7 @@
 //! engine started from the episode's first joint state, and the recorded
 //! commands applied at their timestamps ([`realitygap_core::replay`]). One
 //! results directory per engine (`OUT/<engine>/`, a run per episode, rerun
-//! skips finished runs), and the physics-free model (`OUT/kinematic/`: the
+//! skips finished runs), and the physics-free model (`OUT/ideal/`: the
 //! commands with perfect tracking), then the joint-space table.
 
 use anyhow::{anyhow, bail, Context, Result};
@@ -25,6 +25,7 @@ use realitygap_runner::protocol::{Job, ReplayJob};
 use realitygap_runner::slurm::SlurmOptions;
 use realitygap_runner::{run_child, ChildEnd, Launcher};
 use serde_json::{json, Value};
+use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -33,8 +34,10 @@ pub const SCENE_FILE: &str = "replay.toml";
 /// What a replay was of (the recordings, the robot), written into the
 /// output folder so that `compare OUT` can measure it again.
 pub const RECORD_FILE: &str = "replay.json";
-/// Source name of the physics-free model.
-pub const KINEMATIC: &str = "kinematic";
+/// Source name of the physics-free model, the same name as in every study
+/// table and in `tune --engine ideal`: the recorded commands with perfect
+/// tracking ([`kinematic_run`], its one definition in a replay).
+pub const KINEMATIC: &str = realitygap_core::engine::PHYSICS_FREE_ENGINE;
 /// Engine timestep of the generated scene, s (every engine).
 pub const TIMESTEP_S: f64 = 1e-3;
 
@@ -81,9 +84,57 @@ pub struct Prepared {
     pub packages: Vec<String>,
     /// The recorded episodes' results directory, absolute.
     pub real_dir: PathBuf,
+    /// The robot's moving joints the recording does not name, held still
+    /// at these positions (rad or m) in the generated scene.
+    pub held: BTreeMap<String, f64>,
 }
 
 impl Prepared {
+    /// One line per joint whose position servo `params` gives only in
+    /// part (`kp` without `kv`, or `kv` without `kp`), naming the default
+    /// that fills the rest: a stiff `kp` behind the default `kv` lags.
+    pub fn partial_gain_warnings(&self, params: &PhysicalParams) -> Vec<String> {
+        let mut lines = Vec::new();
+        for a in &self.scene.actuators {
+            let Some(p) = params.joints.get(&a.joint) else {
+                continue;
+            };
+            let (kp, kv) = default_gains(a.force_limit);
+            let kp = a.kp.unwrap_or(kp);
+            let kv = if a.kv > 0.0 { a.kv } else { kv };
+            match (p.kp, p.kv) {
+                (Some(given), None) => lines.push(format!(
+                    "joints.{}: kp = {given} is given without kv: the scene's kv = {kv} N m s/rad fills it in (its default is kp / 10 of the effort limit's gains); give kv too, or the servo may lag or ring",
+                    a.joint
+                )),
+                (None, Some(given)) => lines.push(format!(
+                    "joints.{}: kv = {given} is given without kp: the scene's kp = {kp} N m/rad fills it in (its default: the effort limit over 0.05 rad); give kp too",
+                    a.joint
+                )),
+                _ => {}
+            }
+        }
+        lines
+    }
+
+    /// The one line that says which of the robot's joints are held still
+    /// because the recording does not name them, when any is.
+    pub fn held_warning(&self) -> Option<String> {
+        if self.held.is_empty() {
+            return None;
+        }
+        let held: Vec<String> = self
+            .held
+            .iter()
+            .map(|(n, v)| format!("{n} at {v}"))
+            .collect();
+        Some(format!(
+            "robot '{}' has moving joints the recordings do not name, held still: {} (rad or m; set at import with --hold)",
+            self.robot.name,
+            held.join(", ")
+        ))
+    }
+
     /// The robot's joints the replay drives, in the scene's actuator
     /// order: every moving joint for the generated scene, the controlled
     /// joints of a scene of the user's.
@@ -118,7 +169,13 @@ impl Prepared {
 }
 
 /// The TOML of the generated replay scene.
-pub fn scene_toml(robot: &RobotModel, urdf: &Path, link: &str, duration_s: f64) -> String {
+pub fn scene_toml(
+    robot: &RobotModel,
+    urdf: &Path,
+    link: &str,
+    duration_s: f64,
+    held: &BTreeMap<String, f64>,
+) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
@@ -142,9 +199,22 @@ pub fn scene_toml(robot: &RobotModel, urdf: &Path, link: &str, duration_s: f64) 
         "[robot]\nurdf = {:?}\nbase_position_m = [0.0, 0.0, 0.0]\nbase_rpy_deg = [0.0, 0.0, 0.0]\n",
         urdf.display().to_string()
     );
+    if !held.is_empty() {
+        let _ = writeln!(
+            s,
+            "# The robot's moving joints the recording does not name, held still.\n[robot.held_joints_deg]"
+        );
+        for (name, rad) in held {
+            let _ = writeln!(s, "{name:?} = {:?}", rad.to_degrees());
+        }
+        s.push('\n');
+    }
     let _ = writeln!(s, "# Unused by a replay (the recorded commands drive the servos).\n[controller]\ngain_per_s = 1.0\nmax_speed_deg_s = 1.0\nperiod_s = {TIMESTEP_S:?}\n");
     for &j in &robot.actuated_joints() {
         let joint = &robot.joints[j];
+        if held.contains_key(&joint.name) {
+            continue;
+        }
         let effort = joint.limits.as_ref().map_or(0.0, |l| l.effort);
         let force = if effort.is_finite() && effort > 0.0 {
             effort
@@ -226,6 +296,33 @@ pub fn prepare_replay(req: &ReplayRequest) -> Result<Prepared> {
         Some(path) => Some(Scene::from_file(path)?),
         None => None,
     };
+    // The robot's moving joints the recording does not name are held:
+    // where the import held them, else at 0.
+    let mut held: BTreeMap<String, f64> = settings
+        .get("held_joints")
+        .and_then(Value::as_object)
+        .map(|m| {
+            m.iter()
+                .filter_map(|(k, v)| v.as_f64().map(|v| (k.clone(), v)))
+                .collect()
+        })
+        .unwrap_or_default();
+    if user_scene.is_none() && !recorded.is_empty() {
+        for &j in &robot.actuated_joints() {
+            let name = &robot.joints[j].name;
+            if !recorded.contains(name) {
+                held.entry(name.clone()).or_insert(0.0);
+            }
+        }
+        held.retain(|name, _| {
+            robot
+                .joint_by_name(name)
+                .is_some_and(|j| robot.joints[j].kind.is_movable())
+                && !recorded.contains(name)
+        });
+    } else {
+        held.clear();
+    }
     let moving: Vec<String> = match &user_scene {
         Some(s) => s
             .controlled_joints()
@@ -236,6 +333,7 @@ pub fn prepare_replay(req: &ReplayRequest) -> Result<Prepared> {
             .actuated_joints()
             .iter()
             .map(|&j| robot.joints[j].name.clone())
+            .filter(|n| !held.contains_key(n))
             .collect(),
     };
     if !recorded.is_empty() && recorded != moving {
@@ -305,7 +403,7 @@ pub fn prepare_replay(req: &ReplayRequest) -> Result<Prepared> {
     let (scene, scene_file) = match (req.scene, user_scene) {
         (Some(path), Some(scene)) => (scene, absolute(path)),
         _ => {
-            let text = scene_toml(&robot, &abs_urdf, &link, duration_s);
+            let text = scene_toml(&robot, &abs_urdf, &link, duration_s, &held);
             let path = req.out.join(SCENE_FILE);
             std::fs::write(&path, &text).with_context(|| format!("writing {}", path.display()))?;
             (Scene::from_toml_str(&text, &path)?, absolute(&path))
@@ -326,6 +424,7 @@ pub fn prepare_replay(req: &ReplayRequest) -> Result<Prepared> {
         urdf: abs_urdf,
         packages: req.packages.to_vec(),
         real_dir: absolute(req.real_dir),
+        held,
     };
     // The recorded end effector by forward kinematics of the recorded
     // angles in the scene's world (a motion capture's own bodies are in
@@ -435,7 +534,7 @@ pub fn store_replayed(out: &Path, engine: &dyn Engine, run: &Replayed) -> Result
     Ok(())
 }
 
-/// Stores the physics-free runs in `OUT/kinematic/`.
+/// Stores the physics-free runs in `OUT/ideal/`.
 pub fn store_kinematic(out: &Path, prepared: &Prepared, delay_s: f64) -> Result<usize> {
     let link = prepared
         .robot
@@ -461,7 +560,7 @@ pub fn store_kinematic(out: &Path, prepared: &Prepared, delay_s: f64) -> Result<
 /// Joint-space errors of one source against the recordings.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct JointSpaceRow {
-    /// Source name (an engine, or `kinematic`).
+    /// Source name (an engine, or `ideal`: the physics-free model).
     pub source: String,
     /// Episodes compared.
     pub episodes: usize,

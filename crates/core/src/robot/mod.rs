@@ -55,6 +55,9 @@ pub struct RobotModel {
     /// The URDF file this model was read from; for a model read from a
     /// string, the base directory that relative paths were resolved against.
     pub source: PathBuf,
+    /// What reading the URDF noticed without refusing it (a `package://`
+    /// found beside the file), one line each.
+    pub notes: Vec<String>,
     /// For each link, the joint whose child it is (`None` for the root).
     parent_joint: Vec<Option<usize>>,
     /// For each link, the joints whose parent it is, in file order.
@@ -569,6 +572,7 @@ impl RobotModel {
             joints,
             root_link,
             source,
+            notes: Vec::new(),
             parent_joint,
             child_joints,
             tree_order,

@@ -8,6 +8,7 @@ use super::{
     PackageResolver, RobotError, RobotModel, Visual,
 };
 use crate::pose::{Pose, Quat, Vec3};
+use std::cell::RefCell;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
@@ -34,6 +35,7 @@ pub(super) fn build(
         source,
         base_dir,
         resolver,
+        notes: RefCell::new(Vec::new()),
     };
 
     let mut link_index: HashMap<&str, usize> = HashMap::new();
@@ -77,7 +79,13 @@ pub(super) fn build(
     // Mimic references need every joint's index and kind.
     ctx.mimics(&robot.joints, &joint_index, &mut joints)?;
 
-    RobotModel::from_parts(robot.name.clone(), links, joints, source.to_path_buf())
+    let mut model =
+        RobotModel::from_parts(robot.name.clone(), links, joints, source.to_path_buf())?;
+    // The root link's inertia moves nothing on a fixed base: no note.
+    let root = format!("link \"{}\" has mass 0", model.links[model.root_link].name);
+    model.notes = ctx.notes.into_inner();
+    model.notes.retain(|n| !n.starts_with(&root));
+    Ok(model)
 }
 
 struct Ctx<'a> {
@@ -85,9 +93,27 @@ struct Ctx<'a> {
     source: &'a Path,
     base_dir: &'a Path,
     resolver: &'a PackageResolver,
+    /// What was noticed without refusing the file, one line each.
+    notes: RefCell<Vec<String>>,
 }
 
 impl Ctx<'_> {
+    /// Where `package://PACKAGE/INNER` is when no package of that name is
+    /// known, as pybullet, Isaac and MuJoCo's tools look: `PACKAGE/INNER`
+    /// beside the URDF (`package://meshes/...` with `meshes/` there), or
+    /// `INNER` in a folder above the URDF named `PACKAGE`.
+    fn beside_urdf(&self, package: &str, inner: &str) -> Option<PathBuf> {
+        let beside = self.base_dir.join(package).join(inner);
+        if beside.is_file() {
+            return Some(beside);
+        }
+        self.base_dir
+            .ancestors()
+            .find(|d| d.file_name().is_some_and(|n| n == package))
+            .map(|d| d.join(inner))
+            .filter(|p| p.is_file())
+    }
+
     fn element_line(&self, tag: &str, name: &str) -> Option<usize> {
         self.nth_element_line(tag, name, 0)
     }
@@ -165,6 +191,11 @@ impl Ctx<'_> {
                     name,
                     format!("link \"{name}\" <inertial><inertia>"),
                     format!("inertia {inertia:?} must be finite with ixx, iyy, izz >= 0 kg m^2"),
+                ));
+            }
+            if mass == 0.0 {
+                self.notes.borrow_mut().push(format!(
+                    "link \"{name}\" has mass 0 and the inertia {inertia:?}: a massless link carries no inertia here (MuJoCo's URDF import would keep it)"
                 ));
             }
             Some(Inertial {
@@ -283,6 +314,18 @@ impl Ctx<'_> {
             let (package, inner) = rest.split_once('/').unwrap_or((rest, ""));
             match self.resolver.find(package) {
                 Ok(dir) => dir.join(inner),
+                Err(_) if self.beside_urdf(package, inner).is_some() => {
+                    let found = self.beside_urdf(package, inner).unwrap_or_default();
+                    let mut notes = self.notes.borrow_mut();
+                    let line = format!(
+                        "package '{package}' of the URDF's package:// meshes is not known: found beside the URDF ({}); --package {package}=DIR names another place",
+                        self.base_dir.display()
+                    );
+                    if !notes.contains(&line) {
+                        notes.push(line);
+                    }
+                    found
+                }
                 Err(searched) => {
                     return Err(RobotError::PackageNotFound {
                         source_file: self.source.to_path_buf(),

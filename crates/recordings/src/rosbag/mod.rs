@@ -96,7 +96,19 @@ pub fn import_rosbag(path: &Path, opts: &RosbagOptions) -> Result<Vec<Recording>
         }
         Some(name) => {
             let index = bag.topic(name).unwrap_or(usize::MAX);
-            Some(read_commands(path, &bag, index, opts, &mut warnings)?)
+            // Unnamed command values are the recorded joints', in URDF
+            // order: a robot's joints the bag does not record (a
+            // gripper's fingers) are held, not commanded.
+            let recorded = RosbagOptions {
+                robot_joints: opts
+                    .robot_joints
+                    .iter()
+                    .filter(|j| states.names.contains(j))
+                    .cloned()
+                    .collect(),
+                ..opts.clone()
+            };
+            Some(read_commands(path, &bag, index, &recorded, &mut warnings)?)
         }
     };
     let mut info = Map::new();
