@@ -1,12 +1,14 @@
-//! Mesh files as triangle soups: STL (binary and ASCII, read here),
-//! Wavefront OBJ and COLLADA (`.dae`, read with the `mesh-loader` crate,
-//! which applies COLLADA's `<unit>`, `<up_axis>` and node transforms), so
+//! Mesh files as triangle soups: STL (binary and ASCII) and COLLADA
+//! (`.dae`: its `<unit>` and node transforms applied, `<up_axis>` not; see
+//! `collada.rs`) read here, Wavefront OBJ with the `mesh-loader` crate, so
 //! that every engine that builds its own collision shapes reads the three
 //! formats URDFs in the wild use, and an engine that reads files itself
 //! can be given a format it knows ([`TriangleMesh::to_binary_stl`]).
 
 use crate::pose::Vec3;
 use std::path::{Path, PathBuf};
+
+mod collada;
 
 /// A triangle soup read from an STL file, in the file's units (URDF meshes
 /// are in metres).
@@ -45,6 +47,51 @@ fn malformed(path: &Path, message: String) -> StlError {
         path: path.to_path_buf(),
         line: None,
         message,
+    }
+}
+
+/// The deepest nesting of COLLADA elements read: a document's scene graph
+/// nests a few dozen levels at most (20 000 levels overflowed the stack of
+/// the reader this project used before, `mesh-loader`).
+pub const MAX_COLLADA_DEPTH: usize = 256;
+
+/// 1-based line of a byte offset.
+fn line_at(bytes: &[u8], offset: usize) -> usize {
+    bytes[..offset.min(bytes.len())]
+        .iter()
+        .filter(|&&b| b == b'\n')
+        .count()
+        + 1
+}
+
+/// Refuses COLLADA elements nested deeper than [`MAX_COLLADA_DEPTH`]
+/// before the XML is parsed into a tree. Malformed XML is left to that
+/// parser, which names it.
+fn check_collada(bytes: &[u8], path: &Path) -> Result<(), StlError> {
+    use quick_xml::events::Event;
+    let mut reader = quick_xml::Reader::from_reader(bytes);
+    let mut buf = Vec::new();
+    let mut depth = 0usize;
+    loop {
+        let before = reader.buffer_position() as usize;
+        buf.clear();
+        match reader.read_event_into(&mut buf) {
+            Ok(Event::Start(_)) => {
+                depth += 1;
+                if depth > MAX_COLLADA_DEPTH {
+                    return Err(StlError::Malformed {
+                        path: path.to_path_buf(),
+                        line: Some(line_at(bytes, before)),
+                        message: format!(
+                            "not a valid COLLADA mesh: elements nested more than {MAX_COLLADA_DEPTH} levels deep"
+                        ),
+                    });
+                }
+            }
+            Ok(Event::End(_)) => depth = depth.saturating_sub(1),
+            Ok(Event::Eof) | Err(_) => return Ok(()),
+            Ok(_) => {}
+        }
     }
 }
 
@@ -122,9 +169,8 @@ impl TriangleMesh {
     /// Parses COLLADA content (`<unit>`, `<up_axis>` and node transforms
     /// applied); `path` names it in errors.
     pub fn parse_collada(bytes: &[u8], path: &Path) -> Result<Self, StlError> {
-        let scene = mesh_loader::collada::from_slice(bytes)
-            .map_err(|e| malformed(path, format!("not a valid COLLADA mesh: {e}")))?;
-        Self::from_scene(scene, path)
+        check_collada(bytes, path)?;
+        collada::parse(bytes, path)
     }
 
     fn from_scene(scene: mesh_loader::Scene, path: &Path) -> Result<Self, StlError> {
@@ -397,8 +443,9 @@ mod tests {
     }
 }
 
-/// The independent writer's OBJ and COLLADA copies of the iiwa's STL
-/// meshes (`scripts/make-fixtures`, trimesh) read as the same triangles.
+/// The independent writer's OBJ, COLLADA and ASCII STL copies of the
+/// iiwa's binary STL meshes (`scripts/make-fixtures`, trimesh) read as the
+/// same triangles.
 #[cfg(test)]
 mod fixture_tests {
     use super::*;
@@ -421,6 +468,7 @@ mod fixture_tests {
             for other in [
                 dir.join(format!("obj/{stem}.obj")),
                 dir.join(format!("dae/{stem}.dae")),
+                dir.join(format!("stl_ascii/{stem}.stl")),
             ] {
                 let b = TriangleMesh::read(&other).unwrap();
                 assert_eq!(a.triangles.len(), b.triangles.len(), "{}", other.display());
