@@ -111,6 +111,11 @@ impl std::fmt::Display for CommandKind {
     }
 }
 
+/// Two times closer than this are one instant, s: the resolution of a
+/// ROS timestamp (1 ns), far above the rounding of seconds in `f64` (about
+/// 2e-15 s at 10 s) and far below any engine's step.
+pub const TIME_TIE_S: f64 = 1e-9;
+
 /// Joint commands of one kind at their own timestamps: what a recording's
 /// controller sent (ros2_control's command topic, a dataset's `action`).
 /// Between two samples the command holds (zero-order hold).
@@ -140,9 +145,13 @@ impl JointCommands {
     }
 
     /// The command in force at time `t_s` (the latest at or before it),
-    /// `None` before the first.
+    /// `None` before the first. A command within [`TIME_TIE_S`] after
+    /// `t_s` counts as at it: times in seconds computed two ways (a
+    /// command's timestamp, an engine step's `k dt` less a delay) differ
+    /// by rounding where they are the same instant, and the command must
+    /// then be in force, as in a controller that counts its ticks.
     pub fn held_at(&self, t_s: f64) -> Option<&[f64]> {
-        let i = self.time_s.partition_point(|&c| c <= t_s);
+        let i = self.time_s.partition_point(|&c| c <= t_s + TIME_TIE_S);
         i.checked_sub(1).map(|i| self.values[i].as_slice())
     }
 
