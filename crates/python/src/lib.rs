@@ -50,8 +50,9 @@ fn py_err(e: anyhow::Error) -> PyErr {
 enum Event {
     /// A new bar.
     Bar(u64, u64, String),
-    /// Items done on a bar.
-    Inc(u64, u64),
+    /// Items done on a bar, and where to say that the reporter has seen
+    /// them.
+    Inc(u64, u64, mpsc::Sender<()>),
     /// A bar's position.
     Position(u64, u64),
     /// A bar's message.
@@ -80,8 +81,14 @@ impl Progress for ChannelBar {
     fn println(&self, line: String) {
         let _ = self.tx.send(Event::Note(line));
     }
+    /// Waits until the calling thread has passed the items on to the
+    /// reporter: a Ctrl-C or a reporter that raises there stops the work
+    /// before its next run, not some runs later.
     fn inc(&self, n: u64) {
-        let _ = self.tx.send(Event::Inc(self.id, n));
+        let (seen_tx, seen) = mpsc::channel();
+        if self.tx.send(Event::Inc(self.id, n, seen_tx)).is_ok() {
+            let _ = seen.recv();
+        }
     }
     fn set_message(&self, message: String) {
         let _ = self.tx.send(Event::Message(self.id, message));
@@ -120,7 +127,7 @@ impl Ui for ChannelUi {
 fn dispatch(reporter: &Bound<'_, PyAny>, event: Event) -> PyResult<()> {
     match event {
         Event::Bar(id, total, unit) => reporter.call_method1("bar", (id, total, unit)),
-        Event::Inc(id, n) => reporter.call_method1("inc", (id, n)),
+        Event::Inc(id, n, _) => reporter.call_method1("inc", (id, n)),
         Event::Position(id, n) => reporter.call_method1("position", (id, n)),
         Event::Message(id, m) => reporter.call_method1("message", (id, m)),
         Event::Finish(id) => reporter.call_method1("finish", (id,)),
@@ -163,6 +170,12 @@ fn long_call<T: Send>(
                 Err(mpsc::RecvTimeoutError::Timeout) => None,
                 Err(mpsc::RecvTimeoutError::Disconnected) => break,
             };
+            // Said to the work once the reporter has seen the items and
+            // the signals are checked (see `ChannelBar::inc`).
+            let seen = match &event {
+                Some(Event::Inc(_, _, seen)) => Some(seen.clone()),
+                _ => None,
+            };
             if let (Some(event), Some(r)) = (event, reporter) {
                 if let Err(e) = dispatch(r, event) {
                     if raised.is_none() {
@@ -176,6 +189,9 @@ fn long_call<T: Send>(
                     realitygap_runner::interrupt::request();
                     raised = Some(e);
                 }
+            }
+            if let Some(seen) = seen {
+                let _ = seen.send(());
             }
         }
         py.detach(|| worker.join())

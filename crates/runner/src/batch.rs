@@ -166,10 +166,15 @@ fn slurm_dir(out: &std::path::Path) -> std::path::PathBuf {
         .unwrap_or_else(|| out.join(".slurm").join("batch"))
 }
 
-/// A run's outcome on its way from a worker to the storing thread.
-type Finished = ((usize, u32), ChildEnd, f64);
+/// A run's outcome on its way from a worker to the storing thread, with
+/// the channel on which the storing thread says it is stored.
+type Finished = ((usize, u32), ChildEnd, f64, mpsc::Sender<()>);
 
-/// Runs jobs from `queue` in child processes until it is empty.
+/// Runs jobs from `queue` in child processes until it is empty. A worker
+/// takes its next job only once its last run is stored and reported
+/// ([`Progress::inc`]): an interruption asked for while the run was being
+/// stored or reported (a Ctrl-C seen by the progress display, a Python
+/// reporter that raises) then starts no further run, whatever the timing.
 fn worker(
     queue: &Mutex<VecDeque<((usize, u32), Job)>>,
     launcher: &Launcher,
@@ -188,7 +193,14 @@ fn worker(
             // Cut short by the interruption: not a failure of the run.
             break;
         }
-        if tx.send((key, end, start.elapsed().as_secs_f64())).is_err() {
+        let (stored_tx, stored) = mpsc::channel();
+        if tx
+            .send((key, end, start.elapsed().as_secs_f64(), stored_tx))
+            .is_err()
+        {
+            break;
+        }
+        if stored.recv().is_err() {
             break;
         }
     }
@@ -227,8 +239,9 @@ impl Batch<'_> {
                 scope.spawn(move || worker(queue, launcher, timeout_s, tx));
             }
             drop(tx);
-            for ((gi, repeat), end, elapsed_s) in rx {
+            for ((gi, repeat), end, elapsed_s, stored) in rx {
                 self.store(gi, repeat, end, elapsed_s)?;
+                let _ = stored.send(());
             }
             Ok(())
         })
