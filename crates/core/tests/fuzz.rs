@@ -106,7 +106,7 @@ fn stl() {
             Campaign {
                 format: "stl".into(),
                 seeds: seeds(&paths),
-                inputs: 1500,
+                per_seed: 50,
                 damages,
             }
         },
@@ -132,7 +132,7 @@ fn obj() {
             Campaign {
                 format: "obj".into(),
                 seeds,
-                inputs: 1500,
+                per_seed: 90,
                 damages: text(),
             }
         },
@@ -158,7 +158,7 @@ fn collada() {
             Campaign {
                 format: "collada".into(),
                 seeds,
-                inputs: 1500,
+                per_seed: 150,
                 damages: xml(),
             }
         },
@@ -246,7 +246,7 @@ fn urdf() {
             Campaign {
                 format: "urdf".into(),
                 seeds: seeds(&paths),
-                inputs: 1500,
+                per_seed: 300,
                 damages,
             }
         },

@@ -90,7 +90,7 @@ fn qualisys() {
             Campaign {
                 format: "qualisys".into(),
                 seeds,
-                inputs: 1500,
+                per_seed: 75,
                 damages: text_damages(),
             }
         },
@@ -122,7 +122,7 @@ fn recorded() {
             Campaign {
                 format: "recorded".into(),
                 seeds,
-                inputs: 1500,
+                per_seed: 70,
                 damages: text_damages(),
             }
         },

@@ -14,7 +14,7 @@
 //! the test binary. Each input is named by its format and index; the
 //! failure messages say how to run that one input again
 //! (`REALITYGAP_FUZZ_ONLY=FORMAT:INDEX`), which also writes its bytes to a
-//! file. `REALITYGAP_FUZZ_INPUTS` scales the number of inputs and
+//! file. `REALITYGAP_FUZZ_INPUTS` sets the damaged inputs per seed and
 //! `REALITYGAP_FUZZ_SEED` changes the mutations, for longer local campaigns.
 
 use std::cell::{Cell, RefCell};
@@ -27,7 +27,8 @@ use std::time::Instant;
 const CHILD_ENV: &str = "REALITYGAP_FUZZ_CHILD";
 /// `FORMAT:INDEX`: run that one input only (and write its bytes to a file).
 pub const ONLY_ENV: &str = "REALITYGAP_FUZZ_ONLY";
-/// Number of damaged inputs per format, instead of each test's default.
+/// Damaged inputs per seed, instead of each campaign's default (the same
+/// variable as the joint-recording importers' campaign).
 pub const INPUTS_ENV: &str = "REALITYGAP_FUZZ_INPUTS";
 /// Seed of the mutations (default 0).
 pub const SEED_ENV: &str = "REALITYGAP_FUZZ_SEED";
@@ -680,9 +681,9 @@ pub struct Campaign {
     pub format: String,
     /// Real files to damage.
     pub seeds: Vec<Seed>,
-    /// Damaged inputs to run (after the seeds themselves), unless
+    /// Damaged inputs per seed (run after the seeds themselves), unless
     /// `REALITYGAP_FUZZ_INPUTS` says otherwise.
-    pub inputs: usize,
+    pub per_seed: usize,
     /// The kinds of damage, with weights.
     pub damages: Vec<(Damage, u32)>,
 }
@@ -801,7 +802,7 @@ impl Campaign {
     /// the reader's error as text; checks every outcome.
     pub fn run(&self, read: impl Fn(&[u8], &Path) -> Result<(), String>) -> Report {
         let seed = env_usize(SEED_ENV).unwrap_or(0) as u64;
-        let damaged = env_usize(INPUTS_ENV).unwrap_or(self.inputs);
+        let damaged = env_usize(INPUTS_ENV).unwrap_or(self.per_seed) * self.seeds.len();
         let total = self.seeds.len() + damaged;
         let only: Option<usize> = std::env::var(ONLY_ENV).ok().and_then(|v| {
             let (format, index) = v.split_once(':')?;
@@ -970,7 +971,7 @@ mod tests {
                 bytes: xml.clone(),
                 valid: true,
             }],
-            inputs: 10,
+            per_seed: 10,
             damages: vec![
                 (Damage::DeleteElement, 1),
                 (Damage::LengthField(4), 1),
