@@ -9,7 +9,9 @@
 
 use realitygap_core::robot::stl::TriangleMesh;
 use realitygap_core::robot::{PackageResolver, RobotModel};
-use realitygap_core::testing::fuzz::{run_campaign_test, Campaign, Damage, Seed};
+use realitygap_core::testing::fuzz::{
+    in_campaign_child, run_campaign_test, Campaign, Damage, Seed,
+};
 use realitygap_core::testing::workspace;
 use std::cell::RefCell;
 use std::collections::HashMap;
@@ -256,5 +258,90 @@ fn urdf() {
                 .map(drop)
                 .map_err(|e| e.to_string())
         },
+    );
+}
+
+/// A campaign of three damaged copies of one tiny seed, whose reader
+/// panics on the seed and makes one allocation of `bytes` bytes on every
+/// other input (refusing it with an error naming the file).
+fn faulty_campaign(test: &str, bytes: usize) {
+    let seed = Seed {
+        path: PathBuf::from("x.bin"),
+        name: "x.bin".into(),
+        bytes: b"abcdef".to_vec(),
+        valid: true,
+    };
+    run_campaign_test(
+        test,
+        || Campaign {
+            format: "harness".into(),
+            seeds: vec![seed.clone()],
+            per_seed: 3,
+            damages: vec![(Damage::BitFlip, 1)],
+        },
+        |input, _| {
+            if input == b"abcdef" {
+                panic!("boom");
+            }
+            let v: Vec<u8> = Vec::with_capacity(bytes);
+            std::hint::black_box(&v);
+            Err("x.bin: refused".into())
+        },
+    );
+}
+
+fn panic_message(test: impl FnOnce() + std::panic::UnwindSafe) -> String {
+    let e = std::panic::catch_unwind(test).unwrap_err();
+    e.downcast_ref::<String>()
+        .cloned()
+        .unwrap_or_else(|| format!("{:?}", e.downcast_ref::<&str>()))
+}
+
+/// The campaign's checks can fail: a panic and allocations over 64 x the
+/// input + 64 MiB (here 200 MiB for 6 bytes) fail the test, naming each
+/// input.
+#[test]
+fn the_harness_fails_on_panics_and_oversized_allocations() {
+    let test = "the_harness_fails_on_panics_and_oversized_allocations";
+    if in_campaign_child() {
+        return faulty_campaign(test, 200 << 20);
+    }
+    let message = panic_message(|| faulty_campaign(test, 200 << 20));
+    assert!(
+        message.contains("harness:0 (seed x.bin; undamaged): panicked: boom at "),
+        "{message}"
+    );
+    for i in 1..=3 {
+        assert!(
+            message.contains(&format!("harness:{i} (seed x.bin; flip bit")),
+            "{message}"
+        );
+    }
+    assert!(
+        message.contains(": an allocation of 209715200 bytes for an input of 6 bytes"),
+        "{message}"
+    );
+}
+
+/// An allocation beyond 1 GiB is refused: the child process aborts, and
+/// the test fails with the input it was reading.
+#[test]
+fn the_harness_fails_on_an_abort_naming_the_input() {
+    let test = "the_harness_fails_on_an_abort_naming_the_input";
+    if in_campaign_child() {
+        return faulty_campaign(test, 3 << 30);
+    }
+    let message = panic_message(|| faulty_campaign(test, 3 << 30));
+    assert!(
+        message.contains("child process failed (signal: 6"),
+        "{message}"
+    );
+    assert!(
+        message.contains("input harness:1 (seed x.bin; flip bit"),
+        "{message}"
+    );
+    assert!(
+        message.contains("fuzz: refusing an allocation of 3221225472 bytes"),
+        "{message}"
     );
 }

@@ -136,6 +136,11 @@ macro_rules! counting_global_allocator {
     };
 }
 
+/// True in the child process that [`run_campaign_test`] runs a campaign in.
+pub fn in_campaign_child() -> bool {
+    std::env::var_os(CHILD_ENV).is_some()
+}
+
 /// Starts a new measurement of the largest allocation on this thread.
 pub fn reset_largest_allocation() {
     LARGEST.with(|l| l.set(0));
@@ -915,10 +920,12 @@ pub fn run_campaign_test(
                 .take(12)
                 .collect();
             let tail: Vec<&str> = tail.into_iter().rev().collect();
+            let failures: Vec<&str> = stdout.lines().filter(|l| l.starts_with("  ")).collect();
             panic!(
-                "the campaign's child process failed ({}); the end of its stderr (the last input line names the input; \
-                 run it alone with {ONLY_ENV}=FORMAT:INDEX):\n{}",
+                "the campaign's child process failed ({}); its failures:\n{}\nthe end of its stderr (the last input line \
+                 names the input; run it alone with {ONLY_ENV}=FORMAT:INDEX):\n{}",
                 out.status,
+                failures.join("\n"),
                 tail.join("\n")
             );
         }
