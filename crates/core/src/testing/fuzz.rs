@@ -7,7 +7,7 @@
 //! never make one allocation larger than 64 x the input's size + 64 MiB.
 //!
 //! A test binary that runs a campaign installs a counting global allocator
-//! ([`counting_global_allocator!`]: it records the largest single request
+//! ([`counting_global_allocator!`](crate::counting_global_allocator): it records the largest single request
 //! of the current thread) and calls [`run_campaign_test`], which runs the campaign in a
 //! child process (this test alone, again): an abort or a stack overflow
 //! then fails the test with the input that caused it instead of killing
@@ -46,7 +46,7 @@ thread_local! {
 /// Records an allocation request of `size` bytes for the current thread's
 /// largest ([`largest_allocation`]); false when the request must be
 /// refused (above 1 GiB), after saying so on stderr. Called by the
-/// allocator that [`counting_global_allocator!`] installs.
+/// allocator that [`counting_global_allocator!`](crate::counting_global_allocator) installs.
 pub fn record_allocation(size: usize) -> bool {
     let _ = LARGEST.try_with(|l| l.set(l.get().max(size)));
     if size > HARD_CAP {
@@ -147,7 +147,7 @@ pub fn reset_largest_allocation() {
 }
 
 /// The largest single allocation request on this thread since
-/// [`reset_largest_allocation`] (0 unless [`counting_global_allocator!`]
+/// [`reset_largest_allocation`] (0 unless [`counting_global_allocator!`](crate::counting_global_allocator)
 /// installed the global allocator).
 pub fn largest_allocation() -> usize {
     LARGEST.with(Cell::get)
