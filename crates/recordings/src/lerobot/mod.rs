@@ -188,51 +188,7 @@ fn episode_index(dir: &Path, info: &Value) -> Result<Option<Vec<EpisodeMeta>>, I
     if !v3.is_empty() {
         let mut out = Vec::new();
         for file in &v3 {
-            let reader = pages::open(file)?;
-            let rows = reader.get_row_iter(None).map_err(|e| {
-                ImportError::new(file, format!("cannot read the parquet file: {e}"))
-            })?;
-            for (r, row) in rows.enumerate() {
-                let row = row.map_err(|e| {
-                    ImportError::new(file, format!("cannot read the parquet file: {e}"))
-                        .with_field(format!("row {r}"))
-                })?;
-                let get = |name: &str| -> Result<Option<i64>, ImportError> {
-                    match row.get_column_iter().find(|(n, _)| n.as_str() == name) {
-                        None => Ok(None),
-                        Some((_, f)) => integer(f).map(Some).ok_or_else(|| {
-                            ImportError::new(file, "expected an integer")
-                                .with_field(format!("row {r}, column {name}"))
-                        }),
-                    }
-                };
-                let need = |name: &str| -> Result<i64, ImportError> {
-                    get(name)?.ok_or_else(|| {
-                        ImportError::new(file, format!("the episode index has no column {name}"))
-                            .with_field(format!("row {r}"))
-                    })
-                };
-                let index = need("episode_index")?;
-                let length = need("length")?;
-                let data_file = match (get("data/chunk_index")?, get("data/file_index")?) {
-                    (Some(chunk), Some(f)) => path_of(
-                        &[
-                            ("chunk_index", chunk),
-                            ("file_index", f),
-                            ("episode_chunk", chunk),
-                            ("episode_index", index),
-                        ],
-                        file,
-                    )?,
-                    _ => None,
-                };
-                out.push(EpisodeMeta {
-                    index,
-                    length,
-                    file: data_file,
-                    source: file.clone(),
-                });
-            }
+            out.extend(pages::guarded(file, || episode_rows(file, &path_of))?);
         }
         return Ok(Some(out));
     }
@@ -276,6 +232,61 @@ fn episode_index(dir: &Path, info: &Value) -> Result<Option<Vec<EpisodeMeta>>, I
         });
     }
     Ok(Some(out))
+}
+
+/// The data file `data_path` names for these template values (and the
+/// index file that asked, for messages).
+type DataPathOf<'f> = dyn Fn(&[(&str, i64)], &Path) -> Result<Option<PathBuf>, ImportError> + 'f;
+
+/// The episodes a v3 episode index file lists.
+fn episode_rows(file: &Path, path_of: &DataPathOf<'_>) -> Result<Vec<EpisodeMeta>, ImportError> {
+    let mut out = Vec::new();
+    let reader = pages::open(file)?;
+    let rows = reader
+        .get_row_iter(None)
+        .map_err(|e| ImportError::new(file, format!("cannot read the parquet file: {e}")))?;
+    for (r, row) in rows.enumerate() {
+        let row = row.map_err(|e| {
+            ImportError::new(file, format!("cannot read the parquet file: {e}"))
+                .with_field(format!("row {r}"))
+        })?;
+        let get = |name: &str| -> Result<Option<i64>, ImportError> {
+            match row.get_column_iter().find(|(n, _)| n.as_str() == name) {
+                None => Ok(None),
+                Some((_, f)) => integer(f).map(Some).ok_or_else(|| {
+                    ImportError::new(file, "expected an integer")
+                        .with_field(format!("row {r}, column {name}"))
+                }),
+            }
+        };
+        let need = |name: &str| -> Result<i64, ImportError> {
+            get(name)?.ok_or_else(|| {
+                ImportError::new(file, format!("the episode index has no column {name}"))
+                    .with_field(format!("row {r}"))
+            })
+        };
+        let index = need("episode_index")?;
+        let length = need("length")?;
+        let data_file = match (get("data/chunk_index")?, get("data/file_index")?) {
+            (Some(chunk), Some(f)) => path_of(
+                &[
+                    ("chunk_index", chunk),
+                    ("file_index", f),
+                    ("episode_chunk", chunk),
+                    ("episode_index", index),
+                ],
+                file,
+            )?,
+            _ => None,
+        };
+        out.push(EpisodeMeta {
+            index,
+            length,
+            file: data_file,
+            source: file.to_path_buf(),
+        });
+    }
+    Ok(out)
 }
 
 /// How frames become times: `frame_index / fps`.
@@ -578,8 +589,24 @@ fn check_against_index(
     Ok(())
 }
 
-/// Reads one parquet file's rows into their episodes.
+/// Reads one parquet file's rows into their episodes ([`read_rows`], a
+/// panic of the parquet crate an error naming the file).
 fn read_file(
+    file: &Path,
+    names: &[String],
+    action_names: &[String],
+    has: (bool, bool),
+    clock: Clock,
+    episodes: &mut BTreeMap<i64, Episode>,
+    order: &mut Vec<i64>,
+) -> Result<(), ImportError> {
+    pages::guarded(file, || {
+        read_rows(file, names, action_names, has, clock, episodes, order)
+    })
+}
+
+/// Reads one parquet file's rows into their episodes.
+fn read_rows(
     file: &Path,
     names: &[String],
     action_names: &[String],
@@ -703,6 +730,40 @@ mod tests {
         assert!(fill_template("{nope:03d}", &v).is_err());
         assert!(fill_template("{file_index:x}", &v).is_err());
         assert!(fill_template("{file_index", &v).is_err());
+    }
+
+    #[test]
+    fn a_v2_episode_index_names_each_episodes_file() {
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path();
+        std::fs::create_dir_all(dir.join("meta")).unwrap();
+        let info = serde_json::json!({
+            "codebase_version": "v2.1",
+            "chunks_size": 2,
+            "data_path": "data/chunk-{episode_chunk:03d}/episode_{episode_index:06d}.parquet",
+        });
+        std::fs::write(
+            dir.join("meta/episodes.jsonl"),
+            "{\"episode_index\": 0, \"tasks\": [\"t\"], \"length\": 5}\n\n{\"episode_index\": 3, \"tasks\": [\"t\"], \"length\": 7}\n",
+        )
+        .unwrap();
+        let index = episode_index(dir, &info).unwrap().unwrap();
+        assert_eq!(
+            index
+                .iter()
+                .map(|m| (m.index, m.length, m.file.clone().unwrap()))
+                .collect::<Vec<_>>(),
+            [
+                (0, 5, dir.join("data/chunk-000/episode_000000.parquet")),
+                (3, 7, dir.join("data/chunk-001/episode_000003.parquet")),
+            ]
+        );
+        std::fs::write(dir.join("meta/episodes.jsonl"), "{\"episode_index\": 0}\n").unwrap();
+        let e = episode_index(dir, &info).unwrap_err().to_string();
+        assert!(
+            e.ends_with("meta/episodes.jsonl:1: no integer length"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -11,7 +11,10 @@
 use bytes::Bytes;
 use parquet::file::reader::{FileReader, SerializedFileReader};
 use realitygap_data::ImportError;
+use std::cell::Cell;
+use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::Path;
+use std::sync::Once;
 
 /// The largest decompressed column chunk a parquet file of `file_len`
 /// bytes is allowed to state: 16 times the file and 16 MiB more.
@@ -19,6 +22,49 @@ pub fn parquet_limit(file_len: usize) -> u64 {
     (file_len as u64)
         .saturating_mul(16)
         .saturating_add(16 << 20)
+}
+
+thread_local! {
+    /// Whether a panic on this thread is one [`guarded`] turns into an
+    /// error (the panic hook then prints nothing).
+    static QUIET: Cell<bool> = const { Cell::new(false) };
+}
+
+/// Installs, once, a panic hook that stays silent for [`guarded`] code and
+/// hands every other panic to the hook that was there before.
+static QUIET_HOOK: Once = Once::new();
+
+/// Runs `read` (the `parquet` crate reading `file`) and turns a panic into
+/// an error naming the file: the crate panics on some damaged files where
+/// it should return an error (an out-of-bounds index in its
+/// BYTE_STREAM_SPLIT decoder when a page holds fewer bytes than its values
+/// need, found by the fuzz campaign).
+pub fn guarded<T>(
+    file: &Path,
+    read: impl FnOnce() -> Result<T, ImportError>,
+) -> Result<T, ImportError> {
+    QUIET_HOOK.call_once(|| {
+        let previous = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            if !QUIET.with(Cell::get) {
+                previous(info);
+            }
+        }));
+    });
+    let was = QUIET.with(|q| q.replace(true));
+    let outcome = catch_unwind(AssertUnwindSafe(read));
+    QUIET.with(|q| q.set(was));
+    outcome.unwrap_or_else(|payload| {
+        let message = payload
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| payload.downcast_ref::<String>().cloned())
+            .unwrap_or_default();
+        Err(ImportError::new(
+            file,
+            format!("the parquet file is damaged: its reader failed ({message})"),
+        ))
+    })
 }
 
 /// Reads a parquet file into memory and opens it, once its column chunks
