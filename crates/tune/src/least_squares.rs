@@ -8,14 +8,19 @@
 //! back onto it, and a coordinate held at a bound by the gradient is
 //! reported as such.
 //!
-//! The intervals are the Gauss-Newton covariance `s^2 (J^T J)^-1` (what
-//! `mujoco.sysid` gives), with one correction: residuals of a simulated
-//! trajectory are strongly correlated from one sample to the next, which
-//! makes the plain `s^2 / n` far too optimistic. The number of independent
-//! residuals is estimated from the lag-1 autocorrelation `rho` of the
-//! residuals at the optimum (`n_eff = n (1 - rho) / (1 + rho)`, the
-//! AR(1) effective sample size), and the covariance is scaled by
-//! `n / n_eff`.
+//! Two spreads of the fitted coordinates come from that Jacobian:
+//!
+//! - [`spread`], the Gauss-Newton covariance `s^2 (J^T J)^-1` (what
+//!   `mujoco.sysid` gives) with the residual count reduced for the
+//!   residuals' lag-1 autocorrelation `rho` (`n_eff = n (1 - rho) / (1 +
+//!   rho)`, the AR(1) effective sample size): the polish's intervals, the
+//!   correlations of pairs, and the standard deviations a fit settles in;
+//! - [`misfit`], the intervals of `tune --recordings`: the residuals told
+//!   apart into white noise (Gauss-Newton's share) and structure the model
+//!   cannot reproduce, which bounds how far such an error could have
+//!   shifted each coordinate. Reading noise drives `rho`, and with it the
+//!   first's width, to nothing while the model's error stays; the second
+//!   does not depend on `rho`.
 
 use cmaes::DVector;
 use nalgebra::DMatrix;
@@ -549,23 +554,23 @@ pub fn autocorrelation(r: &[f64], lag: usize) -> f64 {
     (cov / var).clamp(-0.999, 0.999)
 }
 
-/// The spread of a fit with residuals `r` and Jacobian `j` there; `lag` as
-/// for [`autocorrelation`].
-pub fn spread(j: &DMatrix<f64>, r: &[f64], lag: usize) -> Spread {
-    let n = r.len();
+/// `(J^T J)^-1` of a Jacobian, as far as the data see it: per coordinate
+/// the square root of its diagonal element (infinite for a coordinate on
+/// a direction the data do not see, or without effect), and the
+/// correlation of each pair.
+struct NormalInverse {
+    sqrt_diag: Vec<f64>,
+    correlation: Vec<Vec<f64>>,
+}
+
+fn normal_inverse(j: &DMatrix<f64>) -> NormalInverse {
     let p = j.ncols();
-    let rho = autocorrelation(r, lag).max(0.0);
-    let n_eff = (n as f64 * (1.0 - rho) / (1.0 + rho)).max(p as f64 + 1.0);
-    let variance = cost_of(r) / (n_eff - p as f64).max(1.0);
-    // Covariance of the coordinates: variance * (J^T J)^-1, with the
-    // residual count reduced to n_eff: scaled by n / n_eff. J^T J is
-    // first scaled to unit diagonal, so that its conditioning measures
-    // what the data tell apart, not the parameters' units.
+    // J^T J is first scaled to unit diagonal, so that its conditioning
+    // measures what the data tell apart, not the parameters' units.
     let a = j.transpose() * j;
-    let scale = n as f64 / n_eff;
     let d: Vec<f64> = (0..p).map(|i| a[(i, i)].max(0.0).sqrt()).collect();
     let seen: Vec<usize> = (0..p).filter(|&i| d[i] > 0.0).collect();
-    let mut sd_u = vec![f64::INFINITY; p];
+    let mut sqrt_diag = vec![f64::INFINITY; p];
     let mut correlation = vec![vec![f64::NAN; p]; p];
     let m = seen.len();
     if m > 0 {
@@ -600,7 +605,7 @@ pub fn spread(j: &DMatrix<f64>, r: &[f64], lag: usize) -> Spread {
             if blind[r] {
                 continue;
             }
-            sd_u[seen[r]] = (variance * scale * inv[(r, r)]).max(0.0).sqrt() / d[seen[r]];
+            sqrt_diag[seen[r]] = inv[(r, r)].max(0.0).sqrt() / d[seen[r]];
             for c in 0..m {
                 if blind[c] {
                     continue;
@@ -612,13 +617,163 @@ pub fn spread(j: &DMatrix<f64>, r: &[f64], lag: usize) -> Spread {
             }
         }
     }
+    NormalInverse {
+        sqrt_diag,
+        correlation,
+    }
+}
+
+/// The spread of a fit with residuals `r` and Jacobian `j` there; `lag` as
+/// for [`autocorrelation`].
+pub fn spread(j: &DMatrix<f64>, r: &[f64], lag: usize) -> Spread {
+    let n = r.len();
+    let p = j.ncols();
+    let rho = autocorrelation(r, lag).max(0.0);
+    let n_eff = (n as f64 * (1.0 - rho) / (1.0 + rho)).max(p as f64 + 1.0);
+    let variance = cost_of(r) / (n_eff - p as f64).max(1.0);
+    // Covariance of the coordinates: variance * (J^T J)^-1, with the
+    // residual count reduced to n_eff: scaled by n / n_eff.
+    let scale = n as f64 / n_eff;
+    let inv = normal_inverse(j);
+    let sd_u = inv
+        .sqrt_diag
+        .iter()
+        .map(|s| (variance * scale).max(0.0).sqrt() * s)
+        .collect();
     Spread {
         n,
         rho,
         n_eff,
         variance,
         sd_u,
-        correlation,
+        correlation: inv.correlation,
+    }
+}
+
+/// A run of residuals: `samples` rows of `series` values each, row by
+/// row (an episode's joint angles, sample by sample and joint by joint).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Block {
+    /// Rows (samples in time).
+    pub samples: usize,
+    /// Values per row (series side by side: joints).
+    pub series: usize,
+}
+
+/// The residuals at an optimum told apart into white noise (what differs
+/// from one sample to the next at random: a sensor's reading noise) and
+/// structure (what is smooth in time: what the model cannot reproduce),
+/// and the 95 % interval of each coordinate that both allow.
+///
+/// - **Noise**: the variogram of each series, `g(l) = mean (r[t] -
+///   r[t-l])^2 / 2` at lags 1 and 2, extrapolated linearly to lag 0 (`2
+///   g(1) - g(2)`, its nugget): a smooth error adds nothing there, white
+///   noise its variance `s_n^2`. Its share of an interval is the
+///   Gauss-Newton one, `1.96 s_n sqrt((J^T J)^-1_ii)`.
+/// - **Structure**: the residuals averaged over `window` samples (which
+///   keeps a smooth error and leaves white noise `s_n^2 / window`), less
+///   that noise: a mean square `s_m^2` per residual, a norm `|r_m| = s_m
+///   sqrt(n)`. An error of the model shifts the fit by `(J^T J)^-1 J^T e`;
+///   the part of `e` the coordinates absorb is what shifts them, at most
+///   `|P e| sqrt((J^T J)^-1_ii)` for coordinate `i` (Cauchy-Schwarz), and
+///   it is not seen in the residuals. Taking it as no larger than the part
+///   left in them (`|r_m|`) bounds the shift by `|r_m| sqrt((J^T
+///   J)^-1_ii)`: the values of the coordinate over which the fit moves
+///   the replay by no more than what it cannot reproduce.
+///
+/// The half-width is the root sum of squares of the two. Unlike a count
+/// of independent residuals from their autocorrelation (which reading
+/// noise drives to zero while the model error stays), neither share
+/// depends on how correlated the residuals are.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Misfit {
+    /// Residuals.
+    pub n: usize,
+    /// Their root mean square.
+    pub rms: f64,
+    /// The white noise's standard deviation per residual.
+    pub noise_sd: f64,
+    /// The structure's root mean square per residual.
+    pub structure_rms: f64,
+    /// Samples averaged to measure the structure.
+    pub window: usize,
+    /// Half-width of each coordinate's 95 % interval, normalised units
+    /// (infinite where the data do not see the coordinate).
+    pub half_width_u: Vec<f64>,
+    /// Correlation of each pair of coordinates.
+    pub correlation: Vec<Vec<f64>>,
+}
+
+/// The [`Misfit`] of residuals `r` (laid out as `blocks`, in order) with
+/// Jacobian `j` there, the structure measured over `window` samples (at
+/// least 1). Residuals past the blocks, or all of them when the blocks
+/// do not cover them, count as one series.
+pub fn misfit(j: &DMatrix<f64>, r: &[f64], blocks: &[Block], window: usize) -> Misfit {
+    let n = r.len();
+    let window = window.max(1);
+    let covered: usize = blocks.iter().map(|b| b.samples * b.series).sum();
+    let mut layout: Vec<Block> = if covered <= n {
+        blocks.to_vec()
+    } else {
+        Vec::new()
+    };
+    let used: usize = layout.iter().map(|b| b.samples * b.series).sum();
+    if used < n {
+        layout.push(Block {
+            samples: n - used,
+            series: 1,
+        });
+    }
+    // Sums over every series of every block: squared differences at lags
+    // 1 and 2, and the squared moving averages over `window`.
+    let (mut d1, mut c1, mut d2, mut c2, mut avg, mut ca) = (0.0, 0usize, 0.0, 0usize, 0.0, 0usize);
+    let mut at = 0;
+    for b in &layout {
+        let value = |t: usize, s: usize| r[at + t * b.series + s];
+        for s in 0..b.series {
+            for t in 1..b.samples {
+                d1 += (value(t, s) - value(t - 1, s)).powi(2);
+                c1 += 1;
+                if t >= 2 {
+                    d2 += (value(t, s) - value(t - 2, s)).powi(2);
+                    c2 += 1;
+                }
+            }
+            if b.samples >= window {
+                let mut sum: f64 = (0..window).map(|t| value(t, s)).sum();
+                for t in window..=b.samples {
+                    avg += (sum / window as f64).powi(2);
+                    ca += 1;
+                    if t < b.samples {
+                        sum += value(t, s) - value(t - window, s);
+                    }
+                }
+            }
+        }
+        at += b.samples * b.series;
+    }
+    let mean_square = cost_of(r) / n.max(1) as f64;
+    let g = |d: f64, c: usize| if c > 0 { d / (2.0 * c as f64) } else { 0.0 };
+    let noise_var = if c2 > 0 {
+        (2.0 * g(d1, c1) - g(d2, c2)).clamp(0.0, mean_square)
+    } else {
+        0.0
+    };
+    let structure_var = if ca > 0 {
+        (avg / ca as f64 - noise_var / window as f64).clamp(0.0, mean_square)
+    } else {
+        (mean_square - noise_var).max(0.0)
+    };
+    let inv = normal_inverse(j);
+    let per = ((1.96f64.powi(2) * noise_var) + structure_var * n as f64).sqrt();
+    Misfit {
+        n,
+        rms: mean_square.sqrt(),
+        noise_sd: noise_var.sqrt(),
+        structure_rms: structure_var.sqrt(),
+        window,
+        half_width_u: inv.sqrt_diag.iter().map(|s| per * s).collect(),
+        correlation: inv.correlation,
     }
 }
 
@@ -720,6 +875,106 @@ mod tests {
             assert!(s.sd_u[i] < 0.01, "{s:?}");
             assert!(s.correlation[i][i] > 0.999, "{s:?}");
         }
+    }
+
+    /// White noise and a smooth error, told apart: the noise by the
+    /// variogram's nugget, the structure by averaging over the window;
+    /// blocks (episodes, series side by side) are kept apart.
+    #[test]
+    fn the_misfit_tells_white_noise_from_structure() {
+        let mut noise = realitygap_core::controller::SplitMix64::new(11);
+        let blocks = [
+            Block {
+                samples: 2000,
+                series: 3,
+            },
+            Block {
+                samples: 1500,
+                series: 3,
+            },
+        ];
+        let (sigma, amplitude) = (0.02, 0.05);
+        let mut r = Vec::new();
+        for b in &blocks {
+            for t in 0..b.samples {
+                for s in 0..b.series {
+                    // Uniform noise of standard deviation sigma; a sine of
+                    // 100 samples per period, another phase per series.
+                    let white = sigma * 12f64.sqrt() * (noise.uniform() - 0.5);
+                    let smooth = amplitude
+                        * (2.0 * std::f64::consts::PI * t as f64 / 100.0 + s as f64).sin();
+                    r.push(white + smooth);
+                }
+            }
+        }
+        let j = DMatrix::from_fn(r.len(), 1, |i, _| (i % 7) as f64);
+        let m = misfit(&j, &r, &blocks, 5);
+        assert!((m.noise_sd / sigma - 1.0).abs() < 0.05, "{m:?}");
+        // The structure's RMS, less what averaging 5 samples of a
+        // 100-sample period takes off it (1.6 %).
+        let want = amplitude / 2f64.sqrt();
+        assert!((m.structure_rms / want - 1.0).abs() < 0.05, "{m:?}");
+        assert_eq!(m.window, 5);
+        // Without noise, no nugget; a white series has no structure.
+        let smooth: Vec<f64> = (0..3000)
+            .map(|t| amplitude * (t as f64 / 30.0).sin())
+            .collect();
+        let j = DMatrix::from_element(smooth.len(), 1, 1.0);
+        let m = misfit(&j, &smooth, &[], 5);
+        assert!(m.noise_sd < 1e-4 * amplitude, "{m:?}");
+        let white: Vec<f64> = (0..3000).map(|_| noise.uniform() - 0.5).collect();
+        let m = misfit(&j, &white, &[], 5);
+        assert!(m.structure_rms < 0.05 * m.noise_sd, "{m:?}");
+    }
+
+    /// A model error the parameters cannot follow, under reading noise:
+    /// the noise drives the residuals' autocorrelation to nothing, so the
+    /// count of independent residuals takes every one and the intervals
+    /// shrink to the noise's, while the bias of the model error stays. The
+    /// misfit's interval keeps room for it, and covers the truth.
+    #[test]
+    fn intervals_keep_room_for_a_model_error_under_reading_noise() {
+        let mut noise = realitygap_core::controller::SplitMix64::new(7);
+        let n = 2000;
+        let data: Vec<(f64, f64)> = (0..n)
+            .map(|i| {
+                let t = i as f64 * 0.002;
+                // The model's curve, a slow error it has no term for, and
+                // reading noise.
+                let error = 0.004 * (2.0 * std::f64::consts::PI * 0.6 * t).sin();
+                (t, model(&TRUTH, t) + error + 0.01 * (noise.uniform() - 0.5))
+            })
+            .collect();
+        let f = |u: &[f64]| -> Result<Vec<f64>, String> {
+            Ok(data.iter().map(|(t, y)| model(u, *t) - y).collect())
+        };
+        let fit = levenberg_marquardt(&f, &[0.2, 0.8, 0.2], FitOptions::default(), &|_, _, _| {})
+            .unwrap();
+        let r = f(&fit.u).unwrap();
+        let j = jacobian(&f, &fit.u, &r, 1e-6, 1).unwrap();
+        let old = spread(&j, &r, 1);
+        let new = misfit(
+            &j,
+            &r,
+            &[Block {
+                samples: n,
+                series: 1,
+            }],
+            10,
+        );
+        let off = |i: usize| (fit.u[i] - TRUTH[i]).abs();
+        assert!(
+            (0..3).any(|i| off(i) > 1.96 * old.sd_u[i]),
+            "the count of independent residuals covers: {fit:?} {old:?}"
+        );
+        for i in 0..3 {
+            assert!(off(i) <= new.half_width_u[i], "{i}: {fit:?} {new:?}");
+        }
+        assert!(
+            (new.noise_sd / (0.01 / 12f64.sqrt()) - 1.0).abs() < 0.1,
+            "{new:?}"
+        );
+        assert!(new.structure_rms > 0.0, "{new:?}");
     }
 
     #[test]

@@ -32,8 +32,12 @@
 //!   between two engine steps it blends them, [`realitygap_core::replay`]),
 //!   and the delay's profile at whole engine steps around the fit.
 //! - **Intervals.** Each fitted parameter's 95 % interval from the
-//!   Jacobian at the optimum (Gauss-Newton, with the residual count
-//!   reduced for their autocorrelation). The identifiability report names
+//!   Jacobian at the optimum and the residuals there, told apart into
+//!   white reading noise and the structure the engine cannot reproduce
+//!   ([`least_squares::misfit`]): Gauss-Newton's interval for the noise,
+//!   widened by how far an error as large as that structure could shift
+//!   the parameter. The summary says in words what they rest on and what
+//!   in the fit limits them ([`cautions`]). The identifiability report names
 //!   parameters whose interval spans their
 //!   whole range (the data do not see them) and pairs whose estimates are
 //!   correlated beyond 0.95 (they trade against each other: joint damping
@@ -155,8 +159,48 @@ pub struct Identifiability {
     /// Autocorrelation of the residuals at the optimum, from one sample
     /// to the next of each joint.
     pub residual_autocorrelation: f64,
-    /// Residuals, and the independent ones they count as.
-    pub residuals: (usize, f64),
+    /// The residuals at the optimum, told apart into reading noise and
+    /// structure.
+    pub residuals: Residuals,
+}
+
+/// The residuals at the optimum (joint angles, degrees; with efforts, the
+/// weighted effort residuals count alike): how much of them is white
+/// noise and how much the engine cannot reproduce
+/// ([`least_squares::misfit`]).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Residuals {
+    /// One per joint and sample of the training episodes.
+    pub count: usize,
+    /// Their root mean square, degrees.
+    pub rms_deg: f64,
+    /// The white noise in them (a sensor's reading noise), standard
+    /// deviation, degrees.
+    pub noise_deg: f64,
+    /// What is smooth in time (what the engine cannot reproduce), root
+    /// mean square, degrees.
+    pub structure_deg: f64,
+    /// Samples averaged to measure the structure (40 ms of them).
+    pub window_samples: usize,
+}
+
+/// Over how long the residuals are averaged to measure their structure,
+/// s: far longer than a sample (white noise averages out), shorter than a
+/// servo's response (the model's error stays).
+pub const STRUCTURE_WINDOW_S: f64 = 0.04;
+
+/// The median time between samples, s (`None` from fewer than two).
+fn sample_period(time_s: &[f64]) -> Option<f64> {
+    let mut d: Vec<f64> = time_s
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .filter(|x| *x > 0.0 && x.is_finite())
+        .collect();
+    if d.is_empty() {
+        return None;
+    }
+    d.sort_by(f64::total_cmp);
+    Some(d[d.len() / 2])
 }
 
 /// The tuned parameters replayed again at half the engine's timestep
@@ -222,6 +266,9 @@ pub struct RecordingsSummary {
     pub verdict: String,
     /// The tuned parameters at half the timestep.
     pub timestep_check: RecordingsTimestepCheck,
+    /// How far the intervals can be trusted, in words: what they rest on,
+    /// and what in this fit limits them.
+    pub cautions: Vec<String>,
 }
 
 /// The result of a tune.
@@ -1127,14 +1174,41 @@ pub fn tune_recordings(
             .map_err(|m| anyhow!("the Jacobian at the optimum: {m}"))?,
     };
     let spread = least_squares::spread(&jac, &r, joints);
+    // The intervals: the residuals told apart into reading noise and what
+    // the engine cannot reproduce (least_squares::misfit), the structure
+    // measured over 40 ms of samples.
+    let blocks: Vec<least_squares::Block> = p
+        .train
+        .iter()
+        .flat_map(|&k| {
+            let samples = prepared.episodes[k]
+                .real
+                .joint_angles_rad
+                .as_ref()
+                .map_or(0, |q| q.len());
+            let block = least_squares::Block {
+                samples,
+                series: joints,
+            };
+            // With efforts, each episode's effort residuals follow its angles'.
+            let kinds = if p.effort_weights.is_some() { 2 } else { 1 };
+            std::iter::repeat_n(block, kinds)
+        })
+        .collect();
+    let window = p
+        .train
+        .first()
+        .and_then(|&k| sample_period(&prepared.episodes[k].real.time_s))
+        .map_or(1, |dt| ((STRUCTURE_WINDOW_S / dt).round() as usize).max(1));
+    let misfit = least_squares::misfit(&jac, &r, &blocks, window);
     let mut params_out = Vec::new();
     for (c, &i) in p.continuous.iter().enumerate() {
         let d = &p.space.dims[i];
         let value = d.value(u[c]);
-        let sd = spread.sd_u[c];
-        let interval = sd.is_finite().then(|| {
-            let lo = d.value((u[c] - 1.96 * sd).max(0.0));
-            let hi = d.value((u[c] + 1.96 * sd).min(1.0));
+        let half = misfit.half_width_u[c];
+        let interval = half.is_finite().then(|| {
+            let lo = d.value((u[c] - half).max(0.0));
+            let hi = d.value((u[c] + half).min(1.0));
             (lo, hi)
         });
         params_out.push(FittedParam {
@@ -1154,7 +1228,7 @@ pub fn tune_recordings(
     let mut unseen = Vec::new();
     for (c, k) in keys.iter().enumerate() {
         let col = jac.column(c).norm();
-        let width = 2.0 * 1.96 * spread.sd_u[c];
+        let width = 2.0 * misfit.half_width_u[c];
         if col == 0.0 || !width.is_finite() || width >= 1.0 {
             unseen.push(k.clone());
         }
@@ -1164,7 +1238,13 @@ pub fn tune_recordings(
         unseen,
         trading,
         residual_autocorrelation: spread.rho,
-        residuals: (spread.n, spread.n_eff),
+        residuals: Residuals {
+            count: misfit.n,
+            rms_deg: misfit.rms,
+            noise_deg: misfit.noise_sd,
+            structure_deg: misfit.structure_rms,
+            window_samples: misfit.window,
+        },
     };
 
     let search_time_s = started.elapsed().as_secs_f64();
@@ -1297,6 +1377,11 @@ pub fn tune_recordings(
         wall_time_s: started.elapsed().as_secs_f64(),
         verdict,
         timestep_check,
+        cautions: Vec::new(),
+    };
+    let summary = RecordingsSummary {
+        cautions: cautions(&summary),
+        ..summary
     };
     let tuned_path = spec.out.join("tuned.toml");
     let mut tuned_file = tuned.clone();
@@ -1479,6 +1564,56 @@ pub fn recordings_timestep_text(c: &RecordingsTimestepCheck) -> String {
     }
 }
 
+/// How far the intervals of `s` can be trusted, in words: what they rest
+/// on (the residuals' reading noise and structure), then what in this fit
+/// limits them (parameters on a bound, a fit that does not carry over to
+/// the held-out episodes, a search that did not converge).
+pub fn cautions(s: &RecordingsSummary) -> Vec<String> {
+    let mut out = Vec::new();
+    let r = &s.identifiability.residuals;
+    let structured = r.structure_deg > 3.0 * r.noise_deg;
+    out.push(if structured {
+        format!(
+            "The residuals are mostly structure the engine cannot reproduce ({:.5} deg RMS, smooth in time) against {:.5} deg of white reading noise. Each interval is the range over which its parameter, the others refitted, moves the replay by no more than that structure (plus the noise's Gauss-Newton share): a bound on what such a model error shifts the fit by, provided the parameters took up no more of it than they left in the residuals. It is not a statistical spread: an error the parameters take up whole (commands applied at the wrong instant, an effect the engine lacks) can put the truth outside.",
+            r.structure_deg, r.noise_deg
+        )
+    } else {
+        format!(
+            "The residuals are mostly white reading noise ({:.5} deg, against {:.5} deg RMS of structure the engine cannot reproduce): each interval is Gauss-Newton's for that noise, widened by what such a structure could shift the fit by.",
+            r.noise_deg, r.structure_deg
+        )
+    });
+    let bound: Vec<String> = s
+        .params
+        .iter()
+        .filter(|p| p.at_bound)
+        .map(|p| format!("{} ({})", p.key, p.value))
+        .collect();
+    if !bound.is_empty() {
+        out.push(format!(
+            "The fit ended on a bound of the space: {}. An interval is cut at its bound, and the parameters correlated with one that could not go on may have made up for it, so their intervals cannot be trusted either; widen the bound in space.toml and pass it back with --space.",
+            bound.join(", ")
+        ));
+    }
+    if let Some(tuned) = s.scores.get(1) {
+        if let (Some(t), Some(h)) = (&tuned.train, &tuned.holdout) {
+            if h.rms_deg > 2.0 * t.rms_deg {
+                out.push(format!(
+                    "The tuned engine's joint RMS on the held-out episodes ({:.5} deg) is more than twice its training RMS ({:.5} deg): what was fitted does not carry over to episodes it never saw, and the intervals describe the training episodes only.",
+                    h.rms_deg, t.rms_deg
+                ));
+            }
+        }
+    }
+    if s.reason.contains("iteration limit") || s.reason.contains("could not") {
+        out.push(format!(
+            "The last fit stopped at {}, not at a converged optimum: the intervals are those of where it stopped.",
+            s.reason
+        ));
+    }
+    out
+}
+
 /// `summary.md`.
 pub fn summary_markdown(s: &RecordingsSummary) -> String {
     let mut m = format!(
@@ -1513,7 +1648,35 @@ pub fn summary_markdown(s: &RecordingsSummary) -> String {
             cell(&sc.holdout)
         );
     }
+    // Say why an interval is missing: the bootstrap over episodes needs two.
+    let lone: Vec<String> = s
+        .scores
+        .first()
+        .map(|sc| {
+            [("training", &sc.train), ("held-out", &sc.holdout)]
+                .into_iter()
+                .filter_map(|(name, set)| {
+                    set.as_ref()
+                        .filter(|x| x.interval_deg.is_none() && x.episodes.len() < 2)
+                        .map(|x| format!("the {name} set has {}", x.episodes.len()))
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    if !lone.is_empty() {
+        let _ = writeln!(
+            m,
+            "\nn/a: an interval over episodes needs at least two episodes; {} (--runs and --holdout choose them).",
+            lone.join(", ")
+        );
+    }
     let _ = writeln!(m, "\n{}", recordings_timestep_text(&s.timestep_check));
+    if !s.cautions.is_empty() {
+        m.push_str("\n## How far to trust the intervals\n\n");
+        for c in &s.cautions {
+            let _ = writeln!(m, "- {c}");
+        }
+    }
     m.push_str("\n## Parameters (95 % intervals from the Jacobian at the optimum)\n\n| key | untuned | fitted | interval | bounds |\n|---|---:|---:|---|---|\n");
     for p in &s.params {
         let _ = writeln!(
@@ -1546,10 +1709,11 @@ pub fn summary_markdown(s: &RecordingsSummary) -> String {
             "- {a} and {b} trade against each other (correlation {c:.3})."
         );
     }
+    let res = &i.residuals;
     let _ = writeln!(
         m,
-        "\nResiduals: {} (one per joint and sample), autocorrelated {:.4} from one sample to the next, counted as {:.0} independent ones for the intervals.\n\n{} evaluations (each replays every training episode), {} Jacobians by differences (Levenberg-Marquardt, Broyden's updates between them), {:.1} s of search ({:.1} s with the scores and the timestep check); the last fit stopped at {}.",
-        i.residuals.0, i.residual_autocorrelation, i.residuals.1, s.evaluations, s.iterations, s.search_time_s, s.wall_time_s, s.reason
+        "\nResiduals: {} (one per joint and sample), RMS {:.5} deg: white noise {:.5} deg, and {:.5} deg RMS smooth in time (averaged over {} samples), what the engine cannot reproduce; autocorrelated {:.4} from one sample to the next.\n\n{} evaluations (each replays every training episode), {} Jacobians by differences (Levenberg-Marquardt, Broyden's updates between them), {:.1} s of search ({:.1} s with the scores and the timestep check); the last fit stopped at {}.",
+        res.count, res.rms_deg, res.noise_deg, res.structure_deg, res.window_samples, i.residual_autocorrelation, s.evaluations, s.iterations, s.search_time_s, s.wall_time_s, s.reason
     );
     m
 }
