@@ -1513,14 +1513,25 @@ fn verdict(scores: &[SourceScores]) -> String {
         .unwrap_or(("physics-free".into(), kin.0));
     let beats = tuned.0 < best_kin.1;
     format!(
-        "{on}, the tuned engine's joint RMS is {:.3} deg (untuned {:.3}, {:.1}x lower); it {} the best physics-free model ({}, {:.3} deg).",
-        tuned.0,
-        untuned.0,
+        "{on}, the tuned engine's joint RMS is {} deg (untuned {}, {:.1}x lower); it {} the best physics-free model ({}, {} deg).",
+        degrees(tuned.0),
+        degrees(untuned.0),
         untuned.0 / tuned.0.max(1e-12),
         if beats { "beats" } else { "does not beat" },
         best_kin.0,
-        best_kin.1
+        degrees(best_kin.1)
     )
+}
+
+/// An angle in degrees with three decimals, or three significant digits
+/// below 0.01 (a tuned RMS of 0.00048 deg is not "0.000").
+fn degrees(x: f64) -> String {
+    let digits = if x.is_finite() && x != 0.0 {
+        (2 - x.abs().log10().floor() as i64).clamp(3, 12) as usize
+    } else {
+        3
+    };
+    format!("{x:.digits$}")
 }
 
 fn fmt_interval(i: Option<(f64, f64)>, digits: usize) -> String {
@@ -1781,6 +1792,15 @@ mod tests {
         };
         let e = split(&bad, 4).unwrap_err().to_string();
         assert!(e.contains("--holdout") && e.contains("9"), "{e}");
+    }
+
+    #[test]
+    fn small_angles_keep_three_significant_digits() {
+        assert_eq!(degrees(0.721), "0.721");
+        assert_eq!(degrees(1.8194), "1.819");
+        assert_eq!(degrees(0.0123), "0.0123");
+        assert_eq!(degrees(0.00047984), "0.000480");
+        assert_eq!(degrees(0.0), "0.000");
     }
 
     #[test]
