@@ -197,6 +197,12 @@ fn a_franka_with_a_gripper_goes_through_the_guide_as_written() {
     );
     assert!(rms("mujoco") < rms("ideal"), "{rows:?}");
     println!("franka tune: {summary}");
+    // One held-out episode: the summary says why its interval is missing.
+    let md = std::fs::read_to_string(dir.join("results/tune-my-arm/summary.md")).unwrap();
+    assert!(
+        md.contains("n/a: an interval over episodes needs at least two episodes; the training set has 1, the held-out set has 1"),
+        "{md}"
+    );
 }
 
 #[test]
