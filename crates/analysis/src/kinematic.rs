@@ -148,11 +148,10 @@ link = "tip"
         let text = SCENE.replace("link = \"tip\"", "link = \"tool\"");
         std::fs::write(&path, &text).unwrap();
         let scene = Scene::from_file(&path).unwrap();
-        let robot = RobotModel::from_urdf_file(
-            &scene.robot.urdf,
-            &realitygap_core::robot::PackageResolver::new(),
-        )
-        .unwrap();
+        let robot = scene
+            .robot
+            .model(&realitygap_core::robot::PackageResolver::new())
+            .unwrap();
         let k = kinematic_track(&scene, &robot, "wrist", 120).unwrap();
         // 30 deg/s for 0.05 s: 1.5 degrees per step while the error is
         // above 3 degrees; the tool is 1 m from the axis.

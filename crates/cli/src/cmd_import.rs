@@ -616,7 +616,9 @@ fn import_qualisys(args: QualisysArgs) -> Result<()> {
                     scene.set_robot_urdf(path);
                     robot
                 }
-                None => realitygap_core::RobotModel::from_urdf_file(&scene.robot.urdf, &resolver)
+                None => scene
+                    .robot
+                    .model(&resolver)
                     .with_context(|| format!("the robot of scene {}", file.display()))?,
             };
         scene.validate(&robot)?;

@@ -289,13 +289,13 @@ fn bad_urdfs_are_reported() {
 #[cfg(feature = "mujoco")]
 #[test]
 fn a_crashing_engine_fails_only_its_runs() {
-    use realitygap_core::robot::{PackageResolver, RobotModel};
+    use realitygap_core::robot::PackageResolver;
     use realitygap_core::scene::Scene;
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("out");
     let scene_path = assets().join("scenes/scene1_single_joint.toml");
     let scene = Scene::from_file(&scene_path).unwrap();
-    let robot = RobotModel::from_urdf_file(&scene.robot.urdf, &PackageResolver::new()).unwrap();
+    let robot = scene.robot.model(&PackageResolver::new()).unwrap();
     let xml = realitygap_engine_mujoco::mjcf::scene_to_mjcf(&scene, &robot).unwrap();
     // Enough memory to load, too little once the cube touches the ground.
     let mjcf = tmp.path().join("tiny_arena.xml");

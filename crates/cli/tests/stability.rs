@@ -233,7 +233,7 @@ fn bullet_at_one_step_per_control_period_is_flagged_on_scene_2() {
 /// The scene's robot and the link frame tracked as `wrist`.
 fn wrist_of(scene_file: &Path) -> (Scene, RobotModel, usize) {
     let scene = Scene::from_file(scene_file).unwrap();
-    let robot = RobotModel::from_urdf_file(&scene.robot.urdf, &PackageResolver::new()).unwrap();
+    let robot = scene.robot.model(&PackageResolver::new()).unwrap();
     let link = robot.link_by_name("lbr_iiwa_link_7").unwrap();
     (scene, robot, link)
 }

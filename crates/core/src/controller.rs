@@ -27,9 +27,9 @@
 use crate::actuator::{ActuatorStage, StageParams, StageUnit};
 use crate::engine::{Engine, EngineError, EngineSettings, ModelVariation, Simulation};
 use crate::params::PhysicalParams;
-use crate::pose::Pose;
+use crate::pose::{Pose, Vec3};
 use crate::robot::RobotModel;
-use crate::scene::{Scene, SceneError};
+use crate::scene::{Scene, SceneError, TrackTarget};
 use crate::trajectory::Trajectory;
 use std::collections::{BTreeMap, VecDeque};
 use std::time::Instant;
@@ -351,6 +351,63 @@ pub(crate) fn divergence(
     None
 }
 
+/// How deep an object may sink into the ground before the run counts as
+/// diverged, as a fraction of its smallest half-extent: contacts in every
+/// engine are a little soft (a resting cube sinks micrometres to a few
+/// millimetres, more with softened contact parameters), but a cube half
+/// inside the table is a contact that failed, not a softer one.
+pub const PENETRATION_LIMIT_FRACTION: f64 = 0.5;
+
+/// How long an object may stay deeper than the limit, s: an impact at a
+/// coarse timestep may carry a fast object's corner deep into the ground
+/// for a step or two before the contact pushes it out; staying there is a
+/// failed contact.
+pub const PENETRATION_SPELL_S: f64 = 0.1;
+
+/// Checks that no tracked object has stayed sunk into the ground by more
+/// than [`PENETRATION_LIMIT_FRACTION`] of its smallest half-extent for
+/// [`PENETRATION_SPELL_S`]; the reason when one has. `grounded[i]`: the
+/// half-extents of role `i`'s object and the ground's height, when role
+/// `i` is an object over a ground; `sunk_since_s[i]`: when role `i`'s
+/// current spell too deep began (updated here).
+pub(crate) fn penetration(
+    poses: &[Pose],
+    roles: &[String],
+    grounded: &[Option<(Vec3, f64)>],
+    sunk_since_s: &mut [Option<f64>],
+    t_s: f64,
+) -> Option<String> {
+    for (((pose, role), g), since) in poses.iter().zip(roles).zip(grounded).zip(sunk_since_s) {
+        let Some((half, ground_m)) = g else { continue };
+        let depth = ground_m - lowest_point_z(pose, *half);
+        let limit = PENETRATION_LIMIT_FRACTION * half.x.min(half.y).min(half.z);
+        if depth <= limit {
+            *since = None;
+            continue;
+        }
+        let start = *since.get_or_insert(t_s);
+        if t_s - start >= PENETRATION_SPELL_S - 1e-9 {
+            return Some(format!(
+                "'{role}' has been {:.1} mm or more inside the ground since t = {start:.3} s (its lowest corner at z = {:.4} m, the ground at {ground_m} m), more than the {:.1} mm allowed (half its smallest half-extent): the contact failed",
+                limit * 1e3,
+                ground_m - depth,
+                limit * 1e3
+            ));
+        }
+    }
+    None
+}
+
+/// The height of a box's lowest corner, m: its centre's height less the
+/// vertical reach of its half-extents along its rotated axes.
+pub fn lowest_point_z(pose: &Pose, half_extents_m: Vec3) -> f64 {
+    let q = pose.orientation;
+    let reach = half_extents_m.x * q.rotate(Vec3::new(1.0, 0.0, 0.0)).z.abs()
+        + half_extents_m.y * q.rotate(Vec3::new(0.0, 1.0, 0.0)).z.abs()
+        + half_extents_m.z * q.rotate(Vec3::new(0.0, 0.0, 1.0)).z.abs();
+    pose.position_m.z - reach
+}
+
 /// The controller's own state during a run, which outlives any one
 /// [`Simulation`]: the tick reached, the commands waiting out the actuation
 /// delay, the reading-noise generator, the targets in force and the samples
@@ -369,6 +426,15 @@ pub struct ControllerLoop {
     scene_targets: Vec<Vec<f64>>,
     joints: usize,
     divergence_bound_m: f64,
+    /// Per tracked role: the object's half-extents and the ground's height
+    /// when the role is an object over a ground ([`penetration`]).
+    grounded: Vec<Option<(Vec3, f64)>>,
+    /// Per tracked role: when it was first seen too deep in the ground, in
+    /// the spell that lasts to now.
+    sunk_since_s: Vec<Option<f64>>,
+    /// The objects that start moving: name, velocity (m/s), angular
+    /// velocity (rad/s), world frame.
+    initial_twists: Vec<(String, Vec3, Vec3)>,
     noise_std_rad: f64,
     noise: SplitMix64,
     offsets_rad: Vec<f64>,
@@ -447,6 +513,31 @@ impl ControllerLoop {
             scene_targets: Vec::new(),
             joints,
             divergence_bound_m: options.divergence_bound_m,
+            grounded: scene
+                .tracked
+                .iter()
+                .map(|t| match (&t.target, scene.ground) {
+                    (TrackTarget::Object(name), Some(g)) => {
+                        scene.object(name).map(|o| (o.half_extents_m(), g.height_m))
+                    }
+                    _ => None,
+                })
+                .collect(),
+            sunk_since_s: vec![None; scene.tracked.len()],
+            initial_twists: scene
+                .objects
+                .iter()
+                .filter(|o| {
+                    o.linear_velocity_m_s != Vec3::ZERO || o.angular_velocity_rad_s != Vec3::ZERO
+                })
+                .map(|o| {
+                    (
+                        o.name.clone(),
+                        o.linear_velocity_m_s,
+                        o.angular_velocity_rad_s,
+                    )
+                })
+                .collect(),
             noise_std_rad,
             noise,
             offsets_rad: if control.offsets_rad.len() == joints {
@@ -502,12 +593,26 @@ impl ControllerLoop {
     }
 
     /// Places a fresh simulation at the perturbation's initial joint
-    /// angles (nothing to do without one). Call once, before the first
+    /// angles, and gives the scene's objects their initial velocities
+    /// (through [`Simulation::set_state`], the one path every engine has
+    /// for an object's twist). Call once, before the first
     /// [`ControllerLoop::advance`] of a run that starts at tick 0.
     pub fn start(&mut self, sim: &mut dyn Simulation) -> Result<(), RunError> {
         self.check_shape(sim)?;
         if self.initial_offsets_rad.iter().any(|&o| o != 0.0) {
             sim.set_joint_angles_rad(&self.initial_offsets_rad)?;
+        }
+        if !self.initial_twists.is_empty() {
+            // The portable state: the engine's own (native) state, which
+            // it would load in preference, does not carry the change.
+            let mut state = sim.state()?.portable();
+            for object in &mut state.objects {
+                if let Some((_, v, w)) = self.initial_twists.iter().find(|t| t.0 == object.name) {
+                    object.linear_velocity_m_s = *v;
+                    object.angular_velocity_rad_s = *w;
+                }
+            }
+            sim.set_state(&state)?;
         }
         Ok(())
     }
@@ -600,6 +705,15 @@ impl ControllerLoop {
             sim.joint_angles_rad(&mut angles);
             sim.tracked_poses(&mut poses);
             if let Some(reason) = divergence(&angles, &poses, &self.roles, self.divergence_bound_m)
+                .or_else(|| {
+                    penetration(
+                        &poses,
+                        &self.roles,
+                        &self.grounded,
+                        &mut self.sunk_since_s,
+                        t_s,
+                    )
+                })
             {
                 self.status = Some(RunStatus::Diverged { t_s, reason });
                 break;

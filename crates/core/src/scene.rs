@@ -43,6 +43,8 @@
 //! mass_kg = 0.0884
 //! position_m = [0.5, 0.0, 0.0375]
 //! # rpy_deg = [0, 0, 0]   friction = 0.8   (optional)
+//! # linear_velocity_m_s = [0, 0, 0]        (optional: initial velocity, world frame)
+//! # angular_velocity_rad_s = [0, 0, 0]     (optional: initial angular velocity, world frame)
 //!
 //! [controller]
 //! gain_per_s = 10.0        # v_deg_s = gain * error_deg
@@ -69,6 +71,16 @@
 //! [engine.mujoco]
 //! timestep_s = 1e-4
 //! ```
+//!
+//! # Free objects alone
+//!
+//! A scene may leave out `[robot]`: free objects over a ground (a tossed
+//! cube). It then has no `[[actuator]]` or `[[schedule]]`; its
+//! `[controller]` is optional and only sets `period_s`, the sample period
+//! (default [`FREE_SAMPLE_PERIOD_S`]). Its robot is
+//! [`RobotModel::world`](crate::robot::RobotModel::world), which every engine
+//! builds as nothing. Objects start with their initial velocities
+//! ([`crate::controller::ControllerLoop::start`]).
 //!
 //! Reading a file ([`Scene::from_file`]) checks what the file alone can
 //! show; [`Scene::validate`] checks it against the loaded robot (joint and
@@ -125,11 +137,18 @@ pub struct Scene {
     locations: HashMap<String, (usize, usize)>,
 }
 
+/// The sample period of a scene of free objects alone that gives no
+/// `[controller]` table, s.
+pub const FREE_SAMPLE_PERIOD_S: f64 = 0.01;
+
 /// The robot of a scene.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RobotSpec {
-    /// The URDF file (absolute, resolved against the scene file's directory).
-    pub urdf: PathBuf,
+    /// The URDF file (absolute, resolved against the scene file's
+    /// directory); `None` for a scene of free objects alone (no `[robot]`
+    /// table), whose robot is [`RobotModel::world`]: one fixed link with no
+    /// mass, shape or joint, which every engine builds as nothing.
+    pub urdf: Option<PathBuf>,
     /// Pose of the robot's root link frame in the world (m, unit quaternion).
     pub base: Pose,
     /// An MJCF file that a MuJoCo engine loads as it is instead of building a
@@ -140,6 +159,44 @@ pub struct RobotSpec {
     /// Positions (rad) at which non-actuated movable joints are held; joints
     /// not listed are held at 0.
     pub held_joints_rad: BTreeMap<String, f64>,
+}
+
+impl RobotSpec {
+    /// No robot: a scene of free objects alone.
+    pub fn none() -> RobotSpec {
+        RobotSpec {
+            urdf: None,
+            base: Pose::IDENTITY,
+            mjcf: None,
+            held_joints_rad: BTreeMap::new(),
+        }
+    }
+
+    /// Whether the scene has a robot.
+    pub fn is_some(&self) -> bool {
+        self.urdf.is_some()
+    }
+
+    /// The robot model: the URDF read with `resolver`, or
+    /// [`RobotModel::world`] for a scene without a robot.
+    pub fn model(
+        &self,
+        resolver: &crate::robot::PackageResolver,
+    ) -> Result<RobotModel, crate::robot::RobotError> {
+        match &self.urdf {
+            Some(path) => RobotModel::from_urdf_file(path, resolver),
+            None => Ok(RobotModel::world()),
+        }
+    }
+
+    /// The URDF's path for people: `(none: free objects alone)` without a
+    /// robot.
+    pub fn urdf_label(&self) -> String {
+        match &self.urdf {
+            Some(p) => p.display().to_string(),
+            None => "(none: free objects alone)".to_string(),
+        }
+    }
 }
 
 /// A ground plane `z = height_m`.
@@ -162,6 +219,10 @@ pub struct SceneObject {
     pub mass_kg: f64,
     /// Initial pose of the shape's centre in the world.
     pub pose: Pose,
+    /// Initial velocity of its centre, world frame, m/s (default 0).
+    pub linear_velocity_m_s: Vec3,
+    /// Initial angular velocity, world frame, rad/s (default 0).
+    pub angular_velocity_rad_s: Vec3,
     /// Sliding friction coefficient; `None` = the engine's default.
     pub friction: Option<f64>,
 }
@@ -191,6 +252,14 @@ impl SceneObject {
                     ))
                 }
             }
+        }
+    }
+
+    /// Half of each edge, m: the reach of the shape from its centre along
+    /// its own axes.
+    pub fn half_extents_m(&self) -> Vec3 {
+        match self.shape {
+            ObjectShape::Box { size_m: s } => Vec3::new(0.5 * s.x, 0.5 * s.y, 0.5 * s.z),
         }
     }
 
@@ -331,13 +400,14 @@ struct FileScene {
     description: String,
     duration_s: Spanned<f64>,
     gravity_m_s2: Option<Spanned<[f64; 3]>>,
-    robot: FileRobot,
+    robot: Option<FileRobot>,
     ground: Option<FileGround>,
     #[serde(default, rename = "object")]
     objects: Vec<FileObject>,
-    controller: FileController,
-    #[serde(rename = "actuator")]
+    controller: Option<FileController>,
+    #[serde(default, rename = "actuator")]
     actuators: Vec<FileActuator>,
+    #[serde(default)]
     schedule: Vec<FileScheduleEntry>,
     #[serde(default, rename = "track")]
     tracks: Vec<FileTrack>,
@@ -373,14 +443,16 @@ struct FileObject {
     mass_kg: Spanned<f64>,
     position_m: Spanned<[f64; 3]>,
     rpy_deg: Option<Spanned<[f64; 3]>>,
+    linear_velocity_m_s: Option<Spanned<[f64; 3]>>,
+    angular_velocity_rad_s: Option<Spanned<[f64; 3]>>,
     friction: Option<Spanned<f64>>,
 }
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct FileController {
-    gain_per_s: Spanned<f64>,
-    max_speed_deg_s: Spanned<f64>,
+    gain_per_s: Option<Spanned<f64>>,
+    max_speed_deg_s: Option<Spanned<f64>>,
     period_s: Spanned<f64>,
 }
 
@@ -602,7 +674,7 @@ impl Builder<'_> {
             held_joints_rad.insert(joint.get_ref().clone(), v.to_radians());
         }
         Ok(RobotSpec {
-            urdf,
+            urdf: Some(urdf),
             base,
             mjcf,
             held_joints_rad,
@@ -684,11 +756,21 @@ impl Builder<'_> {
                 Some(fr) => Some(self.non_negative(&f("friction"), fr)?),
                 None => None,
             };
+            let linear_velocity_m_s = match &o.linear_velocity_m_s {
+                Some(v) => self.vec3(&f("linear_velocity_m_s"), v)?,
+                None => Vec3::ZERO,
+            };
+            let angular_velocity_rad_s = match &o.angular_velocity_rad_s {
+                Some(v) => self.vec3(&f("angular_velocity_rad_s"), v)?,
+                None => Vec3::ZERO,
+            };
             objects.push(SceneObject {
                 name,
                 shape,
                 mass_kg,
                 pose,
+                linear_velocity_m_s,
+                angular_velocity_rad_s,
                 friction,
             });
         }
@@ -699,13 +781,35 @@ impl Builder<'_> {
     /// number of control periods.
     fn controller(
         &mut self,
-        c: &FileController,
+        c: Option<&FileController>,
+        has_robot: bool,
         duration: &Spanned<f64>,
         duration_s: f64,
     ) -> Result<ControllerSpec, SceneError> {
+        let Some(c) = c else {
+            if has_robot {
+                return Err(self.invalid::<f64>(
+                    "controller",
+                    None,
+                    "a scene with a [robot] needs a [controller] table (gain_per_s, max_speed_deg_s, period_s)",
+                ));
+            }
+            return self.sampling_only(duration, duration_s);
+        };
+        let gain = |field: &str, v: &Option<Spanned<f64>>| match v {
+            Some(v) => self.positive(field, v),
+            None if has_robot => {
+                Err(self.invalid::<f64>(field, None, "missing: a scene with a [robot] needs it"))
+            }
+            // A scene of free objects alone drives no joint: its
+            // controller only sets the sample period.
+            None => Ok(f64::INFINITY),
+        };
+        let gain_per_s = gain("controller.gain_per_s", &c.gain_per_s)?;
+        let max_speed_deg_s = gain("controller.max_speed_deg_s", &c.max_speed_deg_s)?;
         let controller = ControllerSpec {
-            gain_per_s: self.positive("controller.gain_per_s", &c.gain_per_s)?,
-            max_speed_deg_s: self.positive("controller.max_speed_deg_s", &c.max_speed_deg_s)?,
+            gain_per_s,
+            max_speed_deg_s,
             period_s: self.positive("controller.period_s", &c.period_s)?,
         };
         self.at("controller.period_s", &c.period_s);
@@ -723,16 +827,49 @@ impl Builder<'_> {
         Ok(controller)
     }
 
-    /// The `[[actuator]]` entries (at least one).
+    /// A scene of free objects alone without a `[controller]` table:
+    /// samples every [`FREE_SAMPLE_PERIOD_S`], or once at the end of a
+    /// shorter run.
+    fn sampling_only(
+        &mut self,
+        duration: &Spanned<f64>,
+        duration_s: f64,
+    ) -> Result<ControllerSpec, SceneError> {
+        let period_s = FREE_SAMPLE_PERIOD_S.min(duration_s);
+        let ticks = duration_s / period_s;
+        if (ticks - ticks.round()).abs() > 1e-6 * ticks.max(1.0) {
+            return Err(self.invalid(
+                "duration_s",
+                Some(duration),
+                format!("{duration_s} s is not a whole number of the default sample period ({period_s} s): give [controller] period_s"),
+            ));
+        }
+        Ok(ControllerSpec {
+            gain_per_s: f64::INFINITY,
+            max_speed_deg_s: f64::INFINITY,
+            period_s,
+        })
+    }
+
+    /// The `[[actuator]]` entries: at least one with a robot, none
+    /// without.
     fn actuators(
         &mut self,
         file_actuators: &[FileActuator],
+        has_robot: bool,
     ) -> Result<Vec<ActuatorSpec>, SceneError> {
-        if file_actuators.is_empty() {
+        if file_actuators.is_empty() && has_robot {
             return Err(self.invalid::<f64>(
                 "actuator",
                 None,
                 "the scene needs at least one [[actuator]] (a controlled joint)",
+            ));
+        }
+        if let (Some(a), false) = (file_actuators.first(), has_robot) {
+            return Err(self.invalid(
+                "actuator[0].joint",
+                Some(&a.joint),
+                "a scene without a [robot] has no joint to drive: remove its [[actuator]]s or add a [robot]",
             ));
         }
         let mut actuators: Vec<ActuatorSpec> = Vec::new();
@@ -784,6 +921,9 @@ impl Builder<'_> {
         duration_s: f64,
         actuators: &[ActuatorSpec],
     ) -> Result<Vec<ScheduleEntry>, SceneError> {
+        if entries.is_empty() && actuators.is_empty() {
+            return Ok(Vec::new());
+        }
         if entries.is_empty() {
             return Err(self.invalid::<f64>(
                 "schedule",
@@ -1128,11 +1268,27 @@ impl Scene {
         let duration_s = b.positive("duration_s", &file.duration_s)?;
         b.at("duration_s", &file.duration_s);
 
-        let robot = b.robot(&file.robot)?;
+        let has_robot = file.robot.is_some();
+        let robot = match &file.robot {
+            Some(r) => b.robot(r)?,
+            None => RobotSpec::none(),
+        };
         let ground = b.ground(file.ground.as_ref())?;
         let objects = b.objects(&file.objects)?;
-        let controller = b.controller(&file.controller, &file.duration_s, duration_s)?;
-        let actuators = b.actuators(&file.actuators)?;
+        if !has_robot && objects.is_empty() {
+            return Err(b.invalid::<f64>(
+                "robot",
+                None,
+                "the scene has neither a [robot] nor an [[object]]: nothing would move",
+            ));
+        }
+        let controller = b.controller(
+            file.controller.as_ref(),
+            has_robot,
+            &file.duration_s,
+            duration_s,
+        )?;
+        let actuators = b.actuators(&file.actuators, has_robot)?;
         let schedule = b.schedule(&file.schedule, duration_s, &actuators)?;
         let tracked = b.tracks(&file.tracks, &objects)?;
         let engine_settings = b.engine_settings(&file.engine)?;
@@ -1255,7 +1411,7 @@ impl Scene {
     /// Replaces the robot description (e.g. `--robot PATH`): a new URDF,
     /// and no MJCF override. The scene must be validated again.
     pub fn set_robot_urdf(&mut self, urdf: PathBuf) {
-        self.robot.urdf = urdf;
+        self.robot.urdf = Some(urdf);
         self.robot.mjcf = None;
     }
 }
@@ -1311,10 +1467,10 @@ integrator = "euler"
     #[test]
     fn parses_minimal_scene() {
         let s = parse(MINIMAL).unwrap();
-        assert_eq!(s.robot.urdf, PathBuf::from("/scenes/arm.urdf"));
+        assert_eq!(s.robot.urdf, Some(PathBuf::from("/scenes/arm.urdf")));
         let up = parse(&MINIMAL.replace("urdf = \"arm.urdf\"", "urdf = \"../robots/./arm.urdf\""))
             .unwrap();
-        assert_eq!(up.robot.urdf, PathBuf::from("/robots/arm.urdf"));
+        assert_eq!(up.robot.urdf, Some(PathBuf::from("/robots/arm.urdf")));
         assert_eq!(s.sample_count(), 20);
         assert_eq!(s.controlled_joints(), vec!["j1", "j2"]);
         assert_eq!(s.actuators[1].force_limit, f64::INFINITY);
@@ -1330,6 +1486,73 @@ integrator = "euler"
         );
         let inertia = s.objects[0].principal_inertia();
         assert!((inertia.x - 0.5 * 0.02 / 12.0).abs() < 1e-15);
+    }
+
+    /// A toss: a cube with an initial twist over a ground, no robot.
+    const FREE: &str = r#"
+name = "toss"
+duration_s = 0.5
+[ground]
+height_m = 0.0
+[[object]]
+name = "cube"
+shape = "box"
+size_m = [0.1, 0.1, 0.1]
+mass_kg = 0.37
+position_m = [0.0, 0.0, 0.3]
+linear_velocity_m_s = [1.0, 0.0, 2.0]
+angular_velocity_rad_s = [0.0, 3.0, 0.0]
+[[track]]
+role = "cube"
+object = "cube"
+"#;
+
+    #[test]
+    fn free_objects_alone_need_no_robot_controller_or_schedule() {
+        let s = parse(FREE).unwrap();
+        assert!(!s.robot.is_some());
+        assert_eq!(s.robot.urdf, None);
+        assert!(s.actuators.is_empty() && s.schedule.is_empty());
+        assert_eq!(s.controller.period_s, FREE_SAMPLE_PERIOD_S);
+        assert_eq!(s.sample_count(), 50);
+        assert_eq!(s.objects[0].linear_velocity_m_s, Vec3::new(1.0, 0.0, 2.0));
+        assert_eq!(
+            s.objects[0].angular_velocity_rad_s,
+            Vec3::new(0.0, 3.0, 0.0)
+        );
+        assert_eq!(s.objects[0].half_extents_m(), Vec3::new(0.05, 0.05, 0.05));
+        let robot = s
+            .robot
+            .model(&crate::robot::PackageResolver::new())
+            .unwrap();
+        assert_eq!((robot.links.len(), robot.joints.len()), (1, 0));
+        s.validate(&robot).unwrap();
+        // A sample period of its own.
+        let s = parse(&format!("{FREE}[controller]\nperiod_s = 0.025\n")).unwrap();
+        assert_eq!(s.sample_count(), 20);
+    }
+
+    #[test]
+    fn free_objects_alone_refuse_what_drives_a_robot() {
+        let msg = parse(&format!("{FREE}[[actuator]]\njoint = \"j1\"\nkv = 1.0\n"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            msg.contains("actuator[0].joint: a scene without a [robot] has no joint to drive"),
+            "{msg}"
+        );
+        let msg = parse("name = \"empty\"\nduration_s = 1.0\n")
+            .unwrap_err()
+            .to_string();
+        assert!(msg.contains("neither a [robot] nor an [[object]]"), "{msg}");
+        let msg = parse(&MINIMAL.replace("gain_per_s = 10.0", ""))
+            .unwrap_err()
+            .to_string();
+        assert!(msg.contains("controller.gain_per_s: missing"), "{msg}");
+        let msg = parse(&FREE.replace("[0.0, 3.0, 0.0]", "[0.0, nan, 0.0]"))
+            .unwrap_err()
+            .to_string();
+        assert!(msg.contains("object[0].angular_velocity_rad_s"), "{msg}");
     }
 
     #[test]

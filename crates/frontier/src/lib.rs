@@ -293,7 +293,9 @@ fn load_scenes(files: &[PathBuf], engine: &dyn Engine) -> Result<Vec<SceneCase>>
     let mut out: Vec<SceneCase> = Vec::new();
     for file in files {
         let scene = Scene::from_file(file)?;
-        let robot = RobotModel::from_urdf_file(&scene.robot.urdf, &resolver)
+        let robot = scene
+            .robot
+            .model(&resolver)
             .with_context(|| format!("the robot of scene {}", file.display()))?;
         scene.validate(&robot)?;
         let (scene, robot) =

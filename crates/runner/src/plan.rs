@@ -189,7 +189,7 @@ fn config_json(
     let mut config = serde_json::json!({
         "scene_file": p.scene.source.display().to_string(),
         "robot": {
-            "urdf": p.scene.robot.urdf.display().to_string(),
+            "urdf": p.scene.robot.urdf.as_ref().map(|u| u.display().to_string()),
             "mjcf": p.scene.robot.mjcf.as_ref().map(|m| m.display().to_string()),
             "label": robot_label.unwrap_or("scene"),
             "name": p.robot.name,

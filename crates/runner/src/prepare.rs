@@ -217,11 +217,17 @@ fn scene_and_robot(src: &RunSource<'_>) -> Result<(Scene, RobotModel)> {
     let mut scene = Scene::from_file(src.scene_file)?;
     let resolver = resolver(src.packages)?;
     let robot = match robot_override(src.robot, &resolver)? {
+        Some(_) if !scene.robot.is_some() => bail!(
+            "--robot: scene {} has no [robot] (free objects alone): there is no robot to replace",
+            src.scene_file.display()
+        ),
         Some((robot, path, _)) => {
             scene.set_robot_urdf(path);
             robot
         }
-        None => RobotModel::from_urdf_file(&scene.robot.urdf, &resolver)
+        None => scene
+            .robot
+            .model(&resolver)
             .with_context(|| format!("the robot of scene {}", src.scene_file.display()))?,
     };
     scene.validate(&robot)?;

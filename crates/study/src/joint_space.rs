@@ -250,11 +250,10 @@ pub fn study_tables(
         let Some(file) = &s.scene else { continue };
         let path = study.folder.join(file);
         let scene = Scene::from_file(&path)?;
-        let robot = RobotModel::from_urdf_file(
-            &scene.robot.urdf,
-            &realitygap_core::robot::PackageResolver::from_env(),
-        )
-        .with_context(|| format!("robot of scene file {}", path.display()))?;
+        let robot = scene
+            .robot
+            .model(&realitygap_core::robot::PackageResolver::from_env())
+            .with_context(|| format!("robot of scene file {}", path.display()))?;
         let selected = opts
             .runs
             .select(&s.name, l.reference.runs.len())

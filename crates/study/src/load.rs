@@ -9,7 +9,7 @@ use rayon::prelude::*;
 use realitygap_analysis::align::Alignment;
 use realitygap_analysis::compare::{RunInput, SceneSpec, SourceRuns};
 use realitygap_analysis::kinematic::{kinematic_track, KinematicTrack};
-use realitygap_core::robot::{PackageResolver, RobotModel};
+use realitygap_core::robot::PackageResolver;
 use realitygap_core::scene::Scene;
 use realitygap_core::trajectory::WRIST;
 use realitygap_data::{
@@ -218,7 +218,9 @@ impl Study {
     pub fn kinematic(&self, file: &str, steps: usize) -> Result<KinematicTrack> {
         let path = self.folder.join(file);
         let scene = Scene::from_file(&path)?;
-        let robot = RobotModel::from_urdf_file(&scene.robot.urdf, &PackageResolver::from_env())
+        let robot = scene
+            .robot
+            .model(&PackageResolver::from_env())
             .with_context(|| format!("robot of scene file {}", path.display()))?;
         kinematic_track(&scene, &robot, WRIST, steps)
             .map_err(|e| anyhow!("{}: {e}", path.display()))

@@ -233,7 +233,9 @@ fn cross_engine_study(scenes: &[Scene], runs_dir: &Path, engines: &[String]) -> 
             continue;
         }
         let reference = sources.remove(0);
-        let robot = RobotModel::from_urdf_file(&scene.robot.urdf, &PackageResolver::from_env())
+        let robot = scene
+            .robot
+            .model(&PackageResolver::from_env())
             .with_context(|| format!("scene {}", scene.name))?;
         let goal = final_wrist(scene, &robot);
         let cube = scene.objects.first().map(|o| CubeSpec {

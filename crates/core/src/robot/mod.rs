@@ -499,6 +499,18 @@ impl RobotModel {
         urdf::build(&xml, path, &base_dir, resolver)
     }
 
+    /// The robot of a scene without one: a single fixed link named `world`
+    /// with no mass, no shape and no joint. Every engine builds it as
+    /// nothing, so the scene's free objects and ground are all there is.
+    pub fn world() -> RobotModel {
+        const WORLD: &str = "<robot name=\"world\"><link name=\"world\"/></robot>";
+        // Reading this fixed text cannot fail: a test checks it.
+        match RobotModel::from_urdf_str(WORLD, Path::new("(no robot)"), &PackageResolver::new()) {
+            Ok(model) => model,
+            Err(e) => unreachable!("the built-in world model does not read: {e}"),
+        }
+    }
+
     /// Reads URDF text. Relative mesh paths are resolved against `base_dir`,
     /// which also names the source in error messages.
     pub fn from_urdf_str(

@@ -65,9 +65,9 @@ pub fn wrist_gaps(a: &RunOutcome, b: &RunOutcome) -> (f64, f64) {
 /// that names it; fails with the fix when it is missing.
 pub fn iiwa(scene: &Scene) -> RobotModel {
     assert!(
-        scene.robot.urdf.is_file(),
+        scene.robot.urdf.as_ref().is_some_and(|u| u.is_file()),
         "{} is missing: run scripts/setup (it extracts the KUKA iiwa from the pybullet wheel)",
-        scene.robot.urdf.display()
+        scene.robot.urdf_label()
     );
-    RobotModel::from_urdf_file(&scene.robot.urdf, &PackageResolver::new()).unwrap()
+    scene.robot.model(&PackageResolver::new()).unwrap()
 }

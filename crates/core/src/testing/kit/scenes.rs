@@ -262,12 +262,13 @@ pub fn iiwa_push(engine: &dyn Engine, spec: &KitSpec) {
 /// [`static_equilibrium_deg`], or at the targets for a stiff servo).
 pub fn iiwa(engine: &dyn Engine, spec: &KitSpec, name: &str) {
     let s = testing::scene(name);
+    let urdf = s.robot.urdf.clone().expect("the iiwa scene has a robot");
     assert!(
-        s.robot.urdf.is_file(),
+        urdf.is_file(),
         "{} is missing: run scripts/setup (it extracts the KUKA iiwa from the pybullet wheel)",
-        s.robot.urdf.display()
+        urdf.display()
     );
-    let robot = RobotModel::from_urdf_file(&s.robot.urdf, &PackageResolver::new()).unwrap();
+    let robot = RobotModel::from_urdf_file(&urdf, &PackageResolver::new()).unwrap();
     let out = run(engine, spec, &s, &robot, &PhysicalParams::none(), &[]);
     assert_eq!(non_finite(&out), None);
     let q = testing::final_angles_deg(&out);
