@@ -1383,6 +1383,59 @@ link = "l2"
     }
 
     #[test]
+    fn an_object_that_stays_deep_in_the_ground_diverges() {
+        use crate::pose::Quat;
+        let roles = vec!["cube".to_string()];
+        let half = Vec3::new(0.0375, 0.0375, 0.0375);
+        let grounded = vec![Some((half, 0.0))];
+        let at = |z: f64, q: Quat| vec![Pose::new(Vec3::new(0.5, 0.0, z), q)];
+        let mut since = vec![None];
+        // Resting, and a few millimetres soft: fine.
+        for t in [0.0, 0.05, 0.1, 0.2] {
+            assert_eq!(
+                penetration(
+                    &at(0.0375 - 0.004, Quat::IDENTITY),
+                    &roles,
+                    &grounded,
+                    &mut since,
+                    t
+                ),
+                None
+            );
+        }
+        // 21 mm deep (the tuned Rapier cube): flagged once it lasts 0.1 s.
+        let deep = at(0.0375 - 0.021, Quat::IDENTITY);
+        assert_eq!(penetration(&deep, &roles, &grounded, &mut since, 1.0), None);
+        assert_eq!(
+            penetration(&deep, &roles, &grounded, &mut since, 1.05),
+            None
+        );
+        let why = penetration(&deep, &roles, &grounded, &mut since, 1.1).unwrap();
+        assert!(
+            why.contains("'cube' has been 18.8 mm or more inside the ground since t = 1.000 s"),
+            "{why}"
+        );
+        // A spell broken by a sample above the limit starts again.
+        let mut since = vec![None];
+        assert_eq!(penetration(&deep, &roles, &grounded, &mut since, 0.0), None);
+        assert_eq!(
+            penetration(
+                &at(0.05, Quat::IDENTITY),
+                &roles,
+                &grounded,
+                &mut since,
+                0.05
+            ),
+            None
+        );
+        assert_eq!(penetration(&deep, &roles, &grounded, &mut since, 0.1), None);
+        // A cube on its edge reaches sqrt(2) half-edges down.
+        let edge = Quat::from_axis_angle(Vec3::new(1.0, 0.0, 0.0), std::f64::consts::FRAC_PI_4);
+        let low = lowest_point_z(&Pose::new(Vec3::new(0.0, 0.0, 0.1), edge), half);
+        assert!((low - (0.1 - 0.0375 * 2f64.sqrt())).abs() < 1e-12, "{low}");
+    }
+
+    #[test]
     fn divergence_stops_the_run() {
         let mut sim = ideal(0.01);
         sim.blow_up_at = Some(0.3);

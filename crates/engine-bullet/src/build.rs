@@ -232,6 +232,23 @@ pub(crate) fn create_objects(
         };
         let what = format!("object \"{}\"", object.name);
         let body = create_body(lock, client, object.mass_kg, shape, object.pose, &what)?;
+        // Bullet's multibodies carry a quadratic air drag by default (0.04
+        // on the base's linear and angular velocity): a thrown box then
+        // leaves the parabola and a spinning one loses 37 % of its angular
+        // momentum in 2 s (the kit's free-body checks). The scene has no
+        // air: no drag.
+        // SAFETY: as in `create_body`: one command on this simulation's
+        // client, submitted once with the Bullet lock held.
+        unsafe {
+            let cmd = ffi::b3InitChangeDynamicsInfo(client.handle(lock));
+            ffi::b3ChangeDynamicsInfoSetLinearDamping(cmd, body, 0.0);
+            ffi::b3ChangeDynamicsInfoSetAngularDamping(cmd, body, 0.0);
+            expect(
+                client.submit(lock, cmd).kind,
+                ffi::CMD_CLIENT_COMMAND_COMPLETED,
+                &format!("removing the air drag of {what}"),
+            )?;
+        }
         if let Some(f) = object.friction {
             set_friction(lock, client, body, -1, f)?;
         }

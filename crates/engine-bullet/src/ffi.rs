@@ -10,8 +10,9 @@ use std::marker::PhantomData;
 use parking_lot::{ReentrantMutex, ReentrantMutexGuard};
 
 pub(crate) use rubullet_sys::{
-    b3ChangeDynamicsInfoSetContactStiffnessAndDamping, b3ChangeDynamicsInfoSetJointDamping,
-    b3ChangeDynamicsInfoSetLateralFriction, b3ChangeDynamicsInfoSetLocalInertiaDiagonal,
+    b3ChangeDynamicsInfoSetAngularDamping, b3ChangeDynamicsInfoSetContactStiffnessAndDamping,
+    b3ChangeDynamicsInfoSetJointDamping, b3ChangeDynamicsInfoSetLateralFriction,
+    b3ChangeDynamicsInfoSetLinearDamping, b3ChangeDynamicsInfoSetLocalInertiaDiagonal,
     b3ChangeDynamicsInfoSetMass, b3ChangeDynamicsInfoSetRestitution, b3ConnectPhysicsDirect,
     b3ContactInformation, b3CreateCollisionShapeAddBox, b3CreateCollisionShapeAddPlane,
     b3CreateCollisionShapeCommandInit, b3CreateMultiBodyBase, b3CreateMultiBodyCommandInit,

@@ -21,6 +21,7 @@
 //! | [`model`] | every link's tracked pose against the URDF's forward kinematics (both robot models); the initial state |
 //! | [`errors`] | bad settings, scene and robot mismatches, bad meshes and inertias, bad angles and states, divergence |
 //! | [`physics`] | state round trips, handover into a fresh simulation, each physical parameter's effect (or its refusal), self-collision on and off |
+//! | [`free`] | objects alone: free flight against the parabola, torque-free rotation (momentum and energy held), a cube dropped flat comes to rest on its face |
 //! | [`scenes`] | the study's three scenes with both robot models, the KUKA iiwa's scenes |
 //!
 //! What the kit cannot see from core — other engines — is checked in the
@@ -35,6 +36,7 @@
 //! instead of skipping the check.
 
 pub mod errors;
+pub mod free;
 pub mod model;
 pub mod physics;
 pub mod rotor;
@@ -166,6 +168,8 @@ pub struct KitSpec {
     /// Scene 3's push; `None`: the engine has no contact, and the cube
     /// stays where it is.
     pub push: Option<Push>,
+    /// The free-body checks ([`free`]).
+    pub free: free::FreeBody,
 }
 
 /// Tolerances of the model against the URDF's forward kinematics.
@@ -336,6 +340,7 @@ impl KitSpec {
             ends_on_a_face: true,
             max_sink_m: 0.002,
         }),
+        free: free::FreeBody::CONTRACT,
     };
 }
 
@@ -687,7 +692,10 @@ macro_rules! engine_test_kit {
             scenes::scene3_mico2,
             scenes::scene3_official,
             scenes::iiwa_reach,
-            scenes::iiwa_push
+            scenes::iiwa_push,
+            free::free_flight,
+            free::torque_free_rotation,
+            free::drop_flat
         );
     };
     (@tests $engine:expr, $spec:expr, $($group:ident :: $check:ident),*) => {
