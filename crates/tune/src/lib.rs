@@ -21,6 +21,7 @@ pub mod recordings;
 pub mod search;
 pub mod slurm_batch;
 pub mod space;
+pub mod stages;
 
 use anyhow::{bail, Context, Result};
 use objective::{offset_registration, Score, Simulator, Target};
