@@ -38,7 +38,7 @@
 //!   coordinates, with the real runs' spread, each end is then profiled:
 //!   the parameter is held there, the others are refitted, and the end
 //!   moves to where the objective itself has risen by `T`
-//!   (`profiled_ends`), which follows a valley the quadratic model does
+//!   ([`crate::stages::profile::profiled_ends`]), which follows a valley the quadratic model does
 //!   not.
 //! - **Identifiability.** The same Jacobian, at the start point before the
 //!   search and at the optimum after it, names the parameters whose effect

@@ -4,8 +4,8 @@
 //!   rounds of iteratively reweighted Levenberg-Marquardt
 //!   ([`irls_round`]), bounds widened where they hold a coordinate
 //!   ([`widen_held`]), and the probe that restarts it ([`probe`]).
-//! - The recordings tune ([`recordings`]) from the delay's scan: a fit,
-//!   the delay's profile ([`crate::stages::profile::delay_steps`]), and
+//! - The recordings tune (`recordings`) from the delay's scan: a fit,
+//!   the delay's profile (`crate::stages::profile::delay_steps`), and
 //!   the last fit from the profile's best point.
 
 use crate::least_squares::{self, Fit, FitOptions};
@@ -336,7 +336,7 @@ pub struct RecordingsFit {
 /// The recordings tune's fit from `u` (the delay's scan's best point, its
 /// residuals `start_residuals` when known): Levenberg-Marquardt on every
 /// parameter; with a delay, its profile at whole engine steps around the
-/// fit ([`profile::delay_steps`]) and the last fit, the delay free again,
+/// fit (`profile::delay_steps`) and the last fit, the delay free again,
 /// from the profile's best point.
 pub(crate) fn recordings(
     p: &Problem,

@@ -1,11 +1,12 @@
 //! The intervals and the identifiability at the optimum, read from the
 //! Jacobian there ([`Linearised`], the one Jacobian holder of both tunes).
 //!
+//! - The study tune's check at the start ([`before`]), before CMA-ES.
 //! - The study polish ([`polish`]): the Jacobian with the report's wider
 //!   step ([`REPORT_STEP`]), the local model's interval per unit of
 //!   standard deviation set by the real runs' noise, and each end
 //!   profiled in a small space ([`crate::stages::profile::profiled_ends`]).
-//! - The recordings tune ([`recordings`]): the fit's own Jacobian at the
+//! - The recordings tune (`recordings`): the fit's own Jacobian at the
 //!   optimum (or one computed there), the residuals told apart into
 //!   reading noise and structure ([`least_squares::misfit`]).
 
@@ -16,6 +17,34 @@ use crate::stages::fit::Polishing;
 use crate::stages::profile::{profiled_ends, PROFILE_MAX_COORDINATES};
 use crate::Tuner;
 use anyhow::{anyhow, Result};
+
+/// The identifiability check of a study tune before its long search, at
+/// the space's start (only with a polish); `None` when it could not be
+/// measured (said in `note`).
+pub fn before(tuner: &Tuner<'_>, note: &(dyn Fn(String) + Sync)) -> Option<IdentifiabilityReport> {
+    let spec = tuner.spec;
+    if spec.polish.iterations == 0 {
+        return None;
+    }
+    note(format!(
+        "identifiability at the start ({}): a Jacobian of {} coordinates",
+        spec.engine,
+        tuner.dims()
+    ));
+    let u0 = &spec.space.start_unit()[..tuner.dims()];
+    match identifiability(tuner, u0, "start", None, None) {
+        Ok((r, _, _)) => {
+            note(crate::polish::identifiability_text(&r));
+            Some(r)
+        }
+        Err(e) => {
+            note(format!(
+                "identifiability at the start: not measured ({e:#})"
+            ));
+            None
+        }
+    }
+}
 
 /// The Jacobian's report at `u`: identifiability, and the spread.
 pub fn identifiability(

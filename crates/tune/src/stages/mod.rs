@@ -18,7 +18,7 @@
 //!    both tunes), the intervals and the identifiability read from it;
 //! 6. [`score`]: the untuned and the tuned engine and the physics-free
 //!    model on the training and the held-out episodes or runs;
-//! 7. [`write`]: the files (`tuned.toml`, `summary.md`, ...).
+//! 7. [`mod@write`]: the files (`tuned.toml`, `summary.md`, ...).
 //!
 //! A cross-validation runs stages 1 to 6 once per fold; each stage is a
 //! function of the stage before's result, so that one can be changed or

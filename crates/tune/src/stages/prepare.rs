@@ -1,7 +1,6 @@
-//! Before anything is fitted: the space, the episodes, the output folder
-//! and the state a rerun resumes from (the recordings tune,
-//! [`recordings`]; the study tune checks its space and its `tune.json` in
-//! [`crate::fit`]).
+//! Before anything is fitted: the space, the episodes or runs, the output
+//! folder and the state a rerun resumes from (the study tune, [`study`];
+//! the recordings tune, [`recordings`]).
 
 use crate::least_squares;
 use crate::recordings::{
@@ -10,6 +9,7 @@ use crate::recordings::{
 };
 use crate::space::Space;
 use crate::stages::write;
+use crate::Tuner;
 use anyhow::{anyhow, bail, Context, Result};
 use realitygap_core::params::PhysicalParams;
 use realitygap_study::replay::Episode;
@@ -231,4 +231,19 @@ fn best_of_history(path: &Path, header: &str, dims: usize) -> Option<Vec<f64>> {
         })
         .min_by(|a, b| a.0.total_cmp(&b.0))
         .map(|b| b.1)
+}
+
+/// Checks a study tune before its search: the space's start runs in the
+/// engine, and `OUT/tune.json` matches this tune (written when new).
+pub fn study(tuner: &Tuner<'_>) -> Result<()> {
+    let spec = tuner.spec;
+    let start = tuner
+        .params(&spec.space.start_unit())
+        .map_err(|m| anyhow!("{}: {m}", spec.space.source.display()))?;
+    tuner
+        .simulator
+        .check(&tuner.target.scenes, &start)
+        .with_context(|| format!("parameter space {}", spec.space.source.display()))?;
+    realitygap_runner::interrupt::check()?;
+    crate::check_resume(spec, tuner.target)
 }

@@ -4,9 +4,9 @@
 //! - The study polish profiles each interval's ends ([`profiled_ends`]):
 //!   the coordinate is held at a distance from the optimum and the end
 //!   moves to where the objective itself, the others refitted, has risen
-//!   by the threshold ([`End`]).
+//!   by the threshold (`End`).
 //! - The recordings tune profiles its delay at whole engine steps around
-//!   the fit ([`delay_steps`]): a wrong delay and wrong damping can make up
+//!   the fit (`delay_steps`): a wrong delay and wrong damping can make up
 //!   for each other, a valley a gradient search may stop in.
 
 use crate::least_squares::{self, Fit, FitOptions, Residuals};
@@ -260,14 +260,14 @@ fn profile_rise(
 }
 
 /// Profiles each interval's ends: coordinate `c` is held at a distance
-/// from the optimum `u` and the others refitted ([`profile_rise`]),
+/// from the optimum `u` and the others refitted (`profile_rise`),
 /// starting where the local model refits them (`corr[o][c] sd_o / sd_c`
 /// per unit of `c`); the end is where the objective has risen by
 /// `threshold`. The model's end (`k sd_c`) is tried first, then where the
 /// rise, as a power of the distance, reaches the threshold
-/// ([`PROFILE_TRIALS`] at most). Returns each coordinate's ends in
+/// (`PROFILE_TRIALS` at most). Returns each coordinate's ends in
 /// normalised units (`None`: no interval) and the evaluations made.
-pub(crate) fn profiled_ends(
+pub fn profiled_ends(
     t: &Tuner<'_>,
     u: &[f64],
     objective: f64,

@@ -1,12 +1,55 @@
-//! A global look before the gradient fit. The study tune's is CMA-ES
-//! ([`crate::search`], run by [`crate::fit`]); the recordings tune's
-//! ([`delay`]) scans the command delay over its range at the untuned
+//! A global look before the gradient fit. The study tune's ([`study`]) is
+//! CMA-ES ([`crate::search`]); the recordings tune's (`delay`) scans the command delay over its range at the untuned
 //! parameters: a gradient search from a delay far from the truth can
 //! settle where a wrong delay and wrong damping make up for each other.
 
+use crate::polish::IdentifiabilityReport;
 use crate::recordings::Problem;
-use crate::space::Dim;
+use crate::search::{self, History, Progress, SearchEnd};
+use crate::space::{Dim, Space};
+use crate::Tuner;
 use anyhow::Result;
+
+/// The study tune's search: CMA-ES over the space (and the registration
+/// when fitted), resuming from `OUT/history.csv`. The objective's own
+/// noise at the start (`before`) tells a stalled search (with restarts),
+/// unless the caller gave one.
+pub fn study(
+    tuner: &Tuner<'_>,
+    before: Option<&IdentifiabilityReport>,
+    progress: &(dyn Fn(Progress) + Sync),
+) -> Result<SearchEnd> {
+    let spec = tuner.spec;
+    let mut history = History::open(
+        &spec.out.join("history.csv"),
+        &tuner.part_names(),
+        &tuner.value_names(),
+        tuner.dims(),
+    )?;
+    let space = if tuner.fits_registration() {
+        spec.space.clone()
+    } else {
+        Space {
+            registration: None,
+            ..spec.space.clone()
+        }
+    };
+    let options = search::SearchOptions {
+        stall_m: spec
+            .search
+            .stall_m
+            .or_else(|| before.and_then(|r| r.noise_m)),
+        ..spec.search
+    };
+    search::search(
+        &space,
+        &mut history,
+        options,
+        &|u| tuner.evaluate(u),
+        &|u| tuner.values(u),
+        progress,
+    )
+}
 
 /// The recordings tune's start for its fit from the untuned point `u`:
 /// the history's best point when `resumed` (its values), else `u` with

@@ -1,8 +1,8 @@
 //! The scores of a tune: the untuned and the tuned engine and the
 //! physics-free model on the training and the held-out episodes or runs.
 //! The study tune's are computed by [`crate::outputs::finish`]; the
-//! recordings tune's here ([`recordings`]), with the tuned parameters
-//! replayed again at half the engine's timestep ([`timestep_check`]).
+//! recordings tune's here (`recordings`), with the tuned parameters
+//! replayed again at half the engine's timestep (`timestep_check`).
 
 use crate::recordings::{set_score, verdict, Problem, RecordingsTimestepCheck, SourceScores};
 use anyhow::{anyhow, Result};
