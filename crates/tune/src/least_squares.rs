@@ -1005,6 +1005,25 @@ mod tests {
         assert!((j[(0, 0)] - 2.0).abs() < 1e-9 && (j[(1, 0)] - 3.0).abs() < 1e-9);
         assert_eq!((j[(0, 1)], j[(1, 1)]), (0.0, 0.0));
         assert!(spread(&j, &r0, 1).sd_u[1].is_infinite());
+        // The holder of both tunes: the same Jacobian, strict or blind.
+        assert!(Linearised::at(&f, &u, &r0, 1e-3, 2, None)
+            .unwrap_err()
+            .contains("coordinate 1"));
+        let lin = Linearised::at_or_blind(&f, &u, &r0, 1e-3, 2);
+        assert_eq!(
+            (&lin.jacobian, &lin.blind, &lin.u[..]),
+            (&j, &blind, &u[..])
+        );
+        // (Compared as text: the blind coordinate's correlations are NaN.)
+        assert_eq!(
+            format!("{:?}", lin.spread(1)),
+            format!("{:?}", spread(&j, &r0, 1))
+        );
+        // A fit's own Jacobian is taken as it is, with no evaluation.
+        let never = |_: &[f64]| -> Result<Vec<f64>, String> { Err("evaluated".into()) };
+        let given = Linearised::at(&never, &u, &r0, 1e-3, 2, Some(j.clone())).unwrap();
+        assert_eq!(given.jacobian, j);
+        assert!(given.blind.is_empty());
     }
 
     /// y = a exp(-b t) + c on a grid, coordinates mapped a = 4u0,

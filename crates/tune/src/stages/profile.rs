@@ -502,4 +502,45 @@ mod tests {
         };
         assert!(profile(&fails, 0.2, 1.0, t).0 <= 0.15);
     }
+
+    #[test]
+    fn a_held_coordinate_stays_while_the_others_are_refitted() {
+        let held = Held { c: 1, at: 0.25 };
+        assert_eq!(held.full(&[0.1, 0.9]), [0.1, 0.25, 0.9]);
+        assert_eq!(held.others(&[0.1, 0.25, 0.9]), [0.1, 0.9]);
+        let j = DMatrix::from_row_slice(2, 3, &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
+        let back = held.restore_column(&held.drop_column(&j));
+        assert_eq!(held.drop_column(&back), held.drop_column(&j));
+        assert!(back.column(1).iter().all(|x| x.is_nan()));
+        // Residuals whose minimum is at (0.6, 0.5, 0.3): with the middle
+        // coordinate held at 0.25 the others still reach theirs, and every
+        // point the fit evaluates holds it.
+        let evaluated = Mutex::new(Vec::new());
+        let f = |x: &[f64]| -> Result<Vec<f64>, String> {
+            evaluated.lock().unwrap().push(x[1]);
+            Ok(vec![x[0] - 0.6, x[1] - 0.5, 2.0 * (x[2] - 0.3)])
+        };
+        let heard = Mutex::new(Vec::new());
+        let fit = held
+            .refit(
+                &f,
+                &[0.1, 0.25, 0.9],
+                None,
+                Some(&j),
+                FitOptions::default(),
+                &|_, x, _| heard.lock().unwrap().push(x.len()),
+            )
+            .unwrap();
+        assert!(
+            (fit.u[0] - 0.6).abs() < 1e-6 && (fit.u[2] - 0.3).abs() < 1e-6,
+            "{fit:?}"
+        );
+        assert_eq!(fit.u[1], 0.25);
+        assert!(evaluated.lock().unwrap().iter().all(|&x| x == 0.25));
+        assert!(heard.lock().unwrap().iter().all(|&n| n == 3));
+        let last = fit.last_jacobian.expect("a Jacobian");
+        assert_eq!(last.shape(), (3, 3));
+        assert!(last.column(1).iter().all(|x| x.is_nan()));
+        assert!((fit.cost - 0.0625).abs() < 1e-9, "{}", fit.cost);
+    }
 }
