@@ -113,13 +113,9 @@ fn functions(src: &str) -> Vec<(String, usize, usize)> {
         if name.is_empty() {
             continue;
         }
-        // The body: the first `{` before any `;` (a declaration has none).
-        let Some(open) = code[p..]
-            .iter()
-            .position(|&c| c == b'{' || c == b';')
-            .map(|q| p + q)
-            .filter(|&q| code[q] == b'{')
-        else {
+        // The body: the first `{` before a `;` outside brackets (a
+        // declaration has none; `[f64; 2]` in the signature is no end).
+        let Some(open) = body_start(&code, p) else {
             continue;
         };
         let mut depth = 0usize;
@@ -142,6 +138,23 @@ fn functions(src: &str) -> Vec<(String, usize, usize)> {
         found.push((name, first, line_of(close) - first + 1));
     }
     found
+}
+
+/// Where the body of the function whose `fn` is at `from` opens: the
+/// first `{` outside parentheses and square brackets, unless a `;` comes
+/// first there.
+fn body_start(code: &[u8], from: usize) -> Option<usize> {
+    let mut depth = 0i64;
+    for (q, &c) in code.iter().enumerate().skip(from) {
+        match c {
+            b'(' | b'[' => depth += 1,
+            b')' | b']' => depth -= 1,
+            b'{' if depth == 0 => return Some(q),
+            b';' if depth == 0 => return None,
+            _ => {}
+        }
+    }
+    None
 }
 
 fn sources(dir: &Path, out: &mut Vec<PathBuf>) {
@@ -195,9 +208,11 @@ fn the_counter_sees_long_functions_through_strings_and_comments() {
         src.push_str(&format!("    // {k} }}\n    let _s = r#\"{{\"#;\n"));
     }
     src.push_str("    v\n}\ntrait T { fn declared(&self); }\n");
+    src.push_str("fn pairs() -> Vec<[f64; 2]> {\n    vec![[0.0; 2]; 3]\n}\n");
     let found = functions(&src);
     let names: Vec<&str> = found.iter().map(|f| f.0.as_str()).collect();
-    assert_eq!(names, ["short", "long"], "{found:?}");
+    assert_eq!(names, ["short", "long", "pairs"], "{found:?}");
+    assert_eq!(found[2].2, 3);
     assert_eq!((found[0].1, found[0].2), (2, 4));
     assert_eq!(found[1].2, 2 * LIMIT + 3);
 }
