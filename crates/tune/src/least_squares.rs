@@ -177,6 +177,75 @@ pub fn jacobian_or_blind(
     (j, blind)
 }
 
+/// The residuals linearised at a point: the point, its residuals and the
+/// Jacobian there (residuals x coordinates), with the coordinates whose
+/// column could not be evaluated (their columns are zero). The one holder
+/// of a Jacobian for both tunes: the fit's anchor ([`FitOptions::settle`]),
+/// and the intervals and identifiability at the optimum
+/// ([`crate::stages::intervals`]).
+#[derive(Debug, Clone)]
+pub struct Linearised {
+    /// The point, normalised.
+    pub u: Vec<f64>,
+    /// The residuals there.
+    pub residuals: Vec<f64>,
+    /// The Jacobian there.
+    pub jacobian: DMatrix<f64>,
+    /// Coordinates whose column could not be evaluated either way, with
+    /// why (only from [`Linearised::at_or_blind`]).
+    pub blind: Vec<(usize, String)>,
+}
+
+impl Linearised {
+    /// A Jacobian already at hand (a fit's) at `u`, residuals `r`.
+    pub fn new(u: Vec<f64>, residuals: Vec<f64>, jacobian: DMatrix<f64>) -> Linearised {
+        Linearised {
+            u,
+            residuals,
+            jacobian,
+            blind: Vec::new(),
+        }
+    }
+
+    /// [`jacobian`] at `u` (residuals `r`), or the fit's own there when
+    /// it has one (`given`).
+    pub fn at(
+        f: &Residuals,
+        u: &[f64],
+        r: &[f64],
+        step: f64,
+        jobs: usize,
+        given: Option<DMatrix<f64>>,
+    ) -> Result<Linearised, String> {
+        let j = match given {
+            Some(j) => j,
+            None => jacobian(f, u, r, step, jobs)?,
+        };
+        Ok(Linearised::new(u.to_vec(), r.to_vec(), j))
+    }
+
+    /// [`jacobian_or_blind`] at `u` (residuals `r`).
+    pub fn at_or_blind(f: &Residuals, u: &[f64], r: &[f64], step: f64, jobs: usize) -> Linearised {
+        let (jacobian, blind) = jacobian_or_blind(f, u, r, step, jobs);
+        Linearised {
+            u: u.to_vec(),
+            residuals: r.to_vec(),
+            jacobian,
+            blind,
+        }
+    }
+
+    /// The spread of the coordinates ([`spread`]).
+    pub fn spread(&self, lag: usize) -> Spread {
+        spread(&self.jacobian, &self.residuals, lag)
+    }
+
+    /// The misfit's intervals ([`misfit`]).
+    pub fn misfit(&self, blocks: &[Block], window: usize) -> Misfit {
+        misfit(&self.jacobian, &self.residuals, blocks, window)
+    }
+}
+
 /// Column `i` of the Jacobian: forward, or backward at the upper bound or
 /// where the forward point cannot be evaluated (a diverging engine).
 fn column(f: &Residuals, u: &[f64], r0: &[f64], step: f64, i: usize) -> Result<Vec<f64>, String> {
@@ -239,250 +308,364 @@ pub fn levenberg_marquardt_from(
     options: FitOptions,
     on_evaluation: &(dyn Fn(&str, &[f64], f64) + Sync),
 ) -> Result<Fit, String> {
-    let mut u: Vec<f64> = u0.iter().map(|x| x.clamp(0.0, 1.0)).collect();
-    let mut evaluations = 0usize;
-    let mut r = match r0.filter(|_| u == u0) {
-        Some(r) => r,
-        None => {
-            evaluations += 1;
-            f(&u).map_err(|m| format!("at the start: {m}"))?
+    let mut lm = Lm::start(f, u0, r0, options, on_evaluation)?;
+    let start_cost = lm.cost;
+    if lm.u.is_empty() {
+        return Ok(lm.end(start_cost, "nothing to fit".into()));
+    }
+    lm.take_guess(guess);
+    let reason = loop {
+        if let Some(reason) = lm.iterate() {
+            break reason;
         }
     };
-    let mut cost = cost_of(&r);
-    on_evaluation("start", &u, cost);
-    let start_cost = cost;
-    let mut lambda = 1e-3;
-    let mut iterations = 0;
-    let n = u.len();
-    if n == 0 {
-        return Ok(Fit {
+    Ok(lm.end(start_cost, reason))
+}
+
+/// A Levenberg-Marquardt fit under way ([`levenberg_marquardt_from`]).
+struct Lm<'f, 'a> {
+    f: &'f Residuals<'a>,
+    options: FitOptions,
+    on_evaluation: &'f (dyn Fn(&str, &[f64], f64) + Sync),
+    u: Vec<f64>,
+    r: Vec<f64>,
+    cost: f64,
+    lambda: f64,
+    iterations: usize,
+    evaluations: usize,
+    /// The Jacobian in use.
+    jac: Option<DMatrix<f64>>,
+    /// `jac` was computed by differences at `u` (a rejected trial leaves
+    /// it so).
+    fresh: bool,
+    /// The next step needs a Jacobian computed by differences.
+    refresh: bool,
+    /// Broyden updates since the last Jacobian computed by differences.
+    updates: usize,
+    /// With `settle`: the last Jacobian computed by differences, its point
+    /// and the standard deviations it gives the coordinates.
+    anchor: Option<Anchor>,
+}
+
+/// The linear model of one iteration: the free coordinates (those no
+/// bound holds), their normal matrix and gradient.
+struct Model {
+    free: Vec<usize>,
+    a: DMatrix<f64>,
+    g: DVector<f64>,
+    /// What an updated Jacobian cannot conclude, one computed at `u` (or,
+    /// with `settle`, near enough) decides.
+    unsure: bool,
+}
+
+impl<'f, 'a> Lm<'f, 'a> {
+    /// At `u0` clamped to the box, its residuals evaluated unless given.
+    fn start(
+        f: &'f Residuals<'a>,
+        u0: &[f64],
+        r0: Option<Vec<f64>>,
+        options: FitOptions,
+        on_evaluation: &'f (dyn Fn(&str, &[f64], f64) + Sync),
+    ) -> Result<Self, String> {
+        let u: Vec<f64> = u0.iter().map(|x| x.clamp(0.0, 1.0)).collect();
+        let mut evaluations = 0usize;
+        let r = match r0.filter(|_| u == u0) {
+            Some(r) => r,
+            None => {
+                evaluations += 1;
+                f(&u).map_err(|m| format!("at the start: {m}"))?
+            }
+        };
+        let cost = cost_of(&r);
+        on_evaluation("start", &u, cost);
+        Ok(Lm {
+            f,
+            options,
+            on_evaluation,
             u,
-            residuals: r,
+            r,
             cost,
-            start_cost,
-            jacobian: None,
-            last_jacobian: None,
+            lambda: 1e-3,
             iterations: 0,
             evaluations,
-            reason: "nothing to fit".into(),
-        });
+            jac: None,
+            fresh: false,
+            refresh: true,
+            updates: 0,
+            anchor: None,
+        })
     }
-    // The Jacobian in use; `fresh` when it was computed by differences at
-    // `u` (a rejected trial leaves it so); `refresh` when the next step
-    // needs one computed so.
-    let mut jac = guess.filter(|j| j.nrows() == r.len() && j.ncols() == n && options.secant);
-    let mut fresh = false;
-    let mut refresh = jac.is_none();
-    let mut updates = 0usize;
-    // With `settle`: the last Jacobian computed by differences, its point
-    // and the standard deviations it gives the coordinates.
-    let mut anchor: Option<Anchor> = None;
-    if let Some(j) = jac.as_mut() {
+
+    /// Starts from `guess` (with `secant`, of the right shape), its
+    /// columns that are not finite computed by differences.
+    fn take_guess(&mut self, guess: Option<DMatrix<f64>>) {
+        let n = self.u.len();
+        let secant = self.options.secant;
+        self.jac = guess.filter(|j| j.nrows() == self.r.len() && j.ncols() == n && secant);
+        self.refresh = self.jac.is_none();
+        let Some(j) = self.jac.as_mut() else {
+            return;
+        };
         let missing: Vec<usize> = (0..n)
             .filter(|&i| j.column(i).iter().any(|x| !x.is_finite()))
             .collect();
-        if !missing.is_empty() {
-            match columns(f, &u, &r, options.step, options.jobs, &missing) {
-                Ok(cols) => {
-                    evaluations += missing.len();
-                    for (i, c) in missing.iter().zip(cols) {
-                        j.set_column(*i, &DVector::from_vec(c));
-                    }
+        if missing.is_empty() {
+            return;
+        }
+        let (step, jobs) = (self.options.step, self.options.jobs);
+        match columns(self.f, &self.u, &self.r, step, jobs, &missing) {
+            Ok(cols) => {
+                self.evaluations += missing.len();
+                for (i, c) in missing.iter().zip(cols) {
+                    j.set_column(*i, &DVector::from_vec(c));
                 }
-                Err(_) => refresh = true,
             }
+            Err(_) => self.refresh = true,
         }
     }
-    let reason = 'outer: loop {
-        if refresh {
-            if iterations >= options.max_iterations {
-                break "the iteration limit".to_string();
-            }
-            match jacobian(f, &u, &r, options.step, options.jobs) {
-                Ok(j) => jac = Some(j),
-                Err(m) => break format!("the Jacobian could not be evaluated ({m})"),
-            }
-            evaluations += n;
-            iterations += 1;
-            fresh = true;
-            updates = 0;
-            if options.secant && options.certify && options.settle > 0.0 {
-                if let Some(j) = jac.as_ref() {
-                    let sd = spread(j, &r, options.series).sd_u;
-                    anchor = Some(Anchor {
-                        u: u.clone(),
-                        jacobian: j.clone(),
-                        sd,
-                    });
-                }
+
+    /// One iteration: a Jacobian when one is needed, then damped steps
+    /// until one is accepted. `Some`: why the fit stops.
+    fn iterate(&mut self) -> Option<String> {
+        if self.refresh {
+            if let Err(reason) = self.recompute() {
+                return Some(reason);
             }
         }
-        let Some(j) = jac.as_ref() else {
-            break "no Jacobian".to_string();
+        let model = match self.model() {
+            Ok(model) => model,
+            Err(reason) => return reason,
         };
+        self.damped_steps(&model)
+    }
+
+    /// A Jacobian computed by differences at `u`; `Err`: why the fit
+    /// stops.
+    fn recompute(&mut self) -> Result<(), String> {
+        let o = self.options;
+        if self.iterations >= o.max_iterations {
+            return Err("the iteration limit".to_string());
+        }
+        let j = jacobian(self.f, &self.u, &self.r, o.step, o.jobs)
+            .map_err(|m| format!("the Jacobian could not be evaluated ({m})"))?;
+        self.evaluations += self.u.len();
+        self.iterations += 1;
+        self.fresh = true;
+        self.updates = 0;
+        if o.secant && o.certify && o.settle > 0.0 {
+            let sd = spread(&j, &self.r, o.series).sd_u;
+            self.anchor = Some(Anchor {
+                at: Linearised::new(self.u.clone(), self.r.clone(), j.clone()),
+                sd,
+            });
+        }
+        self.jac = Some(j);
+        Ok(())
+    }
+
+    /// The iteration's linear model; `Err(Some)`: why the fit stops,
+    /// `Err(None)`: a Jacobian is needed first.
+    fn model(&mut self) -> Result<Model, Option<String>> {
+        let Some(j) = self.jac.as_ref() else {
+            return Err(Some("no Jacobian".to_string()));
+        };
+        let n = self.u.len();
         let jt = j.transpose();
         let a = &jt * j;
-        let g = &jt * DVector::from_column_slice(&r);
+        let g = &jt * DVector::from_column_slice(&self.r);
         // Coordinates held at a bound by the gradient stay there this
         // iteration (an active set): a step computed as if they could
         // cross the bound, then clipped, is a poor step.
+        let u = &self.u;
         let free: Vec<usize> = (0..n)
             .filter(|&i| !((u[i] <= 0.0 && g[i] > 0.0) || (u[i] >= 1.0 && g[i] < 0.0)))
             .collect();
-        // What an updated Jacobian cannot conclude, one computed at `u`
-        // (or, with `settle`, near enough) decides.
-        let unsure = !fresh && options.certify && !settled(&u, &anchor, options.settle);
+        let unsure =
+            !self.fresh && self.options.certify && !settled(u, &self.anchor, self.options.settle);
         if free.is_empty() {
-            if unsure {
-                refresh = true;
-                continue 'outer;
-            }
-            break 'outer "every coordinate is held at a bound".to_string();
+            return Err(self.unless_unsure(unsure, "every coordinate is held at a bound"));
         }
         let nf = free.len();
         let af = DMatrix::from_fn(nf, nf, |r, c| a[(free[r], free[c])]);
         let gf = DVector::from_fn(nf, |r, _| g[free[r]]);
+        Ok(Model {
+            free,
+            a: af,
+            g: gf,
+            unsure,
+        })
+    }
+
+    /// `None` (and a Jacobian computed at `u` next) when `unsure`, else
+    /// `reason` to stop.
+    fn unless_unsure(&mut self, unsure: bool, reason: &str) -> Option<String> {
+        if unsure {
+            self.refresh = true;
+            None
+        } else {
+            Some(reason.to_string())
+        }
+    }
+
+    /// Damped steps on `model` until one is accepted (`None`: the next
+    /// iteration) or the fit stops (`Some`: why).
+    fn damped_steps(&mut self, model: &Model) -> Option<String> {
+        let (af, gf, nf) = (&model.a, &model.g, model.free.len());
         loop {
             let mut m = af.clone();
             for i in 0..nf {
-                m[(i, i)] += lambda * af[(i, i)].max(1e-12) + 1e-12;
+                m[(i, i)] += self.lambda * af[(i, i)].max(1e-12) + 1e-12;
             }
             let Some(chol) = m.cholesky() else {
-                lambda *= 10.0;
-                if lambda > 1e12 {
-                    if !fresh {
-                        refresh = true;
-                        continue 'outer;
+                self.lambda *= 10.0;
+                if self.lambda > 1e12 {
+                    if !self.fresh {
+                        self.refresh = true;
+                        return None;
                     }
-                    break 'outer "the normal equations are singular".to_string();
+                    return Some("the normal equations are singular".to_string());
                 }
                 continue;
             };
-            let step = chol.solve(&(-&gf));
-            let mut delta = vec![0.0; n];
-            for (k, &i) in free.iter().enumerate() {
-                delta[i] = step[k];
-            }
-            let trial: Vec<f64> = u
-                .iter()
-                .zip(&delta)
-                .map(|(x, d)| (x + d).clamp(0.0, 1.0))
-                .collect();
+            let step = chol.solve(&(-gf));
+            let trial = self.trial(&model.free, &step);
             let moved = trial
                 .iter()
-                .zip(&u)
+                .zip(&self.u)
                 .map(|(a, b)| (a - b).abs())
                 .fold(0.0, f64::max);
             if moved < 1e-10 {
-                if unsure {
-                    refresh = true;
-                    continue 'outer;
-                }
-                break 'outer "the step vanished (at a bound or a minimum)".to_string();
+                return self
+                    .unless_unsure(model.unsure, "the step vanished (at a bound or a minimum)");
             }
             // The cost's fall the linear model predicts for this step
             // (-2 g'd - d'Ad): the damping only shrinks it, so once it is
             // below the tolerance no trial can gain more than that and
             // the fit has converged (without spending the evaluations of
             // a chain of rejected trials on it).
-            let predicted = -2.0 * gf.dot(&step) - step.dot(&(&af * &step));
-            if predicted < options.tolerance * cost {
-                if unsure {
-                    refresh = true;
-                    continue 'outer;
-                }
-                break 'outer format!(
+            let predicted = -2.0 * gf.dot(&step) - step.dot(&(af * &step));
+            if predicted < self.options.tolerance * self.cost {
+                let reason = format!(
                     "converged (the linear model predicts a gain of {:.1e} of the cost)",
-                    predicted / cost.max(f64::MIN_POSITIVE)
+                    predicted / self.cost.max(f64::MIN_POSITIVE)
                 );
+                return self.unless_unsure(model.unsure, &reason);
             }
-            evaluations += 1;
-            match f(&trial) {
-                Ok(rt) if rt.len() == r.len() && cost_of(&rt) < cost => {
-                    let new_cost = cost_of(&rt);
-                    on_evaluation("step", &trial, new_cost);
-                    let gain = (cost - new_cost) / cost.max(f64::MIN_POSITIVE);
-                    if options.secant {
-                        // Broyden's rank-one update: the Jacobian now maps
-                        // this step to the change of the residuals it made.
-                        if let Some(j) = jac.as_mut() {
-                            broyden(j, &trial, &u, &rt, &r);
-                        }
-                        updates += 1;
-                        // A Jacobian updated as many times as there are
-                        // coordinates is computed afresh.
-                        refresh = updates >= n;
-                    } else {
-                        refresh = true;
-                    }
-                    fresh = false;
-                    u = trial;
-                    r = rt;
-                    cost = new_cost;
-                    lambda = (lambda / 3.0).max(1e-9);
-                    if gain < options.tolerance {
-                        if unsure && !settled(&u, &anchor, options.settle) {
-                            refresh = true;
-                            continue 'outer;
-                        }
-                        break 'outer format!(
-                            "converged (the last step gained {:.1e} of the cost)",
-                            gain
-                        );
-                    }
-                    continue 'outer;
-                }
-                Ok(rt) => {
-                    if rt.len() == r.len() {
-                        on_evaluation("rejected", &trial, cost_of(&rt));
-                    }
-                }
-                Err(_) => {
-                    on_evaluation("failed", &trial, f64::INFINITY);
-                }
-            }
-            // A rejected step from an updated Jacobian says more of the
-            // Jacobian than of the damping.
-            if !fresh {
-                refresh = true;
-                continue 'outer;
-            }
-            lambda *= 4.0;
-            if lambda > 1e10 {
-                break 'outer "no step lowers the cost (converged)".to_string();
+            if let Some(next) = self.try_step(trial, model.unsure) {
+                return next;
             }
         }
-    };
-    // A fit certified near its last Jacobian computed by differences ends
-    // on that one.
-    let (jacobian, reason) = if fresh {
-        (jac.clone(), reason)
-    } else if options.certify && settled(&u, &anchor, options.settle) {
-        let within = format!(
-            "{reason}; every coordinate within {} standard deviations of the last Jacobian's point",
-            options.settle
-        );
-        (anchor.map(|a| a.jacobian), within)
-    } else {
-        (None, reason)
-    };
-    Ok(Fit {
-        u,
-        residuals: r,
-        cost,
-        start_cost,
-        jacobian,
-        last_jacobian: jac,
-        iterations,
-        evaluations,
-        reason,
-    })
+    }
+
+    /// The point `step` (over the free coordinates) leads to, in the box.
+    fn trial(&self, free: &[usize], step: &DVector<f64>) -> Vec<f64> {
+        let mut delta = vec![0.0; self.u.len()];
+        for (k, &i) in free.iter().enumerate() {
+            delta[i] = step[k];
+        }
+        self.u
+            .iter()
+            .zip(&delta)
+            .map(|(x, d)| (x + d).clamp(0.0, 1.0))
+            .collect()
+    }
+
+    /// Evaluates `trial`: accepted when it lowers the cost. `None`: damp
+    /// more and try again; `Some(None)`: the next iteration;
+    /// `Some(Some)`: the fit stops, and why.
+    fn try_step(&mut self, trial: Vec<f64>, unsure: bool) -> Option<Option<String>> {
+        self.evaluations += 1;
+        match (self.f)(&trial) {
+            Ok(rt) if rt.len() == self.r.len() && cost_of(&rt) < self.cost => {
+                return Some(self.accept(trial, rt, unsure));
+            }
+            Ok(rt) => {
+                if rt.len() == self.r.len() {
+                    (self.on_evaluation)("rejected", &trial, cost_of(&rt));
+                }
+            }
+            Err(_) => {
+                (self.on_evaluation)("failed", &trial, f64::INFINITY);
+            }
+        }
+        // A rejected step from an updated Jacobian says more of the
+        // Jacobian than of the damping.
+        if !self.fresh {
+            self.refresh = true;
+            return Some(None);
+        }
+        self.lambda *= 4.0;
+        if self.lambda > 1e10 {
+            return Some(Some("no step lowers the cost (converged)".to_string()));
+        }
+        None
+    }
+
+    /// Moves to the accepted `trial` (residuals `rt`); `Some`: the fit
+    /// has converged.
+    fn accept(&mut self, trial: Vec<f64>, rt: Vec<f64>, unsure: bool) -> Option<String> {
+        let new_cost = cost_of(&rt);
+        (self.on_evaluation)("step", &trial, new_cost);
+        let gain = (self.cost - new_cost) / self.cost.max(f64::MIN_POSITIVE);
+        if self.options.secant {
+            // Broyden's rank-one update: the Jacobian now maps this step
+            // to the change of the residuals it made.
+            if let Some(j) = self.jac.as_mut() {
+                broyden(j, &trial, &self.u, &rt, &self.r);
+            }
+            self.updates += 1;
+            // A Jacobian updated as many times as there are coordinates
+            // is computed afresh.
+            self.refresh = self.updates >= self.u.len();
+        } else {
+            self.refresh = true;
+        }
+        self.fresh = false;
+        self.u = trial;
+        self.r = rt;
+        self.cost = new_cost;
+        self.lambda = (self.lambda / 3.0).max(1e-9);
+        if gain < self.options.tolerance {
+            let settled = settled(&self.u, &self.anchor, self.options.settle);
+            let reason = format!("converged (the last step gained {gain:.1e} of the cost)");
+            return self.unless_unsure(unsure && !settled, &reason);
+        }
+        None
+    }
+
+    /// The fit's end. A fit certified near its last Jacobian computed by
+    /// differences ends on that one.
+    fn end(self, start_cost: f64, reason: String) -> Fit {
+        let o = self.options;
+        let (jacobian, reason) = if self.fresh {
+            (self.jac.clone(), reason)
+        } else if o.certify && settled(&self.u, &self.anchor, o.settle) {
+            let within = format!(
+                "{reason}; every coordinate within {} standard deviations of the last Jacobian's point",
+                o.settle
+            );
+            (self.anchor.map(|a| a.at.jacobian), within)
+        } else {
+            (None, reason)
+        };
+        Fit {
+            u: self.u,
+            residuals: self.r,
+            cost: self.cost,
+            start_cost,
+            jacobian,
+            last_jacobian: self.jac,
+            iterations: self.iterations,
+            evaluations: self.evaluations,
+            reason,
+        }
+    }
 }
 
-/// The last Jacobian computed by differences (for [`FitOptions::settle`]).
+/// The last Jacobian computed by differences (for [`FitOptions::settle`])
+/// and the standard deviations it gives the coordinates.
 struct Anchor {
-    u: Vec<f64>,
-    jacobian: DMatrix<f64>,
+    at: Linearised,
     sd: Vec<f64>,
 }
 
@@ -493,7 +676,7 @@ fn settled(u: &[f64], anchor: &Option<Anchor>, settle: f64) -> bool {
     settle > 0.0
         && anchor.as_ref().is_some_and(|a| {
             u.iter()
-                .zip(&a.u)
+                .zip(&a.at.u)
                 .zip(&a.sd)
                 .all(|((x, y), sd)| sd.is_finite() && (x - y).abs() <= settle * sd)
         })
@@ -822,6 +1005,25 @@ mod tests {
         assert!((j[(0, 0)] - 2.0).abs() < 1e-9 && (j[(1, 0)] - 3.0).abs() < 1e-9);
         assert_eq!((j[(0, 1)], j[(1, 1)]), (0.0, 0.0));
         assert!(spread(&j, &r0, 1).sd_u[1].is_infinite());
+        // The holder of both tunes: the same Jacobian, strict or blind.
+        assert!(Linearised::at(&f, &u, &r0, 1e-3, 2, None)
+            .unwrap_err()
+            .contains("coordinate 1"));
+        let lin = Linearised::at_or_blind(&f, &u, &r0, 1e-3, 2);
+        assert_eq!(
+            (&lin.jacobian, &lin.blind, &lin.u[..]),
+            (&j, &blind, &u[..])
+        );
+        // (Compared as text: the blind coordinate's correlations are NaN.)
+        assert_eq!(
+            format!("{:?}", lin.spread(1)),
+            format!("{:?}", spread(&j, &r0, 1))
+        );
+        // A fit's own Jacobian is taken as it is, with no evaluation.
+        let never = |_: &[f64]| -> Result<Vec<f64>, String> { Err("evaluated".into()) };
+        let given = Linearised::at(&never, &u, &r0, 1e-3, 2, Some(j.clone())).unwrap();
+        assert_eq!(given.jacobian, j);
+        assert!(given.blind.is_empty());
     }
 
     /// y = a exp(-b t) + c on a grid, coordinates mapped a = 4u0,

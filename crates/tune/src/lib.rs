@@ -9,7 +9,10 @@
 //! - [`outputs`]: sensitivity, the final scores and the files written;
 //! - [`recordings`]: `tune --recordings`, a robot's own recorded episodes
 //!   fitted in joint space by [`least_squares`] (Levenberg-Marquardt with
-//!   intervals and an identifiability report).
+//!   intervals and an identifiability report);
+//! - [`stages`]: the stages both tunes run, in order (prepare, scan, fit,
+//!   profile, intervals, score, write), with one profile code and one
+//!   Jacobian holder for both.
 
 #![forbid(unsafe_code)]
 
@@ -21,13 +24,14 @@ pub mod recordings;
 pub mod search;
 pub mod slurm_batch;
 pub mod space;
+pub mod stages;
 
 use anyhow::{bail, Context, Result};
 use objective::{offset_registration, Score, Simulator, Target};
 use realitygap_analysis::registration::Registration;
 use realitygap_core::engine::EngineSettings;
 use realitygap_core::params::PhysicalParams;
-use search::{search, History, Outcome, Progress, SearchEnd, SearchOptions};
+use search::{Outcome, Progress, SearchEnd, SearchOptions};
 use serde::Serialize;
 use space::Space;
 use std::path::{Path, PathBuf};
@@ -234,7 +238,7 @@ impl Tuner<'_> {
         v
     }
 
-    fn fits_registration(&self) -> bool {
+    pub(crate) fn fits_registration(&self) -> bool {
         self.spec.fit_registration && self.spec.space.registration.is_some()
     }
 
@@ -265,7 +269,7 @@ fn resume_state(spec: &TuneSpec, target: &Target) -> Resume {
 
 /// Checks `OUT/tune.json` against this tune (writing it when new): a
 /// folder made by a different tune is an error, never mixed in.
-fn check_resume(spec: &TuneSpec, target: &Target) -> Result<()> {
+pub(crate) fn check_resume(spec: &TuneSpec, target: &Target) -> Result<()> {
     std::fs::create_dir_all(&spec.out)
         .with_context(|| format!("creating {}", spec.out.display()))?;
     let path = spec.out.join("tune.json");
@@ -307,8 +311,10 @@ impl Fitted {
     }
 }
 
-/// Fits `spec`: checks, the identifiability check, the search (resuming
-/// from `OUT/history.csv`) and the polish.
+/// Fits `spec`, stage by stage ([`stages`]): the checks
+/// ([`stages::prepare::study`]), the identifiability check
+/// ([`stages::intervals::before`]), the search ([`stages::scan::study`],
+/// resuming from `OUT/history.csv`) and the polish ([`polish::polish`]).
 pub fn fit(
     target: &Target,
     simulator: &Simulator,
@@ -321,68 +327,9 @@ pub fn fit(
         simulator,
         spec,
     };
-    let start = tuner
-        .params(&spec.space.start_unit())
-        .map_err(|m| anyhow::anyhow!("{}: {m}", spec.space.source.display()))?;
-    simulator
-        .check(&target.scenes, &start)
-        .with_context(|| format!("parameter space {}", spec.space.source.display()))?;
-    realitygap_runner::interrupt::check()?;
-    check_resume(spec, target)?;
-    // The identifiability check, before the long search.
-    let before = if spec.polish.iterations > 0 {
-        note(format!(
-            "identifiability at the start ({}): a Jacobian of {} coordinates",
-            spec.engine,
-            tuner.dims()
-        ));
-        let u0 = &spec.space.start_unit()[..tuner.dims()];
-        match polish::identifiability(&tuner, u0, "start", None, None) {
-            Ok((r, _, _)) => {
-                note(polish::identifiability_text(&r));
-                Some(r)
-            }
-            Err(e) => {
-                note(format!(
-                    "identifiability at the start: not measured ({e:#})"
-                ));
-                None
-            }
-        }
-    } else {
-        None
-    };
-    let mut history = History::open(
-        &spec.out.join("history.csv"),
-        &tuner.part_names(),
-        &tuner.value_names(),
-        tuner.dims(),
-    )?;
-    let space = if tuner.fits_registration() {
-        spec.space.clone()
-    } else {
-        Space {
-            registration: None,
-            ..spec.space.clone()
-        }
-    };
-    // The objective's own noise tells a stalled search (with restarts),
-    // unless the caller gave one.
-    let options = search::SearchOptions {
-        stall_m: spec
-            .search
-            .stall_m
-            .or_else(|| before.as_ref().and_then(|r| r.noise_m)),
-        ..spec.search
-    };
-    let end = search(
-        &space,
-        &mut history,
-        options,
-        &|u| tuner.evaluate(u),
-        &|u| tuner.values(u),
-        progress,
-    )?;
+    stages::prepare::study(&tuner)?;
+    let before = stages::intervals::before(&tuner, note);
+    let end = stages::scan::study(&tuner, before.as_ref(), progress)?;
     let best = end.best().ok_or_else(|| {
         anyhow::anyhow!(
             "every candidate failed; see {}",

@@ -1137,8 +1137,17 @@ fn comparison_md(c: &Comparison) -> String {
     t
 }
 
-/// `summary.md`.
+/// `summary.md`: the search and the polish, the scores, the parameters
+/// with their intervals, the identifiability and the sensitivity.
 pub fn markdown(s: &Summary) -> String {
+    let mut m = search_md(s);
+    m.push_str(&scores_md(s));
+    m.push_str(&parameters_md(s));
+    m
+}
+
+/// `summary.md`'s account of the search and the polish.
+fn search_md(s: &Summary) -> String {
     let mut m = format!("# Tune of {}\n\n", s.engine);
     m.push_str(&format!(
         "- Objective: {}.\n- Space: `{}`; engine settings: {}.\n- Search: CMA-ES, seed {}, {} evaluations ({} replayed, {} failed) of a budget of {}, {} jobs; stopped by {}.\n- Wall time {:.1} s, {} evaluations/s; CMA-ES within 5 % of its best after {} evaluations.\n- Best objective {:.4} m on the training runs.\n\n",
@@ -1209,6 +1218,12 @@ pub fn markdown(s: &Summary) -> String {
             b.evaluations, b.objective_m, b.folder
         ));
     }
+    m
+}
+
+/// `summary.md`'s scores: the verdict, the training and the held-out runs.
+fn scores_md(s: &Summary) -> String {
+    let mut m = String::new();
     m.push_str(&format!("\n**{}**\n\n", s.verdict));
     m.push_str(&format!("## Training runs ({})\n\n", s.training.runs));
     m.push_str(&comparison_md(&s.training));
@@ -1219,6 +1234,13 @@ pub fn markdown(s: &Summary) -> String {
     if let Some(c) = &s.timestep_check {
         m.push_str(&format!("\n{}\n", timestep_text(c)));
     }
+    m
+}
+
+/// `summary.md`'s parameters with their intervals, the identifiability,
+/// the registration and the sensitivity.
+fn parameters_md(s: &Summary) -> String {
+    let mut m = String::new();
     m.push_str(
         "\n## Parameters\n\n| key | value | 95 % interval | bounds searched | scale | start |\n|---|---|---|---|---|---|\n",
     );

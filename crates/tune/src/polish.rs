@@ -38,19 +38,22 @@
 //!   coordinates, with the real runs' spread, each end is then profiled:
 //!   the parameter is held there, the others are refitted, and the end
 //!   moves to where the objective itself has risen by `T`
-//!   (`profiled_ends`), which follows a valley the quadratic model does
+//!   ([`crate::stages::profile::profiled_ends`]), which follows a valley the quadratic model does
 //!   not.
 //! - **Identifiability.** The same Jacobian, at the start point before the
 //!   search and at the optimum after it, names the parameters whose effect
 //!   is below the noise (their interval spans the whole range) and the
 //!   pairs that trade against each other (correlation beyond 0.95).
 
-use crate::least_squares::{self, FitOptions};
+use crate::least_squares::FitOptions;
 use crate::space::{Dim, Scale, Space};
-use crate::{TuneSpec, Tuner};
-use anyhow::{anyhow, Result};
+use crate::stages;
+use crate::Tuner;
+use anyhow::Result;
 use serde::Serialize;
-use std::sync::Mutex;
+
+pub use crate::stages::intervals::identifiability;
+pub use crate::stages::profile::PROFILE_MAX_COORDINATES;
 
 /// The forward-difference step (normalised units) of the Jacobians the
 /// identifiability and the intervals are read from: 1 % of each range,
@@ -60,11 +63,11 @@ pub const REPORT_STEP: f64 = 0.01;
 
 /// Reweighting passes per polish round, at most ([`polish`]'s iteratively
 /// reweighted least squares).
-const IRLS_PASSES: usize = 6;
+pub(crate) const IRLS_PASSES: usize = 6;
 
 /// The error length below which the reweighting's weights stop growing,
 /// metres: a tenth of a millimetre, under any capture's noise.
-const IRLS_FLOOR_M: f64 = 1e-4;
+pub(crate) const IRLS_FLOOR_M: f64 = 1e-4;
 
 /// Settings of the polish.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -273,7 +276,7 @@ pub fn physical_limits(key: &str) -> Option<(f64, f64)> {
 
 /// `d` with its `side` bound widened within the physical limits; `None`
 /// when it cannot move.
-fn widen(d: &Dim, high_side: bool) -> Option<Dim> {
+pub(crate) fn widen(d: &Dim, high_side: bool) -> Option<Dim> {
     let (lo, hi) = physical_limits(&d.key)?;
     let mut w = d.clone();
     match (d.scale, high_side) {
@@ -290,117 +293,10 @@ fn widen(d: &Dim, high_side: bool) -> Option<Dim> {
     moved.then_some(w)
 }
 
-/// The tuner of `spec` with another space (and no physics-free row).
-fn with_space(spec: &TuneSpec, space: Space) -> TuneSpec {
-    TuneSpec {
-        baseline_space: None,
-        ..spec.with_space(space)
-    }
-}
-
-/// The Jacobian's report at `u`: identifiability, and the spread.
-pub fn identifiability(
-    tuner: &Tuner<'_>,
-    u: &[f64],
-    at: &str,
-    jac: Option<nalgebra::DMatrix<f64>>,
-    r: Option<Vec<f64>>,
-) -> Result<(IdentifiabilityReport, least_squares::Spread, usize)> {
-    let f = |x: &[f64]| tuner.residuals(x);
-    let mut evaluations = 0;
-    let r = match r {
-        Some(r) => r,
-        None => {
-            evaluations += 1;
-            f(u).map_err(|m| anyhow!("{at}: {m}"))?
-        }
-    };
-    let names = tuner.value_names();
-    let (j, unmeasured) = match jac {
-        Some(j) => (j, Vec::new()),
-        None => {
-            evaluations += u.len();
-            let (j, blind) =
-                least_squares::jacobian_or_blind(&f, u, &r, REPORT_STEP, tuner.spec.search.jobs);
-            let unmeasured: Vec<(String, String)> = blind
-                .into_iter()
-                .map(|(i, why)| (names[i].clone(), why))
-                .collect();
-            (j, unmeasured)
-        }
-    };
-    let s = least_squares::spread(&j, &r, 1);
-    let noise_m = objective_noise(tuner, u);
-    if noise_m.is_some() {
-        evaluations += 1;
-    }
-    // The objective's change for a move of h = 0.1 (normalised) either
-    // way: 2 h (J^T r)_i + h^2 (J^T J)_ii.
-    let h = 0.1;
-    let effects_m: Vec<(String, f64)> = names
-        .iter()
-        .enumerate()
-        .map(|(c, k)| {
-            let col = j.column(c);
-            let g: f64 = col.iter().zip(&r).map(|(a, b)| a * b).sum();
-            let q = col.norm_squared();
-            let up = 2.0 * h * g + h * h * q;
-            let down = -2.0 * h * g + h * h * q;
-            (k.clone(), up.abs().max(down.abs()))
-        })
-        .collect();
-    let threshold = noise_m.unwrap_or(0.0);
-    let unseen: Vec<String> = effects_m
-        .iter()
-        .filter(|(_, e)| e.partial_cmp(&threshold) != Some(std::cmp::Ordering::Greater))
-        .map(|(k, _)| k.clone())
-        .collect();
-    let trading = least_squares::trading_pairs(&names, &s, &|i| unseen.contains(&names[i]));
-    Ok((
-        IdentifiabilityReport {
-            at: at.to_string(),
-            unseen,
-            unmeasured,
-            noise_m,
-            effects_m,
-            trading,
-            residual_autocorrelation: s.rho,
-            residuals: (s.n, s.n_eff),
-        },
-        s,
-        evaluations,
-    ))
-}
-
-/// The bootstrap standard deviation of the wrist total at `u` over the
-/// training runs (200 resamples of the real runs), metres.
-fn objective_noise(tuner: &Tuner<'_>, u: &[f64]) -> Option<f64> {
-    let p = tuner.params(u).ok()?;
-    let trajs = tuner.simulator.simulate(&tuner.target.scenes, &p).ok()?;
-    let t = tuner.target;
-    let reports = t
-        .evaluate(
-            &t.sources("noise", trajs),
-            realitygap_analysis::compare::RegistrationChoice::Given {
-                registration: tuner.registration(u),
-                origin: "identifiability".into(),
-            },
-            &t.train,
-            Some(200),
-        )
-        .ok()?;
-    let (_, reps) = crate::outputs::summed(&reports)?;
-    let reps: Vec<f64> = reps.into_iter().filter(|x| x.is_finite()).collect();
-    if reps.len() < 10 {
-        return None;
-    }
-    let mean = reps.iter().sum::<f64>() / reps.len() as f64;
-    let var = reps.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (reps.len() - 1) as f64;
-    Some(var.sqrt())
-}
-
-/// Polishes the search's best point `u0` (objective `start_objective`).
-/// `note` hears what the polish is doing.
+/// Polishes the search's best point `u0` (objective `start_objective`):
+/// the fit's rounds ([`stages::fit::polish_rounds`]), then the intervals
+/// and the identifiability at the optimum
+/// ([`stages::intervals::polish`]). `note` hears what the polish is doing.
 pub fn polish(
     tuner: &Tuner<'_>,
     u0: &[f64],
@@ -409,621 +305,30 @@ pub fn polish(
     note: &(dyn Fn(String) + Sync),
 ) -> Result<Polished> {
     let started = std::time::Instant::now();
-    let spec = tuner.spec;
-    let mut space = spec.space.clone();
-    let mut u = u0.to_vec();
-    let mut objective = start_objective;
-    let mut report = PolishReport {
-        start_objective_m: start_objective,
-        objective_m: start_objective,
-        evaluations: 0,
-        iterations: 0,
-        rounds: 0,
-        reason: "no polish asked for".into(),
-        widened: Vec::new(),
-        at_limit: Vec::new(),
-        probe_restarts: 0,
-        probe_clean: false,
-        intervals: Vec::new(),
-        interval_basis: String::new(),
-        identifiability: None,
-        wall_time_s: 0.0,
-    };
-    if options.iterations == 0 {
-        return Ok(Polished {
-            space,
-            u,
-            objective_m: objective,
-            report,
-            probe: None,
-        });
-    }
-    let fit_options = FitOptions {
-        max_iterations: options.iterations,
-        step: 1e-3,
-        tolerance: 1e-4,
-        jobs: spec.search.jobs,
-        ..FitOptions::default()
-    };
-    let mut widen_rounds = 0;
-    let mut last_probe;
-    loop {
-        realitygap_runner::interrupt::check()?;
-        let round_spec = with_space(spec, space.clone());
-        let t = Tuner {
-            target: tuner.target,
-            simulator: tuner.simulator,
-            spec: &round_spec,
-        };
-        report.rounds += 1;
-        note(format!(
-            "polish round {}: reweighted least squares from {:.4} m over {} coordinates",
-            report.rounds,
-            objective,
-            u.len()
-        ));
-        // Iteratively reweighted least squares: each pass fixes weights at
-        // its start (each error's length to the power -1/2, so that the
-        // squares sum to the objective there) and runs Levenberg-Marquardt
-        // on the weighted error components, which are smooth where the
-        // square roots of the lengths are not (near a good fit); passes go
-        // on while the objective itself falls.
-        let mut fit_reason = String::new();
-        // The round's iterations (`--iterations`) are shared by its passes,
-        // so that a round costs what one Levenberg-Marquardt run did and
-        // the budget leaves room for the rounds after a widening.
-        let mut round_iterations = fit_options.max_iterations;
-        // The errors at `u`: simulated at the round's start, then those
-        // the last pass ended on (its end is the next pass's start).
-        let mut at_u: Option<crate::objective::Errors> = None;
-        for pass in 0..IRLS_PASSES {
-            let count = Mutex::new(0usize);
-            let errors = match at_u.take() {
-                Some(e) => e,
-                None => {
-                    report.evaluations += 1;
-                    t.errors(&u)
-                        .map_err(|m| anyhow!("the polish, at its start: {m}"))?
-                }
-            };
-            let weights = errors.weights(IRLS_FLOOR_M);
-            let f = |x: &[f64]| {
-                *count.lock().unwrap_or_else(|e| e.into_inner()) += 1;
-                t.errors(x).map(|e| e.residuals(Some(&weights)))
-            };
-            // Iterations this pass: what is left of the polish's
-            // evaluations, a Jacobian and a step each, at least one.
-            let left = options
-                .max_evaluations
-                .saturating_sub(report.evaluations + 2);
-            let round_options = FitOptions {
-                max_iterations: round_iterations.min((left / (u.len() + 1)).max(1)),
-                ..fit_options
-            };
-            let fit = least_squares::levenberg_marquardt(&f, &u, round_options, &|_, _, _| {})
-                .map_err(|m| anyhow!("the polish: {m}"))?;
-            // The fit's evaluations, and the pass's end below.
-            report.evaluations += count.into_inner().unwrap_or_else(|e| e.into_inner()) + 1;
-            report.iterations += fit.iterations;
-            round_iterations = round_iterations.saturating_sub(fit.iterations.max(1));
-            fit_reason = fit.reason.clone();
-            // The objective itself at the pass's end (the weighted cost is
-            // only its model).
-            let reached = t.errors(&fit.u).ok();
-            let gain = match reached {
-                Some(e) if e.objective() < objective => {
-                    let o = e.objective();
-                    let gain = (objective - o) / objective.max(f64::MIN_POSITIVE);
-                    u = fit.u.clone();
-                    objective = o;
-                    at_u = Some(e);
-                    gain
-                }
-                _ => 0.0,
-            };
-            note(format!(
-                "  pass {}: {:.4} m after {} iterations ({})",
-                pass + 1,
-                objective,
-                fit.iterations,
-                fit.reason
-            ));
-            if gain < fit_options.tolerance
-                || round_iterations == 0
-                || report.evaluations + u.len() + 2 >= options.max_evaluations
-            {
-                break;
-            }
-        }
-        report.reason = fit_reason;
-        if report.evaluations >= options.max_evaluations {
-            report.reason = format!(
-                "{} (the polish's {} evaluations are spent)",
-                report.reason, options.max_evaluations
-            );
-            last_probe = None;
-            break;
-        }
-        // Parameters on a bound: widen, and go on from the same point.
-        let mut moved = false;
-        if widen_rounds < options.widen_rounds {
-            let values = space.values(&u);
-            let mut next = space.clone();
-            // A bound holds a coordinate when a step inward (1 % of the
-            // range) raises the objective: only those are widened, not the
-            // ones that sit there because they do not matter.
-            let at_bound: Vec<(usize, bool)> = (0..space.dims.len())
-                .filter_map(|i| {
-                    if u[i] <= 1e-6 {
-                        Some((i, false))
-                    } else if u[i] >= 1.0 - 1e-6 {
-                        Some((i, true))
-                    } else {
-                        None
-                    }
-                })
-                .collect();
-            let held: Vec<bool> = {
-                use rayon::prelude::*;
-                least_squares::pool(spec.search.jobs).install(|| {
-                    at_bound
-                        .par_iter()
-                        .map(|&(i, high)| {
-                            let mut x = u.clone();
-                            x[i] += if high { -0.01 } else { 0.01 };
-                            match t.residuals(&x) {
-                                Ok(r) => {
-                                    r.iter().map(|v| v * v).sum::<f64>() > objective * (1.0 + 1e-6)
-                                }
-                                Err(_) => false,
-                            }
-                        })
-                        .collect()
-                })
-            };
-            report.evaluations += at_bound.len();
-            for (&(i, side), held) in at_bound.iter().zip(held) {
-                let d = &space.dims[i];
-                if !held {
-                    continue;
-                }
-                if let Some(w) = widen(d, side) {
-                    report.widened.push(Widened {
-                        key: d.key.clone(),
-                        side: if side { "high" } else { "low" }.into(),
-                        from: if side { d.high } else { d.low },
-                        to: if side { w.high } else { w.low },
-                    });
-                    next.dims[i] = w;
-                    moved = true;
-                }
-            }
-            if moved {
-                widen_rounds += 1;
-                for (i, d) in next.dims.iter().enumerate() {
-                    u[i] = d.unit(values[i]);
-                }
-                space = next;
-                note(format!(
-                    "  widened: {}",
-                    report
-                        .widened
-                        .iter()
-                        .map(|w| format!("{} {} {} -> {}", w.key, w.side, w.from, w.to))
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ));
-                continue;
-            }
-        }
-        // The probe: 10 % either way of each parameter.
-        let probe = crate::outputs::sensitivity(&t, &u, objective);
-        report.evaluations += 2 * probe.len();
-        last_probe = Some(probe.clone());
-        let better = probe
-            .iter()
-            .flat_map(|s| {
-                s.objectives_m
-                    .iter()
-                    .zip(s.tried)
-                    .map(move |(o, v)| (s.key.clone(), *o, v))
-            })
-            .filter(|(_, o, _)| *o < objective * (1.0 - 1e-6))
-            .min_by(|a, b| a.1.total_cmp(&b.1));
-        match better {
-            Some((key, o, v)) if report.probe_restarts < options.probe_restarts => {
-                report.probe_restarts += 1;
-                note(format!(
-                    "  the probe found {o:.4} m at {key} = {v:.6}: not converged, going on from there"
-                ));
-                if let Some(i) = space.dims.iter().position(|d| d.key == key) {
-                    u[i] = space.dims[i].unit(v);
-                }
-                objective = o;
-                continue;
-            }
-            Some((key, o, v)) => {
-                // No restarts left: keep the better point, unpolished.
-                report.probe_clean = false;
-                note(format!(
-                    "  the probe found {o:.4} m at {key} = {v:.6}; no restarts left: the search has not converged"
-                ));
-                if let Some(i) = space.dims.iter().position(|d| d.key == key) {
-                    u[i] = space.dims[i].unit(v);
-                }
-                objective = o;
-                last_probe = None;
-                break;
-            }
-            None => {
-                report.probe_clean = true;
-                break;
-            }
-        }
-    }
-    // Intervals and identifiability at the optimum.
-    let final_spec = with_space(spec, space.clone());
-    let t = Tuner {
-        target: tuner.target,
-        simulator: tuner.simulator,
-        spec: &final_spec,
-    };
-    // A Jacobian of its own, with the report's wider step (the fit's is
-    // for the steps, and a simulator's small differences can straddle a
-    // contact event).
-    let (ident, spread, n) = identifiability(&t, &u, "optimum", None, None)?;
-    report.evaluations += n;
-    let names = t.value_names();
-    let values = t.values(&u);
-    // The half-width per unit of `sd_u`: with the real runs' noise, the
-    // values over which the objective rises by less than 1.96 times its
-    // bootstrap standard deviation (the local quadratic model, the other
-    // coordinates refitted); without it, 1.96 standard deviations of the
-    // Gauss-Newton covariance.
-    let gn = spread.variance * spread.n as f64 / spread.n_eff;
-    let (k, basis) = match ident.noise_m {
-        Some(n) if n > 0.0 && gn > 0.0 => (
-            (1.96 * n).sqrt() / gn.sqrt(),
-            format!("the objective within 1.96 x the real runs' noise ({n:.3} m) of its optimum"),
-        ),
-        _ => (
-            1.96,
-            "the Gauss-Newton covariance (the real runs' noise unknown)".to_string(),
-        ),
-    };
-    report.interval_basis = basis;
-    // In a small space, with the real runs' noise, each end is profiled:
-    // the objective itself, the others refitted ([`profiled_ends`]).
-    let ends = match ident.noise_m {
-        Some(n) if n > 0.0 && gn > 0.0 && u.len() <= PROFILE_MAX_COORDINATES => {
-            note(format!(
-                "profiling the intervals' ends: {} coordinates",
-                u.len()
-            ));
-            let (ends, evaluations) =
-                profiled_ends(&t, &u, objective, 1.96 * n, k, &spread, fit_options);
-            report.evaluations += evaluations;
-            report.interval_basis.push_str(
-                "; each end profiled: where the objective, the other parameters refitted, has risen by that much",
-            );
-            ends
-        }
-        _ => vec![[None, None]; u.len()],
-    };
-    for (c, key) in names.iter().enumerate() {
-        let sd = spread.sd_u[c];
-        let (interval, clipped) = if sd.is_finite() {
-            let (a, b) = (
-                ends[c][0].unwrap_or(u[c] - k * sd),
-                ends[c][1].unwrap_or(u[c] + k * sd),
-            );
-            // An end profiled all the way to a bound lies on it.
-            let clipped = a <= 1e-12 || b >= 1.0 - 1e-12;
-            let at = |x: f64| {
-                let mut v = u.to_vec();
-                v[c] = x.clamp(0.0, 1.0);
-                t.values(&v)[c]
-            };
-            let (lo, hi) = (at(a), at(b));
-            (Some([lo.min(hi), lo.max(hi)]), clipped)
-        } else {
-            (None, true)
-        };
-        report.intervals.push(ParamInterval {
-            key: key.clone(),
-            value: values[c],
-            interval,
-            clipped,
-        });
-    }
-    for (i, d) in space.dims.iter().enumerate() {
-        if u[i] <= 1e-6 || u[i] >= 1.0 - 1e-6 {
-            report.at_limit.push(d.key.clone());
-        }
-    }
-    report.identifiability = Some(ident);
-    report.objective_m = objective;
-    report.wall_time_s = started.elapsed().as_secs_f64();
-    Ok(Polished {
-        space,
-        u,
-        objective_m: objective,
-        report,
-        probe: last_probe,
-    })
-}
-
-/// Spaces of at most this many coordinates get profiled intervals
-/// (`profiled_ends`); larger ones keep the local model's, as a profile
-/// costs a few refits per end.
-pub const PROFILE_MAX_COORDINATES: usize = 6;
-
-/// Trials per profiled end at most.
-const PROFILE_TRIALS: usize = 3;
-
-/// Levenberg-Marquardt iterations of each profile point's refit at most.
-const PROFILE_ITERATIONS: usize = 8;
-
-/// A profiled point: its distance from the optimum and the objective's
-/// rise there.
-type Point = (f64, f64);
-
-/// One end of an interval being profiled: the distance `h` (normalised
-/// units of its coordinate) from the optimum to try next, and the rises
-/// measured (infinite: the engine failed there).
-#[derive(Debug, Clone, PartialEq)]
-struct End {
-    h: f64,
-    /// The distance to the bound on this side.
-    room: f64,
-    /// (distance, rise) measured, in order.
-    points: Vec<Point>,
-    done: bool,
-}
-
-impl End {
-    fn new(h: f64, room: f64) -> End {
-        End {
-            h: h.min(room),
-            room,
-            points: Vec::new(),
-            done: false,
-        }
-    }
-
-    /// The rise's power of the distance, from the last two finite
-    /// positive rises measured (2, a quadratic, with fewer), within 1 and
-    /// 3.
-    fn power(&self) -> f64 {
-        let ok: Vec<&Point> = self
-            .points
-            .iter()
-            .filter(|(_, r)| r.is_finite() && *r > 0.0)
-            .collect();
-        match ok.as_slice() {
-            [.., (h1, r1), (h2, r2)] if (h2 / h1).ln().abs() > 1e-9 => {
-                ((r2 / r1).ln() / (h2 / h1).ln()).clamp(1.0, 3.0)
-            }
-            _ => 2.0,
-        }
-    }
-
-    /// The farthest distance where the rise stayed within `t`, and the
-    /// nearest where it did not.
-    fn bracket(&self, t: f64) -> (Option<Point>, Option<Point>) {
-        let inside = self
-            .points
-            .iter()
-            .filter(|(_, r)| *r <= t)
-            .max_by(|a, b| a.0.total_cmp(&b.0))
-            .copied();
-        let outside = self
-            .points
-            .iter()
-            .filter(|(_, r)| *r > t)
-            .min_by(|a, b| a.0.total_cmp(&b.0))
-            .copied();
-        (inside, outside)
-    }
-
-    /// Records the rise `rise` at the current distance for the threshold
-    /// `t`, and moves to the next distance to try: where the rise, as a
-    /// power of the distance ([`End::power`]), reaches `t`, within a
-    /// quarter and four times the distance, and inside what is bracketed.
-    fn record(&mut self, rise: f64, t: f64) {
-        let h = self.h;
-        self.points.push((h, rise));
-        if (rise <= t && h >= self.room) || (rise.is_finite() && (rise - t).abs() <= 0.1 * t) {
-            // Within the threshold all the way to the bound, or within 10 %
-            // of the threshold: no other point is needed.
-            self.done = true;
-            return;
-        }
-        let next = if !rise.is_finite() {
-            h / 2.0
-        } else if rise > 0.0 {
-            h * (t / rise).powf(1.0 / self.power())
-        } else {
-            4.0 * h
-        };
-        let mut next = next.clamp(h / 4.0, 4.0 * h).min(self.room);
-        if let (Some((a, _)), Some((b, _))) = self.bracket(t) {
-            if !(next > a && next < b) {
-                next = 0.5 * (a + b);
-            }
-        }
-        self.h = next;
-    }
-
-    /// The end's distance: between the farthest point inside and the
-    /// nearest outside, where the power law through them reaches `t`; the
-    /// farthest point inside when none was outside (no farther than what
-    /// was shown); short of the nearest outside by the rise's power when
-    /// none was inside.
-    fn distance(&self, t: f64) -> f64 {
-        let p = self.power();
-        match self.bracket(t) {
-            (Some((a, ra)), Some((b, rb))) => {
-                if rb.is_finite() && ra > 0.0 {
-                    let q = ((rb / ra).ln() / (b / a).ln()).max(1e-9);
-                    (a * (t / ra).powf(1.0 / q)).clamp(a, b)
-                } else if rb.is_finite() {
-                    (b * (t / rb).powf(1.0 / p)).clamp(a, b)
-                } else {
-                    a
-                }
-            }
-            // Nothing measured beyond: the end is no farther than shown.
-            (Some((a, _)), None) => a,
-            (None, Some((b, rb))) if rb.is_finite() => b * (t / rb).powf(1.0 / p),
-            (None, Some((b, _))) => b / 2.0,
-            (None, None) => self.h,
-        }
-    }
-}
-
-/// The objective's rise over `objective` at `x` with coordinate `c` held
-/// and the others refitted from `x` (one reweighted Levenberg-Marquardt
-/// pass of [`PROFILE_ITERATIONS`] iterations at most): the lowest
-/// objective of any point the refit simulated, infinite where the engine
-/// fails at `x`; and the evaluations made.
-fn profile_rise(
-    t: &Tuner<'_>,
-    x: &[f64],
-    c: usize,
-    objective: f64,
-    options: FitOptions,
-) -> (f64, usize) {
-    let Ok(start) = t.errors(x) else {
-        return (f64::INFINITY, 1);
-    };
-    let others: Vec<usize> = (0..x.len()).filter(|&o| o != c).collect();
-    if others.is_empty() {
-        return (start.objective() - objective, 1);
-    }
-    let weights = start.weights(IRLS_FLOOR_M);
-    let full = |y: &[f64]| -> Vec<f64> {
-        let mut z = x.to_vec();
-        for (i, &o) in others.iter().enumerate() {
-            z[o] = y[i];
-        }
-        z
-    };
-    // Every point the refit simulates holds `c` where the profile puts
-    // it, so the lowest objective among them all (the Jacobian's columns
-    // too) bounds the profile from above: the refit's end needs no
-    // simulation of its own.
-    let seen = Mutex::new((0usize, start.objective()));
-    let f = |y: &[f64]| {
-        let e = t.errors(&full(y));
-        let mut seen = seen.lock().unwrap_or_else(|e| e.into_inner());
-        seen.0 += 1;
-        let e = e?;
-        seen.1 = seen.1.min(e.objective());
-        Ok(e.residuals(Some(&weights)))
-    };
-    let y0: Vec<f64> = others.iter().map(|&o| x[o]).collect();
-    let options = FitOptions {
-        max_iterations: PROFILE_ITERATIONS,
-        ..options
-    };
-    // The start's residuals are known: the refit does not simulate it again.
-    let r0 = Some(start.residuals(Some(&weights)));
-    let _ = least_squares::levenberg_marquardt_from(&f, &y0, r0, None, options, &|_, _, _| {});
-    let (count, lowest) = seen.into_inner().unwrap_or_else(|e| e.into_inner());
-    (lowest - objective, 1 + count)
-}
-
-/// Profiles each interval's ends: coordinate `c` is held at a distance
-/// from the optimum `u` and the others refitted ([`profile_rise`]),
-/// starting where the local model refits them (`corr[o][c] sd_o / sd_c`
-/// per unit of `c`); the end is where the objective has risen by
-/// `threshold`. The model's end (`k sd_c`) is tried first, then where the
-/// rise, as a power of the distance, reaches the threshold
-/// ([`PROFILE_TRIALS`] at most). Returns each coordinate's ends in
-/// normalised units (`None`: no interval) and the evaluations made.
-fn profiled_ends(
-    t: &Tuner<'_>,
-    u: &[f64],
-    objective: f64,
-    threshold: f64,
-    k: f64,
-    spread: &least_squares::Spread,
-    options: FitOptions,
-) -> (Vec<[Option<f64>; 2]>, usize) {
-    use rayon::prelude::*;
-    let n = u.len();
-    let sd = &spread.sd_u;
-    let mut ends = vec![[None, None]; n];
-    // (coordinate, slot, side, the end at the model's distance, the
-    // direction the others move in).
-    let mut tasks: Vec<(usize, usize, f64, End, Vec<f64>)> = Vec::new();
-    for c in 0..n {
-        let h = k * sd[c];
-        if !(h.is_finite() && h > 0.0) {
-            continue;
-        }
-        let w: Vec<f64> = (0..n)
-            .map(|o| {
-                let w = if o == c {
-                    1.0
-                } else {
-                    spread.correlation[o][c] * sd[o] / sd[c]
-                };
-                if w.is_finite() {
-                    w
-                } else {
-                    0.0
-                }
-            })
-            .collect();
-        for (slot, side) in [(0usize, -1.0f64), (1, 1.0)] {
-            let room = if side > 0.0 { 1.0 - u[c] } else { u[c] };
-            if room <= 0.0 {
-                ends[c][slot] = Some(u[c]);
-            } else {
-                tasks.push((c, slot, side, End::new(h, room), w.clone()));
-            }
-        }
-    }
-    // The ends are profiled side by side: `--jobs` at a time here, all at
-    // once on Slurm (so that their evaluations gather into arrays), each
-    // refit's Jacobian one column at a time.
-    let threads = if t.simulator.slurm.is_some() {
-        tasks.len()
+    let mut state = stages::fit::Polishing::new(tuner.spec, u0, start_objective);
+    let probe = if options.iterations == 0 {
+        None
     } else {
-        t.spec.search.jobs
+        let fit_options = FitOptions {
+            max_iterations: options.iterations,
+            step: 1e-3,
+            tolerance: 1e-4,
+            jobs: tuner.spec.search.jobs,
+            ..FitOptions::default()
+        };
+        let probe = stages::fit::polish_rounds(tuner, &mut state, options, fit_options, note)?;
+        stages::intervals::polish(tuner, &mut state, fit_options, note)?;
+        state.report.objective_m = state.objective;
+        state.report.wall_time_s = started.elapsed().as_secs_f64();
+        probe
     };
-    let options = FitOptions { jobs: 1, ..options };
-    let profiled: Vec<(f64, usize)> = least_squares::pool(threads).install(|| {
-        tasks
-            .par_iter()
-            .map(|(c, _, side, end, w)| {
-                let (c, side, mut end) = (*c, *side, end.clone());
-                let mut evaluations = 0;
-                for _ in 0..PROFILE_TRIALS {
-                    if end.done {
-                        break;
-                    }
-                    let x: Vec<f64> = u
-                        .iter()
-                        .zip(w)
-                        .map(|(a, b)| (a + side * end.h * b).clamp(0.0, 1.0))
-                        .collect();
-                    let (rise, used) = profile_rise(t, &x, c, objective, options);
-                    evaluations += used;
-                    end.record(rise, threshold);
-                }
-                (u[c] + side * end.distance(threshold), evaluations)
-            })
-            .collect()
-    });
-    let mut evaluations = 0;
-    for ((c, slot, _, _, _), (at, used)) in tasks.iter().zip(profiled) {
-        ends[*c][*slot] = Some(at);
-        evaluations += used;
-    }
-    (ends, evaluations)
+    Ok(Polished {
+        space: state.space,
+        u: state.u,
+        objective_m: state.objective,
+        report: state.report,
+        probe,
+    })
 }
 
 #[cfg(test)]
@@ -1038,52 +343,6 @@ mod tests {
             scale,
             start: low,
         }
-    }
-
-    /// Profiles one end against `rise` (the objective's rise at a
-    /// distance) from the model's distance `h0`, as [`profiled_ends`] does.
-    fn profile(rise: &dyn Fn(f64) -> f64, h0: f64, room: f64, t: f64) -> (f64, usize) {
-        let mut end = End::new(h0, room);
-        let mut n = 0;
-        while n < PROFILE_TRIALS && !end.done {
-            end.record(rise(end.h), t);
-            n += 1;
-        }
-        (end.distance(t), n)
-    }
-
-    #[test]
-    fn a_profiled_end_is_where_the_rise_reaches_the_threshold() {
-        let t = 0.1;
-        // A quadratic rise reaching t at 0.2: from a model twice too wide
-        // or twice too narrow, the second point is the end.
-        let quad = |h: f64| t * (h / 0.2).powi(2);
-        for h0 in [0.4, 0.1] {
-            let (d, n) = profile(&quad, h0, 1.0, t);
-            assert!((d - 0.2).abs() < 1e-12, "{h0}: {d}");
-            assert_eq!(n, 2);
-        }
-        // The model right: one point.
-        assert_eq!(profile(&quad, 0.205, 1.0, t).1, 1);
-        // A rise linear in the distance (not the model's quadratic).
-        let v = |h: f64| t * h / 0.2;
-        for h0 in [0.1, 0.5] {
-            let (d, _) = profile(&v, h0, 1.0, t);
-            assert!((d - 0.2).abs() < 0.02, "{h0}: {d}");
-        }
-        // Flat to the bound: the end is the bound.
-        assert_eq!(profile(&|_| 0.0, 0.1, 0.3, t), (0.3, 2));
-        // Within the threshold at the bound after a rise: the bound.
-        assert_eq!(profile(&|h: f64| t * (h / 0.4).powi(2), 0.1, 0.3, t).0, 0.3);
-        // The engine fails beyond 0.15: the end stays before the failure.
-        let fails = |h: f64| {
-            if h > 0.15 {
-                f64::INFINITY
-            } else {
-                t * (h / 0.5).powi(2)
-            }
-        };
-        assert!(profile(&fails, 0.2, 1.0, t).0 <= 0.15);
     }
 
     #[test]

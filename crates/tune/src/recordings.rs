@@ -49,17 +49,17 @@
 //!   physics-free model (perfect tracking of the commands, undelayed and
 //!   with the fitted delay).
 
-use crate::least_squares::{self, FitOptions};
+use crate::least_squares;
 use crate::space::{params_of, Dim, Scale, Space};
+use crate::stages;
 use anyhow::{anyhow, bail, Context, Result};
-use nalgebra::DMatrix;
 use realitygap_analysis::bootstrap::percentile_interval;
 use realitygap_analysis::selection::RunSelection;
 use realitygap_core::controller::{RunStatus, SplitMix64};
 use realitygap_core::params::{ParamKey, PhysicalParams};
 use realitygap_core::trajectory::CommandKind;
 use realitygap_core::{Engine, Trajectory};
-use realitygap_study::replay::{kinematic_run, replay_one, Episode, Prepared};
+use realitygap_study::replay::{replay_one, Episode, Prepared};
 use serde::Serialize;
 use std::fmt::Write as _;
 use std::io::Write as _;
@@ -447,7 +447,7 @@ pub fn known_keys(known: &PhysicalParams) -> Vec<String> {
 }
 
 /// Sets `key` (a space key) to `value` in `params`.
-fn set_key(params: &mut PhysicalParams, key: &str, value: f64) -> Result<(), String> {
+pub(crate) fn set_key(params: &mut PhysicalParams, key: &str, value: f64) -> Result<(), String> {
     let parsed = params_of(std::iter::once((key, value)))?;
     for (name, j) in parsed.joints {
         let t = params.joints.entry(name).or_default();
@@ -519,33 +519,33 @@ fn set_key(params: &mut PhysicalParams, key: &str, value: f64) -> Result<(), Str
 }
 
 /// The problem: which dims are continuous, the delay grid, the episodes.
-struct Problem<'a> {
-    spec: &'a RecordingsSpec<'a>,
-    space: Space,
+pub(crate) struct Problem<'a> {
+    pub(crate) spec: &'a RecordingsSpec<'a>,
+    pub(crate) space: Space,
     /// Indices (into `space.dims`) of the coordinates (every parameter).
-    continuous: Vec<usize>,
+    pub(crate) continuous: Vec<usize>,
     /// The delay's dim, when it is searched (scanned first).
-    delay: Option<Dim>,
+    pub(crate) delay: Option<Dim>,
     /// The engine's timestep, s.
-    dt: f64,
-    train: Vec<usize>,
-    holdout: Vec<usize>,
-    evaluations: Mutex<usize>,
-    best: Mutex<f64>,
-    history: Mutex<std::fs::File>,
-    samples: usize,
+    pub(crate) dt: f64,
+    pub(crate) train: Vec<usize>,
+    pub(crate) holdout: Vec<usize>,
+    pub(crate) evaluations: Mutex<usize>,
+    pub(crate) best: Mutex<f64>,
+    pub(crate) history: Mutex<std::fs::File>,
+    pub(crate) samples: usize,
     /// Per joint, the weight of an effort residual (deg per N m), when
     /// efforts are fitted.
-    effort_weights: Option<Vec<f64>>,
-    progress: &'a (dyn Fn(RecordingsProgress) + Sync),
-    phase: Mutex<String>,
+    pub(crate) effort_weights: Option<Vec<f64>>,
+    pub(crate) progress: &'a (dyn Fn(RecordingsProgress) + Sync),
+    pub(crate) phase: Mutex<String>,
     /// `jobs` threads, for the evaluations made outside a Jacobian.
-    pool: rayon::ThreadPool,
+    pub(crate) pool: rayon::ThreadPool,
 }
 
 impl Problem<'_> {
     /// The parameters at coordinates `u`.
-    fn params(&self, u: &[f64]) -> Result<PhysicalParams, String> {
+    pub(crate) fn params(&self, u: &[f64]) -> Result<PhysicalParams, String> {
         let mut p = self.spec.known.clone();
         for (&i, &x) in self.continuous.iter().zip(u) {
             let d = &self.space.dims[i];
@@ -555,7 +555,11 @@ impl Problem<'_> {
     }
 
     /// Replays one episode with `params`.
-    fn replay(&self, episode: &Episode, params: &PhysicalParams) -> Result<Trajectory, String> {
+    pub(crate) fn replay(
+        &self,
+        episode: &Episode,
+        params: &PhysicalParams,
+    ) -> Result<Trajectory, String> {
         let engine = self.spec.engine;
         let prepared = self.spec.prepared;
         let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
@@ -583,7 +587,7 @@ impl Problem<'_> {
     /// in parallel: on the threads of the pool it is called from (a
     /// Jacobian's columns), else on the tune's own (`jobs`), so that a
     /// single evaluation (a step of the fit) uses every core too.
-    fn residuals(&self, params: &PhysicalParams) -> Result<Vec<f64>, String> {
+    pub(crate) fn residuals(&self, params: &PhysicalParams) -> Result<Vec<f64>, String> {
         use rayon::prelude::*;
         let replay_all = || -> Vec<Result<Trajectory, String>> {
             self.train
@@ -620,7 +624,7 @@ impl Problem<'_> {
 
     /// Appends a point of the fit (not the Jacobian's columns) to
     /// `history.csv`.
-    fn record(&self, phase: &str, values: &[f64], cost: f64) {
+    pub(crate) fn record(&self, phase: &str, values: &[f64], cost: f64) {
         let rms = (cost / self.samples.max(1) as f64).sqrt();
         let n = *self.evaluations.lock().unwrap_or_else(|p| p.into_inner());
         {
@@ -637,7 +641,7 @@ impl Problem<'_> {
         let _ = writeln!(f, "{line}");
     }
 
-    fn values(&self, u: &[f64]) -> Vec<f64> {
+    pub(crate) fn values(&self, u: &[f64]) -> Vec<f64> {
         self.continuous
             .iter()
             .zip(u)
@@ -645,17 +649,61 @@ impl Problem<'_> {
             .collect()
     }
 
-    fn set_phase(&self, phase: String) {
+    pub(crate) fn set_phase(&self, phase: String) {
         if let Ok(mut p) = self.phase.lock() {
             *p = phase;
         }
+    }
+
+    /// The residuals' blocks for [`least_squares::misfit`]: per training
+    /// episode, its samples of every joint (with efforts, the effort
+    /// residuals follow the angles').
+    pub(crate) fn blocks(&self) -> Vec<least_squares::Block> {
+        let prepared = self.spec.prepared;
+        let joints = prepared.replayed_joints().len();
+        self.train
+            .iter()
+            .flat_map(|&k| {
+                let samples = prepared.episodes[k]
+                    .real
+                    .joint_angles_rad
+                    .as_ref()
+                    .map_or(0, |q| q.len());
+                let block = least_squares::Block {
+                    samples,
+                    series: joints,
+                };
+                let kinds = if self.effort_weights.is_some() { 2 } else { 1 };
+                std::iter::repeat_n(block, kinds)
+            })
+            .collect()
+    }
+
+    /// Samples in [`STRUCTURE_WINDOW_S`] of the first training episode
+    /// (at least one).
+    pub(crate) fn structure_window(&self) -> usize {
+        let prepared = self.spec.prepared;
+        self.train
+            .first()
+            .and_then(|&k| sample_period(&prepared.episodes[k].real.time_s))
+            .map_or(1, |dt| ((STRUCTURE_WINDOW_S / dt).round() as usize).max(1))
+    }
+
+    /// The delay's coordinate, when it is searched.
+    pub(crate) fn delay_coordinate(&self) -> Option<(usize, &Dim)> {
+        let d = self.delay.as_ref()?;
+        let c = self
+            .continuous
+            .iter()
+            .position(|&i| self.space.dims[i].key == DELAY_KEY)?;
+        Some((c, d))
     }
 }
 
 /// Appends the joint-angle differences (degrees) of `sim` against `real`,
 /// sample by sample and joint by joint, then, with `effort_weights`, the
 /// effort differences (N m) times each joint's weight.
-fn push_residuals(
+pub(crate) fn push_residuals(
     real: &Trajectory,
     sim: &Trajectory,
     effort_weights: Option<&[f64]>,
@@ -694,7 +742,7 @@ fn push_residuals(
 /// spread of all recorded angles (deg, about each joint's mean) over the
 /// spread of the joint's recorded effort. `None` when some episode has no
 /// efforts or an effort never varies.
-fn effort_weights(episodes: &[&Episode], joints: usize) -> Option<Vec<f64>> {
+pub(crate) fn effort_weights(episodes: &[&Episode], joints: usize) -> Option<Vec<f64>> {
     let spread = |rows: &[&Vec<f64>], j: usize| -> f64 {
         let n = rows.len().max(1) as f64;
         let mean = rows.iter().map(|r| r[j]).sum::<f64>() / n;
@@ -723,7 +771,7 @@ fn effort_weights(episodes: &[&Episode], joints: usize) -> Option<Vec<f64>> {
 }
 
 /// Scores of `runs` (episode index, trajectory) against the recordings.
-fn set_score(prepared: &Prepared, runs: &[(usize, Trajectory)]) -> Option<SetScore> {
+pub(crate) fn set_score(prepared: &Prepared, runs: &[(usize, Trajectory)]) -> Option<SetScore> {
     let joints = prepared.replayed_joints().len();
     let mut per_joint = vec![0.0; joints];
     let mut n = 0usize;
@@ -780,7 +828,7 @@ fn set_score(prepared: &Prepared, runs: &[(usize, Trajectory)]) -> Option<SetSco
 
 /// The episodes to fit on and to score on: the selection's, or (without
 /// `--holdout` and `--runs`) the last quarter of the episodes held out.
-fn split(selection: &RunSelection, count: usize) -> Result<(Vec<usize>, Vec<usize>)> {
+pub(crate) fn split(selection: &RunSelection, count: usize) -> Result<(Vec<usize>, Vec<usize>)> {
     if selection.runs.is_none() && selection.holdout.is_none() {
         if count < 2 {
             return Ok(((0..count).collect(), Vec::new()));
@@ -798,692 +846,65 @@ fn split(selection: &RunSelection, count: usize) -> Result<(Vec<usize>, Vec<usiz
     }
 }
 
-/// Runs the tune: writes `OUT/space.toml`, `OUT/history.csv`,
-/// `OUT/tune.json`, `OUT/tuned.toml` (`summary.md` and `summary.json` by
-/// [`write_summary`]). A rerun whose `tune.json` matches resumes from the
-/// best point of `history.csv`.
+/// Runs the tune, stage by stage ([`crate::stages`]): writes
+/// `OUT/space.toml`, `OUT/history.csv`, `OUT/tune.json`, `OUT/tuned.toml`
+/// (`summary.md` and `summary.json` by [`write_summary`]). A rerun whose
+/// `tune.json` matches resumes from the best point of `history.csv`.
 pub fn tune_recordings(
     spec: &RecordingsSpec,
     progress: &(dyn Fn(RecordingsProgress) + Sync),
 ) -> Result<RecordingsResult> {
     let started = Instant::now();
-    let prepared = spec.prepared;
-    let engine = spec.engine;
-    let space = match &spec.space {
-        Some(s) => {
-            // The known parameters are fixed: never searched.
-            let fixed = known_keys(spec.known);
-            let mut s = s.clone();
-            s.dims.retain(|d| !fixed.contains(&d.key));
-            if s.dims.is_empty() {
-                bail!(
-                    "{}: nothing to fit: the known parameters fix every key of the space",
-                    s.source.display()
-                );
-            }
-            s
-        }
-        None => default_space(prepared, engine, spec.known)?,
-    };
-    let (train, holdout) = split(&spec.selection, prepared.episodes.len())?;
-    std::fs::create_dir_all(&spec.out)
-        .with_context(|| format!("creating {}", spec.out.display()))?;
-    let mut files = Vec::new();
-    let space_path = spec.out.join("space.toml");
-    std::fs::write(
-        &space_path,
-        space_toml(&space, &prepared.robot.name, engine.name()),
-    )
-    .with_context(|| format!("writing {}", space_path.display()))?;
-    files.push(space_path);
-
-    let settings = spec
-        .known
-        .settings_over(engine.name(), &prepared.scene.settings_for(engine.name()));
-    let dt = engine
-        .check_settings(&settings)
-        .map_err(|e| anyhow!("{e}"))?;
-    let continuous: Vec<usize> = (0..space.dims.len()).collect();
-    let delay = space.dims.iter().find(|d| d.key == DELAY_KEY).cloned();
-    let samples: usize = train
-        .iter()
-        .map(|&k| {
-            prepared.episodes[k]
-                .real
-                .joint_angles_rad
-                .as_ref()
-                .map_or(0, |q| q.len() * prepared.replayed_joints().len())
-        })
-        .sum();
-    let joints = prepared.replayed_joints().len();
-    let weights = if spec.use_efforts {
-        let chosen: Vec<&Episode> = train.iter().map(|&k| &prepared.episodes[k]).collect();
-        effort_weights(&chosen, joints)
-    } else {
-        None
-    };
-    let samples = samples * if weights.is_some() { 2 } else { 1 };
-    let objective = match &weights {
-        Some(w) => format!(
-            "joint angles (deg) and recorded efforts (N m, weighted {} deg per N m by joint, so that each counts like the angles' spread)",
-            w.iter().map(|x| format!("{x:.3}")).collect::<Vec<_>>().join(" / ")
-        ),
-        None if spec.use_efforts => "joint angles (deg); the training episodes hold no usable efforts".into(),
-        None => "joint angles (deg) (recorded efforts are fitted with --efforts)".into(),
-    };
-    let history_path = spec.out.join("history.csv");
-    // One row per point of the fit: `evaluation` is the count of training
-    // replays so far (the Jacobians' included).
-    let mut header = String::from("evaluation,phase,train_rms_deg");
-    for d in &space.dims {
-        let _ = write!(header, ",{}", d.key);
-    }
-    // A rerun of the same tune (same engine, space, episodes, known
-    // parameters, objective, scene) resumes from the best point of its
-    // history; anything else starts afresh.
-    let state = serde_json::json!({
-        "engine": engine.name(),
-        "space": serde_json::to_value(&space)?,
-        "train": train,
-        "holdout": holdout,
-        "known": spec.known.to_toml_string(),
-        "efforts": spec.use_efforts,
-        "scene": format!("{:?}", prepared.scene.engine_settings),
-        "samples": samples,
-    });
-    let state_path = spec.out.join("tune.json");
-    let resumed = match std::fs::read_to_string(&state_path) {
-        Ok(text)
-            if serde_json::from_str::<serde_json::Value>(&text).ok() == Some(state.clone()) =>
-        {
-            best_of_history(&history_path, &header, space.dims.len())
-        }
-        _ => None,
-    };
-    std::fs::write(&state_path, serde_json::to_string_pretty(&state)? + "\n")
-        .with_context(|| format!("writing {}", state_path.display()))?;
-    let mut history = if resumed.is_some() {
-        std::fs::OpenOptions::new()
-            .append(true)
-            .open(&history_path)
-            .with_context(|| format!("appending to {}", history_path.display()))?
-    } else {
-        let mut f = std::fs::File::create(&history_path)
-            .with_context(|| format!("writing {}", history_path.display()))?;
-        writeln!(f, "{header}")?;
-        f
-    };
-    if resumed.is_some() {
-        writeln!(history, "# resumed from the best point above")?;
-    }
-    files.push(history_path);
-    let problem = Problem {
-        spec,
-        continuous,
-        delay,
-        dt,
-        train,
-        holdout,
-        evaluations: Mutex::new(0),
-        best: Mutex::new(f64::INFINITY),
-        history: Mutex::new(history),
-        samples,
-        effort_weights: weights,
-        progress,
-        phase: Mutex::new("start".into()),
-        space,
-        pool: least_squares::pool(spec.jobs),
-    };
-    let p = &problem;
-    // The untuned start: every key at its start value.
-    let mut u: Vec<f64> = p
-        .continuous
-        .iter()
-        .map(|&i| p.space.dims[i].unit(p.space.dims[i].start))
-        .collect();
-    let start_params = p.params(&u).map_err(|m| anyhow!(m))?;
-    // Fail early, with the engine's own message, when the start cannot run.
-    p.residuals(&start_params)
-        .map_err(|m| anyhow!("the untuned engine cannot replay the training episodes: {m}"))?;
-    // The delay first, over its whole range at the untuned parameters: a
-    // gradient search from a delay far from the truth can settle where a
-    // wrong delay and wrong damping make up for each other. A resumed tune
-    // starts from its best point instead.
-    let mut start_residuals = None;
-    if let Some(values) = &resumed {
-        u = p
-            .continuous
-            .iter()
-            .zip(values)
-            .map(|(&i, &v)| p.space.dims[i].unit(v))
-            .collect();
-        p.set_phase("resumed from the history's best point".into());
-    } else if let Some(d) = &p.delay {
-        let c = p
-            .continuous
-            .iter()
-            .position(|&i| p.space.dims[i].key == DELAY_KEY)
-            .ok_or_else(|| anyhow!("the delay is not a coordinate"))?;
-        // A coarse grid, then the midpoints beside its best value: the
-        // resolution of a grid twice as fine, for about half its replays.
-        let grid = delay_grid(d, p.dt);
-        p.set_phase(format!("the delay over {} values", grid.len()));
-        let mut scanned: Vec<(f64, Vec<f64>)> = grid
-            .iter()
-            .zip(delay_residuals(p, &u, c, &grid)?)
-            .filter_map(|(g, r)| r.map(|r| (*g, r)))
-            .collect();
-        if let Some(i) = best_of(&scanned).and_then(|b| grid.iter().position(|g| *g == b.0)) {
-            let mid = |a: f64, b: f64| ((a + b) / 2.0 / p.dt).round() * p.dt;
-            let refine: Vec<f64> = [i.checked_sub(1), Some(i + 1).filter(|&j| j < grid.len())]
-                .into_iter()
-                .flatten()
-                .map(|j| mid(grid[i], grid[j]))
-                .filter(|x| !grid.iter().any(|g| (g - x).abs() < 1e-12))
-                .collect();
-            p.set_phase(format!(
-                "the delay, {} values beside the best",
-                refine.len()
-            ));
-            scanned.extend(
-                refine
-                    .iter()
-                    .zip(delay_residuals(p, &u, c, &refine)?)
-                    .filter_map(|(g, r)| r.map(|r| (*g, r))),
-            );
-        }
-        if let Some((best, r)) = best_of(&scanned) {
-            u[c] = d.unit(*best);
-            start_residuals = Some(r.clone());
-        }
-    }
-    p.set_phase("Levenberg-Marquardt".into());
-    let f = |x: &[f64]| -> Result<Vec<f64>, String> {
-        let params = p.params(x)?;
-        p.residuals(&params)
-    };
-    // Between Jacobians (one replay per coordinate each), accepted steps
-    // update the last one (Broyden); convergence is declared on one
-    // computed at the optimum, which also gives the intervals. With the
-    // delay's profile to follow, the first fit need not be certified: the
-    // last fit, from the profile's best point, is. A fit that ends within
-    // a tenth of a standard deviation of its last Jacobian's point (in
-    // every coordinate) is certified on that Jacobian: another one there
-    // would move no interval by more than that.
-    let options = FitOptions {
-        max_iterations: spec.max_iterations,
-        jobs: spec.jobs,
-        secant: true,
-        settle: 0.1,
-        series: joints,
-        ..FitOptions::default()
-    };
-    let first_options = FitOptions {
-        certify: p.delay.is_none(),
-        ..options
-    };
-    let fit = least_squares::levenberg_marquardt_from(
-        &f,
-        &u,
-        start_residuals,
-        None,
-        first_options,
-        &|phase, x, cost| p.record(phase, &p.values(x), cost),
-    )
-    .map_err(|m| anyhow!("the fit failed: {m}"))?;
-    let mut iterations = fit.iterations;
-    let mut reason = fit.reason.clone();
-    u.clone_from(&fit.u);
-    let mut fit = fit;
-    // The delay's profile: a wrong delay and wrong damping and inertia can
-    // make up for each other (a valley the gradient search may stop in).
-    // At whole engine steps around the fitted delay, every other
-    // parameter is fitted again; the search walks downhill from the
-    // nearest step and stops where the cost rises. The best is polished
-    // with the delay free again.
-    if let Some(d) = &p.delay {
-        let c = p
-            .continuous
-            .iter()
-            .position(|&i| p.space.dims[i].key == DELAY_KEY)
-            .ok_or_else(|| anyhow!("the delay is not a coordinate"))?;
-        let insert = |x: &[f64], delay: f64| -> Vec<f64> {
-            let mut v = x.to_vec();
-            v.insert(c, d.unit(delay));
-            v
-        };
-        let others = |x: &[f64]| -> Vec<f64> {
-            let mut v = x.to_vec();
-            v.remove(c);
-            v
-        };
-        // The Jacobian without the delay's column, and back with it
-        // unknown (computed by the fit that gets it).
-        let drop_column = |j: &DMatrix<f64>| j.clone().remove_column(c);
-        let add_column = |j: &DMatrix<f64>| j.clone().insert_column(c, f64::NAN);
-        // A profile point: cost, coordinates, Jacobian, residuals.
-        type Point = (f64, Vec<f64>, Option<DMatrix<f64>>, Vec<f64>);
-        let mut profile: Vec<(i64, Point)> = Vec::new();
-        let mut at = |k: i64, from: &Point| -> Result<Option<Point>> {
-            let delay = k as f64 * p.dt;
-            if delay < d.low - 1e-12 || delay > d.high + 1e-12 {
-                return Ok(None);
-            }
-            if let Some((_, point)) = profile.iter().find(|e| e.0 == k) {
-                return Ok(Some(point.clone()));
-            }
-            p.set_phase(format!("the delay's profile: {:.1} ms", delay * 1e3));
-            let g = |x: &[f64]| -> Result<Vec<f64>, String> {
-                let params = p.params(&insert(x, delay))?;
-                p.residuals(&params)
-            };
-            // A rough fit: it starts from the neighbour's Jacobian, updated
-            // step by step, and computes one afresh only when that cannot
-            // find a step down; the profile compares whole steps, whose
-            // costs differ by far more than the fit's last gains.
-            let fk = least_squares::levenberg_marquardt_from(
-                &g,
-                &others(&from.1),
-                None,
-                from.2.clone(),
-                FitOptions {
-                    max_iterations: 1,
-                    jobs: spec.jobs,
-                    secant: true,
-                    certify: false,
-                    ..FitOptions::default()
-                },
-                &|phase, x, cost| {
-                    p.record(
-                        &format!("profile {phase}"),
-                        &p.values(&insert(x, delay)),
-                        cost,
-                    )
-                },
-            );
-            match fk {
-                Ok(fk) => {
-                    let point = (
-                        fk.cost,
-                        insert(&fk.u, delay),
-                        fk.last_jacobian,
-                        fk.residuals,
-                    );
-                    profile.push((k, point.clone()));
-                    Ok(Some(point))
-                }
-                Err(_) => Ok(None),
-            }
-        };
-        let centre = (d.value(u[c]) / p.dt).round() as i64;
-        let first: Point = (
-            f64::INFINITY,
-            u.clone(),
-            fit.last_jacobian.as_ref().map(drop_column),
-            Vec::new(),
-        );
-        let mut best = match at(centre, &first)? {
-            Some(point) => (centre, point),
-            None => (centre, first),
-        };
-        // Down first; up only when down did not improve on the centre (a
-        // minimum below the centre is not also above it).
-        for dir in [-1i64, 1] {
-            if dir == 1 && best.0 != centre {
-                break;
-            }
-            let mut k = centre;
-            loop {
-                k += dir;
-                let from = best.1.clone();
-                match at(k, &from)? {
-                    Some(point) if point.0 < best.1 .0 => best = (k, point),
-                    _ => break,
-                }
-            }
-        }
-        // The last fit, with the delay free again, from the best point:
-        // the profile's, or the first fit's.
-        let (from, residuals, guess) = if best.1 .0 < fit.cost {
-            let (_, from, j, r) = best.1;
-            (from, r, j.as_ref().map(add_column))
-        } else {
-            (u.clone(), fit.residuals.clone(), fit.last_jacobian.clone())
-        };
-        p.set_phase("Levenberg-Marquardt from the profile's best delay".into());
-        let polished = least_squares::levenberg_marquardt_from(
-            &f,
-            &from,
-            Some(residuals),
-            guess,
-            options,
-            &|phase, x, cost| p.record(phase, &p.values(x), cost),
-        )
-        .map_err(|m| anyhow!("the fit failed: {m}"))?;
-        iterations += polished.iterations;
-        reason.clone_from(&polished.reason);
-        u.clone_from(&polished.u);
-        fit = polished;
-    }
-    // The Jacobian at the optimum, for the intervals.
-    p.set_phase("intervals".into());
-    let r = fit.residuals.clone();
-    let jac = match fit.jacobian {
-        Some(j) => j,
-        None => least_squares::jacobian(&f, &u, &r, FitOptions::default().step, spec.jobs)
-            .map_err(|m| anyhow!("the Jacobian at the optimum: {m}"))?,
-    };
-    let spread = least_squares::spread(&jac, &r, joints);
-    // The intervals: the residuals told apart into reading noise and what
-    // the engine cannot reproduce (least_squares::misfit), the structure
-    // measured over 40 ms of samples.
-    let blocks: Vec<least_squares::Block> = p
-        .train
-        .iter()
-        .flat_map(|&k| {
-            let samples = prepared.episodes[k]
-                .real
-                .joint_angles_rad
-                .as_ref()
-                .map_or(0, |q| q.len());
-            let block = least_squares::Block {
-                samples,
-                series: joints,
-            };
-            // With efforts, each episode's effort residuals follow its angles'.
-            let kinds = if p.effort_weights.is_some() { 2 } else { 1 };
-            std::iter::repeat_n(block, kinds)
-        })
-        .collect();
-    let window = p
-        .train
-        .first()
-        .and_then(|&k| sample_period(&prepared.episodes[k].real.time_s))
-        .map_or(1, |dt| ((STRUCTURE_WINDOW_S / dt).round() as usize).max(1));
-    let misfit = least_squares::misfit(&jac, &r, &blocks, window);
-    let mut params_out = Vec::new();
-    for (c, &i) in p.continuous.iter().enumerate() {
-        let d = &p.space.dims[i];
-        let value = d.value(u[c]);
-        let half = misfit.half_width_u[c];
-        let interval = half.is_finite().then(|| {
-            let lo = d.value((u[c] - half).max(0.0));
-            let hi = d.value((u[c] + half).min(1.0));
-            (lo, hi)
-        });
-        params_out.push(FittedParam {
-            key: d.key.clone(),
-            start: d.start,
-            value,
-            interval,
-            bounds: (d.low, d.high),
-            at_bound: u[c] <= 1e-6 || u[c] >= 1.0 - 1e-6,
-        });
-    }
-    let keys: Vec<String> = p
-        .continuous
-        .iter()
-        .map(|&i| p.space.dims[i].key.clone())
-        .collect();
-    let mut unseen = Vec::new();
-    for (c, k) in keys.iter().enumerate() {
-        let col = jac.column(c).norm();
-        let width = 2.0 * misfit.half_width_u[c];
-        if col == 0.0 || !width.is_finite() || width >= 1.0 {
-            unseen.push(k.clone());
-        }
-    }
-    let trading = least_squares::trading_pairs(&keys, &spread, &|_| false);
-    let identifiability = Identifiability {
-        unseen,
-        trading,
-        residual_autocorrelation: spread.rho,
-        residuals: Residuals {
-            count: misfit.n,
-            rms_deg: misfit.rms,
-            noise_deg: misfit.noise_sd,
-            structure_deg: misfit.structure_rms,
-            window_samples: misfit.window,
-        },
-    };
-
+    let ready = stages::prepare::recordings(spec, progress)?;
+    let p = &ready.problem;
+    let (untuned, start_params) = stages::prepare::untuned(p)?;
+    let (u, start_residuals) = stages::scan::delay(p, untuned, ready.resumed.as_deref())?;
+    let fitted = stages::fit::recordings(p, &u, start_residuals)?;
+    let u = fitted.fit.u.clone();
+    let (params, identifiability) = stages::intervals::recordings(p, fitted.fit)?;
     let search_time_s = started.elapsed().as_secs_f64();
-    // Scores: untuned, tuned, the physics-free model.
-    p.set_phase("scoring".into());
-    let tuned = p.params(&u).map_err(|m| anyhow!(m))?;
-    let delay_s = tuned.controller.delay_s.filter(|_| p.delay.is_some());
-    let all: Vec<usize> = p.train.iter().chain(&p.holdout).copied().collect();
-    let score_engine = |params: &PhysicalParams| -> Vec<(usize, Trajectory)> {
-        all.iter()
-            .filter_map(|&k| p.replay(&prepared.episodes[k], params).ok().map(|t| (k, t)))
-            .collect()
-    };
-    let link = prepared
-        .robot
-        .link_by_name(&prepared.link)
-        .ok_or_else(|| anyhow!("the robot has no link {}", prepared.link))?;
-    let kin = |delay: f64| -> Vec<(usize, Trajectory)> {
-        all.iter()
-            .filter_map(|&k| {
-                kinematic_run(&prepared.episodes[k], prepared, link, delay).map(|t| (k, t))
-            })
-            .collect()
-    };
-    let sets = |runs: Vec<(usize, Trajectory)>, source: String| -> SourceScores {
-        let pick = |which: &[usize]| {
-            let chosen: Vec<(usize, Trajectory)> = runs
-                .iter()
-                .filter(|(k, _)| which.contains(k))
-                .cloned()
-                .collect();
-            set_score(prepared, &chosen)
-        };
-        SourceScores {
-            source,
-            train: pick(&p.train),
-            holdout: if p.holdout.is_empty() {
-                None
-            } else {
-                pick(&p.holdout)
-            },
-        }
-    };
-    let name = engine.name();
-    let mut scores = vec![
-        sets(score_engine(&start_params), format!("{name} untuned")),
-        sets(score_engine(&tuned), format!("{name} tuned")),
-        sets(kin(0.0), "physics-free (perfect tracking)".into()),
-    ];
-    if let Some(d) = delay_s.filter(|d| *d > 0.0) {
-        scores.push(sets(
-            kin(d),
-            format!("physics-free, delayed {:.0} ms", d * 1e3),
-        ));
-    }
-    let verdict = verdict(&scores);
-    let timestep_check = {
-        let mut half = tuned.clone();
-        half.engine_settings
-            .entry(name.to_string())
-            .or_default()
-            .insert(
-                realitygap_core::engine::TIMESTEP_KEY.to_string(),
-                realitygap_core::engine::SettingValue::Float(p.dt / 2.0),
-            );
-        let on_holdout = !p.holdout.is_empty();
-        let which = if on_holdout { &p.holdout } else { &p.train };
-        let mut failed = Vec::new();
-        let runs: Vec<(usize, Trajectory)> = which
-            .iter()
-            .filter_map(|&k| match p.replay(&prepared.episodes[k], &half) {
-                Ok(t) => Some((k, t)),
-                Err(m) => {
-                    failed.push(format!("{}: {m}", prepared.episodes[k].id));
-                    None
-                }
-            })
-            .collect();
-        let halved = if failed.is_empty() {
-            set_score(prepared, &runs)
-        } else {
-            None
-        };
-        let at_step = &scores[1];
-        let tuned_score = if on_holdout {
-            at_step.holdout.clone()
-        } else {
-            at_step.train.clone()
-        };
-        let holds = match (&tuned_score, &halved) {
-            (Some(t), Some(h)) => t
-                .interval_deg
-                .map(|(lo, hi)| h.rms_deg >= lo && h.rms_deg <= hi),
-            _ => Some(false).filter(|_| !failed.is_empty()),
-        };
-        RecordingsTimestepCheck {
-            timestep_s: p.dt,
-            halved_s: p.dt / 2.0,
-            episodes: if on_holdout { "held-out" } else { "training" }.into(),
-            tuned: tuned_score,
-            halved,
-            holds,
-            failed,
-        }
-    };
+    let scored = stages::score::recordings(p, &u, &start_params)?;
     let evaluations = *p.evaluations.lock().unwrap_or_else(|e| e.into_inner());
+    let prepared = spec.prepared;
+    let ids = |set: &[usize]| -> Vec<String> {
+        set.iter()
+            .map(|&k| prepared.episodes[k].id.clone())
+            .collect()
+    };
     let summary = RecordingsSummary {
-        engine: format!("{} {}", engine.name(), engine.version()),
+        engine: format!("{} {}", spec.engine.name(), spec.engine.version()),
         robot: prepared.robot.name.clone(),
         recordings: PathBuf::new(),
-        train: p
-            .train
-            .iter()
-            .map(|&k| prepared.episodes[k].id.clone())
-            .collect(),
-        holdout: p
-            .holdout
-            .iter()
-            .map(|&k| prepared.episodes[k].id.clone())
-            .collect(),
+        train: ids(&p.train),
+        holdout: ids(&p.holdout),
         known: known_keys(spec.known),
-        objective,
-        params: params_out,
+        objective: ready.objective.clone(),
+        params,
         identifiability,
-        scores,
+        scores: scored.scores,
         evaluations,
-        iterations,
-        reason,
+        iterations: fitted.iterations,
+        reason: fitted.reason,
         search_time_s,
         wall_time_s: started.elapsed().as_secs_f64(),
-        verdict,
-        timestep_check,
+        verdict: scored.verdict,
+        timestep_check: scored.timestep_check,
         cautions: Vec::new(),
     };
     let summary = RecordingsSummary {
         cautions: cautions(&summary),
         ..summary
     };
-    let tuned_path = spec.out.join("tuned.toml");
-    let mut tuned_file = tuned.clone();
-    tuned_file.source = None;
-    std::fs::write(
-        &tuned_path,
-        format!(
-            "# Tuned by `realitygap tune --recordings` ({}, robot '{}'): the known\n# parameters and the fitted ones; pass it to `realitygap replay --params`.\n{}",
-            summary.engine,
-            summary.robot,
-            tuned_file.to_toml_string()
-        ),
-    )
-    .with_context(|| format!("writing {}", tuned_path.display()))?;
-    files.push(tuned_path);
+    let mut files = ready.files;
+    files.push(stages::write::recordings_tuned(
+        &spec.out,
+        &summary,
+        &scored.tuned,
+    )?);
     Ok(RecordingsResult { summary, files })
 }
 
-/// The values of the best point of a tune's `history.csv` (written with
-/// `header`), when it has one.
-fn best_of_history(path: &Path, header: &str, dims: usize) -> Option<Vec<f64>> {
-    let text = std::fs::read_to_string(path).ok()?;
-    let mut lines = text.lines();
-    if lines.next()? != header {
-        return None;
-    }
-    lines
-        .filter(|l| !l.starts_with('#'))
-        .filter_map(|l| {
-            let cells: Vec<&str> = l.split(',').collect();
-            let rms: f64 = cells.get(2)?.parse().ok()?;
-            let values: Vec<f64> = cells
-                .get(3..)?
-                .iter()
-                .map(|c| c.parse::<f64>())
-                .collect::<Result<_, _>>()
-                .ok()?;
-            (values.len() == dims && rms.is_finite() && !cells[1].contains("failed"))
-                .then_some((rms, values))
-        })
-        .min_by(|a, b| a.0.total_cmp(&b.0))
-        .map(|b| b.1)
-}
-
-/// The delays of the first scan: the range in about 10 steps, on the
-/// engine-step grid.
-fn delay_grid(d: &Dim, dt: f64) -> Vec<f64> {
-    let snap = |x: f64| (x / dt).round() * dt;
-    let (lo, hi) = (snap(d.low).max(d.low), snap(d.high).min(d.high));
-    let step = snap(((hi - lo) / 10.0).max(dt)).max(dt);
-    let mut grid = Vec::new();
-    let mut x = lo;
-    while x <= hi + 1e-12 {
-        grid.push(snap(x).clamp(d.low, d.high));
-        x += step;
-    }
-    grid.dedup_by(|a, b| (*a - *b).abs() < 1e-12);
-    grid
-}
-
-/// The training residuals at `u` with coordinate `c` (the delay) at each
-/// of `grid`, in parallel on the tune's threads; `None` where the replay
-/// failed.
-fn delay_residuals(
-    p: &Problem,
-    u: &[f64],
-    c: usize,
-    grid: &[f64],
-) -> Result<Vec<Option<Vec<f64>>>> {
-    use rayon::prelude::*;
-    let d = &p.space.dims[p.continuous[c]];
-    Ok(p.pool.install(|| {
-        grid.par_iter()
-            .map(|&delay| {
-                let mut x = u.to_vec();
-                x[c] = d.unit(delay);
-                let params = p.params(&x).ok()?;
-                match p.residuals(&params) {
-                    Ok(r) => {
-                        let cost: f64 = r.iter().map(|v| v * v).sum();
-                        p.record("delay scan", &p.values(&x), cost);
-                        Some(r)
-                    }
-                    Err(_) => {
-                        p.record("delay scan failed", &p.values(&x), f64::INFINITY);
-                        None
-                    }
-                }
-            })
-            .collect()
-    }))
-}
-
-/// The scanned delay with the lowest cost, and its residuals.
-fn best_of(scanned: &[(f64, Vec<f64>)]) -> Option<&(f64, Vec<f64>)> {
-    let cost = |r: &[f64]| -> f64 { r.iter().map(|v| v * v).sum() };
-    scanned
-        .iter()
-        .min_by(|a, b| cost(&a.1).total_cmp(&cost(&b.1)))
-}
-
-fn verdict(scores: &[SourceScores]) -> String {
+pub(crate) fn verdict(scores: &[SourceScores]) -> String {
     let get = |i: usize| {
         scores.get(i).and_then(|s| {
             s.holdout
@@ -1747,23 +1168,6 @@ pub fn write_summary(out: &Path, recordings: &Path, result: &mut RecordingsResul
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn the_delay_grid_lies_on_engine_steps_within_bounds() {
-        let d = Dim {
-            key: DELAY_KEY.into(),
-            low: 0.0,
-            high: 0.1,
-            scale: Scale::Linear,
-            start: 0.0,
-        };
-        let grid = delay_grid(&d, 1e-3);
-        assert_eq!(grid.len(), 11);
-        assert!((grid[1] - 0.01).abs() < 1e-12);
-        for x in grid {
-            assert!(((x / 1e-3).round() * 1e-3 - x).abs() < 1e-12);
-        }
-    }
 
     #[test]
     fn the_default_split_holds_out_the_last_quarter() {
