@@ -73,6 +73,11 @@ pub fn replay(args: &ReplayOptions, launcher: &Launcher, ui: &dyn Ui) -> Result<
     if engines.is_empty() && refused.is_empty() {
         bail!("no physics engine is compiled into this binary");
     }
+    if realitygap_study::tosses::is_toss_store(&args.real) {
+        let engines: Vec<&dyn realitygap_core::Engine> =
+            engines.iter().map(|e| e.as_ref()).collect();
+        return replay_tosses(args, &engines, &params, ui);
+    }
     let request = ReplayRequest {
         real_dir: &args.real,
         urdf: args.robot.as_deref(),
@@ -209,6 +214,61 @@ pub fn replay(args: &ReplayOptions, launcher: &Launcher, ui: &dyn Ui) -> Result<
         joints: names,
         table,
         index_html: report.join("index.html"),
+    })
+}
+
+/// `replay` of tossed objects (a results directory of `import
+/// contactnets`): every toss in every engine and the physics-free model,
+/// `OUT/<engine>/runs/<id>.csv`, and the toss table `OUT/tosses.md`.
+fn replay_tosses(
+    args: &ReplayOptions,
+    engines: &[&dyn realitygap_core::Engine],
+    params: &realitygap_core::PhysicalParams,
+    ui: &dyn Ui,
+) -> Result<Replayed> {
+    if args.robot.is_some() || args.scene.is_some() || !args.packages.is_empty() {
+        bail!(
+            "{} holds tossed objects, not a robot's episodes: --robot, --scene and --package do not apply",
+            args.real.display()
+        );
+    }
+    if !matches!(args.executor, Executor::Local) {
+        bail!("tossed objects are replayed on this machine: --executor slurm does not apply");
+    }
+    let set = realitygap_study::tosses::read_tosses(&args.real)?;
+    std::fs::create_dir_all(&args.out)?;
+    let jobs = args
+        .jobs
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let bar = ui.bar((engines.len() * set.tosses.len()) as u64, "tosses");
+    let rows = realitygap_study::tosses::replay_tosses(
+        engines,
+        &set,
+        params,
+        &args.out,
+        jobs,
+        &|engine, id, failed| {
+            bar.inc(1);
+            if let Some(why) = failed {
+                bar.println(format!("toss {id} in {engine}: failed: {why}"));
+            }
+        },
+    )?;
+    bar.finish();
+    let table = realitygap_study::tosses::toss_markdown(&rows, &set);
+    ui.say(table.clone());
+    let failed: usize = rows.iter().map(|r| r.failed).sum();
+    ui.say(format!(
+        "replayed {} tosses in {} engines and the physics-free model ({KINEMATIC}): {failed} diverged or failed; the table {}",
+        set.tosses.len(),
+        engines.len(),
+        args.out.join("tosses.md").display()
+    ));
+    Ok(Replayed {
+        rows: Vec::new(),
+        joints: Vec::new(),
+        table,
+        index_html: args.out.join("tosses.md"),
     })
 }
 

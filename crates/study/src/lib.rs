@@ -32,6 +32,7 @@ pub mod replay;
 pub mod reproduce;
 pub mod stitch;
 pub mod study;
+pub mod tosses;
 
 pub use data_source::DataSource;
 pub use evaluate::{evaluate, evaluate_measured, evaluate_scenes, load_study};

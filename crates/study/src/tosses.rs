@@ -1,0 +1,574 @@
+//! Tossed objects replayed in every engine: each recorded toss (a real run
+//! of one free box, as `realitygap import contactnets` stores it) becomes a
+//! scene of that box alone over the ground, started at the toss's first
+//! recorded pose and twist, simulated at a 1 ms step and sampled at the
+//! recorded times; the physics-free row flies the box ballistically and
+//! freezes it where it first touches the ground.
+//!
+//! The headline measure: the box centre's distance from the recorded one,
+//! averaged over the toss's samples, in box edges; then averaged over the
+//! tosses, with a 95 % bootstrap interval over tosses.
+
+use anyhow::{anyhow, bail, Context, Result};
+use rayon::prelude::*;
+use realitygap_analysis::bootstrap::percentile_interval;
+use realitygap_core::controller::{
+    load_prepared, lowest_point_z, prepare, refuse_unstable, ControlParams, ControllerLoop,
+    RunOptions, RunStatus, SplitMix64,
+};
+use realitygap_core::engine::PHYSICS_FREE_ENGINE;
+use realitygap_core::engine::{Engine, EngineSettings, SettingValue, TIMESTEP_KEY};
+use realitygap_core::params::PhysicalParams;
+use realitygap_core::pose::{Pose, Quat, Vec3};
+use realitygap_core::robot::RobotModel;
+use realitygap_core::scene::Scene;
+use realitygap_core::trajectory::Trajectory;
+use realitygap_data::{EngineInfo, RunEntry, RunStatus as StoredStatus, RunStore, SourceKind};
+use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// The engine step of every toss replay, s: a tenth of the 148 Hz
+/// recording's sample period or less in every engine.
+pub const TOSS_TIMESTEP_S: f64 = 0.001;
+
+/// The free box of a set of tosses, from the import's manifest.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TossedBox {
+    /// The role of its pose columns (`cube`).
+    pub role: String,
+    /// Its edge, m.
+    pub edge_m: f64,
+    /// Its mass, kg.
+    pub mass_kg: f64,
+}
+
+/// One recorded toss.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Toss {
+    /// The run id (the toss's number).
+    pub id: String,
+    /// Sample times, s, from 0.
+    pub time_s: Vec<f64>,
+    /// The box's recorded poses.
+    pub poses: Vec<Pose>,
+    /// The recorded velocity at the first sample, world frame, m/s.
+    pub v0_m_s: Vec3,
+    /// The recorded angular velocity at the first sample, world frame,
+    /// rad/s.
+    pub w0_rad_s: Vec3,
+}
+
+/// The tosses of a results directory of `import contactnets`.
+#[derive(Debug, Clone)]
+pub struct TossSet {
+    /// The directory.
+    pub dir: PathBuf,
+    /// The box.
+    pub object: TossedBox,
+    /// The tosses, in the store's order.
+    pub tosses: Vec<Toss>,
+}
+
+/// Whether `dir` is a results directory of tossed objects (its manifest's
+/// settings name an `object`, and it records no robot).
+pub fn is_toss_store(dir: &Path) -> bool {
+    RunStore::open(dir).is_ok_and(|s| {
+        let settings = &s.manifest().settings;
+        settings.get("object").is_some() && settings.get("robot").is_none()
+    })
+}
+
+/// Reads every finished toss of `dir`: poses, and the first sample's twist
+/// from `runs/<id>.velocities.csv`.
+pub fn read_tosses(dir: &Path) -> Result<TossSet> {
+    let store = RunStore::open(dir)?;
+    let settings = &store.manifest().settings;
+    let object = settings
+        .get("object")
+        .ok_or_else(|| anyhow!("{}: the manifest's settings name no object", dir.display()))?;
+    let number = |key: &str| {
+        object.get(key).and_then(Value::as_f64).ok_or_else(|| {
+            anyhow!(
+                "{}: manifest.json: settings.object.{key} is missing or not a number",
+                dir.display()
+            )
+        })
+    };
+    let object = TossedBox {
+        role: object
+            .get("role")
+            .and_then(Value::as_str)
+            .unwrap_or("cube")
+            .to_string(),
+        edge_m: number("edge_m")?,
+        mass_kg: number("mass_kg")?,
+    };
+    if !(object.edge_m > 0.0 && object.mass_kg > 0.0) {
+        bail!(
+            "{}: manifest.json: the object's edge ({} m) and mass ({} kg) must be positive",
+            dir.display(),
+            object.edge_m,
+            object.mass_kg
+        );
+    }
+    let mut tosses = Vec::new();
+    for entry in store.runs() {
+        if entry.status != StoredStatus::Ok {
+            continue;
+        }
+        tosses.push(read_toss(&store, &entry.id, &object.role)?);
+    }
+    if tosses.is_empty() {
+        bail!("{}: no finished toss to replay", dir.display());
+    }
+    Ok(TossSet {
+        dir: dir.to_path_buf(),
+        object,
+        tosses,
+    })
+}
+
+fn read_toss(store: &RunStore, id: &str, role: &str) -> Result<Toss> {
+    let where_ = || format!("{}: run {id}", store.dir().display());
+    let trajectory = store.read_run(id).with_context(where_)?;
+    let track = trajectory
+        .body(role)
+        .ok_or_else(|| anyhow!("{}: no `{role}` pose columns", where_()))?;
+    let mut poses = Vec::with_capacity(track.poses.len());
+    for (i, p) in track.poses.iter().enumerate() {
+        poses.push(p.ok_or_else(|| anyhow!("{}: sample {i} has no pose", where_()))?);
+    }
+    if poses.len() < 2 {
+        bail!("{}: a toss needs two samples or more", where_());
+    }
+    let velocities = store.read_run_velocities(id).with_context(where_)?;
+    let twist = velocities
+        .iter()
+        .find(|v| v.role == role)
+        .and_then(|v| v.twists.first().copied().flatten())
+        .ok_or_else(|| {
+            anyhow!(
+                "{}: runs/{id}.velocities.csv gives no `{role}` velocity at the first sample",
+                store.dir().display()
+            )
+        })?;
+    let t0 = trajectory.time_s[0];
+    Ok(Toss {
+        id: id.to_string(),
+        time_s: trajectory.time_s.iter().map(|t| t - t0).collect(),
+        v0_m_s: twist.linear_m_s,
+        w0_rad_s: twist.angular_world_rad_s(poses[0].orientation),
+        poses,
+    })
+}
+
+/// The scene of one toss: the box alone over the ground at z = 0, at the
+/// toss's first pose and twist, sampled every engine step until the last
+/// recorded sample.
+pub fn toss_scene(object: &TossedBox, toss: &Toss) -> Result<Scene> {
+    let last = toss.time_s.last().copied().unwrap_or(0.0);
+    let steps = (last / TOSS_TIMESTEP_S).ceil().max(1.0) as u64 + 1;
+    let p = toss.poses[0];
+    let (roll, pitch, yaw) = p.orientation.to_euler_rpy();
+    let v = |a: Vec3| format!("[{:?}, {:?}, {:?}]", a.x, a.y, a.z);
+    let text = format!(
+        "name = \"toss_{id}\"\nduration_s = {dur:?}\n[ground]\nheight_m = 0.0\n[controller]\nperiod_s = {h:?}\n\
+         [[object]]\nname = \"{role}\"\nshape = \"box\"\nsize_m = [{e:?}, {e:?}, {e:?}]\nmass_kg = {m:?}\n\
+         position_m = {pos}\nrpy_deg = {rpy}\nlinear_velocity_m_s = {lin}\nangular_velocity_rad_s = {ang}\n\
+         [[track]]\nrole = \"{role}\"\nobject = \"{role}\"\n",
+        id = realitygap_data::sanitize_run_id(&toss.id),
+        dur = steps as f64 * TOSS_TIMESTEP_S,
+        h = TOSS_TIMESTEP_S,
+        role = object.role,
+        e = object.edge_m,
+        m = object.mass_kg,
+        pos = v(p.position_m),
+        rpy = v(Vec3::new(roll.to_degrees(), pitch.to_degrees(), yaw.to_degrees())),
+        lin = v(toss.v0_m_s),
+        ang = v(toss.w0_rad_s),
+    );
+    Scene::from_toml_str(&text, Path::new(&format!("(toss {})", toss.id)))
+        .map_err(|e| anyhow!("toss {}: {e}", toss.id))
+}
+
+/// A trajectory sampled every step, resampled at `times` (positions
+/// linearly, orientations by normalised linear interpolation).
+fn resample(stepped: &Trajectory, role: &str, times: &[f64], h: f64) -> Trajectory {
+    let mut out = Trajectory::with_bodies(&[role]);
+    let poses = &stepped.bodies[0].poses;
+    for &t in times {
+        let k = ((t / h).floor() as usize).min(poses.len().saturating_sub(1));
+        let frac = (t / h - k as f64).clamp(0.0, 1.0);
+        let pose = match (
+            poses.get(k).copied().flatten(),
+            poses.get(k + 1).copied().flatten(),
+        ) {
+            (Some(a), Some(b)) => Some(interpolate(&a, &b, frac)),
+            (Some(a), None) => Some(a),
+            _ => None,
+        };
+        if pose.is_none() {
+            break;
+        }
+        out.time_s.push(t);
+        out.bodies[0].poses.push(pose);
+    }
+    out
+}
+
+fn interpolate(a: &Pose, b: &Pose, f: f64) -> Pose {
+    let qb = if a.orientation.dot(b.orientation) < 0.0 {
+        Quat::new(
+            -b.orientation.w,
+            -b.orientation.x,
+            -b.orientation.y,
+            -b.orientation.z,
+        )
+    } else {
+        b.orientation
+    };
+    let qa = a.orientation;
+    let q = Quat::new(
+        qa.w + f * (qb.w - qa.w),
+        qa.x + f * (qb.x - qa.x),
+        qa.y + f * (qb.y - qa.y),
+        qa.z + f * (qb.z - qa.z),
+    );
+    Pose::new(
+        a.position_m.lerp(b.position_m, f),
+        q.normalized().unwrap_or(qa),
+    )
+}
+
+/// One replayed toss: the trajectory at the recorded times, how the run
+/// ended, the wall time of its loop (s) and the engine steps taken.
+pub type TossRun = (Trajectory, RunStatus, f64, u64);
+
+/// Simulates one toss in `engine` with `params` (the scene's settings with
+/// the parameters' `[engine.NAME]` over a 1 ms step).
+pub fn simulate_toss(
+    engine: &dyn Engine,
+    object: &TossedBox,
+    toss: &Toss,
+    params: &PhysicalParams,
+) -> Result<TossRun, String> {
+    let scene = toss_scene(object, toss).map_err(|e| e.to_string())?;
+    let options = RunOptions::default();
+    let (scene, robot) =
+        prepare(engine, &scene, &RobotModel::world(), params).map_err(|e| e.to_string())?;
+    let mut base = EngineSettings::new();
+    base.insert(TIMESTEP_KEY.into(), SettingValue::Float(TOSS_TIMESTEP_S));
+    let settings = params.settings_over(engine.name(), &base);
+    let mut sim = load_prepared(engine, &scene, &robot, &settings, params, &options)
+        .map_err(|e| e.to_string())?;
+    refuse_unstable(engine, sim.as_ref(), &options).map_err(|e| e.to_string())?;
+    let h = sim.timestep_s();
+    if (h - TOSS_TIMESTEP_S).abs() > 1e-12 {
+        return Err(format!(
+            "a toss is replayed at a {TOSS_TIMESTEP_S} s step; the parameters set {h} s"
+        ));
+    }
+    let mut run = ControllerLoop::new(&scene, &options, &ControlParams::default());
+    run.start(sim.as_mut()).map_err(|e| e.to_string())?;
+    run.advance(sim.as_mut(), usize::MAX)
+        .map_err(|e| e.to_string())?;
+    let outcome = run.finish();
+    let sampled = resample(&outcome.trajectory, &object.role, &toss.time_s, h);
+    Ok((
+        sampled,
+        outcome.status,
+        outcome.wall_time_s,
+        outcome.engine_steps,
+    ))
+}
+
+/// The physics-free toss: the box flies ballistically from its first
+/// recorded pose and twist (gravity only, spinning at its first angular
+/// velocity) and freezes where its lowest corner first reaches the ground.
+pub fn ballistic_toss(object: &TossedBox, toss: &Toss) -> Trajectory {
+    let half = Vec3::new(0.5, 0.5, 0.5).scale(object.edge_m);
+    let g = Vec3::new(0.0, 0.0, -realitygap_core::scene::STANDARD_GRAVITY_M_S2);
+    let p0 = toss.poses[0];
+    let w = toss.w0_rad_s;
+    let at = |t: f64| {
+        let turn = if w.norm() > 0.0 {
+            Quat::from_axis_angle(w.scale(1.0 / w.norm()), w.norm() * t)
+        } else {
+            Quat::IDENTITY
+        };
+        let orientation = (turn * p0.orientation)
+            .normalized()
+            .unwrap_or(p0.orientation);
+        Pose::new(
+            p0.position_m + toss.v0_m_s.scale(t) + g.scale(0.5 * t * t),
+            orientation,
+        )
+    };
+    let mut out = Trajectory::with_bodies(&[object.role.as_str()]);
+    let mut frozen: Option<Pose> = None;
+    for &t in &toss.time_s {
+        let pose = match frozen {
+            Some(p) => p,
+            None => {
+                let p = at(t);
+                if t > 0.0 && lowest_point_z(&p, half) <= 0.0 {
+                    frozen = Some(p);
+                }
+                p
+            }
+        };
+        out.time_s.push(t);
+        out.bodies[0].poses.push(Some(pose));
+    }
+    out
+}
+
+/// Per toss, the headline error: the mean distance of the box centre from
+/// the recorded one over the samples both have, in box edges; `None` when
+/// the run has no sample.
+pub fn toss_error_edges(object: &TossedBox, toss: &Toss, run: &Trajectory) -> Option<f64> {
+    let track = run.body(&object.role)?;
+    let gaps: Vec<f64> = toss
+        .poses
+        .iter()
+        .zip(&track.poses)
+        .filter_map(|(real, sim)| sim.map(|s| s.position_m.distance(real.position_m)))
+        .collect();
+    if gaps.is_empty() {
+        return None;
+    }
+    // A run that ended early (diverged) counts its last pose for the rest.
+    let missing = toss.poses.len() - gaps.len();
+    let last_gap = track
+        .poses
+        .iter()
+        .rev()
+        .find_map(|p| *p)
+        .map(|p| {
+            p.position_m
+                .distance(toss.poses.last().unwrap_or(&p).position_m)
+        })
+        .unwrap_or(0.0);
+    let sum: f64 = gaps.iter().sum::<f64>() + missing as f64 * last_gap;
+    Some(sum / toss.poses.len() as f64 / object.edge_m)
+}
+
+/// The mean of `values` and its 95 % bootstrap interval over them
+/// (2000 resamples, a fixed seed).
+pub fn mean_interval(values: &[f64]) -> Option<(f64, f64, f64)> {
+    if values.is_empty() {
+        return None;
+    }
+    let n = values.len();
+    let mean = values.iter().sum::<f64>() / n as f64;
+    let mut rng = SplitMix64::new(0x7055);
+    let reps: Vec<f64> = (0..2000)
+        .map(|_| {
+            (0..n)
+                .map(|_| values[(rng.next_u64() % n as u64) as usize])
+                .sum::<f64>()
+                / n as f64
+        })
+        .collect();
+    let i = percentile_interval(&reps, 0.95)?;
+    Some((mean, i.low_m, i.high_m))
+}
+
+/// One source's row of the toss table.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TossRow {
+    /// The engine (or `ideal`).
+    pub source: String,
+    /// Tosses replayed and measured.
+    pub tosses: usize,
+    /// Tosses that diverged or failed.
+    pub failed: usize,
+    /// The headline: mean over tosses of the mean centre error, edges,
+    /// with its 95 % interval.
+    pub error_edges: Option<(f64, f64, f64)>,
+    /// Tosses simulated per second of wall time (engines only).
+    pub tosses_per_s: Option<f64>,
+}
+
+/// Replays every toss of `set` in each engine and the physics-free model,
+/// writes `OUT/<engine>/` (a manifest, `runs/<id>.csv`), and measures.
+/// `progress` is called after each toss.
+pub fn replay_tosses(
+    engines: &[&dyn Engine],
+    set: &TossSet,
+    params: &PhysicalParams,
+    out: &Path,
+    jobs: usize,
+    progress: &(dyn Fn(&str, &str, Option<&str>) + Sync),
+) -> Result<Vec<TossRow>> {
+    let mut rows = Vec::new();
+    let ideal: Vec<Trajectory> = set
+        .tosses
+        .iter()
+        .map(|t| ballistic_toss(&set.object, t))
+        .collect();
+    let mut store = open_store(out, PHYSICS_FREE_ENGINE, None, set)?;
+    store.set_settings(json!({
+        "model": "ballistic flight from the first recorded pose and twist, frozen where the box first touches the ground",
+        "real": set.dir.display().to_string(),
+    }))?;
+    for (toss, t) in set.tosses.iter().zip(&ideal) {
+        store.write_run(RunEntry::new(&toss.id), t)?;
+    }
+    rows.push(row(
+        PHYSICS_FREE_ENGINE,
+        set,
+        &ideal
+            .iter()
+            .map(|t| Ok((t.clone(), RunStatus::Completed, 0.0, 0)))
+            .collect::<Vec<_>>(),
+        None,
+    ));
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(jobs.max(1))
+        .build()
+        .map_err(|e| anyhow!("a pool of {jobs} threads: {e}"))?;
+    for engine in engines {
+        let started = Instant::now();
+        let runs: Vec<Result<TossRun, String>> = pool.install(|| {
+            set.tosses
+                .par_iter()
+                .map(|t| {
+                    let r = simulate_toss(*engine, &set.object, t, params);
+                    progress(engine.name(), &t.id, r.as_ref().err().map(String::as_str));
+                    r
+                })
+                .collect()
+        });
+        let wall = started.elapsed().as_secs_f64();
+        let mut store = open_store(out, engine.name(), Some(*engine), set)?;
+        store.set_settings(json!({
+            "timestep_s": TOSS_TIMESTEP_S,
+            "initial_state": "the first recorded pose and twist",
+            "ground_height_m": 0.0,
+            "real": set.dir.display().to_string(),
+        }))?;
+        for (toss, r) in set.tosses.iter().zip(&runs) {
+            let mut entry = RunEntry::new(&toss.id);
+            match r {
+                Ok((trajectory, status, w, _)) => {
+                    entry.wall_time_s = Some(*w);
+                    if let RunStatus::Diverged { t_s, reason } = status {
+                        entry.status = StoredStatus::Diverged;
+                        entry.message = Some(format!("diverged at {t_s:.3} s: {reason}"));
+                    }
+                    store.write_run(entry, trajectory)?;
+                }
+                Err(message) => {
+                    entry.message = Some(message.clone());
+                    store.record_failed_run(entry)?;
+                }
+            }
+        }
+        rows.push(row(engine.name(), set, &runs, Some(wall)));
+    }
+    let table = toss_markdown(&rows, set);
+    std::fs::write(out.join("tosses.md"), &table)
+        .with_context(|| format!("writing {}", out.join("tosses.md").display()))?;
+    let json = Value::Array(rows.iter().map(row_json).collect());
+    std::fs::write(
+        out.join("tosses.json"),
+        serde_json::to_string_pretty(&json)? + "\n",
+    )?;
+    Ok(rows)
+}
+
+fn open_store(
+    out: &Path,
+    name: &str,
+    engine: Option<&dyn Engine>,
+    _set: &TossSet,
+) -> Result<RunStore> {
+    let mut store =
+        RunStore::create_or_open(&out.join(name), name, SourceKind::Simulated, Some("tosses"))?;
+    if let Some(engine) = engine {
+        store.set_engine(EngineInfo {
+            name: engine.name().to_string(),
+            version: engine.version(),
+        })?;
+    }
+    Ok(store)
+}
+
+fn row(
+    source: &str,
+    set: &TossSet,
+    runs: &[Result<TossRun, String>],
+    wall: Option<f64>,
+) -> TossRow {
+    let mut errors = Vec::new();
+    let mut failed = 0;
+    for (toss, r) in set.tosses.iter().zip(runs) {
+        match r {
+            Ok((t, status, _, _)) => {
+                if !matches!(status, RunStatus::Completed) {
+                    failed += 1;
+                }
+                if let Some(e) = toss_error_edges(&set.object, toss, t) {
+                    errors.push(e);
+                }
+            }
+            Err(_) => failed += 1,
+        }
+    }
+    TossRow {
+        source: source.to_string(),
+        tosses: errors.len(),
+        failed,
+        error_edges: mean_interval(&errors),
+        tosses_per_s: wall.filter(|w| *w > 0.0).map(|w| runs.len() as f64 / w),
+    }
+}
+
+fn row_json(r: &TossRow) -> Value {
+    json!({
+        "source": r.source,
+        "tosses": r.tosses,
+        "failed": r.failed,
+        "position_error_edges": r.error_edges.map(|(m, _, _)| m),
+        "position_error_edges_ci95": r.error_edges.map(|(_, lo, hi)| [lo, hi]),
+        "tosses_per_s": r.tosses_per_s,
+    })
+}
+
+/// The toss table in Markdown, best first.
+pub fn toss_markdown(rows: &[TossRow], set: &TossSet) -> String {
+    let mut sorted: Vec<&TossRow> = rows.iter().collect();
+    sorted.sort_by(|a, b| {
+        let k = |r: &TossRow| r.error_edges.map_or(f64::INFINITY, |e| e.0);
+        k(a).total_cmp(&k(b))
+    });
+    let mut s = format!(
+        "# Tosses: {} real tosses of a {:.4} m, {} kg box ({})\n\n\
+         Position error of the box centre, averaged over each toss's recorded samples, in box edges; the mean over tosses with its 95 % bootstrap interval over tosses. Lower is closer.\n\n\
+         | source | position error (edges) | tosses | diverged or failed | tosses/s |\n|---|---:|---:|---:|---:|\n",
+        set.tosses.len(),
+        set.object.edge_m,
+        set.object.mass_kg,
+        set.dir.display()
+    );
+    for r in sorted {
+        let label = if r.source == PHYSICS_FREE_ENGINE {
+            "physics-free (ballistic, frozen at first contact)".to_string()
+        } else {
+            r.source.clone()
+        };
+        let err = r.error_edges.map_or("n/a".to_string(), |(m, lo, hi)| {
+            format!("{m:.3} [{lo:.3}, {hi:.3}]")
+        });
+        let speed = r
+            .tosses_per_s
+            .map_or("-".to_string(), |v| format!("{v:.1}"));
+        s.push_str(&format!(
+            "| {label} | {err} | {} | {} | {speed} |\n",
+            r.tosses, r.failed
+        ));
+    }
+    s
+}
