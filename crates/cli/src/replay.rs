@@ -56,8 +56,10 @@ pub fn replay(args: &ReplayOptions, launcher: &Launcher, ui: &dyn Ui) -> Result<
     let chosen = select_engines(crate::compiled_engines, &args.engines)?;
     let mut engines = Vec::new();
     let mut refused: Vec<(String, String)> = Vec::new();
+    let mut ideal_chosen = false;
     for engine in chosen {
         if engine.name() == KINEMATIC {
+            ideal_chosen = true;
             continue;
         }
         // A key of the user's parameters the engine cannot honour: its row
@@ -70,7 +72,7 @@ pub fn replay(args: &ReplayOptions, launcher: &Launcher, ui: &dyn Ui) -> Result<
     for (name, why) in &refused {
         ui.note(format!("{name}: not replayed: {why}"));
     }
-    if engines.is_empty() && refused.is_empty() {
+    if engines.is_empty() && refused.is_empty() && !ideal_chosen {
         bail!("no physics engine is compiled into this binary");
     }
     if realitygap_study::tosses::is_toss_store(&args.real) {

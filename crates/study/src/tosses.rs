@@ -572,3 +572,104 @@ pub fn toss_markdown(rows: &[TossRow], set: &TossSet) -> String {
     }
     s
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cube() -> TossedBox {
+        TossedBox {
+            role: "cube".into(),
+            edge_m: 0.1,
+            mass_kg: 0.37,
+        }
+    }
+
+    /// A toss recorded from the analytic parabola (no spin) until it
+    /// would sink into the ground.
+    fn parabola(v0: Vec3, samples: usize) -> Toss {
+        let p0 = Vec3::new(0.0, 0.0, 0.3);
+        let g = Vec3::new(0.0, 0.0, -9.81);
+        let time_s: Vec<f64> = (0..samples).map(|k| k as f64 / 148.0).collect();
+        let poses = time_s
+            .iter()
+            .map(|&t| Pose::new(p0 + v0.scale(t) + g.scale(0.5 * t * t), Quat::IDENTITY))
+            .collect();
+        Toss {
+            id: "1".into(),
+            time_s,
+            poses,
+            v0_m_s: v0,
+            w0_rad_s: Vec3::ZERO,
+        }
+    }
+
+    #[test]
+    fn the_ballistic_toss_follows_the_parabola_then_freezes_on_the_ground() {
+        let toss = parabola(Vec3::new(1.0, 0.0, 0.5), 60);
+        let run = ballistic_toss(&cube(), &toss);
+        let poses: Vec<Pose> = run.bodies[0].poses.iter().map(|p| p.unwrap()).collect();
+        // Contact when the centre is half an edge up: 0.3 + 0.5 t - 4.905 t^2 = 0.05.
+        let t_contact = (0.5 + (0.25f64 + 4.0 * 4.905 * 0.25).sqrt()) / (2.0 * 4.905);
+        for (k, (&t, p)) in run.time_s.iter().zip(&poses).enumerate() {
+            if t < t_contact {
+                assert!(
+                    p.position_m.distance(toss.poses[k].position_m) < 1e-12,
+                    "{t}"
+                );
+            } else {
+                assert_eq!(*p, *poses.last().unwrap(), "frozen from {t_contact} s");
+            }
+        }
+        let rest = poses.last().unwrap().position_m;
+        assert!(rest.z <= 0.05 && rest.z > 0.05 - 0.1, "{rest:?}");
+        assert_eq!(
+            toss_error_edges(&cube(), &toss, &run).map(|e| e > 0.0),
+            Some(true)
+        );
+    }
+
+    #[test]
+    fn the_error_is_the_mean_centre_distance_in_edges() {
+        let toss = parabola(Vec3::new(1.0, 0.0, 3.0), 10);
+        let mut run = Trajectory::with_bodies(&["cube"]);
+        for (t, p) in toss.time_s.iter().zip(&toss.poses) {
+            run.time_s.push(*t);
+            run.bodies[0].poses.push(Some(Pose::new(
+                p.position_m + Vec3::new(0.02, 0.0, 0.0),
+                p.orientation,
+            )));
+        }
+        let e = toss_error_edges(&cube(), &toss, &run).unwrap();
+        assert!((e - 0.2).abs() < 1e-12, "{e}");
+        // A run that stopped half way counts its last gap for the rest.
+        run.time_s.truncate(5);
+        run.bodies[0].poses.truncate(5);
+        let e = toss_error_edges(&cube(), &toss, &run).unwrap();
+        assert!(e > 0.2, "{e}");
+        let (m, lo, hi) = mean_interval(&[1.0, 2.0, 3.0, 4.0]).unwrap();
+        assert!((m - 2.5).abs() < 1e-12 && lo < m && m < hi, "{lo} {m} {hi}");
+    }
+
+    #[test]
+    fn resampling_interpolates_between_steps() {
+        let mut stepped = Trajectory::with_bodies(&["cube"]);
+        for k in 0..3 {
+            stepped.time_s.push(k as f64 * 0.001);
+            stepped.bodies[0].poses.push(Some(Pose::new(
+                Vec3::new(k as f64, 0.0, 0.0),
+                Quat::IDENTITY,
+            )));
+        }
+        let r = resample(&stepped, "cube", &[0.0, 0.0015, 0.002], 0.001);
+        let x: Vec<f64> = r.bodies[0]
+            .poses
+            .iter()
+            .map(|p| p.unwrap().position_m.x)
+            .collect();
+        assert!(
+            (x[0] - 0.0).abs() < 1e-9 && (x[1] - 1.5).abs() < 1e-9 && (x[2] - 2.0).abs() < 1e-9,
+            "{x:?}"
+        );
+    }
+}
