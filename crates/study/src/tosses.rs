@@ -354,6 +354,51 @@ pub fn toss_error_edges(object: &TossedBox, toss: &Toss, run: &Trajectory) -> Op
     Some(sum / toss.poses.len() as f64 / object.edge_m)
 }
 
+/// The secondary measures of one toss: the centre's error at 0.1 s and
+/// 0.3 s after the first sample (edges; `None` for a shorter toss), at the
+/// last sample (the rest pose, edges), and the orientation's mean error
+/// over the samples (degrees). A run that ended early holds its last pose.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TossMeasures {
+    /// Centre error 0.1 s in, edges.
+    pub at_0_1_edges: Option<f64>,
+    /// Centre error 0.3 s in, edges.
+    pub at_0_3_edges: Option<f64>,
+    /// Centre error at the last sample, edges.
+    pub rest_edges: f64,
+    /// Mean orientation error, degrees.
+    pub orientation_deg: f64,
+}
+
+/// [`TossMeasures`] of `run` against `toss`; `None` when the run has no
+/// sample.
+pub fn toss_measures(object: &TossedBox, toss: &Toss, run: &Trajectory) -> Option<TossMeasures> {
+    let track = run.body(&object.role)?;
+    let mut last = None;
+    let held: Vec<Pose> = (0..toss.poses.len())
+        .map(|k| {
+            if let Some(p) = track.poses.get(k).copied().flatten() {
+                last = Some(p);
+            }
+            last
+        })
+        .collect::<Option<Vec<Pose>>>()?;
+    let gap = |k: usize| held[k].position_m.distance(toss.poses[k].position_m) / object.edge_m;
+    let at = |t: f64| toss.time_s.iter().position(|&s| s >= t - 1e-9).map(gap);
+    let orientation_deg = held
+        .iter()
+        .zip(&toss.poses)
+        .map(|(s, r)| s.orientation.angle_to(r.orientation).to_degrees())
+        .sum::<f64>()
+        / held.len() as f64;
+    Some(TossMeasures {
+        at_0_1_edges: at(0.1),
+        at_0_3_edges: at(0.3),
+        rest_edges: gap(held.len() - 1),
+        orientation_deg,
+    })
+}
+
 /// The mean of `values` and its 95 % bootstrap interval over them
 /// (2000 resamples, a fixed seed).
 pub fn mean_interval(values: &[f64]) -> Option<(f64, f64, f64)> {
@@ -387,6 +432,14 @@ pub struct TossRow {
     /// The headline: mean over tosses of the mean centre error, edges,
     /// with its 95 % interval.
     pub error_edges: Option<(f64, f64, f64)>,
+    /// The centre's error 0.1 s in, edges, over the tosses that long.
+    pub at_0_1_edges: Option<(f64, f64, f64)>,
+    /// The centre's error 0.3 s in, edges.
+    pub at_0_3_edges: Option<(f64, f64, f64)>,
+    /// The rest pose's centre error (the last sample), edges.
+    pub rest_edges: Option<(f64, f64, f64)>,
+    /// The mean orientation error, degrees.
+    pub orientation_deg: Option<(f64, f64, f64)>,
     /// Tosses simulated per second of wall time (engines only).
     pub tosses_per_s: Option<f64>,
 }
@@ -503,6 +556,7 @@ fn row(
     wall: Option<f64>,
 ) -> TossRow {
     let mut errors = Vec::new();
+    let mut measures = Vec::new();
     let mut failed = 0;
     for (toss, r) in set.tosses.iter().zip(runs) {
         match r {
@@ -513,15 +567,23 @@ fn row(
                 if let Some(e) = toss_error_edges(&set.object, toss, t) {
                     errors.push(e);
                 }
+                measures.extend(toss_measures(&set.object, toss, t));
             }
             Err(_) => failed += 1,
         }
     }
+    let pick = |f: &dyn Fn(&TossMeasures) -> Option<f64>| {
+        mean_interval(&measures.iter().filter_map(f).collect::<Vec<f64>>())
+    };
     TossRow {
         source: source.to_string(),
         tosses: errors.len(),
         failed,
         error_edges: mean_interval(&errors),
+        at_0_1_edges: pick(&|m| m.at_0_1_edges),
+        at_0_3_edges: pick(&|m| m.at_0_3_edges),
+        rest_edges: pick(&|m| Some(m.rest_edges)),
+        orientation_deg: pick(&|m| Some(m.orientation_deg)),
         tosses_per_s: wall.filter(|w| *w > 0.0).map(|w| runs.len() as f64 / w),
     }
 }
@@ -533,6 +595,12 @@ fn row_json(r: &TossRow) -> Value {
         "failed": r.failed,
         "position_error_edges": r.error_edges.map(|(m, _, _)| m),
         "position_error_edges_ci95": r.error_edges.map(|(_, lo, hi)| [lo, hi]),
+        "at_0_1_s_edges": r.at_0_1_edges.map(|(m, _, _)| m),
+        "at_0_3_s_edges": r.at_0_3_edges.map(|(m, _, _)| m),
+        "rest_edges": r.rest_edges.map(|(m, _, _)| m),
+        "rest_edges_ci95": r.rest_edges.map(|(_, lo, hi)| [lo, hi]),
+        "orientation_deg": r.orientation_deg.map(|(m, _, _)| m),
+        "orientation_deg_ci95": r.orientation_deg.map(|(_, lo, hi)| [lo, hi]),
         "tosses_per_s": r.tosses_per_s,
     })
 }
@@ -546,8 +614,8 @@ pub fn toss_markdown(rows: &[TossRow], set: &TossSet) -> String {
     });
     let mut s = format!(
         "# Tosses: {} real tosses of a {:.4} m, {} kg box ({})\n\n\
-         Position error of the box centre, averaged over each toss's recorded samples, in box edges; the mean over tosses with its 95 % bootstrap interval over tosses. Lower is closer.\n\n\
-         | source | position error (edges) | tosses | diverged or failed | tosses/s |\n|---|---:|---:|---:|---:|\n",
+         Position error of the box centre, averaged over each toss's recorded samples, in box edges (the headline); the same at 0.1 s and 0.3 s after the first sample and at the last (the rest pose); the orientation's mean error in degrees. Each is the mean over tosses with its 95 % bootstrap interval over tosses. Lower is closer.\n\n\
+         | source | position error (edges) | at 0.1 s | at 0.3 s | at rest | orientation (deg) | tosses | diverged or failed | tosses/s |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|\n",
         set.tosses.len(),
         set.object.edge_m,
         set.object.mass_kg,
@@ -559,9 +627,19 @@ pub fn toss_markdown(rows: &[TossRow], set: &TossSet) -> String {
         } else {
             r.source.clone()
         };
-        let err = r.error_edges.map_or("n/a".to_string(), |(m, lo, hi)| {
-            format!("{m:.3} [{lo:.3}, {hi:.3}]")
-        });
+        let cell = |v: Option<(f64, f64, f64)>, digits: usize| {
+            v.map_or("n/a".to_string(), |(m, lo, hi)| {
+                format!("{m:.digits$} [{lo:.digits$}, {hi:.digits$}]")
+            })
+        };
+        let err = format!(
+            "{} | {} | {} | {} | {}",
+            cell(r.error_edges, 3),
+            cell(r.at_0_1_edges, 3),
+            cell(r.at_0_3_edges, 3),
+            cell(r.rest_edges, 3),
+            cell(r.orientation_deg, 1)
+        );
         let speed = r
             .tosses_per_s
             .map_or("-".to_string(), |v| format!("{v:.1}"));
