@@ -43,6 +43,11 @@ pub struct Args {
     /// cores).
     #[arg(long, short = 'j', value_name = "N")]
     jobs: Option<usize>,
+    /// Tossed objects (from `import contactnets`): the initial velocity
+    /// from a fit of free flight over the first 5 samples (`fit`), or the
+    /// first sample's recorded one (`first`).
+    #[arg(long, value_name = "HOW", default_value = "fit", value_parser = ["fit", "first"])]
+    toss_start: String,
     /// Where the replays run.
     #[command(flatten)]
     executor: crate::cmd_run::ExecutorArgs,
@@ -60,6 +65,11 @@ pub fn run(args: Args) -> Result<()> {
         out: args.out,
         jobs: args.jobs,
         executor: args.executor.executor()?,
+        toss_start: if args.toss_start == "first" {
+            realitygap_study::tosses::TossStart::First
+        } else {
+            realitygap_study::tosses::TossStart::Fit
+        },
     };
     replay(
         &options,

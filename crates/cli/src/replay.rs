@@ -33,6 +33,8 @@ pub struct ReplayOptions {
     pub jobs: Option<usize>,
     /// Where the replays run.
     pub executor: Executor,
+    /// Tossed objects: where the initial velocity comes from.
+    pub toss_start: realitygap_study::tosses::TossStart,
 }
 
 /// What a replay made.
@@ -237,7 +239,7 @@ fn replay_tosses(
     if !matches!(args.executor, Executor::Local) {
         bail!("tossed objects are replayed on this machine: --executor slurm does not apply");
     }
-    let set = realitygap_study::tosses::read_tosses(&args.real)?;
+    let set = realitygap_study::tosses::read_tosses(&args.real, args.toss_start)?;
     std::fs::create_dir_all(&args.out)?;
     let jobs = args
         .jobs

@@ -573,6 +573,7 @@ fn replay<'py>(
         out,
         jobs,
         executor: Executor::Local,
+        toss_start: Default::default(),
     };
     let launcher = launcher(py)?;
     let (csv, markdown, json, report) = long_call(py, reporter, move |ui| {
