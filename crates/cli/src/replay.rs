@@ -240,7 +240,6 @@ fn replay_tosses(
         bail!("tossed objects are replayed on this machine: --executor slurm does not apply");
     }
     let set = realitygap_study::tosses::read_tosses(&args.real, args.toss_start)?;
-    std::fs::create_dir_all(&args.out)?;
     let jobs = args
         .jobs
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
@@ -268,6 +267,13 @@ fn replay_tosses(
         engines.len(),
         args.out.join("tosses.md").display()
     ));
+    let errors: usize = rows.iter().map(|r| set.tosses.len() - r.tosses).sum();
+    if errors > 0 {
+        bail!(
+            "{errors} toss replays failed (see the messages above and the manifests in {})",
+            args.out.display()
+        );
+    }
     Ok(Replayed {
         rows: Vec::new(),
         joints: Vec::new(),

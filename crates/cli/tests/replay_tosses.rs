@@ -142,3 +142,31 @@ fn a_toss_without_its_velocities_is_a_located_error() {
     assert!(stderr.contains("run 229"), "{stderr}");
     assert!(!out.exists(), "nothing written: {}", out.display());
 }
+
+#[test]
+fn parameters_no_engine_can_use_are_refused_before_anything_is_written() {
+    let tmp = tempfile::tempdir().unwrap();
+    let real = imported(tmp.path());
+    let out = tmp.path().join("replay");
+    for (toml, want) in [
+        ("[objects.box]\nfriction = 0.18\n", "box"),
+        ("[engine.mujoco]\ntimestep_s = 0.002\n", "0.002"),
+    ] {
+        let params = tmp.path().join("p.toml");
+        std::fs::write(&params, toml).unwrap();
+        let o = realitygap(&[
+            "replay",
+            real.to_str().unwrap(),
+            "--engine",
+            "mujoco",
+            "--params",
+            params.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        let stderr = text(&o.stderr);
+        assert!(!o.status.success(), "{toml}: {stderr}");
+        assert!(stderr.contains(want), "{toml}: {stderr}");
+        assert!(!out.exists(), "{toml}: nothing written");
+    }
+}

@@ -254,7 +254,11 @@ fn resample(stepped: &Trajectory, role: &str, times: &[f64], h: f64) -> Trajecto
     let mut out = Trajectory::with_bodies(&[role]);
     let poses = &stepped.bodies[0].poses;
     for &t in times {
-        let k = ((t / h).floor() as usize).min(poses.len().saturating_sub(1));
+        // Nothing is invented past the last step (a run that diverged).
+        let k = (t / h + 1e-9).floor() as usize;
+        if k >= poses.len() {
+            break;
+        }
         let frac = (t / h - k as f64).clamp(0.0, 1.0);
         let pose = match (
             poses.get(k).copied().flatten(),
@@ -301,6 +305,40 @@ fn interpolate(a: &Pose, b: &Pose, f: f64) -> Pose {
 /// ended, the wall time of its loop (s) and the engine steps taken.
 pub type TossRun = (Trajectory, RunStatus, f64, u64);
 
+/// Checks that `engine` can replay the tosses of `set` with `params` (the
+/// parameters' keys, objects and settings) by loading the first toss,
+/// before anything is written; the error names the engine.
+pub fn check_toss_replay(
+    engine: &dyn Engine,
+    set: &TossSet,
+    params: &PhysicalParams,
+) -> Result<()> {
+    let toss = &set.tosses[0];
+    let scene = toss_scene(&set.object, toss)?;
+    let options = RunOptions::default();
+    let fail = |e: String| anyhow!("{}: {e}", engine.name());
+    let (scene, robot) =
+        prepare(engine, &scene, &RobotModel::world(), params).map_err(|e| fail(e.to_string()))?;
+    let settings = toss_settings(engine, params);
+    let sim = load_prepared(engine, &scene, &robot, &settings, params, &options)
+        .map_err(|e| fail(e.to_string()))?;
+    refuse_unstable(engine, sim.as_ref(), &options).map_err(|e| fail(e.to_string()))?;
+    let h = sim.timestep_s();
+    if (h - TOSS_TIMESTEP_S).abs() > 1e-12 {
+        return Err(fail(format!(
+            "a toss is replayed at a {TOSS_TIMESTEP_S} s step; the parameters set {h} s"
+        )));
+    }
+    Ok(())
+}
+
+/// A 1 ms step, with the parameters' `[engine.NAME]` over it.
+fn toss_settings(engine: &dyn Engine, params: &PhysicalParams) -> EngineSettings {
+    let mut base = EngineSettings::new();
+    base.insert(TIMESTEP_KEY.into(), SettingValue::Float(TOSS_TIMESTEP_S));
+    params.settings_over(engine.name(), &base)
+}
+
 /// Simulates one toss in `engine` with `params` (the scene's settings with
 /// the parameters' `[engine.NAME]` over a 1 ms step).
 pub fn simulate_toss(
@@ -313,9 +351,7 @@ pub fn simulate_toss(
     let options = RunOptions::default();
     let (scene, robot) =
         prepare(engine, &scene, &RobotModel::world(), params).map_err(|e| e.to_string())?;
-    let mut base = EngineSettings::new();
-    base.insert(TIMESTEP_KEY.into(), SettingValue::Float(TOSS_TIMESTEP_S));
-    let settings = params.settings_over(engine.name(), &base);
+    let settings = toss_settings(engine, params);
     let mut sim = load_prepared(engine, &scene, &robot, &settings, params, &options)
         .map_err(|e| e.to_string())?;
     refuse_unstable(engine, sim.as_ref(), &options).map_err(|e| e.to_string())?;
@@ -384,30 +420,29 @@ pub fn ballistic_toss(object: &TossedBox, toss: &Toss) -> Trajectory {
 /// the recorded one over the samples both have, in box edges; `None` when
 /// the run has no sample.
 pub fn toss_error_edges(object: &TossedBox, toss: &Toss, run: &Trajectory) -> Option<f64> {
-    let track = run.body(&object.role)?;
-    let gaps: Vec<f64> = toss
-        .poses
+    let held = held_poses(object, toss, run)?;
+    let sum: f64 = held
         .iter()
-        .zip(&track.poses)
-        .filter_map(|(real, sim)| sim.map(|s| s.position_m.distance(real.position_m)))
-        .collect();
-    if gaps.is_empty() {
-        return None;
-    }
-    // A run that ended early (diverged) counts its last pose for the rest.
-    let missing = toss.poses.len() - gaps.len();
-    let last_gap = track
-        .poses
-        .iter()
-        .rev()
-        .find_map(|p| *p)
-        .map(|p| {
-            p.position_m
-                .distance(toss.poses.last().unwrap_or(&p).position_m)
-        })
-        .unwrap_or(0.0);
-    let sum: f64 = gaps.iter().sum::<f64>() + missing as f64 * last_gap;
+        .zip(&toss.poses)
+        .map(|(s, r)| s.position_m.distance(r.position_m))
+        .sum();
     Some(sum / toss.poses.len() as f64 / object.edge_m)
+}
+
+/// The run's pose at each of the toss's samples, a run that ended early
+/// (diverged) holding its last pose for the rest; `None` when the run has
+/// no sample.
+fn held_poses(object: &TossedBox, toss: &Toss, run: &Trajectory) -> Option<Vec<Pose>> {
+    let track = run.body(&object.role)?;
+    let mut last = None;
+    (0..toss.poses.len())
+        .map(|k| {
+            if let Some(p) = track.poses.get(k).copied().flatten() {
+                last = Some(p);
+            }
+            last
+        })
+        .collect()
 }
 
 /// The secondary measures of one toss: the centre's error at 0.1 s and
@@ -429,16 +464,7 @@ pub struct TossMeasures {
 /// [`TossMeasures`] of `run` against `toss`; `None` when the run has no
 /// sample.
 pub fn toss_measures(object: &TossedBox, toss: &Toss, run: &Trajectory) -> Option<TossMeasures> {
-    let track = run.body(&object.role)?;
-    let mut last = None;
-    let held: Vec<Pose> = (0..toss.poses.len())
-        .map(|k| {
-            if let Some(p) = track.poses.get(k).copied().flatten() {
-                last = Some(p);
-            }
-            last
-        })
-        .collect::<Option<Vec<Pose>>>()?;
+    let held = held_poses(object, toss, run)?;
     let gap = |k: usize| held[k].position_m.distance(toss.poses[k].position_m) / object.edge_m;
     let at = |t: f64| toss.time_s.iter().position(|&s| s >= t - 1e-9).map(gap);
     let orientation_deg = held
@@ -511,6 +537,10 @@ pub fn replay_tosses(
     jobs: usize,
     progress: &(dyn Fn(&str, &str, Option<&str>) + Sync),
 ) -> Result<Vec<TossRow>> {
+    for engine in engines {
+        check_toss_replay(*engine, set, params)?;
+    }
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let mut rows = Vec::new();
     let ideal: Vec<Trajectory> = set
         .tosses
@@ -665,8 +695,16 @@ fn row_json(r: &TossRow) -> Value {
 pub fn toss_markdown(rows: &[TossRow], set: &TossSet) -> String {
     let mut sorted: Vec<&TossRow> = rows.iter().collect();
     sorted.sort_by(|a, b| {
-        let k = |r: &TossRow| r.error_edges.map_or(f64::INFINITY, |e| e.0);
-        k(a).total_cmp(&k(b))
+        // A source that failed on some tosses is measured on fewer: it is
+        // listed after every source measured on all of them.
+        let k = |r: &TossRow| {
+            (
+                r.tosses < set.tosses.len(),
+                r.error_edges.map_or(f64::INFINITY, |e| e.0),
+            )
+        };
+        let (ka, kb) = (k(a), k(b));
+        ka.0.cmp(&kb.0).then(ka.1.total_cmp(&kb.1))
     });
     let mut s = format!(
         "# Tosses: {} real tosses of a {:.4} m, {} kg box ({})\n\n\
