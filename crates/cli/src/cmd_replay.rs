@@ -43,10 +43,11 @@ pub struct Args {
     /// cores).
     #[arg(long, short = 'j', value_name = "N")]
     jobs: Option<usize>,
-    /// Tossed objects (from `import contactnets`): the initial velocity
-    /// from a fit of free flight over the first 5 samples (`fit`), or the
-    /// first sample's recorded one (`first`).
-    #[arg(long, value_name = "HOW", default_value = "fit", value_parser = ["fit", "first"])]
+    /// Tossed objects (from `import contactnets`): the initial velocity is
+    /// the first sample's recorded one (`first`), or a fit of free flight
+    /// over the first 5 samples (`fit`: better over the first 0.1 s, worse
+    /// over the whole toss).
+    #[arg(long, value_name = "HOW", default_value = "first", value_parser = ["first", "fit"])]
     toss_start: String,
     /// Where the replays run.
     #[command(flatten)]
@@ -65,10 +66,10 @@ pub fn run(args: Args) -> Result<()> {
         out: args.out,
         jobs: args.jobs,
         executor: args.executor.executor()?,
-        toss_start: if args.toss_start == "first" {
-            realitygap_study::tosses::TossStart::First
-        } else {
+        toss_start: if args.toss_start == "fit" {
             realitygap_study::tosses::TossStart::Fit
+        } else {
+            realitygap_study::tosses::TossStart::First
         },
     };
     replay(

@@ -76,14 +76,17 @@ pub struct TossSet {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum TossStart {
     /// The first sample's recorded velocity (the data's backward
-    /// difference).
+    /// difference): the better headline on the 456 visible tosses in 10
+    /// of 12 engine rows (six engines, at their defaults and with
+    /// friction 0.18).
+    #[default]
     First,
     /// A least-squares fit of free flight over the first samples
-    /// ([`fitted_velocity`]). On the 456 visible tosses with friction 0.18
-    /// it predicts the first 0.1 s better in both engines measured (MuJoCo
-    /// 0.029 -> 0.022 edges, ODE 0.026 -> 0.019); over the whole toss it
-    /// is mixed (MuJoCo 0.284 -> 0.266, ODE 0.259 -> 0.279).
-    #[default]
+    /// ([`fitted_velocity`]): better over the first 0.1 s in every engine
+    /// (at their defaults MuJoCo 0.032 -> 0.027 edges, Bullet 0.027 ->
+    /// 0.020), worse over the whole toss in most (MuJoCo 0.939 -> 0.975,
+    /// Bullet 0.392 -> 0.427; with friction 0.18 better only in MuJoCo,
+    /// 0.284 -> 0.266, and Bullet).
     Fit,
 }
 
