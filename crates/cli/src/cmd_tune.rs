@@ -67,9 +67,11 @@ pub struct Args {
     /// Real runs to score on and never fit on, e.g. 16-20.
     #[arg(long, value_name = "RANGE")]
     pub holdout: Option<String>,
-    /// Evaluations (each simulates every scene of the study).
-    #[arg(long, default_value_t = 600, value_name = "EVALUATIONS")]
-    pub budget: usize,
+    /// Evaluations (each simulates every scene of the study, or every toss
+    /// fitted on). Default 600; for a study of tosses, the study file's
+    /// `budget` (96 for contactnets2020).
+    #[arg(long, value_name = "EVALUATIONS")]
+    pub budget: Option<usize>,
     /// Seed of the search.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,

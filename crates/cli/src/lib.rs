@@ -13,6 +13,7 @@ pub mod compare;
 pub mod replay;
 pub mod reproduce;
 pub mod tune;
+pub mod tune_tosses;
 pub mod ui;
 
 use realitygap_core::engine::Engine;

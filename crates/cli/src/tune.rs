@@ -11,6 +11,7 @@ use realitygap_runner::prepare::{engine_names, find_engine, overrides_for};
 use realitygap_runner::slurm::Executor;
 use realitygap_runner::Launcher;
 use realitygap_study::data_source::assets_dir;
+use realitygap_study::toss_study::is_toss_study;
 use realitygap_study::{load_study, DataSource};
 use realitygap_tune::objective::{Simulator, Target};
 use realitygap_tune::search::SearchOptions;
@@ -48,8 +49,8 @@ pub struct TuneRequest {
     pub runs: Option<String>,
     /// Runs to score on and never fit on.
     pub holdout: Option<String>,
-    /// Evaluations.
-    pub budget: usize,
+    /// Evaluations (default 600; a study of tosses: the study file's).
+    pub budget: Option<usize>,
     /// Seed of the search.
     pub seed: u64,
     /// Restart a stalled search (IPOP-CMA-ES).
@@ -91,7 +92,7 @@ impl Default for TuneRequest {
             space: None,
             runs: None,
             holdout: None,
-            budget: 600,
+            budget: None,
             seed: 1,
             restarts: false,
             jobs: None,
@@ -120,8 +121,11 @@ pub struct Tuned {
 /// 4 + 3 ln n, 17 for 60 parameters).
 const SLURM_THREADS: usize = 64;
 
+/// The study tune's evaluations when `--budget` is not given.
+pub const STUDY_BUDGET: usize = 600;
+
 /// The cores of this machine.
-fn cores() -> usize {
+pub(crate) fn cores() -> usize {
     std::thread::available_parallelism().map_or(1, |n| n.get())
 }
 
@@ -138,7 +142,11 @@ pub fn tune(request: &TuneRequest, launcher: &Launcher, ui: &dyn Ui) -> Result<T
     if let Some(recordings) = &request.recordings {
         return tune_recordings(request, recordings, ui);
     }
+    if let Some(study) = request.study.as_deref().filter(|s| is_toss_study(s)) {
+        return crate::tune_tosses::tune_tosses(request, study, ui);
+    }
     let args = request;
+    let budget = args.budget.unwrap_or(STUDY_BUDGET);
     for (given, flag) in [
         (args.params.is_some(), "--params"),
         (args.scene.is_some(), "--scene"),
@@ -204,7 +212,7 @@ pub fn tune(request: &TuneRequest, launcher: &Launcher, ui: &dyn Ui) -> Result<T
         space,
         set,
         search: SearchOptions {
-            budget: args.budget,
+            budget,
             seed: args.seed,
             jobs,
             restarts: args.restarts,
@@ -214,7 +222,7 @@ pub fn tune(request: &TuneRequest, launcher: &Launcher, ui: &dyn Ui) -> Result<T
         polish: realitygap_tune::polish::PolishOptions {
             iterations: args.iterations.unwrap_or(10),
             // The polish spends about what the search did.
-            max_evaluations: args.budget,
+            max_evaluations: budget,
             ..Default::default()
         },
         baseline_space: if engine.name() == realitygap_tune::outputs::PHYSICS_FREE {
@@ -232,7 +240,7 @@ pub fn tune(request: &TuneRequest, launcher: &Launcher, ui: &dyn Ui) -> Result<T
         packages: args.packages.clone(),
         slurm: gatherer.clone(),
     };
-    let bar = ui.bar(args.budget as u64, "evaluations");
+    let bar = ui.bar(budget as u64, "evaluations");
     let started = Instant::now();
     let on_progress = |p: realitygap_tune::search::Progress| {
         bar.set_position(p.done as u64);

@@ -84,6 +84,10 @@ pub struct StudyArchive {
     pub checksum_file: PathBuf,
     /// Its recorded SHA-256, 64 lower-case hex digits.
     pub sha256: String,
+    /// The folders the archive must hold (the study's recordings'
+    /// `MotionCapture/`, `Simulation/` and `kinova_description/` unless
+    /// [`StudyArchive::requiring`] says otherwise).
+    pub required: Vec<String>,
 }
 
 impl StudyArchive {
@@ -127,7 +131,16 @@ impl StudyArchive {
             path: archive.to_path_buf(),
             checksum_file: checksum_file.to_path_buf(),
             sha256,
+            required: ["MotionCapture", "Simulation", "kinova_description"]
+                .map(String::from)
+                .to_vec(),
         })
+    }
+
+    /// The same archive, required to hold the folders `folders` instead.
+    pub fn requiring(mut self, folders: &[&str]) -> StudyArchive {
+        self.required = folders.iter().map(|f| f.to_string()).collect();
+        self
     }
 
     /// Name of this archive's folder in the cache: the first 16 hex digits
@@ -430,7 +443,7 @@ fn unpack_into(bytes: &[u8], archive: &StudyArchive, tmp: &Path) -> Result<Manif
             }
         }
     }
-    for required in ["MotionCapture", "Simulation", "kinova_description"] {
+    for required in &archive.required {
         if !tmp.join(required).is_dir() {
             return Err(bad(format!("the archive has no {required}/ folder")));
         }

@@ -596,7 +596,7 @@ fn replay<'py>(
 #[pyfunction]
 #[pyo3(signature = (*, engine, out, study=None, recordings=None, params=None, scene=None,
     efforts=false, iterations=None, data="builtin", space=None, runs=None, holdout=None,
-    budget=600, seed=1, restarts=false, jobs=None, cube_weight=None, keep_registration=false,
+    budget=None, seed=1, restarts=false, jobs=None, cube_weight=None, keep_registration=false,
     settings=None, set=Vec::new(), robot=None, packages=Vec::new(), reporter=None))]
 #[allow(clippy::too_many_arguments)]
 fn tune<'py>(
@@ -613,7 +613,7 @@ fn tune<'py>(
     space: Option<PathBuf>,
     runs: Option<String>,
     holdout: Option<String>,
-    budget: usize,
+    budget: Option<usize>,
     seed: u64,
     restarts: bool,
     jobs: Option<usize>,

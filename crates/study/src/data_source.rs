@@ -135,6 +135,38 @@ pub fn builtin_data_dir_in(assets: &Path) -> Result<PathBuf> {
     Ok(unpacked.dir)
 }
 
+/// The tosses' archive in the assets folder (the second built-in study).
+pub const TOSSES_ARCHIVE_IN_ASSETS: &str = "study-data/contactnets.tar.zst";
+/// Its checksum file.
+pub const TOSSES_CHECKSUM_IN_ASSETS: &str = "study-data/contactnets.tar.zst.sha256";
+
+/// The ContactNets cube tosses built in, unpacked and verified as the
+/// study's recordings are: the folder holding `tosses/N.pt`,
+/// `experiment.json` and `LICENSE`.
+pub fn builtin_tosses_dir_in(assets: &Path) -> Result<PathBuf> {
+    let context = |e: builtin::BuiltinError| {
+        anyhow!("the cube tosses built in (--data builtin): {e} (or pass --data DIR, a folder holding tosses/ and experiment.json)")
+    };
+    let archive = StudyArchive::at(
+        &assets.join(TOSSES_ARCHIVE_IN_ASSETS),
+        &assets.join(TOSSES_CHECKSUM_IN_ASSETS),
+    )
+    .map_err(context)?
+    .requiring(&["tosses"]);
+    let root = builtin::default_cache_root().map_err(context)?;
+    let unpacked = builtin::open_or_unpack(&archive, &root).map_err(context)?;
+    if unpacked.action != CacheAction::Reused {
+        eprintln!(
+            "study data: unpacked the cube tosses built in ({} files, {:.1} MB, into {} in {:.2} s)",
+            unpacked.files,
+            unpacked.bytes as f64 / 1e6,
+            unpacked.dir.display(),
+            unpacked.elapsed_s
+        );
+    }
+    Ok(unpacked.dir)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

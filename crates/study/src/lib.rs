@@ -32,6 +32,7 @@ pub mod replay;
 pub mod reproduce;
 pub mod stitch;
 pub mod study;
+pub mod toss_study;
 pub mod tosses;
 
 pub use data_source::DataSource;

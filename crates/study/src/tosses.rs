@@ -90,6 +90,17 @@ pub enum TossStart {
     Fit,
 }
 
+impl TossSet {
+    /// The tosses at `indices`, in that order, of the same box.
+    pub fn subset(&self, indices: &[usize]) -> TossSet {
+        TossSet {
+            dir: self.dir.clone(),
+            object: self.object.clone(),
+            tosses: indices.iter().map(|&i| self.tosses[i].clone()).collect(),
+        }
+    }
+}
+
 /// Whether `dir` is a results directory of tossed objects (its manifest's
 /// settings name an `object`, and it records no robot).
 pub fn is_toss_store(dir: &Path) -> bool {
@@ -142,6 +153,54 @@ pub fn read_tosses(dir: &Path, start: TossStart) -> Result<TossSet> {
     if tosses.is_empty() {
         bail!("{}: no finished toss to replay", dir.display());
     }
+    Ok(TossSet {
+        dir: dir.to_path_buf(),
+        object,
+        tosses,
+    })
+}
+
+/// The tosses of a folder of published `N.pt` files (ContactNets' layout,
+/// read directly, no results directory): `experiment` is its
+/// `experiment.json` (default: beside the files or one folder up, else the
+/// published constants). The box's mass is the experiment's (the published
+/// 0.37 kg when it gives none).
+pub fn read_toss_folder(dir: &Path, experiment: Option<&Path>, start: TossStart) -> Result<TossSet> {
+    use realitygap_contactnets::{import, Experiment};
+    let experiment = match experiment
+        .map(Path::to_path_buf)
+        .or_else(|| import::default_experiment_file(dir))
+    {
+        Some(file) => Experiment::read(&file)?,
+        None => Experiment::published(),
+    };
+    let files = import::list_tosses(dir)?;
+    let read = import::read_tosses(&files, &experiment)?;
+    let object = TossedBox {
+        role: realitygap_core::trajectory::CUBE.to_string(),
+        edge_m: experiment.edge_m(),
+        mass_kg: experiment
+            .mass_kg
+            .or(Experiment::published().mass_kg)
+            .unwrap_or(0.37),
+    };
+    let tosses = read
+        .into_iter()
+        .map(|t| {
+            let twist = t.twists[0];
+            let v0_m_s = match start {
+                TossStart::First => twist.linear_m_s,
+                TossStart::Fit => fitted_velocity(&t.time_s, &t.poses).unwrap_or(twist.linear_m_s),
+            };
+            Toss {
+                id: t.number.to_string(),
+                v0_m_s,
+                w0_rad_s: twist.angular_world_rad_s(t.poses[0].orientation),
+                time_s: t.time_s,
+                poses: t.poses,
+            }
+        })
+        .collect();
     Ok(TossSet {
         dir: dir.to_path_buf(),
         object,
@@ -558,7 +617,7 @@ pub fn replay_tosses(
     for (toss, t) in set.tosses.iter().zip(&ideal) {
         store.write_run(RunEntry::new(&toss.id), t)?;
     }
-    rows.push(row(
+    rows.push(toss_row(
         PHYSICS_FREE_ENGINE,
         set,
         &ideal
@@ -608,12 +667,12 @@ pub fn replay_tosses(
                 }
             }
         }
-        rows.push(row(engine.name(), set, &runs, Some(wall)));
+        rows.push(toss_row(engine.name(), set, &runs, Some(wall)));
     }
     let table = toss_markdown(&rows, set);
     std::fs::write(out.join("tosses.md"), &table)
         .with_context(|| format!("writing {}", out.join("tosses.md").display()))?;
-    let json = Value::Array(rows.iter().map(row_json).collect());
+    let json = Value::Array(rows.iter().map(toss_row_json).collect());
     std::fs::write(
         out.join("tosses.json"),
         serde_json::to_string_pretty(&json)? + "\n",
@@ -638,7 +697,9 @@ fn open_store(
     Ok(store)
 }
 
-fn row(
+/// One source's row of the toss table from its runs of `set`'s tosses (in
+/// order); `wall` is the wall time of those runs, s.
+pub fn toss_row(
     source: &str,
     set: &TossSet,
     runs: &[Result<TossRun, String>],
@@ -677,7 +738,8 @@ fn row(
     }
 }
 
-fn row_json(r: &TossRow) -> Value {
+/// A row of the toss table as JSON.
+pub fn toss_row_json(r: &TossRow) -> Value {
     json!({
         "source": r.source,
         "tosses": r.tosses,

@@ -25,6 +25,7 @@ pub mod search;
 pub mod slurm_batch;
 pub mod space;
 pub mod stages;
+pub mod tosses;
 
 use anyhow::{bail, Context, Result};
 use objective::{offset_registration, Score, Simulator, Target};
