@@ -64,6 +64,12 @@ pub struct Args {
     /// e.g. 16-20 (default: none held out).
     #[arg(long, value_name = "RANGE", requires = "joint_space")]
     pub holdout: Option<String>,
+    /// Leave out the second study: the 456 real cube tosses built in
+    /// (assets/studies/contactnets2020.toml), replayed in every engine at
+    /// its defaults beside the physics-free row into OUT/tosses/ (about
+    /// 25 s on 2 cores). Never with --data none.
+    #[arg(long)]
+    pub no_tosses: bool,
     /// Where the simulations run (as for `run`).
     #[command(flatten)]
     pub executor: cmd_run::ExecutorArgs,
@@ -92,6 +98,7 @@ pub fn run(args: Args) -> Result<()> {
         holdout: args.holdout,
         // `--executor slurm` without Slurm is an error now, not a warning per batch.
         executor: args.executor.executor()?,
+        tosses: !args.no_tosses,
         command: std::env::args().collect::<Vec<_>>().join(" "),
         verbose: args.verbose,
     };

@@ -60,6 +60,10 @@ pub struct ReproduceRequest {
     pub holdout: Option<String>,
     /// Where the simulations run.
     pub executor: Executor,
+    /// Also replay the cube tosses built in (the second study,
+    /// contactnets2020) in every engine beside the physics-free row, into
+    /// `OUT/tosses/` (not with `data` none).
+    pub tosses: bool,
     /// The command line, for the report's provenance.
     pub command: String,
     /// Say everything: a line per scene and engine, and the full tables
@@ -84,6 +88,7 @@ impl Default for ReproduceRequest {
             runs: None,
             holdout: None,
             executor: Executor::Local,
+            tosses: true,
             command: String::new(),
             verbose: false,
         }
@@ -96,6 +101,8 @@ pub struct Reproduced {
     pub reports: Vec<SceneReport>,
     /// The table in Markdown (as printed).
     pub table: String,
+    /// The toss table in Markdown, when the tosses were replayed.
+    pub tosses: Option<String>,
     /// The joint-space tables in Markdown, when asked for.
     pub joint_space: Option<String>,
     /// `OUT/report/index.html`.
@@ -216,6 +223,16 @@ pub fn reproduce_keeping_problems(
         timings.push(("joint space".into(), t.elapsed().as_secs_f64()));
     }
 
+    let mut tosses = None;
+    if args.tosses && data.is_some() {
+        let t = Instant::now();
+        let (md, failed) = replay_builtin_tosses(args, &engines, ui)?;
+        problems.extend(failed);
+        ui.say(format!("\n{}", md.trim_end_matches('\n')));
+        tosses = Some(md);
+        timings.push(("tosses".into(), t.elapsed().as_secs_f64()));
+    }
+
     ui.note("[3/3] writing the report".into());
     let t = Instant::now();
     let index_html = write_report(args, &reports, &study, &study_path, &roots)?;
@@ -232,6 +249,7 @@ pub fn reproduce_keeping_problems(
     Ok(Reproduced {
         reports,
         table,
+        tosses,
         joint_space,
         index_html,
         timings,
@@ -299,6 +317,71 @@ fn simulate(
         }
     }
 }
+
+/// The second study: the cube tosses built in replayed in `engines` (the
+/// physics-free one as the ballistic row) at their defaults into
+/// `OUT/tosses/`; the table, and the tosses that failed as problems.
+fn replay_builtin_tosses(
+    args: &ReproduceRequest,
+    engines: &[String],
+    ui: &dyn Ui,
+) -> Result<(String, Vec<String>)> {
+    use realitygap_study::toss_study::TossStudy;
+    use realitygap_study::tosses::{replay_tosses, toss_markdown};
+    let file = realitygap_study::data_source::assets_dir().join(CONTACTNETS_STUDY);
+    let study = TossStudy::from_file(&file)?;
+    let set = study.load(&DataSource::Builtin)?;
+    let mut chosen = Vec::new();
+    for name in engines {
+        let engine = realitygap_runner::prepare::find_engine(crate::compiled_engines, name)?;
+        if engine.name() != realitygap_core::engine::PHYSICS_FREE_ENGINE {
+            chosen.push(engine);
+        }
+    }
+    let refs: Vec<&dyn realitygap_core::Engine> = chosen.iter().map(|e| e.as_ref()).collect();
+    ui.note(format!(
+        "tosses: {} real cube tosses ({}) in {} engines and the physics-free row",
+        set.tosses.len(),
+        study.name,
+        refs.len()
+    ));
+    let jobs = args
+        .jobs
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let bar = ui.bar((refs.len() * set.tosses.len()) as u64, "tosses");
+    let out = args.out.join("tosses");
+    let rows = replay_tosses(
+        &refs,
+        &set,
+        &realitygap_core::PhysicalParams::default(),
+        &out,
+        jobs,
+        &|engine, id, failed| {
+            bar.inc(1);
+            if let Some(why) = failed {
+                bar.println(format!("toss {id} in {engine}: failed: {why}"));
+            }
+        },
+    )?;
+    bar.finish();
+    let failed = rows
+        .iter()
+        .filter(|r| r.tosses < set.tosses.len())
+        .map(|r| {
+            format!(
+                "{} of {} tosses failed in {} (see {})",
+                set.tosses.len() - r.tosses,
+                set.tosses.len(),
+                r.source,
+                out.join(&r.source).join("manifest.json").display()
+            )
+        })
+        .collect();
+    Ok((toss_markdown(&rows, &set), failed))
+}
+
+/// The second built-in study, in the assets folder.
+pub const CONTACTNETS_STUDY: &str = "studies/contactnets2020.toml";
 
 /// Stage 3: tables, figures and `OUT/report/index.html`, with the
 /// provenance of every source and of this call; the page's path.

@@ -13,7 +13,7 @@ use realitygap_study::data_source::assets_dir;
 use realitygap_study::toss_study::TossStudy;
 use realitygap_tune::search::SearchOptions;
 use realitygap_tune::space::Space;
-use realitygap_tune::tosses::{tune_tosses as tune, TossTune};
+use realitygap_tune::tosses::{supported_space, tune_tosses as tune, TossTune};
 use std::path::Path;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
@@ -58,7 +58,14 @@ pub fn tune_tosses(request: &TuneRequest, study: &Path, ui: &dyn Ui) -> Result<T
         .space
         .clone()
         .unwrap_or_else(|| assets_dir().join(TOSS_SPACE_IN_ASSETS));
-    let space = Space::from_file(&space_file)?;
+    let space = supported_space(engine.as_ref(), &Space::from_file(&space_file)?);
+    if !space.held.is_empty() {
+        ui.note(format!(
+            "{} has no equivalent of {}: not fitted",
+            engine.name(),
+            space.held.join(", ")
+        ));
+    }
     let mut settings = match &args.settings {
         Some(f) => PhysicalParams::from_file(f)?
             .engine_settings

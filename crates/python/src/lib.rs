@@ -679,7 +679,7 @@ fn tune<'py>(
 #[pyfunction]
 #[pyo3(signature = (*, out, data="builtin", repeats=20, engines=Vec::new(), scenes=Vec::new(),
     jobs=None, mode="default", timeout_s=None, params=None, tuned=Vec::new(),
-    joint_space=false, runs=None, holdout=None, reporter=None))]
+    joint_space=false, runs=None, holdout=None, tosses=true, reporter=None))]
 #[allow(clippy::too_many_arguments)]
 fn reproduce<'py>(
     py: Python<'py>,
@@ -696,6 +696,7 @@ fn reproduce<'py>(
     joint_space: bool,
     runs: Option<String>,
     holdout: Option<String>,
+    tosses: bool,
     reporter: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     if !(1..=10_000).contains(&repeats) {
@@ -718,6 +719,7 @@ fn reproduce<'py>(
         runs,
         holdout,
         executor: Executor::Local,
+        tosses,
         command: "realitygap.reproduce(...) (Python)".into(),
         verbose: false,
     };
@@ -734,6 +736,7 @@ fn reproduce<'py>(
     d.set_item("markdown", r.table)?;
     d.set_item("json", json)?;
     d.set_item("joint_space", r.joint_space)?;
+    d.set_item("tosses", r.tosses)?;
     d.set_item("report", r.index_html.display().to_string())?;
     d.set_item("timings", r.timings)?;
     d.set_item("problems", r.problems)?;

@@ -103,6 +103,22 @@ pub fn toss_errors(
         .collect()
 }
 
+/// The space without the keys `engine` has no equivalent for (PhysX has no
+/// contact softness): they are held, listed in [`Space::held`].
+pub fn supported_space(engine: &dyn Engine, space: &Space) -> Space {
+    let support = engine.param_support();
+    space.holding(|key| {
+        let start = space
+            .dims
+            .iter()
+            .find(|d| d.key == key)
+            .map_or(0.0, |d| d.start);
+        crate::space::params_of(std::iter::once((key, start)))
+            .map(|p| p.check_support(engine.name(), &support).is_err())
+            .unwrap_or(false)
+    })
+}
+
 /// Prepare: the space holds only keys of the tossed box and the contact,
 /// and the engine loads a toss at the search's start.
 fn prepare(t: &TossTune) -> Result<PhysicalParams> {
@@ -296,8 +312,8 @@ pub fn tune_tosses(
     progress: &(dyn Fn(Progress) + Sync),
     scored: &(dyn Fn() + Sync),
 ) -> Result<TossTuned> {
-    std::fs::create_dir_all(t.out).with_context(|| format!("creating {}", t.out.display()))?;
     prepare(t)?;
+    std::fs::create_dir_all(t.out).with_context(|| format!("creating {}", t.out.display()))?;
     let started = Instant::now();
     let history = fit(t, progress)?;
     let fit_s = started.elapsed().as_secs_f64();
@@ -397,14 +413,22 @@ fn write(
         "# {name}: contact tuned on real tosses\n\n\
          Study {}: fitted on {} tosses, scored on {} held out (never fitted on). {} evaluations in {:.0} s; the best candidate's mean error on the fitted tosses is {:.4} edges.\n\n\
          ## Fitted parameters\n\n\
-         Intervals: the 2.5-97.5 percentiles of the best evaluated candidate over {INTERVAL_RESAMPLES} bootstrap resamples of the fitted tosses (bounded by where the search looked). The data's experiment.json gives friction 0.18 and restitution 0.125, values its authors used, not measurements.\n\n\
+         {}Intervals: the 2.5-97.5 percentiles of the best evaluated candidate over {INTERVAL_RESAMPLES} bootstrap resamples of the fitted tosses (bounded by where the search looked). The data's experiment.json gives friction 0.18 and restitution 0.125, values its authors used, not measurements.\n\n\
          | parameter | tuned | 95 % interval | bounds |\n|---|---:|---|---|\n",
         t.study,
         t.training.len(),
         t.held_out.len(),
         tuned.evaluations,
         fit_s,
-        tuned.training_edges
+        tuned.training_edges,
+        if t.space.held.is_empty() {
+            String::new()
+        } else {
+            format!(
+                "Not fitted, {name} has no equivalent: {}.\n\n",
+                t.space.held.iter().map(|k| format!("`{k}`")).collect::<Vec<_>>().join(", ")
+            )
+        }
     );
     for ((key, v, i), d) in tuned.intervals.iter().zip(&t.space.dims) {
         let near = |b: f64| (v - b).abs() <= 1e-3 * (d.high - d.low);
@@ -442,6 +466,7 @@ fn write(
         "fitted_tosses": t.training.iter().map(|&i| &t.set.tosses[i].id).collect::<Vec<_>>(),
         "held_out_tosses": t.held_out.iter().map(|&i| &t.set.tosses[i].id).collect::<Vec<_>>(),
         "evaluations": tuned.evaluations,
+        "held_keys": t.space.held,
         "fit_wall_s": fit_s,
         "training_edges": tuned.training_edges,
         "parameters": tuned.intervals.iter().map(|(k, v, i)| json!({

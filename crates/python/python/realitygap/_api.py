@@ -686,7 +686,7 @@ def tune(
     out: PathLike,
     study: Optional[PathLike] = None,
     recordings: Optional[PathLike] = None,
-    budget: int = 600,
+    budget: Optional[int] = None,
     seed: int = 1,
     restarts: bool = False,
     runs: Optional[str] = None,
@@ -703,12 +703,14 @@ def tune(
     params: Optional[Params] = None,
     scene: Optional[PathLike] = None,
     efforts: bool = False,
-    iterations: int = 30,
+    iterations: Optional[int] = None,
     progress: Any = True,
 ) -> TuneResult:
     """Calibrates ``engine`` (``realitygap tune``) into ``out``: against a
-    study's real runs (``study``, default the built-in study) with CMA-ES
-    over ``budget`` evaluations (``restarts``: restart a stalled search
+    study's real runs (``study``, default the built-in study; a study of
+    tosses such as ``assets/studies/contactnets2020.toml`` fits the contact
+    on its tosses and scores it on the ones it holds out) with CMA-ES
+    over ``budget`` evaluations (default 600, or the toss study's own) (``restarts``: restart a stalled search
     from a random point with twice the population), then untuned against tuned on the
     training and held-out runs with intervals; or against a robot's own
     recorded episodes (``recordings``: a results directory of ``realitygap
@@ -764,6 +766,7 @@ class Reproduction(Comparison):
         self.timings = dict(d["timings"])
         self.problems = list(d["problems"])
         self.joint_space = d["joint_space"]
+        self.tosses = d.get("tosses")
 
 
 def reproduce(
@@ -781,6 +784,7 @@ def reproduce(
     joint_space: bool = False,
     runs: Optional[str] = None,
     holdout: Optional[str] = None,
+    tosses: bool = True,
     progress: Any = True,
 ) -> Reproduction:
     """The whole study in one call (``realitygap reproduce``): every scene
@@ -788,7 +792,9 @@ def reproduce(
     study's recorded simulators, the table, the figures and
     ``out/report/index.html``. ``tuned``: tunes (:class:`TuneResult` or
     their folders) whose engines run again tuned, as "<engine> (tuned)"
-    rows. Resumes where an earlier call stopped."""
+    rows. ``tosses``: also replay the 456 real cube tosses built in, in every
+    engine beside the physics-free row (``tosses``: their table, Markdown).
+    Resumes where an earlier call stopped."""
     if tuned is None:
         tuned_list: List[Any] = []
     elif isinstance(tuned, (str, os.PathLike, TuneResult)):
@@ -814,6 +820,7 @@ def reproduce(
         joint_space=joint_space,
         runs=runs,
         holdout=holdout,
+        tosses=tosses,
         reporter=r,
     )
     return Reproduction(os.fspath(out), d)

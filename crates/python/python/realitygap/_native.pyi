@@ -76,12 +76,12 @@ def tune(
     params: Optional[str] = None,
     scene: Optional[str] = None,
     efforts: bool = False,
-    iterations: int = 30,
+    iterations: Optional[int] = None,
     data: str = "builtin",
     space: Optional[str] = None,
     runs: Optional[str] = None,
     holdout: Optional[str] = None,
-    budget: int = 600,
+    budget: Optional[int] = None,
     seed: int = 1,
     restarts: bool = False,
     jobs: Optional[int] = None,
@@ -108,6 +108,7 @@ def reproduce(
     joint_space: bool = False,
     runs: Optional[str] = None,
     holdout: Optional[str] = None,
+    tosses: bool = True,
     reporter: Optional[Any] = None,
 ) -> Dict[str, Any]: ...
 def params_toml(json: str) -> str: ...
