@@ -226,9 +226,13 @@ pub fn reproduce_keeping_problems(
     let mut tosses = None;
     if args.tosses && data.is_some() {
         let t = Instant::now();
-        let (md, failed) = replay_builtin_tosses(args, &engines, ui)?;
+        let (md, line, failed) = replay_builtin_tosses(args, &engines, ui)?;
         problems.extend(failed);
-        ui.say(format!("\n{}", md.trim_end_matches('\n')));
+        if args.verbose {
+            ui.say(format!("\n{}", md.trim_end_matches('\n')));
+        } else {
+            ui.say(line);
+        }
         tosses = Some(md);
         timings.push(("tosses".into(), t.elapsed().as_secs_f64()));
     }
@@ -325,7 +329,7 @@ fn replay_builtin_tosses(
     args: &ReproduceRequest,
     engines: &[String],
     ui: &dyn Ui,
-) -> Result<(String, Vec<String>)> {
+) -> Result<(String, String, Vec<String>)> {
     use realitygap_study::toss_study::TossStudy;
     use realitygap_study::tosses::{replay_tosses, toss_markdown};
     let file = realitygap_study::data_source::assets_dir().join(CONTACTNETS_STUDY);
@@ -377,7 +381,29 @@ fn replay_builtin_tosses(
             )
         })
         .collect();
-    Ok((toss_markdown(&rows, &set), failed))
+    let mut sorted: Vec<_> = rows.iter().filter(|r| r.error_edges.is_some()).collect();
+    sorted.sort_by(|a, b| {
+        let e = |r: &realitygap_study::tosses::TossRow| r.error_edges.map_or(f64::INFINITY, |e| e.0);
+        e(a).total_cmp(&e(b))
+    });
+    let line = format!(
+        "tosses: {} real cube tosses, each engine at its defaults (the cube centre's mean error, cube edges): {}; the table: {}",
+        set.tosses.len(),
+        sorted
+            .iter()
+            .map(|r| {
+                let name = if r.source == realitygap_core::engine::PHYSICS_FREE_ENGINE {
+                    "physics-free"
+                } else {
+                    r.source.as_str()
+                };
+                format!("{name} {:.3}", r.error_edges.map_or(f64::NAN, |e| e.0))
+            })
+            .collect::<Vec<_>>()
+            .join(", "),
+        out.join("tosses.md").display()
+    );
+    Ok((toss_markdown(&rows, &set), line, failed))
 }
 
 /// The second built-in study, in the assets folder.

@@ -205,6 +205,13 @@ fn reproduce_with_the_builtin_data_gives_the_table_of_paper_data() {
     // Header, 7 recorded simulators, 2 engines of this tool.
     assert_eq!(rows.len(), 1 + 7 + 2, "{summary}");
     assert!(builtin.contains("| V-Rep Vortex |") && builtin.contains("(this tool)"));
+    // The second study: the built-in tosses in both engines and the
+    // physics-free row.
+    let tosses = std::fs::read_to_string(out_dir.join("tosses/tosses.md")).unwrap();
+    for row in ["| rapier |", "| ode |", "| physics-free"] {
+        assert!(tosses.contains(row), "{tosses}");
+    }
+    assert!(tosses.contains("456 real tosses"), "{tosses}");
     let html = std::fs::read_to_string(out_dir.join("report/index.html")).unwrap();
     assert!(
         html.contains("paper-data.tar.zst"),

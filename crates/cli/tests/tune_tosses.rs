@@ -30,7 +30,7 @@ fn small_study(dir: &Path) -> PathBuf {
     let file = dir.join("three.toml");
     std::fs::write(
         &file,
-        "kind = \"tosses\"\nname = \"three\"\ntitle = \"three tosses\"\ntosses = \"tosses\"\nexperiment = \"experiment.json\"\nheld_out_every = 2\nbudget = 6\n",
+        "kind = \"tosses\"\nname = \"three\"\ntitle = \"three tosses\"\ntosses = \"tosses\"\nexperiment = \"experiment.json\"\nheld_out_every = 2\nbudget = 8\n",
     )
     .unwrap();
     file
@@ -45,11 +45,12 @@ fn the_contact_is_fitted_scored_on_held_out_tosses_resumed_and_replayed() {
     let tmp = tempfile::tempdir().unwrap();
     let study = small_study(tmp.path());
     let out = tmp.path().join("tuned");
+    let data_dir = data();
     let args = [
         "tune",
         study.to_str().unwrap(),
         "--data",
-        data().to_str().unwrap(),
+        data_dir.to_str().unwrap(),
         "--engine",
         "mujoco",
         "--out",
@@ -62,7 +63,7 @@ fn the_contact_is_fitted_scored_on_held_out_tosses_resumed_and_replayed() {
     let s = summary(&out);
     assert_eq!(s["fitted_tosses"], serde_json::json!(["185", "563"]));
     assert_eq!(s["held_out_tosses"], serde_json::json!(["229"]));
-    assert_eq!(s["evaluations"], 6);
+    assert_eq!(s["evaluations"], 8);
     let rows = s["held_out"].as_array().unwrap();
     let sources: Vec<&str> = rows.iter().map(|r| r["source"].as_str().unwrap()).collect();
     assert_eq!(sources, ["mujoco at its defaults", "mujoco tuned", "ideal"]);
@@ -156,11 +157,12 @@ fn options_of_the_arm_s_tune_and_the_physics_free_engine_are_refused() {
     let tmp = tempfile::tempdir().unwrap();
     let study = small_study(tmp.path());
     let out = tmp.path().join("t");
+    let data_dir = data();
     let base = [
         "tune",
         study.to_str().unwrap(),
         "--data",
-        data().to_str().unwrap(),
+        data_dir.to_str().unwrap(),
         "--out",
         out.to_str().unwrap(),
     ];

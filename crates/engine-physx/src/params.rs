@@ -49,7 +49,7 @@ pub fn support() -> Vec<ParamSupport> {
         s(ParamKey::ObjectMass, "object actor mass, inertia of a uniform box"),
         s(
             ParamKey::ObjectFriction,
-            "object material static and dynamic friction, combine mode Average with the other shape's (robot and ground 0.5 unless the scene sets the ground's)",
+            "object material static and dynamic friction, combine mode Min when given (a contact takes the smaller of the object's and the other shape's; robot and ground 0.5 unless the scene sets the ground's), PhysX's Average otherwise",
         ),
         s(
             ParamKey::ObjectRestitution,

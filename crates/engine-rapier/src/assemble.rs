@@ -521,6 +521,13 @@ fn add_objects(
             ));
         }
         let mut collider = shape.mass(mass).friction(friction(o.friction, variation));
+        if o.friction.is_some() {
+            // A friction given for the object is the contact's when the
+            // other surface is at least as rough (`Min`, as in ODE and
+            // DART): with Rapier's `Average` the ground's 0.5 kept every
+            // contact above 0.25 whatever the object's coefficient.
+            collider = collider.friction_combine_rule(CoefficientCombineRule::Min);
+        }
         if let Some(r) = params.restitution(&o.name) {
             // The other colliders' restitution is 0: with `Max` the
             // object's coefficient is the contact's.

@@ -50,7 +50,7 @@ pub fn support() -> Vec<ParamSupport> {
         ),
         s(
             ParamKey::ObjectFriction,
-            "object collider friction, combine rule Average with the other collider's (ground and robot 0.5 unless the scene sets the ground's)",
+            "object collider friction, combine rule Min when given (a contact takes the smaller of the object's and the other collider's; ground and robot 0.5 unless the scene sets the ground's), Rapier's Average otherwise",
         ),
         s(
             ParamKey::ObjectRestitution,

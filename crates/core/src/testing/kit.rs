@@ -695,7 +695,8 @@ macro_rules! engine_test_kit {
             scenes::iiwa_push,
             free::free_flight,
             free::torque_free_rotation,
-            free::drop_flat
+            free::drop_flat,
+            free::slide
         );
     };
     (@tests $engine:expr, $spec:expr, $($group:ident :: $check:ident),*) => {

@@ -44,6 +44,10 @@ pub struct FreeBody {
     pub rest_drift_m: f64,
     /// The same: how far it may have tilted, rad.
     pub rest_tilt_rad: f64,
+    /// A cube given friction 0.2 sliding on the engine's own ground: the
+    /// coefficient its slide shows, as a multiple of 0.2 (1: the object's
+    /// friction is the contact's; Bullet multiplies it by the ground's).
+    pub slide_friction_factor: f64,
 }
 
 impl FreeBody {
@@ -64,6 +68,7 @@ impl FreeBody {
         rest_sink_m: 1e-3,
         rest_drift_m: 1e-3,
         rest_tilt_rad: 0.01,
+        slide_friction_factor: 1.0,
     };
 }
 
@@ -286,5 +291,58 @@ pub fn drop_flat(engine: &dyn Engine, spec: &KitSpec) {
     assert!(
         speed <= 0.01,
         "{name}: the dropped cube still moves at {speed} m/s"
+    );
+}
+
+const SLID: &str = r#"
+name = "slid"
+duration_s = 1.5
+[ground]
+height_m = 0.0
+[[object]]
+name = "cube"
+shape = "box"
+size_m = [0.1, 0.1, 0.1]
+mass_kg = 0.37
+position_m = [0.0, 0.0, 0.05]
+friction = 0.2
+linear_velocity_m_s = [1.0, 0.0, 0.0]
+[[track]]
+role = "cube"
+object = "cube"
+"#;
+
+/// The tossed cube's size and mass set sliding on its face at 1 m/s over
+/// the engine's own ground with friction 0.2 on the cube: it stops after
+/// `v^2 / (2 mu g)`; the coefficient that distance shows must be
+/// [`FreeBody::slide_friction_factor`] times 0.2 within 5 %: a friction
+/// given for an object is the contact's (the ground is rougher), whatever
+/// rule the engine combines two surfaces' coefficients with, unless the
+/// spec says otherwise.
+pub fn slide(engine: &dyn Engine, spec: &KitSpec) {
+    let scene = free_scene(SLID);
+    let mut sim = started(engine, spec, &scene);
+    let steps = (1.5 / sim.timestep_s()).round() as u64;
+    sim.step_n(steps).unwrap();
+    let o = object(sim.as_ref());
+    let start = scene.objects[0].pose.position_m;
+    let d = o.pose.position_m.x - start.x;
+    if !spec.dynamics {
+        assert_eq!(d, 0.0, "{}: the cube moved", engine.name());
+        return;
+    }
+    let g = -scene.gravity_m_s2.z;
+    let mu = 1.0 / (2.0 * g * d);
+    let want = 0.2 * spec.free.slide_friction_factor;
+    report(engine, "slide_friction", mu, want);
+    let name = engine.name();
+    assert!(
+        o.linear_velocity_m_s.norm() < 0.01,
+        "{name}: the slid cube still moves at {} m/s after 1.5 s",
+        o.linear_velocity_m_s.norm()
+    );
+    assert!(
+        (mu / want - 1.0).abs() <= 0.05,
+        "{name}: a cube with friction 0.2 slid {d} m from 1 m/s: a coefficient of {mu:.4}, not {want:.4} (within 5 %)"
     );
 }
