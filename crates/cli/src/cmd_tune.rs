@@ -12,8 +12,10 @@ use std::path::PathBuf;
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// The study file (TOML), e.g. assets/studies/collins2019.toml: its
-    /// scenes are simulated and compared with its real runs. Not with
-    /// --recordings.
+    /// scenes are simulated and compared with its real runs; or a study of
+    /// tosses, assets/studies/contactnets2020.toml: the contact (friction,
+    /// restitution, softness; assets/tuning/tosses.toml) fitted on its
+    /// tosses and scored on the ones it holds out. Not with --recordings.
     #[arg(required_unless_present = "recordings", conflicts_with = "recordings")]
     pub study: Option<PathBuf>,
     /// Tune against a robot's own recorded episodes instead of a study: a

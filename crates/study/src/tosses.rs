@@ -521,6 +521,77 @@ pub struct TossMeasures {
     pub rest_edges: f64,
     /// Mean orientation error, degrees.
     pub orientation_deg: f64,
+    /// The first impact's time, simulated minus recorded, s (`None` when
+    /// either never comes within [`CONTACT_HEIGHT_EDGES`] of the ground).
+    pub impact_error_s: Option<f64>,
+    /// The time of rest, simulated minus recorded, s.
+    pub rest_time_error_s: f64,
+    /// Bounces, simulated minus recorded.
+    pub bounce_error: f64,
+}
+
+/// A box whose lowest corner is this close to the ground (in edges, 5 mm
+/// for the tossed cube) touches it: the motion capture's noise and the
+/// ground's registration are a few millimetres.
+pub const CONTACT_HEIGHT_EDGES: f64 = 0.05;
+/// After touching the ground, a box whose lowest corner rises this high
+/// (edges) and comes down again has bounced once.
+pub const BOUNCE_HEIGHT_EDGES: f64 = 0.1;
+/// A box is at rest from the first sample after which its centre stays
+/// this close to where it ends (edges) ...
+pub const REST_RADIUS_EDGES: f64 = 0.02;
+/// ... and its orientation this close to its last, degrees.
+pub const REST_ANGLE_DEG: f64 = 2.0;
+
+/// The contact events of a box's poses at the times `time_s`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TossEvents {
+    /// The first sample at which the lowest corner is within
+    /// [`CONTACT_HEIGHT_EDGES`] of the ground, s; `None` if none is.
+    pub impact_s: Option<f64>,
+    /// The first sample from which the box stays within
+    /// [`REST_RADIUS_EDGES`] and [`REST_ANGLE_DEG`] of its last pose, s.
+    pub rest_s: f64,
+    /// Bounces: after the first impact, how often the lowest corner rose
+    /// above [`BOUNCE_HEIGHT_EDGES`] and came back within
+    /// [`CONTACT_HEIGHT_EDGES`].
+    pub bounces: usize,
+}
+
+/// [`TossEvents`] of `poses` (one per time of `time_s`, at least one) of
+/// `object`.
+pub fn toss_events(object: &TossedBox, time_s: &[f64], poses: &[Pose]) -> TossEvents {
+    let half = Vec3::new(0.5, 0.5, 0.5).scale(object.edge_m);
+    let contact = CONTACT_HEIGHT_EDGES * object.edge_m;
+    let bounce = BOUNCE_HEIGHT_EDGES * object.edge_m;
+    let mut impact_s = None;
+    let mut bounces = 0;
+    let mut aloft = false;
+    for (t, p) in time_s.iter().zip(poses) {
+        let z = lowest_point_z(p, half);
+        match impact_s {
+            None if z <= contact => impact_s = Some(*t),
+            None => {}
+            Some(_) if z > bounce => aloft = true,
+            Some(_) if aloft && z <= contact => {
+                aloft = false;
+                bounces += 1;
+            }
+            Some(_) => {}
+        }
+    }
+    let last = poses[poses.len() - 1];
+    let still = |p: &Pose| {
+        p.position_m.distance(last.position_m) <= REST_RADIUS_EDGES * object.edge_m
+            && p.orientation.angle_to(last.orientation).to_degrees() <= REST_ANGLE_DEG
+    };
+    let moving = poses.iter().rposition(|p| !still(p));
+    let rest = moving.map_or(0, |k| k + 1).min(poses.len() - 1);
+    TossEvents {
+        impact_s,
+        rest_s: time_s[rest],
+        bounces,
+    }
 }
 
 /// [`TossMeasures`] of `run` against `toss`; `None` when the run has no
@@ -535,7 +606,12 @@ pub fn toss_measures(object: &TossedBox, toss: &Toss, run: &Trajectory) -> Optio
         .map(|(s, r)| s.orientation.angle_to(r.orientation).to_degrees())
         .sum::<f64>()
         / held.len() as f64;
+    let real = toss_events(object, &toss.time_s, &toss.poses);
+    let sim = toss_events(object, &toss.time_s, &held);
     Some(TossMeasures {
+        impact_error_s: sim.impact_s.zip(real.impact_s).map(|(s, r)| s - r),
+        rest_time_error_s: sim.rest_s - real.rest_s,
+        bounce_error: sim.bounces as f64 - real.bounces as f64,
         at_0_1_edges: at(0.1),
         at_0_3_edges: at(0.3),
         rest_edges: gap(held.len() - 1),
@@ -584,6 +660,12 @@ pub struct TossRow {
     pub rest_edges: Option<(f64, f64, f64)>,
     /// The mean orientation error, degrees.
     pub orientation_deg: Option<(f64, f64, f64)>,
+    /// The first impact's time, simulated minus recorded, ms.
+    pub impact_error_ms: Option<(f64, f64, f64)>,
+    /// The time of rest, simulated minus recorded, s.
+    pub rest_time_error_s: Option<(f64, f64, f64)>,
+    /// Bounces, simulated minus recorded.
+    pub bounce_error: Option<(f64, f64, f64)>,
     /// Tosses simulated per second of wall time (engines only).
     pub tosses_per_s: Option<f64>,
 }
@@ -734,6 +816,9 @@ pub fn toss_row(
         at_0_3_edges: pick(&|m| m.at_0_3_edges),
         rest_edges: pick(&|m| Some(m.rest_edges)),
         orientation_deg: pick(&|m| Some(m.orientation_deg)),
+        impact_error_ms: pick(&|m| m.impact_error_s.map(|e| 1e3 * e)),
+        rest_time_error_s: pick(&|m| Some(m.rest_time_error_s)),
+        bounce_error: pick(&|m| Some(m.bounce_error)),
         tosses_per_s: wall.filter(|w| *w > 0.0).map(|w| runs.len() as f64 / w),
     }
 }
@@ -752,6 +837,12 @@ pub fn toss_row_json(r: &TossRow) -> Value {
         "rest_edges_ci95": r.rest_edges.map(|(_, lo, hi)| [lo, hi]),
         "orientation_deg": r.orientation_deg.map(|(m, _, _)| m),
         "orientation_deg_ci95": r.orientation_deg.map(|(_, lo, hi)| [lo, hi]),
+        "impact_error_ms": r.impact_error_ms.map(|(m, _, _)| m),
+        "impact_error_ms_ci95": r.impact_error_ms.map(|(_, lo, hi)| [lo, hi]),
+        "rest_time_error_s": r.rest_time_error_s.map(|(m, _, _)| m),
+        "rest_time_error_s_ci95": r.rest_time_error_s.map(|(_, lo, hi)| [lo, hi]),
+        "bounce_error": r.bounce_error.map(|(m, _, _)| m),
+        "bounce_error_ci95": r.bounce_error.map(|(_, lo, hi)| [lo, hi]),
         "tosses_per_s": r.tosses_per_s,
     })
 }
@@ -780,7 +871,7 @@ pub fn toss_markdown(rows: &[TossRow], set: &TossSet) -> String {
         set.object.mass_kg,
         set.dir.display()
     );
-    for r in sorted {
+    for r in &sorted {
         let label = if r.source == PHYSICS_FREE_ENGINE {
             "physics-free (ballistic, frozen at first contact)".to_string()
         } else {
@@ -805,6 +896,51 @@ pub fn toss_markdown(rows: &[TossRow], set: &TossSet) -> String {
         s.push_str(&format!(
             "| {label} | {err} | {} | {} | {speed} |\n",
             r.tosses, r.failed
+        ));
+    }
+    s.push_str(&events_markdown(&sorted, set));
+    s
+}
+
+/// The contact events' table: each source's impact time, time of rest and
+/// bounces against the recorded ones.
+fn events_markdown(sorted: &[&TossRow], set: &TossSet) -> String {
+    let real: Vec<TossEvents> = set
+        .tosses
+        .iter()
+        .map(|t| toss_events(&set.object, &t.time_s, &t.poses))
+        .collect();
+    let n = real.len().max(1) as f64;
+    let impacts: Vec<f64> = real.iter().filter_map(|e| e.impact_s).collect();
+    let mut s = format!(
+        "\n## Contact events\n\n\
+         The recorded tosses first touch the ground (lowest corner within {:.0} % of an edge) at {:.3} s on average ({} of {}), come to rest (centre within {:.0} % of an edge and {REST_ANGLE_DEG}° of its last pose) at {:.2} s, and bounce (the corner {:.0} % of an edge up and down again) {:.2} times. Per source, simulated minus recorded, mean over tosses with its 95 % interval:\n\n\
+         | source | first impact (ms) | time of rest (s) | bounces |\n|---|---:|---:|---:|\n",
+        100.0 * CONTACT_HEIGHT_EDGES,
+        impacts.iter().sum::<f64>() / impacts.len().max(1) as f64,
+        impacts.len(),
+        real.len(),
+        100.0 * REST_RADIUS_EDGES,
+        real.iter().map(|e| e.rest_s).sum::<f64>() / n,
+        100.0 * BOUNCE_HEIGHT_EDGES,
+        real.iter().map(|e| e.bounces as f64).sum::<f64>() / n,
+    );
+    let cell = |v: Option<(f64, f64, f64)>, digits: usize| {
+        v.map_or("n/a".to_string(), |(m, lo, hi)| {
+            format!("{m:+.digits$} [{lo:+.digits$}, {hi:+.digits$}]")
+        })
+    };
+    for r in sorted {
+        let label = if r.source == PHYSICS_FREE_ENGINE {
+            "physics-free"
+        } else {
+            r.source.as_str()
+        };
+        s.push_str(&format!(
+            "| {label} | {} | {} | {} |\n",
+            cell(r.impact_error_ms, 1),
+            cell(r.rest_time_error_s, 2),
+            cell(r.bounce_error, 2)
         ));
     }
     s
@@ -864,6 +1000,28 @@ mod tests {
             toss_error_edges(&cube(), &toss, &run).map(|e| e > 0.0),
             Some(true)
         );
+    }
+
+    #[test]
+    fn events_are_the_first_touch_the_bounces_and_the_rest() {
+        // Lowest corner heights (m) of a 0.1 m cube: flight, a touch, up
+        // 2 cm (a bounce: above 1 cm), down to 4 mm (within the 5 mm of a
+        // touch), then still on the ground.
+        let heights = [0.3, 0.1, 0.002, 0.02, 0.004, 0.0, 0.0, 0.0];
+        let time_s: Vec<f64> = (0..heights.len()).map(|k| k as f64 * 0.01).collect();
+        let poses: Vec<Pose> = heights
+            .iter()
+            .map(|h| Pose::new(Vec3::new(0.0, 0.0, 0.05 + h), Quat::IDENTITY))
+            .collect();
+        let e = toss_events(&cube(), &time_s, &poses);
+        assert_eq!(e.impact_s, Some(0.02));
+        assert_eq!(e.bounces, 1);
+        assert_eq!(e.rest_s, 0.05);
+        // Never near the ground: no impact, no bounce; still throughout:
+        // at rest from the first sample.
+        let aloft = vec![Pose::new(Vec3::new(0.0, 0.0, 1.0), Quat::IDENTITY); 3];
+        let e = toss_events(&cube(), &[0.0, 0.1, 0.2], &aloft);
+        assert_eq!((e.impact_s, e.bounces, e.rest_s), (None, 0, 0.0));
     }
 
     #[test]
