@@ -383,7 +383,8 @@ fn replay_builtin_tosses(
         .collect();
     let mut sorted: Vec<_> = rows.iter().filter(|r| r.error_edges.is_some()).collect();
     sorted.sort_by(|a, b| {
-        let e = |r: &realitygap_study::tosses::TossRow| r.error_edges.map_or(f64::INFINITY, |e| e.0);
+        let e =
+            |r: &realitygap_study::tosses::TossRow| r.error_edges.map_or(f64::INFINITY, |e| e.0);
         e(a).total_cmp(&e(b))
     });
     let line = format!(

@@ -71,11 +71,19 @@ pub fn tune_tosses(request: &TuneRequest, study: &Path, ui: &dyn Ui) -> Result<T
             .engine_settings
             .remove(engine.name())
             .with_context(|| {
-                format!("--settings {}: no [engine.{}] table", f.display(), engine.name())
+                format!(
+                    "--settings {}: no [engine.{}] table",
+                    f.display(),
+                    engine.name()
+                )
             })?,
         None => Default::default(),
     };
-    settings.extend(overrides_for(&args.set, engine.name(), &engine_names(registry))?);
+    settings.extend(overrides_for(
+        &args.set,
+        engine.name(),
+        &engine_names(registry),
+    )?);
     let set = spec.load(&args.data)?;
     let (training, held_out) = spec.split(&set);
     let budget = args.budget.unwrap_or(spec.budget);
@@ -116,7 +124,11 @@ pub fn tune_tosses(request: &TuneRequest, study: &Path, ui: &dyn Ui) -> Result<T
             "best {:.4} edges, {:.2} evaluations/s{}",
             p.best,
             fresh as f64 / started.elapsed().as_secs_f64().max(1e-9),
-            if p.replayed > 0 { format!(" ({} replayed)", p.replayed) } else { String::new() }
+            if p.replayed > 0 {
+                format!(" ({} replayed)", p.replayed)
+            } else {
+                String::new()
+            }
         ));
     };
     let scored = AtomicU64::new(0);

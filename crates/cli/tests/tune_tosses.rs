@@ -59,7 +59,11 @@ fn the_contact_is_fitted_scored_on_held_out_tosses_resumed_and_replayed() {
     let o = realitygap(&args);
     let stdout = text(&o.stdout);
     assert!(o.status.success(), "{stdout}\n{}", text(&o.stderr));
-    assert!(text(&o.stderr).contains("2 tosses to fit on, 1 held out"), "{}", text(&o.stderr));
+    assert!(
+        text(&o.stderr).contains("2 tosses to fit on, 1 held out"),
+        "{}",
+        text(&o.stderr)
+    );
     let s = summary(&out);
     assert_eq!(s["fitted_tosses"], serde_json::json!(["185", "563"]));
     assert_eq!(s["held_out_tosses"], serde_json::json!(["229"]));
@@ -87,14 +91,20 @@ fn the_contact_is_fitted_scored_on_held_out_tosses_resumed_and_replayed() {
         ]
     );
     let tuned = std::fs::read_to_string(out.join("tuned.toml")).unwrap();
-    assert!(tuned.contains("[objects.cube]") && tuned.contains("[contact]"), "{tuned}");
+    assert!(
+        tuned.contains("[objects.cube]") && tuned.contains("[contact]"),
+        "{tuned}"
+    );
     assert!(stdout.contains("## Held-out tosses"), "{stdout}");
 
     // The same command again resumes: every evaluation is replayed from
     // history.csv and the result is the same.
     let o = realitygap(&args);
     assert!(o.status.success(), "{}", text(&o.stderr));
-    assert_eq!(std::fs::read_to_string(out.join("tuned.toml")).unwrap(), tuned);
+    assert_eq!(
+        std::fs::read_to_string(out.join("tuned.toml")).unwrap(),
+        tuned
+    );
     assert_eq!(summary(&out)["parameters"], s["parameters"]);
 
     // The contract: tuned.toml is what `replay` takes for the tosses.
@@ -131,7 +141,10 @@ fn the_built_in_study_tunes_on_365_tosses_and_holds_out_91() {
     let out = tmp.path().join("tuned");
     let o = realitygap(&[
         "tune",
-        assets().join("studies/contactnets2020.toml").to_str().unwrap(),
+        assets()
+            .join("studies/contactnets2020.toml")
+            .to_str()
+            .unwrap(),
         "--engine",
         "mujoco",
         "--budget",
@@ -167,7 +180,10 @@ fn options_of_the_arm_s_tune_and_the_physics_free_engine_are_refused() {
         out.to_str().unwrap(),
     ];
     for (extra, says) in [
-        (vec!["--engine", "mujoco", "--runs", "1-2"], "--runs does not apply to a study of tosses"),
+        (
+            vec!["--engine", "mujoco", "--runs", "1-2"],
+            "--runs does not apply to a study of tosses",
+        ),
         (vec!["--engine", "ideal"], "has nothing to tune"),
     ] {
         let mut args: Vec<&str> = base.to_vec();

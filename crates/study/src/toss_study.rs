@@ -172,14 +172,16 @@ impl TossStudy {
                 set.tosses[i].id.clone(),
             )
         });
-        let (held, fit): (Vec<(usize, usize)>, Vec<(usize, usize)>) = order
-            .into_iter()
-            .enumerate()
-            .partition(|(k, _)| (k + 1) % self.held_out_every == 0);
-        (
-            fit.into_iter().map(|(_, i)| i).collect(),
-            held.into_iter().map(|(_, i)| i).collect(),
-        )
+        let held_out = |k: usize| (k + 1).is_multiple_of(self.held_out_every);
+        let pick = |want: bool| -> Vec<usize> {
+            order
+                .iter()
+                .enumerate()
+                .filter(|(k, _)| held_out(*k) == want)
+                .map(|(_, &i)| i)
+                .collect()
+        };
+        (pick(false), pick(true))
     }
 }
 
@@ -219,7 +221,11 @@ mod tests {
                 .collect(),
         };
         let (fit, held) = study.split(&set);
-        let ids = |v: &[usize]| v.iter().map(|&i| set.tosses[i].id.clone()).collect::<Vec<_>>();
+        let ids = |v: &[usize]| {
+            v.iter()
+                .map(|&i| set.tosses[i].id.clone())
+                .collect::<Vec<_>>()
+        };
         assert_eq!(ids(&held), ["5", "10"]);
         assert_eq!(fit.len(), 10);
         assert!(!ids(&fit).contains(&"5".to_string()));
@@ -227,7 +233,9 @@ mod tests {
 
     #[test]
     fn errors_name_the_file_and_field() {
-        let (_d, f) = write("kind = \"tosses\"\nname = \"x\"\ntitle = \"t\"\ntosses = \"t\"\nheld_out_every = 1\n");
+        let (_d, f) = write(
+            "kind = \"tosses\"\nname = \"x\"\ntitle = \"t\"\ntosses = \"t\"\nheld_out_every = 1\n",
+        );
         let e = TossStudy::from_file(&f).unwrap_err().to_string();
         assert!(e.contains("s.toml: held_out_every: 1"), "{e}");
         let (_d, f) = write("kind = \"tosses\"\nname = \"x\"\ntitle = \"t\"\ntosses = \"t\"\nheld_out_every = 5\nstart = \"late\"\n");

@@ -165,7 +165,11 @@ pub fn read_tosses(dir: &Path, start: TossStart) -> Result<TossSet> {
 /// `experiment.json` (default: beside the files or one folder up, else the
 /// published constants). The box's mass is the experiment's (the published
 /// 0.37 kg when it gives none).
-pub fn read_toss_folder(dir: &Path, experiment: Option<&Path>, start: TossStart) -> Result<TossSet> {
+pub fn read_toss_folder(
+    dir: &Path,
+    experiment: Option<&Path>,
+    start: TossStart,
+) -> Result<TossSet> {
     use realitygap_contactnets::{import, Experiment};
     let experiment = match experiment
         .map(Path::to_path_buf)

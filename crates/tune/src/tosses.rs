@@ -64,6 +64,9 @@ pub struct TossTune<'a> {
     pub study: String,
 }
 
+/// One fitted parameter: its key, its value and its 95 % interval.
+pub type FittedValue = (String, f64, Option<(f64, f64)>);
+
 /// What a toss tune found.
 #[derive(Debug, Clone)]
 pub struct TossTuned {
@@ -80,7 +83,7 @@ pub struct TossTuned {
     /// Evaluations in the history.
     pub evaluations: usize,
     /// Per parameter: key, tuned value, 95 % interval.
-    pub intervals: Vec<(String, f64, Option<(f64, f64)>)>,
+    pub intervals: Vec<FittedValue>,
 }
 
 /// The headline error of each toss at `indices` with `params`; the first
@@ -151,7 +154,11 @@ fn prepare(t: &TossTune) -> Result<PhysicalParams> {
     }
     let start = t
         .space
-        .params(&t.space.values(&t.space.start_unit()), t.engine.name(), t.settings)
+        .params(
+            &t.space.values(&t.space.start_unit()),
+            t.engine.name(),
+            t.settings,
+        )
         .map_err(|e| anyhow!(e))?;
     check_toss_replay(t.engine, t.set, &start)?;
     Ok(start)
@@ -165,12 +172,7 @@ fn fit(t: &TossTune, progress: &(dyn Fn(Progress) + Sync)) -> Result<Vec<Evaluat
         .map(|&i| format!("toss_{}_edges", t.set.tosses[i].id))
         .collect();
     let names: Vec<String> = t.space.dims.iter().map(|d| d.key.clone()).collect();
-    let mut history = History::open(
-        &t.out.join("history.csv"),
-        &parts,
-        &names,
-        t.space.len(),
-    )?;
+    let mut history = History::open(&t.out.join("history.csv"), &parts, &names, t.space.len())?;
     let evaluate = |u: &[f64]| -> Outcome {
         let values = t.space.values(u);
         let failed = |m: String| Outcome {
@@ -333,7 +335,7 @@ pub fn tune_tosses(
         .space
         .params(&best.values, t.engine.name(), t.settings)
         .map_err(|e| anyhow!(e))?;
-    let intervals: Vec<(String, f64, Option<(f64, f64)>)> = t
+    let intervals: Vec<FittedValue> = t
         .space
         .dims
         .iter()
@@ -365,7 +367,12 @@ pub fn tune_tosses(
         .collect();
     let name = t.engine.name();
     let rows = vec![
-        toss_row(&format!("{name} at its defaults"), &held, &default_runs, Some(default_s)),
+        toss_row(
+            &format!("{name} at its defaults"),
+            &held,
+            &default_runs,
+            Some(default_s),
+        ),
         toss_row(&format!("{name} tuned"), &held, &tuned_runs, Some(tuned_s)),
         toss_row(PHYSICS_FREE_ENGINE, &held, &ideal_runs, None),
     ];
@@ -432,7 +439,11 @@ fn write(
     );
     for ((key, v, i), d) in tuned.intervals.iter().zip(&t.space.dims) {
         let near = |b: f64| (v - b).abs() <= 1e-3 * (d.high - d.low);
-        let flag = if near(d.low) || near(d.high) { " (at a bound)" } else { "" };
+        let flag = if near(d.low) || near(d.high) {
+            " (at a bound)"
+        } else {
+            ""
+        };
         md += &format!(
             "| `{key}` | {v:.4}{flag} | {} | [{}, {}] |\n",
             i.map_or("n/a".into(), |(lo, hi)| format!("[{lo:.4}, {hi:.4}]")),
@@ -447,7 +458,9 @@ fn write(
         .collect::<Vec<_>>()
         .join("\n");
     let diff = |v: Option<(f64, f64, f64)>| {
-        v.map_or("n/a".into(), |(m, lo, hi)| format!("{m:+.4} [{lo:+.4}, {hi:+.4}]"))
+        v.map_or("n/a".into(), |(m, lo, hi)| {
+            format!("{m:+.4} [{lo:+.4}, {hi:+.4}]")
+        })
     };
     md += &format!(
         "\n\nPaired over the held-out tosses (edges; negative: tuned is closer): tuned minus defaults {}, tuned minus physics-free {}.\n",
@@ -457,7 +470,8 @@ fn write(
     let md_file = t.out.join("summary.md");
     std::fs::write(&md_file, &md).with_context(|| format!("writing {}", md_file.display()))?;
     let json_file = t.out.join("summary.json");
-    let pair = |v: Option<(f64, f64, f64)>| v.map(|(m, lo, hi)| json!({"mean": m, "ci95": [lo, hi]}));
+    let pair =
+        |v: Option<(f64, f64, f64)>| v.map(|(m, lo, hi)| json!({"mean": m, "ci95": [lo, hi]}));
     let summary = json!({
         "engine": name,
         "engine_version": t.engine.version(),
