@@ -253,6 +253,24 @@ def test_tune_briefly_gives_params_summary_history_intervals(tmp_path):
     assert t.markdown
 
 
+def test_tune_of_tosses_gives_the_held_out_table_and_the_contact(root, tmp_path):
+    study = tmp_path / "three.toml"
+    study.write_text(
+        'kind = "tosses"\nname = "three"\ntitle = "three tosses"\ntosses = "tosses"\n'
+        'experiment = "experiment.json"\nheld_out_every = 2\nbudget = 8\n'
+    )
+    data = root / "crates" / "contactnets" / "tests" / "data"
+    t = rg.tune("ode", study=study, data=data, out=tmp_path / "tune", jobs=2, progress=False)
+    assert list(t.summary["source"]) == ["ode at its defaults", "ode tuned", "ideal"]
+    assert (t.summary["tosses"] == 1).all()
+    assert set(t.parameters["key"]) == {
+        "objects.cube.friction", "objects.cube.restitution",
+        "contact.time_constant_s", "contact.damping_ratio",
+    }
+    assert "friction" in t.params["objects"]["cube"]
+    assert len(t.history) == 8
+
+
 # ------------------------------------------------------------ replay
 
 

@@ -619,6 +619,10 @@ class TuneResult:
 
         s = self.summary_json
         rows = []
+        if s.get("kind") == "tosses":
+            # A study of tosses: the held-out table (the engine at its
+            # defaults, tuned, and the physics-free row), in cube edges.
+            return pd.json_normalize(s.get("held_out", []))
         if self.recordings:
             for src in s["scores"]:
                 for set_name in ("train", "holdout"):
