@@ -69,6 +69,15 @@ pub struct Args {
     /// Real runs to score on and never fit on, e.g. 16-20.
     #[arg(long, value_name = "RANGE")]
     pub holdout: Option<String>,
+    /// Cross-validate: split the real runs into K folds of consecutive
+    /// runs (20 runs in 4 folds: 1-5, 6-10, 11-15, 16-20), tune once per
+    /// fold with that fold held out (OUT/fold-N, each a whole tune with
+    /// the physics-free model's own actuator stage), and gather the
+    /// held-out scores over the folds into OUT/crossval.md and .json (mean,
+    /// spread, and the paired differences against both physics-free rows).
+    /// K times a tune's time. Not with --runs, --holdout or --recordings.
+    #[arg(long, value_name = "K", conflicts_with_all = ["runs", "holdout", "recordings"])]
+    pub folds: Option<usize>,
     /// Evaluations (each simulates every scene of the study, or every toss
     /// fitted on). Default 600; for a study of tosses, the study file's
     /// `budget` (96 for contactnets2020).
@@ -103,6 +112,22 @@ pub struct Args {
     /// capture frame with the parameters.
     #[arg(long)]
     pub keep_registration: bool,
+    /// Leave out the row "physics-free + actuator (fitted)": the
+    /// physics-free model behind its own actuator stage, fitted on the same
+    /// runs with the same effort, which every study tune is otherwise
+    /// scored against. Its fit costs about what the engine's does; leave it
+    /// out when that comparison is not wanted (known-truth checks, a
+    /// robot whose joints assets/tuning/ideal.toml does not name).
+    #[arg(long)]
+    pub no_baseline: bool,
+    /// Where the engine's search starts: `space` (the space file's
+    /// `start` values, the engine's defaults) or `physics-free` (fit the
+    /// physics-free model behind its actuator stage first, then start the
+    /// engine's search at its fitted actuator stage, delay, acceleration
+    /// limit, encoder offsets and registration: the keys both spaces
+    /// have).
+    #[arg(long, value_name = "space|physics-free", default_value = "space", value_parser = ["space", "physics-free"], conflicts_with = "no_baseline")]
+    pub start: String,
     /// Engine settings over the space's: a parameters file's
     /// `[engine.NAME]` table, such as the `recommended.toml` that
     /// `realitygap frontier` writes.
@@ -143,12 +168,15 @@ pub fn run(args: Args) -> Result<()> {
         space: args.space,
         runs: args.runs,
         holdout: args.holdout,
+        folds: args.folds,
         budget: args.budget,
         seed: args.seed,
         restarts: args.restarts,
         jobs: args.jobs,
         cube_weight: args.cube_weight,
         keep_registration: args.keep_registration,
+        no_baseline: args.no_baseline,
+        start_from_baseline: args.start == "physics-free",
         settings: args.settings,
         set: args.set,
         robot: args.robot,

@@ -49,6 +49,9 @@ pub struct TuneRequest {
     pub runs: Option<String>,
     /// Runs to score on and never fit on.
     pub holdout: Option<String>,
+    /// Cross-validate over this many folds of consecutive real runs
+    /// (not with `runs` or `holdout`).
+    pub folds: Option<usize>,
     /// Evaluations (default 600; a study of tosses: the study file's).
     pub budget: Option<usize>,
     /// Seed of the search.
@@ -62,6 +65,12 @@ pub struct TuneRequest {
     pub cube_weight: f64,
     /// Keep the measurement's registration estimate.
     pub keep_registration: bool,
+    /// Leave out the physics-free model behind its own fitted actuator
+    /// stage (its fit costs about what the engine's does).
+    pub no_baseline: bool,
+    /// Start the engine's search at the physics-free model's fitted
+    /// actuator stage and registration (fitted first).
+    pub start_from_baseline: bool,
     /// Engine settings over the space's (a parameters file).
     pub settings: Option<PathBuf>,
     /// Engine settings over the space's and `settings`: KEY=VALUE.
@@ -92,12 +101,15 @@ impl Default for TuneRequest {
             space: None,
             runs: None,
             holdout: None,
+            folds: None,
             budget: None,
             seed: 1,
             restarts: false,
             jobs: None,
             cube_weight: realitygap_tune::objective::CUBE_WEIGHT_PER_STEP,
             keep_registration: false,
+            no_baseline: false,
+            start_from_baseline: false,
             settings: None,
             set: Vec::new(),
             robot: None,
@@ -186,14 +198,10 @@ pub fn tune(request: &TuneRequest, launcher: &Launcher, ui: &dyn Ui) -> Result<T
         &engine_names(registry),
     )?);
     let (study, roots) = load_study(&study_file, &args.data, None)?;
-    let target = Target::new(
-        &study,
-        &roots,
-        range(&args.runs, "--runs")?,
-        range(&args.holdout, "--holdout")?,
-        args.cube_weight,
-    )
-    .with_context(|| format!("study {}", study_file.display()))?;
+    let target_for = |runs: Option<RunRange>, holdout: Option<RunRange>| {
+        Target::new(&study, &roots, runs, holdout, args.cube_weight)
+            .with_context(|| format!("study {}", study_file.display()))
+    };
     let gatherer = match &args.executor {
         Executor::Slurm(opts) => Some(std::sync::Arc::new(Gatherer::new(
             launcher.clone(),
@@ -225,12 +233,15 @@ pub fn tune(request: &TuneRequest, launcher: &Launcher, ui: &dyn Ui) -> Result<T
             max_evaluations: budget,
             ..Default::default()
         },
-        baseline_space: if engine.name() == realitygap_tune::outputs::PHYSICS_FREE {
+        baseline_space: if engine.name() == realitygap_tune::outputs::PHYSICS_FREE
+            || args.no_baseline
+        {
             None
         } else {
             let f = default_space_file(&assets_dir(), realitygap_tune::outputs::PHYSICS_FREE);
             Some(Space::from_file(&f)?)
         },
+        start_from_baseline: args.start_from_baseline,
     };
     ui.note(settings_line(&spec, &space_file));
     let simulator = Simulator {
@@ -240,13 +251,38 @@ pub fn tune(request: &TuneRequest, launcher: &Launcher, ui: &dyn Ui) -> Result<T
         packages: args.packages.clone(),
         slurm: gatherer.clone(),
     };
-    let bar = ui.bar(budget as u64, "evaluations");
+    if let Some(k) = args.folds {
+        return cross_validate(args, k, &target_for, &simulator, &spec, ui);
+    }
+    let target = target_for(
+        range(&args.runs, "--runs")?,
+        range(&args.holdout, "--holdout")?,
+    )?;
+    let result = tune_with_bar(&target, &simulator, &spec, ui, "")?;
+    let markdown = realitygap_tune::outputs::markdown(&result.summary);
+    ui.say(shortened(&markdown, args.verbose, &args.out));
+    let mut files = result.files;
+    files.push(args.out.join("history.csv"));
+    say_files(ui, &files);
+    Ok(Tuned { markdown, files })
+}
+
+/// One study tune with its progress bar (`label` before the bar's
+/// message: which fold).
+fn tune_with_bar(
+    target: &Target,
+    simulator: &Simulator,
+    spec: &TuneSpec,
+    ui: &dyn Ui,
+    label: &str,
+) -> Result<realitygap_tune::TuneResult> {
+    let bar = ui.bar(spec.search.budget as u64, "evaluations");
     let started = Instant::now();
     let on_progress = |p: realitygap_tune::search::Progress| {
         bar.set_position(p.done as u64);
         let fresh = p.done.saturating_sub(p.replayed);
         bar.set_message(format!(
-            "best {:.4} m, {:.2} evaluations/s{}",
+            "{label}best {:.4} m, {:.2} evaluations/s{}",
             p.best,
             fresh as f64 / started.elapsed().as_secs_f64().max(1e-9),
             if p.replayed > 0 {
@@ -257,17 +293,78 @@ pub fn tune(request: &TuneRequest, launcher: &Launcher, ui: &dyn Ui) -> Result<T
         ));
     };
     let on_note = |line: String| bar.println(line);
-    let result = realitygap_tune::tune(&target, &simulator, &spec, &on_progress, &on_note);
+    let result = realitygap_tune::tune(target, simulator, spec, &on_progress, &on_note);
     bar.finish();
-    let result = result?;
-    let markdown = realitygap_tune::outputs::markdown(&result.summary);
-    ui.say(shortened(&markdown, args.verbose, &args.out));
-    let mut files = result.files;
-    files.push(args.out.join("history.csv"));
+    result
+}
+
+fn say_files(ui: &dyn Ui, files: &[PathBuf]) {
     ui.note("\nwrote:".into());
-    for f in &files {
+    for f in files {
         ui.note(format!("  {}", f.display()));
     }
+}
+
+/// `tune --folds K`: the tune run once per fold of consecutive real runs,
+/// each fold held out once, into `OUT/fold-N`; the held-out scores
+/// gathered into `OUT/crossval.md` and `OUT/crossval.json`.
+fn cross_validate(
+    args: &TuneRequest,
+    k: usize,
+    target_for: &dyn Fn(Option<RunRange>, Option<RunRange>) -> Result<Target>,
+    simulator: &Simulator,
+    spec: &TuneSpec,
+    ui: &dyn Ui,
+) -> Result<Tuned> {
+    use realitygap_tune::crossval;
+    for (given, flag) in [
+        (args.runs.is_some(), "--runs"),
+        (args.holdout.is_some(), "--holdout"),
+    ] {
+        if given {
+            anyhow::bail!("{flag} does not go with --folds: the folds choose the runs to fit on and to hold out");
+        }
+    }
+    let runs = target_for(None, None)?.run_count();
+    let folds = crossval::folds(runs, k)?;
+    let mut summaries = Vec::new();
+    let mut folders = Vec::new();
+    let mut files = Vec::new();
+    for f in &folds {
+        let holdout = RunRange::parse(&f.holdout, "--holdout")?;
+        let held = (1..=runs).filter(|r| holdout.contains(*r)).count();
+        ui.note(format!(
+            "fold {} of {k}: runs {} held out, the other {} fitted on",
+            f.number,
+            f.holdout,
+            runs - held
+        ));
+        let target = target_for(None, Some(holdout))?;
+        let out = args.out.join(format!("fold-{}", f.number));
+        let fold_spec = TuneSpec {
+            out: out.clone(),
+            ..spec.with_space(spec.space.clone())
+        };
+        let label = format!("fold {}/{k}: ", f.number);
+        let result = tune_with_bar(&target, simulator, &fold_spec, ui, &label)?;
+        ui.note(format!("  fold {}: {}", f.number, result.summary.verdict));
+        folders.push(out.display().to_string());
+        files.push(out.join("summary.md"));
+        summaries.push(result.summary);
+    }
+    let cv = crossval::gather(&spec.engine, runs, &folds, &folders, &summaries)?;
+    let markdown = crossval::markdown(&cv);
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    let md = args.out.join("crossval.md");
+    std::fs::write(&md, &markdown).with_context(|| format!("writing {}", md.display()))?;
+    let json = args.out.join("crossval.json");
+    std::fs::write(&json, serde_json::to_string_pretty(&cv)? + "\n")
+        .with_context(|| format!("writing {}", json.display()))?;
+    ui.say(markdown.trim_end().to_string());
+    files.insert(0, md);
+    files.insert(1, json);
+    say_files(ui, &files);
     Ok(Tuned { markdown, files })
 }
 
@@ -336,10 +433,7 @@ fn tune_recordings(args: &TuneRequest, recordings: &Path, ui: &dyn Ui) -> Result
     write_summary(&args.out, recordings, &mut result)?;
     let markdown = summary_markdown(&result.summary);
     ui.say(shortened(&markdown, args.verbose, &args.out));
-    ui.note("\nwrote:".into());
-    for f in &result.files {
-        ui.note(format!("  {}", f.display()));
-    }
+    say_files(ui, &result.files);
     Ok(Tuned {
         markdown,
         files: result.files.clone(),

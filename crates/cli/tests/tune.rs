@@ -658,6 +658,8 @@ fn known_truth_is_covered_by_the_intervals_in_every_engine() {
             "150",
             "--jobs",
             "2",
+            // Only the engine's intervals are checked here.
+            "--no-baseline",
         ]));
         let s: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap())
@@ -694,4 +696,220 @@ fn known_truth_is_covered_by_the_intervals_in_every_engine() {
         }
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+/// `--folds 3` on six known-truth runs: three tunes, each holding out two
+/// consecutive runs, and their held-out scores gathered over the folds
+/// (each fold's value is that fold's own summary's), with the differences
+/// against both physics-free rows; folds that cannot split the runs are
+/// refused before anything runs.
+#[test]
+fn folds_cross_validate_over_consecutive_runs() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    std::fs::write(
+        d.join("known.toml"),
+        format!("[joints.m1n6s300_joint_2]\nkv = {KNOWN_KV}\n[controller]\ndelay_s = {KNOWN_DELAY_S}\n{SETTINGS}"),
+    )
+    .unwrap();
+    std::fs::write(
+        d.join("space.toml"),
+        format!(
+            "{SETTINGS}[params]\n\"joints.m1n6s300_joint_2.kv\" = {{ low = 4.0, high = 400.0, scale = \"log\", start = 40.0 }}\n\
+             \"controller.delay_s\" = {{ low = 0.0, high = 0.15, start = 0.0 }}\n"
+        ),
+    )
+    .unwrap();
+    noisy_known_runs(d, "mujoco");
+    write_study(d, "mujoco");
+    let out = d.join("cv");
+    let mut args = tune_args(d, out.to_str().unwrap(), "16");
+    args.extend(["--folds", "3", "--iterations", "1"].map(String::from));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let stdout = String::from_utf8(ok(realitygap(&args)).stdout).unwrap();
+    let cv: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("crossval.json")).unwrap()).unwrap();
+    let holdouts: Vec<&str> = cv["folds"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f["fold"]["holdout"].as_str().unwrap())
+        .collect();
+    assert_eq!(holdouts, ["1-2", "3-4", "5-6"]);
+    let row = |source: &str| {
+        cv["rows"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["source"] == source)
+            .unwrap_or_else(|| panic!("no row {source}: {cv}"))
+            .clone()
+    };
+    let tuned = row("tuned");
+    for (i, f) in cv["folds"].as_array().unwrap().iter().enumerate() {
+        let folder = Path::new(f["folder"].as_str().unwrap());
+        assert_eq!(folder, out.join(format!("fold-{}", i + 1)));
+        let s: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(folder.join("summary.json")).unwrap())
+                .unwrap();
+        assert_eq!(s["holdout"]["runs"], holdouts[i]);
+        assert_eq!(
+            tuned["total"]["folds"][i], s["holdout"]["total_tuned"]["value_m"],
+            "fold {i}"
+        );
+        let free = s["holdout"]["baselines"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|b| b["source"] == "physics-free")
+            .unwrap();
+        assert_eq!(
+            row("physics-free")["total"]["folds"][i],
+            free["total"]["value_m"]
+        );
+    }
+    let t = &tuned["total"];
+    let mean = t["folds"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .sum::<f64>()
+        / 3.0;
+    assert!((t["mean"].as_f64().unwrap() - mean).abs() < 1e-12);
+    let lo = t["interval"][0].as_f64().unwrap();
+    let hi = t["interval"][1].as_f64().unwrap();
+    assert!(lo <= mean && mean <= hi);
+    let against: Vec<&str> = cv["differences"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|d| d["against"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        against,
+        ["physics-free", "physics-free + actuator (fitted)"]
+    );
+    // Known truth in the engine itself: the tuned engine is closer than
+    // perfect tracking of the commands in every fold.
+    let diff = &cv["differences"][0]["total"];
+    for v in diff["folds"].as_array().unwrap() {
+        assert!(v.as_f64().unwrap() < 0.0, "{diff}");
+    }
+    let md = std::fs::read_to_string(out.join("crossval.md")).unwrap();
+    assert!(
+        md.contains("Cross-validated over 3 folds of runs 1-6"),
+        "{md}"
+    );
+    assert!(stdout.contains("Cross-validated over 3 folds"), "{stdout}");
+    // Seven folds of six runs, and folds with a held-out range.
+    let out2 = d.join("cv7");
+    let mut args = tune_args(d, out2.to_str().unwrap(), "16");
+    args.extend(["--folds", "7"].map(String::from));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let o = realitygap(&args);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("--folds 7") && err.contains("at most 6 folds"),
+        "{err}"
+    );
+    let mut args = tune_args(d, out2.to_str().unwrap(), "16");
+    args.extend(["--folds", "2", "--holdout", "5-6"].map(String::from));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let o = realitygap(&args);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("--folds") && err.contains("--holdout"),
+        "{err}"
+    );
+    assert!(!out2.join("fold-1").exists());
+}
+
+/// `--start physics-free`: the physics-free row is fitted first and the
+/// engine's search starts at its fitted values of the keys both spaces
+/// have (here the delay and the actuator's frequency), which the summary
+/// says; `--no-baseline` leaves that row out, and cannot go with it.
+#[test]
+fn the_search_can_start_from_the_fitted_physics_free_row() {
+    let tmp = synthetic();
+    let d = tmp.path();
+    std::fs::remove_dir_all(d.join("runs")).unwrap();
+    noisy_known_runs(d, "mujoco");
+    let space = std::fs::read_to_string(d.join("space.toml")).unwrap();
+    std::fs::write(
+        d.join("space.toml"),
+        format!("{space}\"actuator.frequency_rad_s\" = {{ low = 4.0, high = 200.0, scale = \"log\", start = 100.0 }}\n"),
+    )
+    .unwrap();
+    let out = d.join("seeded");
+    let mut args = tune_args(d, out.to_str().unwrap(), "16");
+    args.extend(["--start", "physics-free", "--iterations", "1"].map(String::from));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let stderr = String::from_utf8(ok(realitygap(&args)).stderr).unwrap();
+    assert!(
+        stderr.contains("the search starts at the physics-free model's fitted controller.delay_s, actuator.frequency_rad_s"),
+        "{stderr}"
+    );
+    let read = |p: PathBuf| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
+    };
+    let s = read(out.join("summary.json"));
+    assert!(
+        s["start"].as_str().unwrap().contains("physics-free"),
+        "{}",
+        s["start"]
+    );
+    let b = read(out.join("physics-free-actuator/summary.json"));
+    for key in ["controller.delay_s", "actuator.frequency_rad_s"] {
+        let fitted = b["parameters"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|p| p["key"] == key)
+            .unwrap()["value"]
+            .as_f64()
+            .unwrap();
+        let start = s["parameters"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|p| p["key"] == key)
+            .unwrap()["start"]
+            .as_f64()
+            .unwrap();
+        assert!(
+            (start - fitted).abs() <= 1e-9 * fitted.abs().max(1.0),
+            "{key}: {start} against {fitted}"
+        );
+    }
+    // The engine's own key keeps its start.
+    let kv = s["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p["key"] == "joints.m1n6s300_joint_2.kv")
+        .unwrap();
+    assert_eq!(kv["start"], 40.0);
+    // Without the row.
+    let plain = d.join("plain");
+    let mut args = tune_args(d, plain.to_str().unwrap(), "8");
+    args.extend(["--no-baseline", "--iterations", "0"].map(String::from));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    ok(realitygap(&args));
+    let s = read(plain.join("summary.json"));
+    assert!(s["baseline"].is_null(), "{}", s["baseline"]);
+    assert!(!plain.join("physics-free-actuator").exists());
+    let rows: Vec<&str> = s["training"]["baselines"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| r["source"].as_str().unwrap())
+        .collect();
+    assert_eq!(rows, ["physics-free"]);
+    let mut args = tune_args(d, d.join("both").to_str().unwrap(), "8");
+    args.extend(["--no-baseline", "--start", "physics-free"].map(String::from));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    assert!(!realitygap(&args).status.success());
 }

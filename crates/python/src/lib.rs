@@ -596,8 +596,8 @@ fn replay<'py>(
 #[pyfunction]
 #[pyo3(signature = (*, engine, out, study=None, recordings=None, params=None, scene=None,
     efforts=false, iterations=None, data="builtin", space=None, runs=None, holdout=None,
-    budget=None, seed=1, restarts=false, jobs=None, cube_weight=None, keep_registration=false,
-    settings=None, set=Vec::new(), robot=None, packages=Vec::new(), reporter=None))]
+    folds=None, budget=None, seed=1, restarts=false, jobs=None, cube_weight=None, keep_registration=false,
+    baseline=true, start="space", settings=None, set=Vec::new(), robot=None, packages=Vec::new(), reporter=None))]
 #[allow(clippy::too_many_arguments)]
 fn tune<'py>(
     py: Python<'py>,
@@ -613,12 +613,15 @@ fn tune<'py>(
     space: Option<PathBuf>,
     runs: Option<String>,
     holdout: Option<String>,
+    folds: Option<usize>,
     budget: Option<usize>,
     seed: u64,
     restarts: bool,
     jobs: Option<usize>,
     cube_weight: Option<f64>,
     keep_registration: bool,
+    baseline: bool,
+    start: &str,
     settings: Option<PathBuf>,
     set: Vec<String>,
     robot: Option<String>,
@@ -644,12 +647,23 @@ fn tune<'py>(
         space,
         runs,
         holdout,
+        folds,
         budget,
         seed,
         restarts,
         jobs,
         cube_weight: cube_weight.unwrap_or(defaults.cube_weight),
         keep_registration,
+        no_baseline: !baseline,
+        start_from_baseline: match start {
+            "space" => false,
+            "physics-free" => true,
+            other => {
+                return Err(RealityGapError::new_err(format!(
+                    "start={other:?}: expected \"space\" or \"physics-free\""
+                )))
+            }
+        },
         settings,
         set,
         robot,

@@ -10,12 +10,14 @@
 //! - [`recordings`]: `tune --recordings`, a robot's own recorded episodes
 //!   fitted in joint space by [`least_squares`] (Levenberg-Marquardt with
 //!   intervals and an identifiability report);
+//! - [`crossval`]: a study tune cross-validated over folds of real runs;
 //! - [`stages`]: the stages both tunes run, in order (prepare, scan, fit,
 //!   profile, intervals, score, write), with one profile code and one
 //!   Jacobian holder for both.
 
 #![forbid(unsafe_code)]
 
+pub mod crossval;
 pub mod least_squares;
 pub mod objective;
 pub mod outputs;
@@ -65,6 +67,11 @@ pub struct TuneSpec {
     /// actuator" row every tune is scored against. `None`: that row is
     /// left out (the physics-free row stays).
     pub baseline_space: Option<Space>,
+    /// Fit the physics-free row first and start the engine's search at its
+    /// fitted values: the keys both spaces have (the actuator stage, the
+    /// delay, the acceleration limit, the encoder offsets) and the
+    /// registration. `false`: the search starts at the space's `start`.
+    pub start_from_baseline: bool,
 }
 
 impl TuneSpec {
@@ -79,6 +86,7 @@ impl TuneSpec {
             out: self.out.clone(),
             polish: self.polish,
             baseline_space: self.baseline_space.clone(),
+            start_from_baseline: self.start_from_baseline,
         }
     }
 }
@@ -365,6 +373,48 @@ pub fn cube_unseen(target: &Target, space: &Space) -> Option<Space> {
     (!weighed && any).then(|| space.holding(is_object_or_contact_key))
 }
 
+/// The physics-free model behind its own actuator stage (`space`) fitted
+/// on `target` with the effort of `spec`, into `OUT/physics-free-actuator`;
+/// with its fitted values by key (the registration's offset as
+/// `registration.rx_deg` ... `registration.tz_mm`).
+fn fit_baseline(
+    target: &Target,
+    simulator: &Simulator,
+    spec: &TuneSpec,
+    space: &Space,
+) -> Result<(outputs::Baseline, Vec<(String, f64)>)> {
+    let sim = Simulator {
+        engine: outputs::PHYSICS_FREE.to_string(),
+        ..simulator.clone()
+    };
+    let bspec = TuneSpec {
+        engine: outputs::PHYSICS_FREE.to_string(),
+        fit_registration: spec.fit_registration && space.registration.is_some(),
+        space: space.clone(),
+        set: EngineSettings::new(),
+        // The same effort as the engine's own fit: the same budget,
+        // polish, widening and probe.
+        search: spec.search,
+        out: spec.out.join(outputs::PHYSICS_FREE_DIR),
+        polish: spec.polish,
+        baseline_space: None,
+        start_from_baseline: false,
+    };
+    let b = fit(target, &sim, &bspec, &|_| {}, &|_| {})?;
+    let pspec = b.polished_spec(&bspec);
+    let t = Tuner {
+        target,
+        simulator: &sim,
+        spec: &pspec,
+    };
+    let values = t
+        .value_names()
+        .into_iter()
+        .zip(t.values(&b.polished.u))
+        .collect();
+    Ok((outputs::Baseline::new(target, &sim, &bspec, b)?, values))
+}
+
 /// Runs a whole tune: [`fit`], the physics-free model behind its own
 /// fitted actuator stage ([`TuneSpec::baseline_space`], in
 /// `OUT/physics-free-actuator/`), the final scores and every output file.
@@ -388,32 +438,34 @@ pub fn tune(
         }
         None => spec,
     };
-    let fitted = fit(target, simulator, spec, progress, note)?;
-    realitygap_runner::interrupt::check()?;
-    let baseline = match &spec.baseline_space {
-        Some(space) if spec.engine != outputs::PHYSICS_FREE => {
-            note("fitting the physics-free model's actuator stage on the same runs".into());
-            let sim = Simulator {
-                engine: outputs::PHYSICS_FREE.to_string(),
-                ..simulator.clone()
-            };
-            let bspec = TuneSpec {
-                engine: outputs::PHYSICS_FREE.to_string(),
-                fit_registration: spec.fit_registration && space.registration.is_some(),
-                space: space.clone(),
-                set: EngineSettings::new(),
-                // The same effort as the engine's own fit: the same budget,
-                // polish, widening and probe.
-                search: spec.search,
-                out: spec.out.join(outputs::PHYSICS_FREE_DIR),
-                polish: spec.polish,
-                baseline_space: None,
-            };
-            let b = fit(target, &sim, &bspec, &|_| {}, &|_| {})?;
-            Some(outputs::Baseline::new(target, &sim, &bspec, b)?)
+    let physics_free = spec
+        .baseline_space
+        .as_ref()
+        .filter(|_| spec.engine != outputs::PHYSICS_FREE);
+    let (fitted, baseline, seeded) = match physics_free {
+        Some(space) if spec.start_from_baseline => {
+            note("fitting the physics-free model's actuator stage first: the engine's search starts from it".into());
+            let (baseline, values) = fit_baseline(target, simulator, spec, space)?;
+            let (seeded, moved) = spec.space.starting_at(&values);
+            note(format!(
+                "the search starts at the physics-free model's fitted {}",
+                moved.join(", ")
+            ));
+            let seeded = spec.with_space(seeded);
+            realitygap_runner::interrupt::check()?;
+            let fitted = fit(target, simulator, &seeded, progress, note)?;
+            (fitted, Some(baseline), Some(seeded))
         }
-        _ => None,
+        Some(space) => {
+            let fitted = fit(target, simulator, spec, progress, note)?;
+            realitygap_runner::interrupt::check()?;
+            note("fitting the physics-free model's actuator stage on the same runs".into());
+            let baseline = fit_baseline(target, simulator, spec, space)?.0;
+            (fitted, Some(baseline), None)
+        }
+        None => (fit(target, simulator, spec, progress, note)?, None, None),
     };
+    let spec = seeded.as_ref().unwrap_or(spec);
     let polished_spec = fitted.polished_spec(spec);
     let final_tuner = Tuner {
         target,

@@ -244,6 +244,15 @@ impl Target {
         Ok(target)
     }
 
+    /// The fewest real runs of any scene (what folds of runs can split).
+    pub fn run_count(&self) -> usize {
+        self.loaded
+            .iter()
+            .map(|l| l.reference.runs.len())
+            .min()
+            .unwrap_or(0)
+    }
+
     /// The held-out selection (`--runs` fitted, `--holdout` scored).
     pub fn holdout_selection(&self) -> Option<RunSelection> {
         self.holdout.as_ref().map(|h| RunSelection {

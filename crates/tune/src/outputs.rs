@@ -111,6 +111,8 @@ pub struct BaselineRow {
     pub source: String,
     /// Its total, with the interval.
     pub total: Option<Scored>,
+    /// Per scene, in study order.
+    pub scenes: Vec<Option<Scored>>,
     /// The tuned engine's total minus this row's: value and 95 % paired
     /// bootstrap interval (negative: the tuned engine is closer).
     pub tuned_minus_m: Option<[f64; 3]>,
@@ -241,6 +243,8 @@ pub struct Summary {
     pub settings: Vec<(String, String)>,
     /// The objective, in words.
     pub objective: String,
+    /// Where the search started, in words (`--start`).
+    pub start: String,
     /// Seed, budget, jobs.
     pub seed: u64,
     /// Evaluations asked for.
@@ -462,6 +466,7 @@ fn baseline_row(source: &str, base: &Reports, tuned: &Reports) -> BaselineRow {
     BaselineRow {
         source: source.to_string(),
         total: b.map(|x| x.0),
+        scenes: base.reports.iter().map(scored).collect(),
         tuned_minus_m: diff,
     }
 }
@@ -770,6 +775,11 @@ pub fn finish(
         held: spec.space.held.clone(),
         settings,
         objective: objective_text(tuner),
+        start: if spec.start_from_baseline {
+            "the physics-free model's fitted actuator stage and registration (--start physics-free; the parameters' `start`)".into()
+        } else {
+            "the space's start values".into()
+        },
         seed: spec.search.seed,
         budget: spec.search.budget,
         jobs: spec.search.jobs,
@@ -1150,7 +1160,7 @@ pub fn markdown(s: &Summary) -> String {
 fn search_md(s: &Summary) -> String {
     let mut m = format!("# Tune of {}\n\n", s.engine);
     m.push_str(&format!(
-        "- Objective: {}.\n- Space: `{}`; engine settings: {}.\n- Search: CMA-ES, seed {}, {} evaluations ({} replayed, {} failed) of a budget of {}, {} jobs; stopped by {}.\n- Wall time {:.1} s, {} evaluations/s; CMA-ES within 5 % of its best after {} evaluations.\n- Best objective {:.4} m on the training runs.\n\n",
+        "- Objective: {}.\n- Space: `{}`; engine settings: {}.\n- Search: CMA-ES from {}, seed {}, {} evaluations ({} replayed, {} failed) of a budget of {}, {} jobs; stopped by {}.\n- Wall time {:.1} s, {} evaluations/s; CMA-ES within 5 % of its best after {} evaluations.\n- Best objective {:.4} m on the training runs.\n\n",
         s.objective,
         s.space,
         if s.settings.is_empty() {
@@ -1158,6 +1168,7 @@ fn search_md(s: &Summary) -> String {
         } else {
             s.settings.iter().map(|(k, v)| format!("{k} = {v}")).collect::<Vec<_>>().join(", ")
         },
+        s.start,
         s.seed,
         s.evaluations,
         s.replayed,

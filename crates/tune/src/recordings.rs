@@ -407,6 +407,7 @@ pub fn default_space(
         settings: Default::default(),
         registration: None,
         held: Vec::new(),
+        registration_start: None,
     })
 }
 

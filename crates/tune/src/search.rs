@@ -529,6 +529,7 @@ mod tests {
             settings: Default::default(),
             held: Vec::new(),
             registration: None,
+            registration_start: None,
         }
     }
 

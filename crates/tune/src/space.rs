@@ -104,6 +104,11 @@ pub struct Space {
     pub held: Vec<String>,
     /// The registration's bounds, when the registration is fitted too.
     pub registration: Option<RegistrationBounds>,
+    /// Where the search starts in the registration: the offset from the
+    /// measurement's estimate, rotation (degrees, 3) then translation (mm,
+    /// 3); `None`: at the estimate.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub registration_start: Option<[f64; 6]>,
 }
 
 /// A space file that cannot be used: file, line and column, and what is
@@ -258,6 +263,7 @@ impl Space {
             settings,
             registration,
             held: Vec::new(),
+            registration_start: None,
         })
     }
 
@@ -289,10 +295,56 @@ impl Space {
     /// The normalised start point.
     pub fn start_unit(&self) -> Vec<f64> {
         let mut u: Vec<f64> = self.dims.iter().map(|d| d.unit(d.start)).collect();
-        if self.registration.is_some() {
-            u.extend([0.5; 6]);
+        if let Some(b) = self.registration {
+            let at = self.registration_start.unwrap_or([0.0; 6]);
+            let unit = |x: f64, bound: f64| (0.5 + 0.5 * x / bound).clamp(0.0, 1.0);
+            u.extend((0..6).map(|i| {
+                unit(
+                    at[i],
+                    if i < 3 {
+                        b.rotation_deg
+                    } else {
+                        b.translation_mm
+                    },
+                )
+            }));
         }
         u
+    }
+
+    /// The space with its search started at `values` (keys as in
+    /// [`Dim::key`], and `registration.rx_deg` ... `registration.tz_mm`
+    /// for the registration's offset), each clamped into its bounds; other
+    /// coordinates start where they did. Returns the space and the keys
+    /// whose start moved.
+    pub fn starting_at(&self, values: &[(String, f64)]) -> (Space, Vec<String>) {
+        let mut space = self.clone();
+        let mut moved = Vec::new();
+        for d in &mut space.dims {
+            if let Some((_, v)) = values.iter().find(|(k, _)| *k == d.key) {
+                d.start = v.clamp(d.low, d.high);
+                moved.push(d.key.clone());
+            }
+        }
+        if space.registration.is_some() {
+            const KEYS: [&str; 6] = [
+                "registration.rx_deg",
+                "registration.ry_deg",
+                "registration.rz_deg",
+                "registration.tx_mm",
+                "registration.ty_mm",
+                "registration.tz_mm",
+            ];
+            let found: Vec<f64> = KEYS
+                .iter()
+                .filter_map(|k| values.iter().find(|(n, _)| n == k).map(|(_, v)| *v))
+                .collect();
+            if let Ok(at) = <[f64; 6]>::try_from(found) {
+                space.registration_start = Some(at);
+                moved.push("registration".into());
+            }
+        }
+        (space, moved)
     }
 
     /// The parameter values (in file order) at normalised coordinates `u`.
@@ -557,5 +609,62 @@ mod tests {
                 assert!((d.low..=d.high).contains(&d.start), "{engine} {}", d.key);
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod starting_at_tests {
+    use super::*;
+
+    #[test]
+    fn starting_at_moves_the_named_starts_and_the_registration() {
+        let s = Space::from_toml_str(
+            "[registration]\nrotation_deg = 2.0\ntranslation_mm = 10.0\n[params]\n\
+             \"controller.delay_s\" = { low = 0.0, high = 0.15, start = 0.0 }\n\
+             \"actuator.damping_ratio\" = { low = 0.2, high = 2.0, scale = \"log\", start = 1.0 }\n\
+             \"joints.j.kv\" = { low = 1.0, high = 100.0, scale = \"log\", start = 10.0 }\n",
+            Path::new("s.toml"),
+        )
+        .unwrap();
+        let u0 = s.start_unit();
+        assert_eq!(&u0[3..], &[0.5; 6]);
+        let values: Vec<(String, f64)> = [
+            ("controller.delay_s", 0.05),
+            ("actuator.damping_ratio", 9.0),
+            ("actuator.frequency_rad_s", 19.0),
+            ("registration.rx_deg", 1.0),
+            ("registration.ry_deg", -2.0),
+            ("registration.rz_deg", 0.0),
+            ("registration.tx_mm", 5.0),
+            ("registration.ty_mm", -20.0),
+            ("registration.tz_mm", 0.0),
+        ]
+        .iter()
+        .map(|(k, v)| (k.to_string(), *v))
+        .collect();
+        let (moved, keys) = s.starting_at(&values);
+        assert_eq!(
+            keys,
+            [
+                "controller.delay_s",
+                "actuator.damping_ratio",
+                "registration"
+            ]
+        );
+        assert_eq!(moved.dims[0].start, 0.05);
+        // Clamped into the bounds; a key the space lacks is ignored.
+        assert_eq!(moved.dims[1].start, 2.0);
+        assert_eq!(moved.dims[2].start, 10.0);
+        let u = moved.start_unit();
+        assert!((u[0] - 0.05 / 0.15).abs() < 1e-12);
+        assert_eq!(&u[3..], &[0.75, 0.0, 0.5, 0.75, 0.0, 0.5]);
+        // Back through the registration's own mapping.
+        let (r, t) = moved.registration_offset(&u).unwrap();
+        assert_eq!(r, [1.0, -2.0, 0.0]);
+        assert!((t[0] - 0.005).abs() < 1e-15 && (t[1] + 0.010).abs() < 1e-15);
+        // Without the registration's six, it starts at the estimate.
+        let (same, keys) = s.starting_at(&values[..2]);
+        assert_eq!(keys.len(), 2);
+        assert_eq!(&same.start_unit()[3..], &[0.5; 6]);
     }
 }
