@@ -67,6 +67,37 @@ impl RunRange {
     pub fn contains(&self, number: usize) -> bool {
         self.ranges.iter().any(|&(a, b)| a <= number && number <= b)
     }
+
+    /// The runs of `1..=count` not in this set, as a range written like
+    /// one given (`1-5,11-20`); `None` when every run is in it.
+    pub fn complement(&self, count: usize) -> Option<RunRange> {
+        let mut ranges: Vec<(usize, usize)> = Vec::new();
+        for n in (1..=count).filter(|n| !self.contains(*n)) {
+            match ranges.last_mut() {
+                Some((_, b)) if *b + 1 == n => *b = n,
+                _ => ranges.push((n, n)),
+            }
+        }
+        if ranges.is_empty() {
+            return None;
+        }
+        let text = ranges
+            .iter()
+            .map(|&(a, b)| {
+                if a == b {
+                    a.to_string()
+                } else {
+                    format!("{a}-{b}")
+                }
+            })
+            .collect::<Vec<_>>()
+            .join(",");
+        Some(RunRange {
+            origin: format!("the runs not in {} \"{}\"", self.origin, self.text),
+            text,
+            ranges,
+        })
+    }
 }
 
 /// The runs to fit on and to score on. Without `holdout`, both are
@@ -167,6 +198,21 @@ impl RunSelection {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_complement_is_every_other_run_written_as_a_range() {
+        let h = RunRange::parse("6-10", "--holdout").unwrap();
+        let c = h.complement(20).unwrap();
+        assert_eq!(c.text, "1-5,11-20");
+        assert!(c.contains(5) && !c.contains(6) && c.contains(11) && c.contains(20));
+        assert!(c.origin.contains("--holdout \"6-10\""));
+        let h = RunRange::parse("1,3", "--holdout").unwrap();
+        assert_eq!(h.complement(4).unwrap().text, "2,4");
+        assert!(RunRange::parse("1-20", "--holdout")
+            .unwrap()
+            .complement(20)
+            .is_none());
+    }
 
     fn sel(runs: Option<&str>, holdout: Option<&str>) -> RunSelection {
         RunSelection {

@@ -62,8 +62,9 @@ pub struct Args {
     #[arg(long, value_name = "FILE")]
     pub space: Option<PathBuf>,
     /// Real runs (or recorded episodes, numbered from 1 in the results
-    /// directory's order) to fit on, e.g. 1-15 (default: all; with
-    /// --recordings and no --holdout, all but the last quarter).
+    /// directory's order) to fit on, e.g. 1-15 (default: all, or with
+    /// --holdout, every run it does not hold out; with --recordings and no
+    /// --holdout, all but the last quarter).
     #[arg(long, value_name = "RANGE")]
     pub runs: Option<String>,
     /// Real runs to score on and never fit on, e.g. 16-20.

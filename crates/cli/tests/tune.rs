@@ -753,6 +753,8 @@ fn folds_cross_validate_over_consecutive_runs() {
             serde_json::from_str(&std::fs::read_to_string(folder.join("summary.json")).unwrap())
                 .unwrap();
         assert_eq!(s["holdout"]["runs"], holdouts[i]);
+        // Fitted on every other run, never on the held-out ones.
+        assert_eq!(s["training"]["runs"], ["3-6", "1-2,5-6", "1-4"][i]);
         assert_eq!(
             tuned["total"]["folds"][i], s["holdout"]["total_tuned"]["value_m"],
             "fold {i}"

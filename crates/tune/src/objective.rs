@@ -202,6 +202,23 @@ impl Target {
             });
         }
         let loaded = study.load(roots)?;
+        // Without --runs, every run not held out is fitted on (never the
+        // held-out ones).
+        let most = loaded
+            .iter()
+            .map(|l| l.reference.runs.len())
+            .max()
+            .unwrap_or(0);
+        let runs = match (&runs, &holdout) {
+            (None, Some(h)) => Some(h.complement(most).ok_or_else(|| {
+                anyhow::anyhow!(
+                    "{} \"{}\" holds out every run: none is left to fit on",
+                    h.origin,
+                    h.text
+                )
+            })?),
+            _ => runs,
+        };
         let train = RunSelection {
             runs: runs.clone(),
             holdout: None,
