@@ -620,82 +620,109 @@ fn a_tune_on_slurm_equals_the_local_tune() {
 /// fails too (the intervals of these 3-4 coordinates are profiled, which
 /// follows the valley between the stage and the delay: 2-3 times the
 /// width of the local model's).
-#[test]
-fn known_truth_is_covered_by_the_intervals_in_every_engine() {
+fn known_truth_is_covered_by_the_intervals(engine: &str) {
     let mut failures = Vec::new();
-    for engine in ["ode", "bullet", "mujoco", "physx", "rapier", "dart"] {
-        let has_kv = !matches!(engine, "ode" | "bullet");
-        let tmp = tempfile::tempdir().unwrap();
-        let d = tmp.path();
-        let settings = if engine == "mujoco" { SETTINGS } else { "" };
-        let mut known = format!(
-            "[actuator]\nfrequency_rad_s = 20.0\ndamping_ratio = 0.5\n[controller]\ndelay_s = 0.05\n{settings}"
-        );
-        let mut space = format!(
-            "{settings}[params]\n\"actuator.frequency_rad_s\" = {{ low = 5.0, high = 200.0, scale = \"log\", start = 60.0 }}\n\
-             \"actuator.damping_ratio\" = {{ low = 0.1, high = 2.0, start = 1.0 }}\n\
-             \"controller.delay_s\" = {{ low = 0.0, high = 0.15, start = 0.0 }}\n"
-        );
-        if has_kv {
-            known += "[joints.m1n6s300_joint_2]\nkv = 25.0\n";
-            space += "\"joints.m1n6s300_joint_2.kv\" = { low = 4.0, high = 400.0, scale = \"log\", start = 40.0 }\n";
-        }
-        std::fs::write(d.join("known.toml"), &known).unwrap();
-        std::fs::write(d.join("space.toml"), &space).unwrap();
-        noisy_known_runs(d, engine);
-        write_study(d, engine);
-        let out = d.join("tuned");
-        ok(realitygap(&[
-            "tune",
-            d.join("study.toml").to_str().unwrap(),
-            "--engine",
-            engine,
-            "--space",
-            d.join("space.toml").to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-            "--budget",
-            "150",
-            "--jobs",
-            "2",
-            // Only the engine's intervals are checked here.
-            "--no-baseline",
-        ]));
-        let s: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap())
-                .unwrap();
-        let expected: &[(&str, f64)] = if has_kv {
-            &[("joints.m1n6s300_joint_2.kv", 25.0)]
-        } else {
-            &[
-                ("actuator.frequency_rad_s", 20.0),
-                ("actuator.damping_ratio", 0.5),
-                ("controller.delay_s", 0.05),
-            ]
-        };
-        for &(key, truth) in expected {
-            let iv = s["polish"]["intervals"]
-                .as_array()
-                .unwrap()
-                .iter()
-                .find(|i| i["key"] == key)
-                .unwrap_or_else(|| panic!("{engine}: no interval for {key}: {s}"));
-            match iv["interval"].as_array() {
-                Some(b) => {
-                    let (lo, hi) = (b[0].as_f64().unwrap(), b[1].as_f64().unwrap());
-                    if !(lo <= truth && truth <= hi) {
-                        failures.push(format!("{engine}: {key} = {truth} outside [{lo}, {hi}]"));
-                    } else if hi - lo > truth {
-                        failures.push(format!(
-                            "{engine}: {key}'s interval [{lo}, {hi}] says little about {truth}"
-                        ));
-                    }
+    let has_kv = !matches!(engine, "ode" | "bullet");
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let settings = if engine == "mujoco" { SETTINGS } else { "" };
+    let mut known = format!(
+        "[actuator]\nfrequency_rad_s = 20.0\ndamping_ratio = 0.5\n[controller]\ndelay_s = 0.05\n{settings}"
+    );
+    let mut space = format!(
+        "{settings}[params]\n\"actuator.frequency_rad_s\" = {{ low = 5.0, high = 200.0, scale = \"log\", start = 60.0 }}\n\
+         \"actuator.damping_ratio\" = {{ low = 0.1, high = 2.0, start = 1.0 }}\n\
+         \"controller.delay_s\" = {{ low = 0.0, high = 0.15, start = 0.0 }}\n"
+    );
+    if has_kv {
+        known += "[joints.m1n6s300_joint_2]\nkv = 25.0\n";
+        space += "\"joints.m1n6s300_joint_2.kv\" = { low = 4.0, high = 400.0, scale = \"log\", start = 40.0 }\n";
+    }
+    std::fs::write(d.join("known.toml"), &known).unwrap();
+    std::fs::write(d.join("space.toml"), &space).unwrap();
+    noisy_known_runs(d, engine);
+    write_study(d, engine);
+    let out = d.join("tuned");
+    ok(realitygap(&[
+        "tune",
+        d.join("study.toml").to_str().unwrap(),
+        "--engine",
+        engine,
+        "--space",
+        d.join("space.toml").to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--budget",
+        "150",
+        "--jobs",
+        "2",
+        // Only the engine's intervals are checked here.
+        "--no-baseline",
+    ]));
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let expected: &[(&str, f64)] = if has_kv {
+        &[("joints.m1n6s300_joint_2.kv", 25.0)]
+    } else {
+        &[
+            ("actuator.frequency_rad_s", 20.0),
+            ("actuator.damping_ratio", 0.5),
+            ("controller.delay_s", 0.05),
+        ]
+    };
+    for &(key, truth) in expected {
+        let iv = s["polish"]["intervals"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|i| i["key"] == key)
+            .unwrap_or_else(|| panic!("{engine}: no interval for {key}: {s}"));
+        match iv["interval"].as_array() {
+            Some(b) => {
+                let (lo, hi) = (b[0].as_f64().unwrap(), b[1].as_f64().unwrap());
+                if !(lo <= truth && truth <= hi) {
+                    failures.push(format!("{engine}: {key} = {truth} outside [{lo}, {hi}]"));
+                } else if hi - lo > truth {
+                    failures.push(format!(
+                        "{engine}: {key}'s interval [{lo}, {hi}] says little about {truth}"
+                    ));
                 }
-                None => failures.push(format!("{engine}: {key} has no interval: {iv}")),
             }
+            None => failures.push(format!("{engine}: {key} has no interval: {iv}")),
         }
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+// One test per engine, so that a runner spreads them over the cores.
+#[test]
+fn known_truth_is_covered_by_the_intervals_in_ode() {
+    known_truth_is_covered_by_the_intervals("ode");
+}
+
+#[test]
+fn known_truth_is_covered_by_the_intervals_in_bullet() {
+    known_truth_is_covered_by_the_intervals("bullet");
+}
+
+#[test]
+fn known_truth_is_covered_by_the_intervals_in_mujoco() {
+    known_truth_is_covered_by_the_intervals("mujoco");
+}
+
+#[test]
+fn known_truth_is_covered_by_the_intervals_in_physx() {
+    known_truth_is_covered_by_the_intervals("physx");
+}
+
+#[test]
+fn known_truth_is_covered_by_the_intervals_in_rapier() {
+    known_truth_is_covered_by_the_intervals("rapier");
+}
+
+#[test]
+fn known_truth_is_covered_by_the_intervals_in_dart() {
+    known_truth_is_covered_by_the_intervals("dart");
 }
 
 /// `--folds 3` on six known-truth runs: three tunes, each holding out two
