@@ -172,6 +172,12 @@ def test_interrupted_run_keeps_its_finished_runs(tmp_path):
         import signal, sys, realitygap as rg
         from realitygap._progress import Reporter
 
+        # A process started in the background by a shell without job
+        # control (nohup, a CI runner's `cmd &`) inherits SIGINT ignored,
+        # and Python then installs no KeyboardInterrupt handler: the
+        # Ctrl-C below would do nothing. Install Python's own.
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
         class CtrlCAfterFirstRun(Reporter):
             def inc(self, id, n):
                 signal.raise_signal(signal.SIGINT)
@@ -251,6 +257,21 @@ def test_tune_briefly_gives_params_summary_history_intervals(tmp_path):
     assert t.intervals is not None and len(t.intervals) > 0
     assert len(t.parameters) > 0
     assert t.markdown
+
+
+def test_tune_with_folds_is_cross_validated(tmp_path):
+    cv = rg.tune("ideal", out=tmp_path / "cv", folds=2, budget=6, iterations=0, jobs=2, progress=False)
+    assert isinstance(cv, rg.CrossValidated)
+    assert [f.out.rsplit("/", 1)[-1] for f in cv.folds] == ["fold-1", "fold-2"]
+    assert [f.summary_json["holdout"]["runs"] for f in cv.folds] == ["1-10", "11-20"]
+    t = cv.table
+    # The physics-free model tuned: its own rows, no physics-free row to beat.
+    assert list(t["source"].unique()) == ["untuned", "tuned"]
+    total = t[(t["source"] == "tuned") & (t["scene"] == "total")].iloc[0]
+    assert total["low_m"] <= total["mean_m"] <= total["high_m"]
+    assert cv.differences.empty
+    assert cv.verdict.startswith("Cross-validated over 2 folds of runs 1-20")
+    assert "Cross-validated" in cv.markdown
 
 
 def test_tune_of_tosses_gives_the_held_out_table_and_the_contact(root, tmp_path):
