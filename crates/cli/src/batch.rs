@@ -57,7 +57,7 @@ pub fn run(
 ) -> Result<BatchOutcome> {
     let start = Instant::now();
     let spec = with_builtin_kinova(spec, ui)?;
-    let mut plan = Plan::new(crate::compiled_engines, spec)?;
+    let mut plan = Plan::new(crate::engines, spec)?;
     plan.executor = executor;
     plan.check_loads(launcher);
     realitygap_runner::interrupt::check()?;

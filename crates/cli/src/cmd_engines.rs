@@ -21,17 +21,36 @@ pub struct Args {
     /// efforts): the engine's own mechanism.
     #[arg(long)]
     pub commands: bool,
+    /// Makes the pinned Python environment of a built-in engine adapter
+    /// (`mujoco4`, ...) in the engines folder (~/.cache/realitygap/engines,
+    /// or $REALITYGAP_ENGINES_DIR), then lists the engines.
+    #[arg(long, value_name = "NAME")]
+    pub install: Vec<String>,
 }
 
-/// Every engine compiled in (cargo features of this crate), by name
-/// ([`realitygap::compiled_engines`]).
+/// Every engine this binary can run, by name ([`realitygap::engines`]).
 pub fn compiled() -> Vec<Box<dyn Engine>> {
-    realitygap::compiled_engines()
+    realitygap::engines()
 }
 
 /// Prints the compiled-in engines, one per line: name, version, default
 /// timestep.
 pub fn run(args: Args) -> Result<()> {
+    use realitygap_engine_remote::registry;
+    for name in &args.install {
+        let adapter = registry::adapter(name).ok_or_else(|| {
+            let names: Vec<&str> = registry::ADAPTERS.iter().map(|a| a.name).collect();
+            anyhow::anyhow!(
+                "--install {name}: not a built-in engine adapter (they are: {})",
+                names.join(", ")
+            )
+        })?;
+        eprintln!(
+            "installing engine {name} into {}",
+            registry::venv_dir(adapter).display()
+        );
+        registry::install(adapter).map_err(|e| anyhow::anyhow!("--install {name}: {e}"))?;
+    }
     let engines = compiled();
     if engines.is_empty() {
         println!("no engine compiled in (build with `--features mujoco`)");
@@ -64,6 +83,15 @@ pub fn run(args: Args) -> Result<()> {
                     c.mechanism
                 );
             }
+        }
+    }
+    for adapter in registry::ADAPTERS {
+        if !registry::is_installed(adapter) {
+            println!(
+                "{:<width$}  not installed: {}",
+                adapter.name,
+                registry::install_line(adapter.name)
+            );
         }
     }
     Ok(())

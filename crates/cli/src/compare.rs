@@ -153,7 +153,7 @@ pub fn physics_free_sources(
 ) -> Result<AddedSources> {
     use anyhow::{bail, Context};
     use realitygap_core::engine::PHYSICS_FREE_ENGINE;
-    if !crate::compiled_engines()
+    if !crate::engines()
         .iter()
         .any(|e| e.name() == PHYSICS_FREE_ENGINE)
     {
@@ -255,7 +255,7 @@ impl PhysicsFreeRows {
     pub fn applies(study_path: &Path) -> bool {
         use realitygap_core::engine::PHYSICS_FREE_ENGINE;
         if is_replay_folder(study_path)
-            || !crate::compiled_engines()
+            || !crate::engines()
                 .iter()
                 .any(|e| e.name() == PHYSICS_FREE_ENGINE)
         {

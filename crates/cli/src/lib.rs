@@ -44,6 +44,22 @@ pub fn compiled_engines() -> Vec<Box<dyn Engine>> {
     engines
 }
 
+/// Every engine this binary can run: the engines linked in
+/// ([`compiled_engines`]), then the engines out of process that can start
+/// (the installed built-in adapters and the user's own engines,
+/// [`realitygap_engine_remote::registry::available`]). The command's
+/// registry: `--engine`, `realitygap engines` and the defaults of
+/// `reproduce` and `replay` take their engines from here.
+pub fn engines() -> Vec<Box<dyn Engine>> {
+    let mut all = compiled_engines();
+    all.extend(
+        realitygap_engine_remote::registry::available()
+            .into_iter()
+            .map(|e| Box::new(e) as Box<dyn Engine>),
+    );
+    all
+}
+
 /// The compiled-in engines that simulate physics: every one but the
 /// physics-free model (`ideal`), which has no dynamics to hand over, no
 /// contact and no forces (for the checks of physical effects).
@@ -70,7 +86,7 @@ pub fn install_native_handlers() {
 /// standard input) run with the engines compiled in, its result on
 /// standard output.
 pub fn run_one() -> anyhow::Result<()> {
-    realitygap_runner::run_one(compiled_engines, install_native_handlers)
+    realitygap_runner::run_one(engines, install_native_handlers)
 }
 
 /// Every parameter key with what it becomes in `engine`: the engine's own

@@ -55,7 +55,7 @@ pub fn replay(args: &ReplayOptions, launcher: &Launcher, ui: &dyn Ui) -> Result<
     let params = realitygap_runner::prepare::read_params(args.params.as_deref())?;
     // The physics-free model is the `ideal` row of every replay, computed
     // from its one definition (`kinematic_run`), never stepped as an engine.
-    let chosen = select_engines(crate::compiled_engines, &args.engines)?;
+    let chosen = select_engines(crate::engines, &args.engines)?;
     let mut engines = Vec::new();
     let mut refused: Vec<(String, String)> = Vec::new();
     let mut ideal_chosen = false;
@@ -324,6 +324,12 @@ pub fn select_engines(
     }
     for n in include.iter().chain(&exclude) {
         if !known.contains(n) {
+            if realitygap_engine_remote::registry::adapter(n).is_some() {
+                bail!(
+                    "engine \"{n}\" is not installed: `{}` makes its environment",
+                    realitygap_engine_remote::registry::install_line(n)
+                );
+            }
             bail!(
                 "unknown engine \"{n}\" in --engine (compiled in: {}; all-except:A,B or -A leaves engines out)",
                 known.join(", ")

@@ -145,7 +145,7 @@ pub fn reproduce_keeping_problems(
         args.scenes.clone()
     };
     let engines: Vec<String> = if args.engines.is_empty() {
-        crate::compiled_engines()
+        crate::engines()
             .iter()
             .map(|e| e.name().to_string())
             .collect()
@@ -337,7 +337,7 @@ fn replay_builtin_tosses(
     let set = study.load(&DataSource::Builtin)?;
     let mut chosen = Vec::new();
     for name in engines {
-        let engine = realitygap_runner::prepare::find_engine(crate::compiled_engines, name)?;
+        let engine = realitygap_runner::prepare::find_engine(crate::engines, name)?;
         if engine.name() != realitygap_core::engine::PHYSICS_FREE_ENGINE {
             chosen.push(engine);
         }

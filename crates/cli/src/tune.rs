@@ -172,7 +172,7 @@ pub fn tune(request: &TuneRequest, launcher: &Launcher, ui: &dyn Ui) -> Result<T
         .study
         .clone()
         .context("give a study file, or --recordings DIR")?;
-    let registry = crate::compiled_engines;
+    let registry = crate::engines;
     let engine = find_engine(registry, &args.engine)?;
     let space_file = args
         .space
@@ -377,7 +377,7 @@ fn tune_recordings(args: &TuneRequest, recordings: &Path, ui: &dyn Ui) -> Result
     if !matches!(args.executor, Executor::Local) {
         anyhow::bail!("--recordings runs on this machine only (--executor local)");
     }
-    let engine = find_engine(crate::compiled_engines, &args.engine)?;
+    let engine = find_engine(crate::engines, &args.engine)?;
     let known = realitygap_runner::prepare::read_params(args.params.as_deref())?;
     let urdf = args.robot.as_ref().map(PathBuf::from);
     let prepared =

@@ -45,7 +45,7 @@ pub fn tune_tosses(request: &TuneRequest, study: &Path, ui: &dyn Ui) -> Result<T
     if !matches!(args.executor, Executor::Local) {
         bail!("a study of tosses is tuned on this machine only (--executor local)");
     }
-    let registry = crate::compiled_engines;
+    let registry = crate::engines;
     let engine = find_engine(registry, &args.engine)?;
     if engine.name() == realitygap_core::engine::PHYSICS_FREE_ENGINE {
         bail!(

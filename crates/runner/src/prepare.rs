@@ -45,7 +45,13 @@ pub fn find_engine(registry: Registry, name: &str) -> Result<Box<dyn Engine>> {
     let list = names.join(", ");
     match engines.into_iter().find(|e| e.name() == name) {
         Some(e) => Ok(e),
-        None => bail!("unknown engine \"{name}\" (compiled in: {list})"),
+        None => match realitygap_engine_remote::registry::adapter(name) {
+            Some(_) => bail!(
+                "engine \"{name}\" is not installed: `{}` makes its environment (available: {list})",
+                realitygap_engine_remote::registry::install_line(name)
+            ),
+            None => bail!("unknown engine \"{name}\" (compiled in: {list})"),
+        },
     }
 }
 

@@ -1,0 +1,216 @@
+//! One engine child process: a request written as a line to its standard
+//! input, one reply line read from its standard output within the
+//! timeout. Its standard error is kept (the last lines) for the messages
+//! of a child that fails. A child that exits, hangs past the timeout,
+//! closes its output or writes a line that is not a reply is killed, and
+//! every later request fails with the same reason.
+
+use serde_json::{Map, Value};
+use std::collections::VecDeque;
+use std::io::{BufRead, BufReader, Write};
+use std::process::{ChildStdin, Command, Stdio};
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+/// How an engine child is started.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Launch {
+    /// The program and its arguments.
+    pub command: Vec<String>,
+    /// Environment variables set for it.
+    pub env: Vec<(String, String)>,
+}
+
+/// The standard error lines kept for messages.
+const STDERR_LINES: usize = 12;
+
+/// A request that did not get an `ok` reply.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Failure {
+    /// The child answered with an `error` reply.
+    Engine {
+        /// `setting`, `load`, `param`, `unstable`, `state` or `usage`.
+        kind: String,
+        /// The child's message.
+        message: String,
+        /// The setting or parameter key, when the reply gave one.
+        key: Option<String>,
+        /// For `unstable`: the simulated time it happened at, s, when the
+        /// reply gave it.
+        t_s: Option<f64>,
+    },
+    /// The child broke the protocol or died: the reason, with the last
+    /// lines of its standard error.
+    Broken(String),
+}
+
+/// A running engine child.
+pub struct Child {
+    process: std::process::Child,
+    stdin: Option<ChildStdin>,
+    lines: Receiver<std::io::Result<String>>,
+    stderr: Arc<Mutex<VecDeque<String>>>,
+    stderr_reader: Option<JoinHandle<()>>,
+    timeout: Duration,
+    broken: Option<String>,
+}
+
+impl Child {
+    /// Starts the child; `timeout` bounds the wait for each reply.
+    pub fn spawn(launch: &Launch, timeout: Duration) -> Result<Child, String> {
+        let (program, args) = launch
+            .command
+            .split_first()
+            .ok_or("the engine's command is empty")?;
+        let mut process = Command::new(program)
+            .args(args)
+            .envs(launch.env.iter().map(|(k, v)| (k, v)))
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .map_err(|e| format!("cannot start `{}`: {e}", launch.command.join(" ")))?;
+        let stdout = process.stdout.take().expect("piped");
+        let stderr_pipe = process.stderr.take().expect("piped");
+        let (tx, lines) = mpsc::channel();
+        std::thread::spawn(move || {
+            let mut reader = BufReader::new(stdout);
+            loop {
+                let mut line = String::new();
+                match reader.read_line(&mut line) {
+                    Ok(0) => break,
+                    Ok(_) => {
+                        if tx.send(Ok(line)).is_err() {
+                            break;
+                        }
+                    }
+                    Err(e) => {
+                        let _ = tx.send(Err(e));
+                        break;
+                    }
+                }
+            }
+        });
+        let stderr = Arc::new(Mutex::new(VecDeque::new()));
+        let kept = Arc::clone(&stderr);
+        let stderr_reader = std::thread::spawn(move || {
+            for line in BufReader::new(stderr_pipe).lines() {
+                let Ok(line) = line else { break };
+                let mut kept = kept.lock().unwrap_or_else(|e| e.into_inner());
+                if kept.len() == STDERR_LINES {
+                    kept.pop_front();
+                }
+                kept.push_back(line);
+            }
+        });
+        Ok(Child {
+            stdin: process.stdin.take(),
+            process,
+            lines,
+            stderr,
+            stderr_reader: Some(stderr_reader),
+            timeout,
+            broken: None,
+        })
+    }
+
+    /// Sets the wait for each reply.
+    pub fn set_timeout(&mut self, timeout: Duration) {
+        self.timeout = timeout;
+    }
+
+    /// Kills the child and collects its standard error: `reason` with the
+    /// last lines, which every later request repeats.
+    fn fail(&mut self, reason: String) -> Failure {
+        let _ = self.process.kill();
+        let status = self.process.wait().ok();
+        // The standard error pipe closes with the process: its reader has
+        // then kept everything the child wrote.
+        if let Some(reader) = self.stderr_reader.take() {
+            let _ = reader.join();
+        }
+        let mut message = reason;
+        if let Some(code) = status.and_then(|s| s.code()) {
+            message.push_str(&format!(" (exit status {code})"));
+        }
+        let tail = self.stderr.lock().unwrap_or_else(|e| e.into_inner());
+        if !tail.is_empty() {
+            message.push_str("; its last messages:\n  ");
+            message.push_str(&tail.iter().cloned().collect::<Vec<_>>().join("\n  "));
+        }
+        self.broken = Some(message.clone());
+        Failure::Broken(message)
+    }
+
+    /// Sends `request` (its `op` names it in messages) and returns the
+    /// reply's `ok` object.
+    pub fn call(&mut self, request: &Value) -> Result<Map<String, Value>, Failure> {
+        if let Some(reason) = &self.broken {
+            return Err(Failure::Broken(reason.clone()));
+        }
+        let op = request["op"].as_str().unwrap_or("?").to_string();
+        let mut line = request.to_string();
+        line.push('\n');
+        let written = match self.stdin.as_mut() {
+            Some(stdin) => stdin.write_all(line.as_bytes()).and_then(|_| stdin.flush()),
+            None => Err(std::io::Error::other("input closed")),
+        };
+        if let Err(e) = written {
+            return Err(self.fail(format!(
+                "the engine process stopped reading before \"{op}\" ({e})"
+            )));
+        }
+        let reply = match self.lines.recv_timeout(self.timeout) {
+            Ok(Ok(text)) => text,
+            Ok(Err(e)) => return Err(self.fail(format!("cannot read the reply to \"{op}\": {e}"))),
+            Err(RecvTimeoutError::Disconnected) => {
+                return Err(self.fail(format!(
+                    "the engine process exited before replying to \"{op}\""
+                )))
+            }
+            Err(RecvTimeoutError::Timeout) => {
+                return Err(self.fail(format!(
+                    "no reply to \"{op}\" within {} s (timeout_s); the engine process was stopped",
+                    self.timeout.as_secs_f64()
+                )))
+            }
+        };
+        let parsed: Value = match serde_json::from_str(reply.trim_end()) {
+            Ok(v) => v,
+            Err(e) => {
+                let shown: String = reply.trim_end().chars().take(120).collect();
+                return Err(self.fail(format!(
+                    "the reply to \"{op}\" is not JSON ({e}): \"{shown}\""
+                )));
+            }
+        };
+        if let Some(ok) = parsed.get("ok").and_then(Value::as_object) {
+            return Ok(ok.clone());
+        }
+        if let Some(error) = parsed.get("error").and_then(Value::as_object) {
+            let text = |k: &str| error.get(k).and_then(Value::as_str).map(str::to_string);
+            return Err(Failure::Engine {
+                kind: text("kind").unwrap_or_else(|| "usage".into()),
+                message: text("message").unwrap_or_else(|| "(no message)".into()),
+                key: text("key"),
+                t_s: error.get("t_s").and_then(Value::as_f64),
+            });
+        }
+        let shown: String = reply.trim_end().chars().take(120).collect();
+        Err(self.fail(format!(
+            "the reply to \"{op}\" is neither {{\"ok\": ...}} nor {{\"error\": ...}}: \"{shown}\""
+        )))
+    }
+}
+
+impl Drop for Child {
+    fn drop(&mut self) {
+        // Closing its input is the child's signal to exit; it is killed in
+        // case it does not.
+        self.stdin.take();
+        let _ = self.process.kill();
+        let _ = self.process.wait();
+    }
+}

@@ -1,0 +1,447 @@
+//! A simulation in an engine child: [`Simulation`] over the protocol.
+//!
+//! One reply per control period: commands set between steps are held here
+//! and travel with the next `step`, whose reply carries the reading (time,
+//! joint angles and velocities, tracked poses) that the controller then
+//! reads from here without another message.
+
+use crate::child::{Child, Failure};
+use crate::wire::{bits, Reply};
+use realitygap_core::engine::{
+    check_servo_commands, CommandKind, EngineError, NativeState, ObjectState, ServoCommand,
+    SimState, Simulation, StabilityIssue,
+};
+use realitygap_core::pose::{Pose, Quat, Vec3};
+use realitygap_core::scene::Scene;
+use serde_json::{json, Map, Value};
+use std::cell::RefCell;
+
+/// Turns a failed request into the engine error of its kind; a broken
+/// child is `broken(message)`.
+pub(crate) fn engine_error(
+    engine: &str,
+    failure: Failure,
+    broken: impl FnOnce(String) -> EngineError,
+) -> EngineError {
+    let engine_s = engine.to_string();
+    match failure {
+        Failure::Broken(message) => broken(message),
+        Failure::Engine {
+            kind,
+            message,
+            key,
+            t_s,
+        } => match kind.as_str() {
+            "setting" => EngineError::Setting {
+                engine: engine_s,
+                key: key.unwrap_or_default(),
+                message,
+            },
+            "param" => EngineError::Param {
+                engine: engine_s,
+                key: key.unwrap_or_default(),
+                message,
+            },
+            "load" => EngineError::Load {
+                engine: engine_s,
+                message,
+            },
+            "state" => EngineError::State {
+                engine: engine_s,
+                message,
+            },
+            "unstable" => match (broken(message), t_s) {
+                (
+                    EngineError::Unstable {
+                        engine, message, ..
+                    },
+                    Some(t),
+                ) if t.is_finite() => EngineError::Unstable {
+                    engine,
+                    t_s: t,
+                    message,
+                },
+                (e, _) => e,
+            },
+            _ => EngineError::Usage {
+                engine: engine_s,
+                message,
+            },
+        },
+    }
+}
+
+fn kind_name(kind: CommandKind) -> &'static str {
+    match kind {
+        CommandKind::Velocity => "velocity",
+        CommandKind::Position => "position",
+        CommandKind::Effort => "effort",
+    }
+}
+
+fn commands_json(commands: &[ServoCommand]) -> Value {
+    let kinds: Vec<&str> = commands.iter().map(|c| kind_name(c.kind)).collect();
+    let values: Vec<f64> = commands.iter().map(|c| c.value).collect();
+    json!({"kinds": kinds, "values": bits(&values)})
+}
+
+fn pose_of(v: &[f64]) -> Pose {
+    Pose::new(
+        Vec3::new(v[0], v[1], v[2]),
+        Quat {
+            w: v[3],
+            x: v[4],
+            y: v[5],
+            z: v[6],
+        },
+    )
+}
+
+/// What the controller reads after a step.
+#[derive(Debug, Clone)]
+pub(crate) struct Reading {
+    pub t: f64,
+    pub q: Vec<f64>,
+    pub qd: Vec<f64>,
+    pub poses: Vec<Pose>,
+}
+
+impl Reading {
+    /// The reading in `reply`'s field `state`.
+    pub fn parse(reply: &Reply, joints: usize, tracked: usize) -> Result<Reading, String> {
+        let s = reply.object("state")?;
+        let t = s.vector("t", Some(1))?[0];
+        let q = s.vector("q", Some(joints))?;
+        let qd = s.vector("qd", Some(joints))?;
+        let flat = s.vector("poses", Some(7 * tracked))?;
+        Ok(Reading {
+            t,
+            q,
+            qd,
+            poses: flat.chunks(7).map(pose_of).collect(),
+        })
+    }
+}
+
+/// The stability issues of a `load` reply.
+pub(crate) fn stability_issues(reply: &Reply) -> Result<Vec<StabilityIssue>, String> {
+    let Some(list) = reply.value("stability_issues") else {
+        return Ok(Vec::new());
+    };
+    let list = list
+        .as_array()
+        .ok_or("the reply to \"load\": stability_issues is not an array")?;
+    list.iter()
+        .map(|v| {
+            let fields = v
+                .as_object()
+                .ok_or("the reply to \"load\": a stability issue is not an object")?;
+            let r = Reply { op: "load", fields };
+            Ok(StabilityIssue {
+                joint: r.value("joint").and_then(Value::as_str).map(str::to_string),
+                quantity: r.text("quantity")?.to_string(),
+                value: r.number("value")?,
+                bound: r.number("bound")?,
+                message: r.text("message")?.to_string(),
+            })
+        })
+        .collect()
+}
+
+/// A running simulation in an engine child.
+pub struct RemoteSimulation {
+    engine: &'static str,
+    scene: Scene,
+    child: RefCell<Child>,
+    timestep_s: f64,
+    reading: Reading,
+    /// The commands in force (velocity targets 0 at the start).
+    commands: Vec<ServoCommand>,
+    /// Whether `commands` changed since the child last had them.
+    pending: bool,
+    issues: Vec<StabilityIssue>,
+}
+
+impl RemoteSimulation {
+    pub(crate) fn new(
+        engine: &'static str,
+        scene: &Scene,
+        child: Child,
+        timestep_s: f64,
+        reading: Reading,
+        issues: Vec<StabilityIssue>,
+    ) -> RemoteSimulation {
+        RemoteSimulation {
+            engine,
+            commands: vec![ServoCommand::velocity(0.0); scene.actuators.len()],
+            scene: scene.clone(),
+            child: RefCell::new(child),
+            timestep_s,
+            reading,
+            pending: false,
+            issues,
+        }
+    }
+
+    fn unstable(&self, message: String) -> EngineError {
+        EngineError::Unstable {
+            engine: self.engine.to_string(),
+            t_s: self.reading.t,
+            message,
+        }
+    }
+
+    /// Sends `request` and returns its reply's fields; a broken child is
+    /// an unstable run at the current time.
+    fn call(&self, request: Value) -> Result<Map<String, Value>, EngineError> {
+        let result = self.child.borrow_mut().call(&request);
+        result.map_err(|f| engine_error(self.engine, f, |m| self.unstable(m)))
+    }
+
+    /// Sends a request whose reply is a reading, and keeps it.
+    fn call_reading(&mut self, request: Value) -> Result<(), EngineError> {
+        let op = request["op"].as_str().unwrap_or("?").to_string();
+        let fields = self.call(request)?;
+        let reply = Reply {
+            op: &op,
+            fields: &fields,
+        };
+        let reading = Reading::parse(&reply, self.scene.actuators.len(), self.scene.tracked.len())
+            .map_err(|m| self.unstable(m))?;
+        self.reading = reading;
+        Ok(())
+    }
+
+    fn usage(&self, message: String) -> EngineError {
+        EngineError::Usage {
+            engine: self.engine.to_string(),
+            message,
+        }
+    }
+}
+
+impl Simulation for RemoteSimulation {
+    fn stability_issues(&self) -> Vec<StabilityIssue> {
+        self.issues.clone()
+    }
+
+    fn timestep_s(&self) -> f64 {
+        self.timestep_s
+    }
+
+    fn time_s(&self) -> f64 {
+        self.reading.t
+    }
+
+    fn joint_count(&self) -> usize {
+        self.scene.actuators.len()
+    }
+
+    fn tracked_count(&self) -> usize {
+        self.scene.tracked.len()
+    }
+
+    fn set_joint_angles_rad(&mut self, rad: &[f64]) -> Result<(), EngineError> {
+        if rad.len() != self.joint_count() {
+            return Err(self.usage(format!(
+                "{} joint angles for {} controlled joints",
+                rad.len(),
+                self.joint_count()
+            )));
+        }
+        if let Some(i) = rad.iter().position(|a| !a.is_finite()) {
+            return Err(self.usage(format!(
+                "the angle of joint \"{}\" is {} (not finite)",
+                self.scene.actuators[i].joint, rad[i]
+            )));
+        }
+        self.call_reading(json!({"op": "set_joint_angles", "q": bits(rad)}))
+    }
+
+    fn set_joint_velocity_targets(&mut self, rad_s: &[f64]) {
+        // A vector of the wrong length (the trait gives no error to
+        // return) sets the joints it reaches; the others keep their
+        // velocity target, or get 0.
+        let commands: Vec<ServoCommand> = self
+            .commands
+            .iter()
+            .enumerate()
+            .map(|(i, c)| {
+                let kept = if c.kind == CommandKind::Velocity {
+                    c.value
+                } else {
+                    0.0
+                };
+                ServoCommand::velocity(rad_s.get(i).copied().unwrap_or(kept))
+            })
+            .collect();
+        if commands != self.commands {
+            self.commands = commands;
+            self.pending = true;
+        }
+    }
+
+    fn set_joint_commands(&mut self, commands: &[ServoCommand]) -> Result<(), EngineError> {
+        check_servo_commands(self.engine, &self.scene, commands)?;
+        if commands != self.commands.as_slice() {
+            self.commands = commands.to_vec();
+            self.pending = true;
+        }
+        Ok(())
+    }
+
+    fn step(&mut self) -> Result<(), EngineError> {
+        self.step_n(1)
+    }
+
+    fn step_n(&mut self, n: u64) -> Result<(), EngineError> {
+        if n == 0 {
+            return Ok(());
+        }
+        let mut request = json!({"op": "step", "n": n});
+        if self.pending {
+            request["commands"] = commands_json(&self.commands);
+        }
+        self.call_reading(request)?;
+        self.pending = false;
+        Ok(())
+    }
+
+    fn joint_angles_rad(&self, out: &mut [f64]) {
+        out.copy_from_slice(&self.reading.q);
+    }
+
+    fn joint_velocities_rad_s(&self, out: &mut [f64]) -> Result<(), EngineError> {
+        out.copy_from_slice(&self.reading.qd);
+        Ok(())
+    }
+
+    fn tracked_poses(&self, out: &mut [Pose]) {
+        out.copy_from_slice(&self.reading.poses);
+    }
+
+    fn state(&self) -> Result<SimState, EngineError> {
+        let fields = self.call(json!({"op": "get_state"}))?;
+        let reply = Reply {
+            op: "get_state",
+            fields: &fields,
+        };
+        let joints = self.joint_count();
+        let parse = || -> Result<SimState, String> {
+            let objects = reply.array("objects")?;
+            if objects.len() != self.scene.objects.len() {
+                return Err(format!(
+                    "the reply to \"get_state\" has {} objects, the scene {}",
+                    objects.len(),
+                    self.scene.objects.len()
+                ));
+            }
+            let objects = objects
+                .iter()
+                .zip(&self.scene.objects)
+                .map(|(v, o)| {
+                    let fields = v
+                        .as_object()
+                        .ok_or("the reply to \"get_state\": an object is not an object")?;
+                    let r = Reply {
+                        op: "get_state",
+                        fields,
+                    };
+                    let three = |k| r.vector(k, Some(3)).map(|v| Vec3::new(v[0], v[1], v[2]));
+                    Ok(ObjectState {
+                        name: o.name.clone(),
+                        pose: pose_of(&r.vector("pose", Some(7))?),
+                        linear_velocity_m_s: three("v")?,
+                        angular_velocity_rad_s: three("w")?,
+                    })
+                })
+                .collect::<Result<Vec<_>, String>>()?;
+            let native = match reply.value("native") {
+                Some(_) => Some(NativeState {
+                    engine: self.engine.to_string(),
+                    data: reply.vector("native", None)?,
+                }),
+                None => None,
+            };
+            let all_velocity = self
+                .commands
+                .iter()
+                .all(|c| c.kind == CommandKind::Velocity);
+            Ok(SimState {
+                time_s: reply.vector("t", Some(1))?[0],
+                joint_angles_rad: reply.vector("q", Some(joints))?,
+                joint_velocities_rad_s: reply.vector("qd", Some(joints))?,
+                joint_velocity_targets_rad_s: self
+                    .commands
+                    .iter()
+                    .map(|c| {
+                        if c.kind == CommandKind::Velocity {
+                            c.value
+                        } else {
+                            0.0
+                        }
+                    })
+                    .collect(),
+                servo_commands: if all_velocity {
+                    Vec::new()
+                } else {
+                    self.commands.clone()
+                },
+                objects,
+                native,
+            })
+        };
+        parse().map_err(|m| self.unstable(m))
+    }
+
+    fn set_state(&mut self, state: &SimState) -> Result<(), EngineError> {
+        let names: Vec<&str> = self.scene.objects.iter().map(|o| o.name.as_str()).collect();
+        state
+            .check(self.joint_count(), &names)
+            .map_err(|message| EngineError::State {
+                engine: self.engine.to_string(),
+                message,
+            })?;
+        let commands: Vec<ServoCommand> = if state.servo_commands.is_empty() {
+            state
+                .joint_velocity_targets_rad_s
+                .iter()
+                .map(|v| ServoCommand::velocity(*v))
+                .collect()
+        } else {
+            state.servo_commands.clone()
+        };
+        let objects: Vec<Value> = state
+            .objects
+            .iter()
+            .map(|o| {
+                let (p, q) = (o.pose.position_m, o.pose.orientation);
+                let (v, w) = (o.linear_velocity_m_s, o.angular_velocity_rad_s);
+                json!({
+                    "name": o.name,
+                    "pose": bits(&[p.x, p.y, p.z, q.w, q.x, q.y, q.z]),
+                    "v": bits(&[v.x, v.y, v.z]),
+                    "w": bits(&[w.x, w.y, w.z]),
+                })
+            })
+            .collect();
+        let native = state
+            .native
+            .as_ref()
+            .filter(|n| n.engine == self.engine)
+            .map(|n| Value::String(bits(&n.data)))
+            .unwrap_or(Value::Null);
+        self.call_reading(json!({
+            "op": "set_state",
+            "t": bits(&[state.time_s]),
+            "q": bits(&state.joint_angles_rad),
+            "qd": bits(&state.joint_velocities_rad_s),
+            "objects": objects,
+            "native": native,
+            "commands": commands_json(&commands),
+        }))?;
+        self.commands = commands;
+        self.pending = false;
+        Ok(())
+    }
+}

@@ -1,0 +1,154 @@
+//! Bad engine processes: one that crashes, hangs, writes garbage, returns
+//! NaN or a short vector, closes its output or refuses, at `hello`,
+//! `load` or `step`. Each is a failed load or a diverged run with its
+//! reason (and the process's last messages), never a hung or crashed
+//! caller; the process is gone afterwards. The misbehaving engine is
+//! `tests/adapters/misbehave.py` (standard library only).
+
+use realitygap_core::controller::{simulate, RunOptions, RunStatus};
+use realitygap_core::engine::{Engine, EngineError, EngineSettings, SettingValue};
+use realitygap_core::testing;
+use realitygap_engine_remote::child::Launch;
+use realitygap_engine_remote::RemoteEngine;
+use std::time::Instant;
+
+fn misbehave(when: &str, what: &str) -> RemoteEngine {
+    let script = testing::workspace().join("crates/engine-remote/tests/adapters/misbehave.py");
+    RemoteEngine::new(
+        "misbehave",
+        Launch {
+            command: vec![
+                "python3".into(),
+                script.display().to_string(),
+                when.into(),
+                what.into(),
+            ],
+            env: Vec::new(),
+        },
+    )
+}
+
+/// Scene 1 for 0.5 s with a reply timeout of `timeout_s`.
+fn run(engine: &RemoteEngine, timeout_s: f64) -> Result<RunStatus, String> {
+    let mut scene = testing::scene("scene1_single_joint");
+    scene.duration_s = 0.5;
+    let robot = testing::mico2();
+    let mut settings = EngineSettings::new();
+    settings.insert("timeout_s".into(), SettingValue::Float(timeout_s));
+    simulate(engine, &scene, &robot, &settings, &RunOptions::default())
+        .map(|out| out.status)
+        .map_err(|e| e.to_string())
+}
+
+fn diverged(status: Result<RunStatus, String>) -> String {
+    match status {
+        Ok(RunStatus::Diverged { reason, .. }) => reason,
+        other => panic!("expected a diverged run, got {other:?}"),
+    }
+}
+
+#[test]
+fn a_well_behaved_process_runs_the_scene() {
+    // The same script without misbehaviour: the baseline of the others.
+    let status = run(&misbehave("never", "crash"), 30.0).unwrap();
+    assert!(matches!(status, RunStatus::Completed), "{status:?}");
+}
+
+#[test]
+fn a_crash_while_stepping_is_a_diverged_run_with_its_last_messages() {
+    let reason = diverged(run(&misbehave("step", "crash"), 30.0));
+    assert!(
+        reason.contains("exited before replying to \"step\"")
+            && reason.contains("(exit status 3)")
+            && reason.contains("misbehave: simulated crash in step"),
+        "{reason}"
+    );
+}
+
+#[test]
+fn a_hung_process_is_stopped_at_the_timeout() {
+    let started = Instant::now();
+    let reason = diverged(run(&misbehave("step", "hang"), 1.0));
+    assert!(
+        reason.contains("no reply to \"step\" within 1 s (timeout_s)"),
+        "{reason}"
+    );
+    // Not a timing assertion: the wait is one timeout, not the hour the
+    // process sleeps.
+    assert!(started.elapsed().as_secs() < 600);
+}
+
+#[test]
+fn garbage_is_a_failed_run_quoting_the_line() {
+    let reason = diverged(run(&misbehave("step", "garbage"), 30.0));
+    assert!(
+        reason.contains("the reply to \"step\" is not JSON")
+            && reason.contains("\"Segmentation fault (core dumped)\""),
+        "{reason}"
+    );
+}
+
+#[test]
+fn nan_and_short_vectors_are_refused() {
+    let reason = diverged(run(&misbehave("step", "nan"), 30.0));
+    assert!(
+        reason.contains("the reply to \"step\": q[0] is NaN (not finite)"),
+        "{reason}"
+    );
+    let reason = diverged(run(&misbehave("step", "wrong"), 30.0));
+    assert!(reason.contains("has 5 numbers, 6 expected"), "{reason}");
+}
+
+#[test]
+fn a_process_that_closes_its_output_is_stopped() {
+    let reason = diverged(run(&misbehave("step", "silent"), 30.0));
+    assert!(
+        reason.contains("exited before replying to \"step\""),
+        "{reason}"
+    );
+}
+
+#[test]
+fn failures_at_load_and_hello_are_load_errors() {
+    let e = run(&misbehave("load", "refuse"), 30.0).unwrap_err();
+    assert_eq!(
+        e,
+        "engine misbehave: cannot load the scene: misbehave refuses to load"
+    );
+    let e = run(&misbehave("load", "crash"), 30.0).unwrap_err();
+    assert!(
+        e.starts_with("engine misbehave: cannot load the scene: the engine process exited before replying to \"load\""),
+        "{e}"
+    );
+    let e = run(&misbehave("hello", "garbage"), 30.0).unwrap_err();
+    assert!(e.contains("the reply to \"hello\" is not JSON"), "{e}");
+    let engine = misbehave("hello", "crash");
+    assert!(engine
+        .version()
+        .starts_with("unavailable: the engine process exited"));
+}
+
+#[test]
+fn a_missing_program_and_a_bad_timeout_are_clear() {
+    let engine = RemoteEngine::new(
+        "nowhere",
+        Launch {
+            command: vec!["/nonexistent/python".into()],
+            env: Vec::new(),
+        },
+    );
+    let e = engine.check_settings(&EngineSettings::new()).unwrap_err();
+    assert!(
+        matches!(&e, EngineError::Load { message, .. } if message.starts_with("cannot start `/nonexistent/python`")),
+        "{e}"
+    );
+    let mut settings = EngineSettings::new();
+    settings.insert("timeout_s".into(), SettingValue::Integer(0));
+    let e = misbehave("never", "crash")
+        .check_settings(&settings)
+        .unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        "engine misbehave: setting `timeout_s`: must be a positive number of seconds, found 0"
+    );
+}
