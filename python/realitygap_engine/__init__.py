@@ -697,6 +697,8 @@ def _handle(session: _Session, request: Mapping[str, Any]) -> dict:
             sim.set_commands(kinds, values)
         sim.step(n)
         return {"state": _reading_json(session, sim.reading())}
+    if op == "run":
+        return _run_segments(session, request)
     if op == "set_joint_angles":
         sim = _need_sim(session)
         q = _vector(request, "q", "set_joint_angles", session.joints)
@@ -720,7 +722,44 @@ def _handle(session: _Session, request: Mapping[str, Any]) -> dict:
             sim.set_commands(*commands)
         return {"state": _reading_json(session, sim.reading())}
     raise UsageError(f"unknown op {json.dumps(op)} (accepted: hello, check_settings, load, step, "
-                     "set_joint_angles, get_state, set_state)")
+                     "run, set_joint_angles, get_state, set_state)")
+
+
+def _run_segments(session: _Session, request: Mapping[str, Any]) -> dict:
+    """The ``run`` request: segments in order, each ``{"read": bool,
+    "commands": {...} or null, "steps": n}``: read the state first (when
+    ``read``), then set the commands (when given), then step ``n`` times.
+    The reply holds the readings taken and the reading at the end
+    (``state``); a failure part-way ends the run there and comes back as
+    ``error`` beside the readings taken before it (an unexpected exception
+    as an ``unstable`` error)."""
+    sim = _need_sim(session)
+    segments = request.get("segments")
+    if not isinstance(segments, list):
+        raise UsageError("`segments` must be a list")
+    readings: list[dict] = []
+    try:
+        for i, seg in enumerate(segments):
+            if not isinstance(seg, Mapping):
+                raise UsageError(f"segment {i} is not a JSON object")
+            n = seg.get("steps", 0)
+            if not isinstance(n, int) or isinstance(n, bool) or n < 0:
+                raise UsageError(f"segment {i}: `steps` must be a whole number >= 0, found {json.dumps(n)}")
+            if seg.get("read"):
+                readings.append(_reading_json(session, sim.reading()))
+            if seg.get("commands") is not None:
+                sim.set_commands(*_parse_commands(session, seg["commands"]))
+            if n:
+                sim.step(n)
+    except EngineError as e:
+        if isinstance(e, UnstableError) and e.t_s is None:
+            e.t_s = session.last_t
+        return {"readings": readings, "error": e.reply()}
+    except Exception as e:  # noqa: BLE001 - a failure while stepping is the run's end
+        traceback.print_exc(file=sys.stderr)
+        sys.stderr.flush()
+        return {"readings": readings, "error": UnstableError(f"{type(e).__name__}: {e}", session.last_t).reply()}
+    return {"readings": readings, "state": _reading_json(session, sim.reading())}
 
 
 def _checked_bits(x: float, what: str) -> str:

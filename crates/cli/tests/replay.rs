@@ -195,7 +195,7 @@ fn every_engine_replays_at_its_defaults_and_refusals_are_named() {
     let stdout = text(&run.stdout);
     assert!(run.status.success(), "{stdout}{}", text(&run.stderr));
     let rows = rows(&out);
-    let engines = realitygap::compiled_engines();
+    let engines = realitygap::engines();
     // The physics-free model (`ideal`) is one row, not an engine replayed
     // beside it.
     assert_eq!(rows.len(), engines.len(), "{stdout}");

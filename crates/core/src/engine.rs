@@ -652,6 +652,30 @@ pub struct StabilityIssue {
     pub message: String,
 }
 
+/// One stretch of an open-loop schedule ([`Simulation::run_segments`]):
+/// read the state first (when `read`), then set the commands (when
+/// given), then take `steps` steps.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Segment {
+    /// Read the state before anything else.
+    pub read: bool,
+    /// The commands from here on (see [`Simulation::set_joint_commands`]).
+    pub commands: Option<Vec<ServoCommand>>,
+    /// Steps to take.
+    pub steps: u64,
+}
+
+/// The state read at a [`Segment`] with `read`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SegmentReading {
+    /// Controlled joints' angles, rad.
+    pub angles_rad: Vec<f64>,
+    /// Controlled joints' velocities, rad/s.
+    pub velocities_rad_s: Vec<f64>,
+    /// Tracked bodies' poses.
+    pub poses: Vec<Pose>,
+}
+
 /// One running simulation of a scene (see the module documentation for the
 /// contract).
 pub trait Simulation: Send {
@@ -691,6 +715,40 @@ pub trait Simulation: Send {
     fn step_n(&mut self, n: u64) -> Result<(), EngineError> {
         for _ in 0..n {
             self.step()?;
+        }
+        Ok(())
+    }
+    /// Runs an open-loop schedule: each segment in order (see
+    /// [`Segment`]), the readings appended to `readings`. A failure
+    /// part-way ends the schedule there with the readings taken before it
+    /// kept. The default does it call by call; an engine that can take a
+    /// whole schedule at once (one message for an engine out of process)
+    /// does so, with the same result.
+    fn run_segments(
+        &mut self,
+        segments: &[Segment],
+        readings: &mut Vec<SegmentReading>,
+    ) -> Result<(), EngineError> {
+        for segment in segments {
+            if segment.read {
+                let mut angles_rad = vec![0.0; self.joint_count()];
+                let mut velocities_rad_s = vec![0.0; self.joint_count()];
+                let mut poses = vec![Pose::IDENTITY; self.tracked_count()];
+                self.joint_angles_rad(&mut angles_rad);
+                self.joint_velocities_rad_s(&mut velocities_rad_s)?;
+                self.tracked_poses(&mut poses);
+                readings.push(SegmentReading {
+                    angles_rad,
+                    velocities_rad_s,
+                    poses,
+                });
+            }
+            if let Some(commands) = &segment.commands {
+                self.set_joint_commands(commands)?;
+            }
+            for _ in 0..segment.steps {
+                self.step()?;
+            }
         }
         Ok(())
     }

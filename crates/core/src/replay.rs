@@ -21,9 +21,8 @@
 
 use crate::actuator::{ActuatorStage, StageUnit};
 use crate::controller::{RunError, RunOptions, RunOutcome, RunStatus};
-use crate::engine::{EngineError, ServoCommand, Simulation};
+use crate::engine::{EngineError, Segment, ServoCommand, Simulation};
 use crate::params::PhysicalParams;
-use crate::pose::Pose;
 use crate::scene::Scene;
 use crate::trajectory::{CommandKind, JointCommands, Trajectory};
 use std::time::Instant;
@@ -249,6 +248,99 @@ impl ReplayPlan {
     }
 }
 
+/// The engine steps at most in one batch of a replay's schedule.
+const BATCH_STEPS: u64 = 20_000;
+/// The readings at most in one batch.
+const BATCH_READS: usize = 500;
+
+/// A reading the replay asked for: the samples it records, and the
+/// commands, time and step count at it.
+#[derive(Debug, Clone)]
+struct Read {
+    samples: std::ops::Range<usize>,
+    commands: Vec<ServoCommand>,
+    t_s: f64,
+    steps: u64,
+}
+
+/// The segments of one batch of the replay's schedule.
+#[derive(Debug, Default)]
+struct Batch {
+    segments: Vec<Segment>,
+    reads: Vec<Read>,
+    /// Steps in the batch.
+    steps: u64,
+    /// The step count when the batch starts.
+    first_step: u64,
+}
+
+impl Batch {
+    /// The segment to add to: a new one when the last one has stepped.
+    fn open(&mut self) -> &mut Segment {
+        if self.segments.last().is_none_or(|s| s.steps > 0) {
+            self.segments.push(Segment {
+                read: false,
+                commands: None,
+                steps: 0,
+            });
+        }
+        self.segments.last_mut().expect("just pushed")
+    }
+
+    fn read(
+        &mut self,
+        samples: std::ops::Range<usize>,
+        commands: &[ServoCommand],
+        t_s: f64,
+        steps: u64,
+    ) {
+        let segment = self.open();
+        if segment.read || segment.commands.is_some() {
+            // Reads come first in a segment.
+            self.segments.push(Segment {
+                read: true,
+                commands: None,
+                steps: 0,
+            });
+        } else {
+            segment.read = true;
+        }
+        self.reads.push(Read {
+            samples,
+            commands: commands.to_vec(),
+            t_s,
+            steps,
+        });
+    }
+
+    fn set(&mut self, commands: &[ServoCommand]) {
+        self.open().commands = Some(commands.to_vec());
+    }
+
+    fn step(&mut self) {
+        match self.segments.last_mut() {
+            Some(s) => s.steps += 1,
+            None => self.segments.push(Segment {
+                read: false,
+                commands: None,
+                steps: 1,
+            }),
+        }
+        self.steps += 1;
+    }
+
+    fn is_full(&self) -> bool {
+        self.steps >= BATCH_STEPS || self.reads.len() >= BATCH_READS
+    }
+
+    fn clear(&mut self, first_step: u64) {
+        self.segments.clear();
+        self.reads.clear();
+        self.steps = 0;
+        self.first_step = first_step;
+    }
+}
+
 /// Replays `plan` on a freshly loaded `sim`: the trajectory at the plan's
 /// sample times (tracked poses, joint angles and velocities, for velocity
 /// commands the targets in force as the commands sent, and each servo's
@@ -308,12 +400,16 @@ pub fn replay(sim: &mut dyn Simulation, plan: &ReplayPlan) -> Result<RunOutcome,
     let mut target_rows = Vec::with_capacity(rows);
     let mut velocity_rows = Vec::with_capacity(rows);
     let mut effort_rows = Vec::with_capacity(rows);
-    let mut angles = vec![0.0; joints];
-    let mut poses = vec![Pose::IDENTITY; plan.roles.len()];
     let mut status = RunStatus::Completed;
+    // The replay is open loop: the commands of every step follow from the
+    // recording alone, so the steps go to the engine as a schedule of
+    // segments (read at a sample's step, set commands when they change,
+    // step), a batch at a time (one message each for an engine out of
+    // process), and the readings are recorded as they come back.
+    let mut batch = Batch::default();
     let mut steps = 0u64;
     let mut next_sample = 0usize;
-    while next_sample < rows {
+    'schedule: while next_sample < rows {
         let t_s = steps as f64 * dt;
         plan.commands_at(t_s, dt, &mut commands, &mut scratch);
         if staged {
@@ -329,54 +425,86 @@ pub fn replay(sim: &mut dyn Simulation, plan: &ReplayPlan) -> Result<RunOutcome,
                 }
             }
         }
-        // Record every sample whose nearest engine step is this one.
+        // Every sample whose nearest engine step is this one is read here,
+        // before the step.
+        let first = next_sample;
         while next_sample < rows && plan.sample_times_s[next_sample] < t_s + 0.5 * dt {
-            sim.joint_angles_rad(&mut angles);
-            sim.tracked_poses(&mut poses);
-            if let Some(reason) =
-                crate::controller::divergence(&angles, &poses, &plan.roles, plan.divergence_bound_m)
-            {
-                status = RunStatus::Diverged { t_s, reason };
-                break;
-            }
-            let mut velocities = vec![0.0; joints];
-            sim.joint_velocities_rad_s(&mut velocities)?;
-            let efforts: Vec<f64> = (0..joints)
-                .map(|j| plan.servo_effort(j, commands[j], angles[j], velocities[j]))
-                .collect();
-            trajectory.time_s.push(plan.sample_times_s[next_sample]);
-            for (track, pose) in trajectory.bodies.iter_mut().zip(&poses) {
-                track.poses.push(Some(*pose));
-            }
-            angle_rows.push(angles.clone());
-            if velocity_kind {
-                target_rows.push(commands.iter().map(|c| c.value).collect::<Vec<f64>>());
-            }
-            velocity_rows.push(velocities);
-            effort_rows.push(efforts);
             next_sample += 1;
         }
-        if !matches!(status, RunStatus::Completed) || next_sample == rows {
-            break;
+        if next_sample > first {
+            batch.read(first..next_sample, &commands, t_s, steps);
         }
-        if commands != in_force {
-            sim.set_joint_commands(&commands)?;
-            in_force.clone_from(&commands);
+        let last = next_sample == rows;
+        if !last {
+            if commands != in_force {
+                batch.set(&commands);
+                in_force.clone_from(&commands);
+            }
+            batch.step();
+            steps += 1;
         }
-        match sim.step() {
-            Ok(()) => steps += 1,
+        if !(last || batch.is_full()) {
+            continue;
+        }
+        let mut readings = Vec::with_capacity(batch.reads.len());
+        let failed = sim.run_segments(&batch.segments, &mut readings);
+        for (reading, read) in readings.iter().zip(&batch.reads) {
+            if let Some(reason) = crate::controller::divergence(
+                &reading.angles_rad,
+                &reading.poses,
+                &plan.roles,
+                plan.divergence_bound_m,
+            ) {
+                status = RunStatus::Diverged {
+                    t_s: read.t_s,
+                    reason,
+                };
+                steps = read.steps;
+                break 'schedule;
+            }
+            for _ in read.samples.clone() {
+                let efforts: Vec<f64> = (0..joints)
+                    .map(|j| {
+                        plan.servo_effort(
+                            j,
+                            read.commands[j],
+                            reading.angles_rad[j],
+                            reading.velocities_rad_s[j],
+                        )
+                    })
+                    .collect();
+                trajectory
+                    .time_s
+                    .push(plan.sample_times_s[angle_rows.len()]);
+                for (track, pose) in trajectory.bodies.iter_mut().zip(&reading.poses) {
+                    track.poses.push(Some(*pose));
+                }
+                angle_rows.push(reading.angles_rad.clone());
+                if velocity_kind {
+                    target_rows.push(read.commands.iter().map(|c| c.value).collect::<Vec<f64>>());
+                }
+                velocity_rows.push(reading.velocities_rad_s.clone());
+                effort_rows.push(efforts);
+            }
+        }
+        match failed {
+            Ok(()) => {}
             Err(EngineError::Unstable {
                 t_s: at, message, ..
             }) => {
-                steps += 1;
+                // The steps up to and including the bad one.
+                let from = batch.first_step;
+                let into = ((at - from as f64 * dt) / dt).round().max(0.0) as u64;
+                steps = (from + into + 1).min(steps);
                 status = RunStatus::Diverged {
                     t_s: at,
                     reason: message,
                 };
-                break;
+                break 'schedule;
             }
             Err(e) => return Err(e.into()),
         }
+        batch.clear(steps);
     }
     trajectory.joint_angles_rad = Some(angle_rows);
     trajectory.joint_velocity_commands_rad_s = velocity_kind.then_some(target_rows);

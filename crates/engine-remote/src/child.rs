@@ -116,6 +116,11 @@ impl Child {
         })
     }
 
+    /// Whether the child failed (and was stopped).
+    pub fn is_broken(&self) -> bool {
+        self.broken.is_some()
+    }
+
     /// Sets the wait for each reply.
     pub fn set_timeout(&mut self, timeout: Duration) {
         self.timeout = timeout;

@@ -14,9 +14,12 @@
 //!   pinned environments, and a user's own engines (`engines.toml`).
 //!
 //! A [`RemoteEngine`] asks its child `hello` once (name, version,
-//! settings, parameters, command laws) and keeps one child for
-//! `check_settings`; every [`Engine::load_with`] starts a child of its
-//! own, so a crash ends one run, never a batch.
+//! settings, parameters, command laws) and keeps that child idle for
+//! `check_settings`; [`Engine::load_with`] takes the idle child (or starts
+//! one), and a simulation that ends gives its child back, so a process
+//! that runs one simulation after another starts the engine once. A child
+//! that fails is stopped and never reused: a crash ends one run, never a
+//! batch.
 
 pub mod child;
 pub mod model;
@@ -216,7 +219,9 @@ struct Inner {
     /// installed), with the line that installs it.
     unavailable: Option<String>,
     hello: OnceLock<Result<Hello, String>>,
-    control: Mutex<Option<Child>>,
+    /// An idle child: the one `hello` started, or one whose simulation
+    /// ended; `check_settings` asks it, and `load` takes it.
+    control: sim::IdleSlot,
 }
 
 impl RemoteEngine {
@@ -232,7 +237,7 @@ impl RemoteEngine {
                 launch,
                 unavailable,
                 hello: OnceLock::new(),
-                control: Mutex::new(None),
+                control: Arc::new(Mutex::new(None)),
             }),
         }
     }
@@ -407,7 +412,19 @@ impl Engine for RemoteEngine {
         let timestep_s = self.check_settings(settings)?;
         let description = model::describe(scene, robot, &rest, variation, params)
             .map_err(|m| self.load_error(m))?;
-        let (mut child, _) = self.start(timeout).map_err(|m| self.load_error(m))?;
+        let idle = self
+            .inner
+            .control
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .take();
+        let mut child = match idle {
+            Some(mut child) => {
+                child.set_timeout(timeout);
+                child
+            }
+            None => self.start(timeout).map_err(|m| self.load_error(m))?.0,
+        };
         let fields = child
             .call(&json!({"op": "load", "model": description}))
             .map_err(|f| engine_error(self.inner.name, f, |m| self.load_error(m)))?;
@@ -422,6 +439,7 @@ impl Engine for RemoteEngine {
             self.inner.name,
             scene,
             child,
+            Arc::clone(&self.inner.control),
             timestep_s,
             reading,
             issues,

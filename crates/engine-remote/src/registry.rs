@@ -37,28 +37,7 @@ pub struct Adapter {
     pub requirements: &'static str,
 }
 
-/// The built-in adapters.
-pub const ADAPTERS: &[Adapter] = &[Adapter {
-    name: "mujoco4",
-    module: "realitygap_engine.adapters.mujoco",
-    requirements: include_str!("../../../python/engines/mujoco4.txt"),
-}];
-
-/// The SDK's files, relative to the folder on `PYTHONPATH`.
-const SDK: &[(&str, &str)] = &[
-    (
-        "realitygap_engine/__init__.py",
-        include_str!("../../../python/realitygap_engine/__init__.py"),
-    ),
-    (
-        "realitygap_engine/adapters/__init__.py",
-        include_str!("../../../python/realitygap_engine/adapters/__init__.py"),
-    ),
-    (
-        "realitygap_engine/adapters/mujoco.py",
-        include_str!("../../../python/realitygap_engine/adapters/mujoco.py"),
-    ),
-];
+include!(concat!(env!("OUT_DIR"), "/embedded.rs"));
 
 /// The folder of engine environments and the SDK (see the module
 /// documentation).
@@ -126,9 +105,29 @@ pub fn sdk_dir() -> Result<PathBuf, String> {
     Ok(dir)
 }
 
+/// The folder where `scripts/setup --tests` installs the adapters that the
+/// first command does not (for the engine test kit alone, so that the
+/// rest of the suite sees the engines a user has after `scripts/setup`):
+/// `REALITYGAP_KIT_ENGINES_DIR`, else `engines-kit/` beside
+/// [`engines_dir`].
+pub fn kit_engines_dir() -> PathBuf {
+    std::env::var_os("REALITYGAP_KIT_ENGINES_DIR")
+        .filter(|v| !v.is_empty())
+        .map(PathBuf::from)
+        .unwrap_or_else(|| {
+            let dir = engines_dir();
+            dir.parent()
+                .map_or_else(|| PathBuf::from("engines-kit"), |p| p.join("engines-kit"))
+        })
+}
+
 /// The environment of a built-in adapter.
 pub fn venv_dir(adapter: &Adapter) -> PathBuf {
-    engines_dir().join(adapter.name).join("venv")
+    venv_dir_in(adapter, &engines_dir())
+}
+
+fn venv_dir_in(adapter: &Adapter, root: &Path) -> PathBuf {
+    root.join(adapter.name).join("venv")
 }
 
 /// The stamp that says the environment was made from these requirements.
@@ -138,8 +137,16 @@ fn stamp_file(adapter: &Adapter) -> PathBuf {
 
 /// Whether the adapter's environment is made from its current list.
 pub fn is_installed(adapter: &Adapter) -> bool {
-    venv_dir(adapter).join("bin/python").is_file()
-        && std::fs::read_to_string(stamp_file(adapter)).ok().as_deref()
+    is_installed_in(adapter, &engines_dir())
+}
+
+/// Whether the adapter's environment in the engines folder `root` is made
+/// from its current list.
+pub fn is_installed_in(adapter: &Adapter, root: &Path) -> bool {
+    venv_dir_in(adapter, root).join("bin/python").is_file()
+        && std::fs::read_to_string(root.join(adapter.name).join("requirements.txt"))
+            .ok()
+            .as_deref()
             == Some(adapter.requirements)
 }
 
@@ -212,22 +219,39 @@ pub fn adapter(name: &str) -> Option<&'static Adapter> {
     ADAPTERS.iter().find(|a| a.name == name)
 }
 
+/// The engine of a built-in adapter for the engine test kit: the one in
+/// [`engines_dir`] when it is installed there, else the one in
+/// [`kit_engines_dir`].
+pub fn for_kit(name: &str) -> RemoteEngine {
+    let adapter = adapter(name).unwrap_or_else(|| panic!("\"{name}\" is not a built-in adapter"));
+    if is_installed(adapter) {
+        built_in(adapter)
+    } else {
+        built_in_in(adapter, &kit_engines_dir())
+    }
+}
+
 /// The engine of a built-in adapter: runnable when installed, else one
 /// whose every load says the line that installs it.
 pub fn built_in(adapter: &Adapter) -> RemoteEngine {
-    if !is_installed(adapter) {
+    built_in_in(adapter, &engines_dir())
+}
+
+/// [`built_in`] with its environment in the engines folder `root`.
+pub fn built_in_in(adapter: &Adapter, root: &Path) -> RemoteEngine {
+    if !is_installed_in(adapter, root) {
         return RemoteEngine::unavailable(
             adapter.name,
             format!(
                 "engine \"{}\" is not installed: `{}` makes its environment ({})",
                 adapter.name,
                 install_line(adapter.name),
-                venv_dir(adapter).display()
+                venv_dir_in(adapter, root).display()
             ),
         );
     }
     match python_launch(
-        &venv_dir(adapter).join("bin/python"),
+        &venv_dir_in(adapter, root).join("bin/python"),
         adapter.module,
         adapter.name,
     ) {

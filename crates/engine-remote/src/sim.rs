@@ -8,13 +8,20 @@
 use crate::child::{Child, Failure};
 use crate::wire::{bits, Reply};
 use realitygap_core::engine::{
-    check_servo_commands, CommandKind, EngineError, NativeState, ObjectState, ServoCommand,
-    SimState, Simulation, StabilityIssue,
+    check_servo_commands, CommandKind, EngineError, NativeState, ObjectState, Segment,
+    SegmentReading, ServoCommand, SimState, Simulation, StabilityIssue,
 };
 use realitygap_core::pose::{Pose, Quat, Vec3};
 use realitygap_core::scene::Scene;
 use serde_json::{json, Map, Value};
 use std::cell::RefCell;
+use std::sync::{Arc, Mutex};
+
+/// Where a simulation's child goes back to when the simulation ends: its
+/// engine's idle slot, for the next `check_settings` or `load` (a second
+/// `load` replaces the child's simulation), so that a process running one
+/// simulation after another starts the engine once.
+pub(crate) type IdleSlot = Arc<Mutex<Option<Child>>>;
 
 /// Turns a failed request into the engine error of its kind; a broken
 /// child is `broken(message)`.
@@ -109,7 +116,11 @@ pub(crate) struct Reading {
 impl Reading {
     /// The reading in `reply`'s field `state`.
     pub fn parse(reply: &Reply, joints: usize, tracked: usize) -> Result<Reading, String> {
-        let s = reply.object("state")?;
+        Reading::of(&reply.object("state")?, joints, tracked)
+    }
+
+    /// The reading that is `s`.
+    pub fn of(s: &Reply, joints: usize, tracked: usize) -> Result<Reading, String> {
         let t = s.vector("t", Some(1))?[0];
         let q = s.vector("q", Some(joints))?;
         let qd = s.vector("qd", Some(joints))?;
@@ -152,7 +163,9 @@ pub(crate) fn stability_issues(reply: &Reply) -> Result<Vec<StabilityIssue>, Str
 pub struct RemoteSimulation {
     engine: &'static str,
     scene: Scene,
-    child: RefCell<Child>,
+    /// The child (taken only when the simulation ends).
+    child: RefCell<Option<Child>>,
+    idle: IdleSlot,
     timestep_s: f64,
     reading: Reading,
     /// The commands in force (velocity targets 0 at the start).
@@ -167,6 +180,7 @@ impl RemoteSimulation {
         engine: &'static str,
         scene: &Scene,
         child: Child,
+        idle: IdleSlot,
         timestep_s: f64,
         reading: Reading,
         issues: Vec<StabilityIssue>,
@@ -175,7 +189,8 @@ impl RemoteSimulation {
             engine,
             commands: vec![ServoCommand::velocity(0.0); scene.actuators.len()],
             scene: scene.clone(),
-            child: RefCell::new(child),
+            child: RefCell::new(Some(child)),
+            idle,
             timestep_s,
             reading,
             pending: false,
@@ -194,7 +209,12 @@ impl RemoteSimulation {
     /// Sends `request` and returns its reply's fields; a broken child is
     /// an unstable run at the current time.
     fn call(&self, request: Value) -> Result<Map<String, Value>, EngineError> {
-        let result = self.child.borrow_mut().call(&request);
+        let result = self
+            .child
+            .borrow_mut()
+            .as_mut()
+            .expect("the child is there until the simulation ends")
+            .call(&request);
         result.map_err(|f| engine_error(self.engine, f, |m| self.unstable(m)))
     }
 
@@ -216,6 +236,21 @@ impl RemoteSimulation {
         EngineError::Usage {
             engine: self.engine.to_string(),
             message,
+        }
+    }
+}
+
+impl Drop for RemoteSimulation {
+    fn drop(&mut self) {
+        let Some(child) = self.child.get_mut().take() else {
+            return;
+        };
+        if child.is_broken() {
+            return;
+        }
+        let mut slot = self.idle.lock().unwrap_or_else(|e| e.into_inner());
+        if slot.is_none() {
+            *slot = Some(child);
         }
     }
 }
@@ -304,6 +339,64 @@ impl Simulation for RemoteSimulation {
         }
         self.call_reading(request)?;
         self.pending = false;
+        Ok(())
+    }
+
+    fn run_segments(
+        &mut self,
+        segments: &[Segment],
+        readings: &mut Vec<SegmentReading>,
+    ) -> Result<(), EngineError> {
+        // One message for the whole schedule; commands set before it
+        // travel with its first segment.
+        let mut commands = self.commands.clone();
+        let mut pending = self.pending;
+        let mut wire = Vec::with_capacity(segments.len());
+        for segment in segments {
+            let mut w = json!({"read": segment.read, "steps": segment.steps});
+            if let Some(c) = &segment.commands {
+                check_servo_commands(self.engine, &self.scene, c)?;
+                commands.clone_from(c);
+                pending = true;
+            }
+            if pending {
+                w["commands"] = commands_json(&commands);
+                pending = false;
+            }
+            wire.push(w);
+        }
+        let fields = self.call(json!({"op": "run", "segments": wire}))?;
+        self.commands = commands;
+        self.pending = false;
+        let reply = Reply {
+            op: "run",
+            fields: &fields,
+        };
+        let (joints, tracked) = (self.joint_count(), self.tracked_count());
+        for v in reply.array("readings").map_err(|m| self.unstable(m))? {
+            let fields = v.as_object().ok_or_else(|| {
+                self.unstable("the reply to \"run\": a reading is not an object".into())
+            })?;
+            let r = Reading::of(&Reply { op: "run", fields }, joints, tracked)
+                .map_err(|m| self.unstable(m))?;
+            self.reading.t = r.t;
+            readings.push(SegmentReading {
+                angles_rad: r.q,
+                velocities_rad_s: r.qd,
+                poses: r.poses,
+            });
+        }
+        if let Some(error) = reply.value("error") {
+            let text = |k: &str| error.get(k).and_then(Value::as_str).map(str::to_string);
+            let failure = Failure::Engine {
+                kind: text("kind").unwrap_or_else(|| "unstable".into()),
+                message: text("message").unwrap_or_else(|| "(no message)".into()),
+                key: text("key"),
+                t_s: error.get("t_s").and_then(Value::as_f64),
+            };
+            return Err(engine_error(self.engine, failure, |m| self.unstable(m)));
+        }
+        self.reading = Reading::parse(&reply, joints, tracked).map_err(|m| self.unstable(m))?;
         Ok(())
     }
 

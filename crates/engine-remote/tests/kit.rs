@@ -43,7 +43,4 @@ const SPEC: KitSpec = KitSpec {
     ..KitSpec::CONTRACT
 };
 
-realitygap_core::engine_test_kit!(
-    registry::built_in(registry::adapter("mujoco4").expect("a built-in adapter")),
-    SPEC
-);
+realitygap_core::engine_test_kit!(registry::for_kit("mujoco4"), SPEC);

@@ -244,13 +244,14 @@ fn data_source(data: &str) -> PyResult<DataSource> {
         .map_err(|e: String| RealityGapError::new_err(format!("data={data:?}: {e}")))
 }
 
-/// The physics engines compiled in, in `realitygap engines` order: per
-/// engine a dict of its name, version, default timestep, settings, the
+/// The physics engines this package can run, in `realitygap engines`
+/// order (compiled in, then the engines out of process that are
+/// installed, such as `mujoco4`): per engine a dict of its name, version, default timestep, settings, the
 /// physical parameters it honours and how it takes joint commands.
 #[pyfunction]
 fn engines(py: Python<'_>) -> PyResult<Bound<'_, PyList>> {
     let list = PyList::empty(py);
-    for e in realitygap::compiled_engines() {
+    for e in realitygap::engines() {
         let d = PyDict::new(py);
         d.set_item("name", e.name())?;
         d.set_item("version", e.version())?;

@@ -230,14 +230,18 @@ pub fn scene_toml(
     }
     let _ = writeln!(s, "[[schedule]]\nt_s = 0.0\ntargets_deg = {{}}\n");
     let _ = writeln!(s, "[[track]]\nrole = \"wrist\"\nlink = {link:?}\n");
-    for engine in ["mujoco", "bullet", "ode", "rapier", "physx", "dart"] {
+    // The engines out of process too (every engine has `timestep_s`):
+    // mujoco4 with MuJoCo's settings.
+    for engine in [
+        "mujoco", "bullet", "ode", "rapier", "physx", "dart", "mujoco4", "drake", "newton",
+    ] {
         let _ = writeln!(s, "[engine.{engine}]\ntimestep_s = {TIMESTEP_S:?}");
         match engine {
             // Implicit servo damping: stiff gains at 1 ms stay stable. The
             // links do not collide with each other, as in Bullet, ODE and
             // DART: the recorded arm did not, and a URDF's collision meshes
             // of non-adjacent links may overlap.
-            "mujoco" => {
+            "mujoco" | "mujoco4" => {
                 let _ = writeln!(s, "integrator = \"implicitfast\"\nself_collision = false");
             }
             // The kv servo (motor CFM = 1/kv), so that kv and the PD law hold;
