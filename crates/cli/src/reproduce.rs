@@ -145,6 +145,18 @@ pub fn reproduce_keeping_problems(
         args.scenes.clone()
     };
     let engines: Vec<String> = if args.engines.is_empty() {
+        let missing: Vec<&str> = realitygap_engine_remote::registry::ADAPTERS
+            .iter()
+            .filter(|a| !realitygap_engine_remote::registry::is_installed(a))
+            .map(|a| a.name)
+            .collect();
+        if !missing.is_empty() {
+            println!(
+                "engines out of process not installed, left out: {} (each adds with `{}`)",
+                missing.join(", "),
+                realitygap_engine_remote::registry::install_line("NAME")
+            );
+        }
         crate::engines()
             .iter()
             .map(|e| e.name().to_string())

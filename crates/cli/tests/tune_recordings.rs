@@ -109,7 +109,18 @@ fn coverage(s: &Value, joints: &Value, delay_s: f64, dt: f64) -> Coverage {
 
 #[test]
 fn mujoco_recovers_the_writers_parameters_with_the_gains_known() {
-    let dir = scratch("tune-recordings-tests", "truth");
+    recovers_the_writers_parameters("mujoco");
+}
+
+/// MuJoCo 4.0.1 out of process (the `mujoco4` adapter, through the engine
+/// protocol): the same recovery, the same tolerances.
+#[test]
+fn mujoco4_recovers_the_writers_parameters_with_the_gains_known() {
+    recovers_the_writers_parameters("mujoco4");
+}
+
+fn recovers_the_writers_parameters(engine: &str) {
+    let dir = scratch("tune-recordings-tests", &format!("truth-{engine}"));
     let real = import_bags(&dir, 4);
     // Known: the servo gains (kp, and kd as kv). Searched: damping,
     // armature, frictionloss per joint, and the delay.
@@ -120,7 +131,7 @@ fn mujoco_recovers_the_writers_parameters_with_the_gains_known() {
         "--recordings",
         &path(&real),
         "--engine",
-        "mujoco",
+        engine,
         "--params",
         &path(&known),
         "--runs",
@@ -179,8 +190,8 @@ fn mujoco_recovers_the_writers_parameters_with_the_gains_known() {
     assert!((got - want).abs() <= 0.005 + 1e-9, "delay {got} vs {want}");
     // Held out: at least 5x below the untuned engine, and below the
     // physics-free model.
-    let untuned = holdout_rms(&s, "mujoco untuned");
-    let tuned = holdout_rms(&s, "mujoco tuned");
+    let untuned = holdout_rms(&s, &format!("{engine} untuned"));
+    let tuned = holdout_rms(&s, &format!("{engine} tuned"));
     let kinematic = holdout_rms(&s, "physics-free (perfect");
     assert!(
         tuned * 5.0 <= untuned,
