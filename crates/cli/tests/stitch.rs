@@ -461,9 +461,10 @@ fn the_stitch_command_chooses_runs_and_scores_plans() {
         let rows = s["rows"].as_array().unwrap();
         let engines: Vec<&serde_json::Value> =
             rows.iter().filter(|r| r["role"] == "engine").collect();
-        // Every engine at its defaults but the physics-free model, and ODE
-        // with its own parameters.
-        let physics = self::engines()
+        // Every engine at its defaults but the physics-free model (those
+        // out of process that are installed too), and ODE with its own
+        // parameters.
+        let physics = realitygap::engines()
             .iter()
             .filter(|e| e.name() != "ideal")
             .count();
