@@ -126,7 +126,7 @@ fn recovers_the_writers_parameters(engine: &str) {
     // armature, frictionloss per joint, and the delay.
     let known = truth_params(&dir, &["damping", "armature", "frictionloss", "delay_s"]);
     let out = dir.join("tune");
-    let run = realitygap(&[
+    let args = [
         "tune",
         "--recordings",
         &path(&real),
@@ -140,7 +140,23 @@ fn recovers_the_writers_parameters(engine: &str) {
         "3-4",
         "--out",
         &path(&out),
-    ]);
+    ];
+    // An engine out of process from wherever it is installed: the
+    // command's engines folder, or the kit's (`scripts/setup --tests`).
+    let engines_dir = match realitygap_engine_remote::registry::adapter(engine) {
+        Some(a) if !realitygap_engine_remote::registry::is_installed(a) => {
+            Some(realitygap_engine_remote::registry::kit_engines_dir())
+        }
+        _ => None,
+    };
+    let run = match engines_dir {
+        None => realitygap(&args),
+        Some(dir) => std::process::Command::new(env!("CARGO_BIN_EXE_realitygap"))
+            .args(args)
+            .env("REALITYGAP_ENGINES_DIR", dir)
+            .output()
+            .unwrap(),
+    };
     let stdout = text(&run.stdout);
     assert!(run.status.success(), "{stdout}{}", text(&run.stderr));
     println!("{stdout}");
