@@ -43,4 +43,4 @@ const SPEC: KitSpec = KitSpec {
     ..KitSpec::CONTRACT
 };
 
-realitygap_core::engine_test_kit!(registry::for_kit("mujoco4"), SPEC);
+realitygap_core::engine_test_kit!(grouped: registry::for_kit("mujoco4"), SPEC);

@@ -63,4 +63,4 @@ const SPEC: KitSpec = KitSpec {
     ..KitSpec::CONTRACT
 };
 
-realitygap_core::engine_test_kit!(registry::for_kit("drake"), SPEC);
+realitygap_core::engine_test_kit!(grouped: registry::for_kit("drake"), SPEC);

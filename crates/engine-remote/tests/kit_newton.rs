@@ -8,9 +8,9 @@
 //!
 //! The suite runs the kit with `backend = "c"` (the same SolverMuJoCo
 //! model stepped by MuJoCo's C library: 1 700 steps/s against MuJoCo
-//! Warp's 89-111 on this CPU; 40 of 40 in 304 s, where MuJoCo Warp, the
-//! adapter's default, took 17.6 minutes for 40 of 40 at the tolerances
-//! below, measured on it).
+//! Warp's 89-111 on this CPU; 40 of 40 in 162 s of test time, grouped,
+//! where MuJoCo Warp, the adapter's default, took 17.6 minutes for 40 of
+//! 40 at the tolerances below, measured on it).
 //!
 //! The environment's Warp kernel cache must be warm before the kit runs
 //! (any load and step of the adapter fills it): Warp compiles MuJoCo
@@ -95,4 +95,4 @@ const SPEC: KitSpec = KitSpec {
     ..KitSpec::CONTRACT
 };
 
-realitygap_core::engine_test_kit!(registry::for_kit("newton"), SPEC);
+realitygap_core::engine_test_kit!(grouped: registry::for_kit("newton"), SPEC);

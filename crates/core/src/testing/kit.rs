@@ -653,58 +653,158 @@ pub fn non_finite(out: &RunOutcome) -> Option<String> {
 /// The kit: one `#[test]` per check, on `$engine` (an expression of a type
 /// implementing [`Engine`]) with `$spec` (a [`KitSpec`]). Call it once in
 /// an engine crate's `tests/kit.rs`.
+///
+/// `engine_test_kit!(grouped: $engine, $spec)` makes one `#[test]` per
+/// group instead (`rotor`, `model`, `errors`, `physics`, `scenes`, `free`),
+/// each running its checks in turn on one value of `$engine` (see
+/// [`run_group`]): for an engine whose start costs seconds, such as one
+/// out of process whose child is reused from load to load, the checks of a
+/// group then share one start instead of paying one each.
 #[macro_export]
 macro_rules! engine_test_kit {
     ($engine:expr, $spec:expr) => {
-        $crate::engine_test_kit!(@tests $engine, $spec,
-            rotor::step_response_velocity,
-            rotor::step_response_position,
-            rotor::step_response_effort,
-            rotor::command_round_trip,
-            rotor::bad_commands,
-            model::kinematics_mico2,
-            model::kinematics_official,
-            model::initial_state,
-            errors::bad_settings,
-            errors::scene_mismatches,
-            errors::bad_robots,
-            errors::bad_angles_and_states,
-            errors::divergence,
-            physics::state_round_trips,
-            physics::handover,
-            physics::damping,
-            physics::force_limit,
-            physics::cube_friction,
-            physics::unsupported_keys,
-            physics::gravity,
-            physics::armature,
-            physics::frictionloss,
-            physics::restitution,
-            physics::contact_softness,
-            physics::cube_mass,
-            physics::masses,
-            physics::self_collision,
-            scenes::scene1_mico2,
-            scenes::scene1_official,
-            scenes::stock_settings,
-            scenes::scene2_mico2,
-            scenes::scene2_official,
-            scenes::scene3_mico2,
-            scenes::scene3_official,
-            scenes::iiwa_reach,
-            scenes::iiwa_push,
-            free::free_flight,
-            free::torque_free_rotation,
-            free::drop_flat,
-            free::slide
+        $crate::engine_test_kit!(@checks @tests $engine, $spec);
+    };
+    (grouped: $engine:expr, $spec:expr) => {
+        $crate::engine_test_kit!(@checks @grouped $engine, $spec);
+    };
+    (@checks @$how:ident $engine:expr, $spec:expr) => {
+        $crate::engine_test_kit!(@$how $engine, $spec,
+            rotor {
+                step_response_velocity,
+                step_response_position,
+                step_response_effort,
+                command_round_trip,
+                bad_commands
+            },
+            model { kinematics_mico2, kinematics_official, initial_state },
+            errors {
+                bad_settings,
+                scene_mismatches,
+                bad_robots,
+                bad_angles_and_states,
+                divergence
+            },
+            physics {
+                state_round_trips,
+                handover,
+                damping,
+                force_limit,
+                cube_friction,
+                unsupported_keys,
+                gravity,
+                armature,
+                frictionloss,
+                restitution,
+                contact_softness,
+                cube_mass,
+                masses,
+                self_collision
+            },
+            scenes {
+                scene1_mico2,
+                scene1_official,
+                stock_settings,
+                scene2_mico2,
+                scene2_official,
+                scene3_mico2,
+                scene3_official,
+                iiwa_reach,
+                iiwa_push
+            },
+            free { free_flight, torque_free_rotation, drop_flat, slide }
         );
     };
-    (@tests $engine:expr, $spec:expr, $($group:ident :: $check:ident),*) => {
-        $(
+    (@tests $engine:expr, $spec:expr, $($group:ident { $($check:ident),* }),*) => {
+        $($(
             #[test]
             fn $check() {
                 $crate::testing::kit::$group::$check(&$engine, &$spec);
             }
+        )*)*
+    };
+    (@grouped $engine:expr, $spec:expr, $($group:ident { $($check:ident),* }),*) => {
+        $(
+            #[test]
+            fn $group() {
+                let engine = $engine;
+                $crate::testing::kit::run_group(
+                    stringify!($group),
+                    &[$((stringify!($check), &|| {
+                        $crate::testing::kit::$group::$check(&engine, &$spec)
+                    })),*],
+                );
+            }
         )*
     };
+}
+
+/// Runs a group's checks in turn (the `grouped:` form of
+/// [`engine_test_kit!`](crate::engine_test_kit)): each check's name, time
+/// and result on stderr, every check run even after one fails, and a panic
+/// at the end naming each failed check with its message.
+pub fn run_group(group: &str, checks: &[(&str, &dyn Fn())]) {
+    let mut failed = Vec::new();
+    for (name, check) in checks {
+        eprintln!("kit: {group}::{name} ...");
+        let started = std::time::Instant::now();
+        let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(check));
+        let took = started.elapsed().as_secs_f64();
+        match result {
+            Ok(()) => eprintln!("kit: {group}::{name} passed in {took:.1} s"),
+            Err(panic) => {
+                let message = panic
+                    .downcast_ref::<String>()
+                    .cloned()
+                    .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
+                    .unwrap_or_else(|| "(a panic without a message)".into());
+                eprintln!("kit: {group}::{name} FAILED in {took:.1} s");
+                failed.push(format!("{group}::{name}: {message}"));
+            }
+        }
+    }
+    assert!(
+        failed.is_empty(),
+        "{} of {} checks failed:\n{}",
+        failed.len(),
+        checks.len(),
+        failed.join("\n")
+    );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::run_group;
+    use std::cell::RefCell;
+
+    #[test]
+    fn a_group_runs_every_check_and_names_each_that_failed() {
+        let ran = RefCell::new(Vec::new());
+        let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            run_group(
+                "g",
+                &[
+                    ("first", &|| ran.borrow_mut().push("first")),
+                    ("second", &|| {
+                        ran.borrow_mut().push("second");
+                        panic!("gap 3 mm, 1 mm allowed")
+                    }),
+                    ("third", &|| ran.borrow_mut().push("third")),
+                    ("fourth", &|| panic!("{} NaN", "a")),
+                ],
+            )
+        }));
+        assert_eq!(*ran.borrow(), ["first", "second", "third"]);
+        let panic = result.unwrap_err();
+        let message = panic.downcast_ref::<String>().unwrap();
+        assert_eq!(
+            message,
+            "2 of 4 checks failed:\ng::second: gap 3 mm, 1 mm allowed\ng::fourth: a NaN"
+        );
+    }
+
+    #[test]
+    fn a_group_whose_checks_pass_returns() {
+        run_group("g", &[("only", &|| ())]);
+    }
 }
