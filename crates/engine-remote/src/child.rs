@@ -46,6 +46,20 @@ pub enum Failure {
     Broken(String),
 }
 
+impl Failure {
+    /// The failure an `error` object reports (`kind`, `message`, and `key`
+    /// and `t_s` when given), its kind `default_kind` when it names none.
+    pub fn from_error(error: &Value, default_kind: &str) -> Failure {
+        let text = |k: &str| error.get(k).and_then(Value::as_str).map(str::to_string);
+        Failure::Engine {
+            kind: text("kind").unwrap_or_else(|| default_kind.into()),
+            message: text("message").unwrap_or_else(|| "(no message)".into()),
+            key: text("key"),
+            t_s: error.get("t_s").and_then(Value::as_f64),
+        }
+    }
+}
+
 /// A running engine child.
 pub struct Child {
     process: std::process::Child,
@@ -194,14 +208,8 @@ impl Child {
         if let Some(ok) = parsed.get("ok").and_then(Value::as_object) {
             return Ok(ok.clone());
         }
-        if let Some(error) = parsed.get("error").and_then(Value::as_object) {
-            let text = |k: &str| error.get(k).and_then(Value::as_str).map(str::to_string);
-            return Err(Failure::Engine {
-                kind: text("kind").unwrap_or_else(|| "usage".into()),
-                message: text("message").unwrap_or_else(|| "(no message)".into()),
-                key: text("key"),
-                t_s: error.get("t_s").and_then(Value::as_f64),
-            });
+        if let Some(error) = parsed.get("error").filter(|e| e.is_object()) {
+            return Err(Failure::from_error(error, "usage"));
         }
         let shown: String = reply.trim_end().chars().take(120).collect();
         Err(self.fail(format!(

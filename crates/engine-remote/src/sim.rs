@@ -387,13 +387,7 @@ impl Simulation for RemoteSimulation {
             });
         }
         if let Some(error) = reply.value("error") {
-            let text = |k: &str| error.get(k).and_then(Value::as_str).map(str::to_string);
-            let failure = Failure::Engine {
-                kind: text("kind").unwrap_or_else(|| "unstable".into()),
-                message: text("message").unwrap_or_else(|| "(no message)".into()),
-                key: text("key"),
-                t_s: error.get("t_s").and_then(Value::as_f64),
-            };
+            let failure = Failure::from_error(error, "unstable");
             return Err(engine_error(self.engine, failure, |m| self.unstable(m)));
         }
         self.reading = Reading::parse(&reply, joints, tracked).map_err(|m| self.unstable(m))?;
