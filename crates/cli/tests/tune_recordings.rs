@@ -143,12 +143,8 @@ fn recovers_the_writers_parameters(engine: &str) {
     ];
     // An engine out of process from wherever it is installed: the
     // command's engines folder, or the kit's (`scripts/setup --tests`).
-    let engines_dir = match realitygap_engine_remote::registry::adapter(engine) {
-        Some(a) if !realitygap_engine_remote::registry::is_installed(a) => {
-            Some(realitygap_engine_remote::registry::kit_engines_dir())
-        }
-        _ => None,
-    };
+    let engines_dir = realitygap_engine_remote::registry::adapter(engine)
+        .map(realitygap_engine_remote::registry::kit_dir_of);
     let run = match engines_dir {
         None => realitygap(&args),
         Some(dir) => std::process::Command::new(env!("CARGO_BIN_EXE_realitygap"))

@@ -294,17 +294,11 @@ impl Batch {
         t_s: f64,
         steps: u64,
     ) {
+        // A read opens each step of the replay's loop (read, set, step), so
+        // the segment it opens is a fresh one: reads come first in a segment.
         let segment = self.open();
-        if segment.read || segment.commands.is_some() {
-            // Reads come first in a segment.
-            self.segments.push(Segment {
-                read: true,
-                commands: None,
-                steps: 0,
-            });
-        } else {
-            segment.read = true;
-        }
+        debug_assert!(!segment.read && segment.commands.is_none());
+        segment.read = true;
         self.reads.push(Read {
             samples,
             commands: commands.to_vec(),

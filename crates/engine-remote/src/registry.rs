@@ -224,10 +224,19 @@ pub fn adapter(name: &str) -> Option<&'static Adapter> {
 /// [`kit_engines_dir`].
 pub fn for_kit(name: &str) -> RemoteEngine {
     let adapter = adapter(name).unwrap_or_else(|| panic!("\"{name}\" is not a built-in adapter"));
+    built_in_in(adapter, &kit_dir_of(adapter))
+}
+
+/// The engines folder a test takes an adapter from: the command's
+/// ([`engines_dir`]) when the adapter is installed there, else the kit's
+/// ([`kit_engines_dir`], where `scripts/setup --tests` installs every
+/// adapter). A test that runs the `realitygap` binary passes it as
+/// `REALITYGAP_ENGINES_DIR`.
+pub fn kit_dir_of(adapter: &Adapter) -> PathBuf {
     if is_installed(adapter) {
-        built_in(adapter)
+        engines_dir()
     } else {
-        built_in_in(adapter, &kit_engines_dir())
+        kit_engines_dir()
     }
 }
 

@@ -230,11 +230,13 @@ pub fn scene_toml(
     }
     let _ = writeln!(s, "[[schedule]]\nt_s = 0.0\ntargets_deg = {{}}\n");
     let _ = writeln!(s, "[[track]]\nrole = \"wrist\"\nlink = {link:?}\n");
-    // The engines out of process too (every engine has `timestep_s`):
-    // mujoco4 with MuJoCo's settings.
-    for engine in [
-        "mujoco", "bullet", "ode", "rapier", "physx", "dart", "mujoco4", "drake", "newton",
-    ] {
+    // The linked engines, then every built-in adapter out of process
+    // (every engine has `timestep_s`): mujoco4 with MuJoCo's settings.
+    let linked = ["mujoco", "bullet", "ode", "rapier", "physx", "dart"];
+    let adapters = realitygap_engine_remote::registry::ADAPTERS
+        .iter()
+        .map(|a| a.name);
+    for engine in linked.into_iter().chain(adapters) {
         let _ = writeln!(s, "[engine.{engine}]\ntimestep_s = {TIMESTEP_S:?}");
         match engine {
             // Implicit servo damping: stiff gains at 1 ms stay stable. The
