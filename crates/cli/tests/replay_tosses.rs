@@ -114,6 +114,22 @@ fn every_toss_is_replayed_in_every_engine_and_the_physics_free_model() {
     // a third of an edge, as it does from Python.
     let ideal = error("ideal");
     assert!(ideal > 0.5, "physics-free: {ideal} edges");
+    // By phase: the ballistic row follows the flight (it starts from the
+    // recorded state) and is far off once the cube slides; every phase of
+    // these tosses has samples, so each cell has a value.
+    let phase = |source: &str, i: usize| {
+        let r = rows.iter().find(|r| r["source"] == source).unwrap();
+        assert_eq!(
+            r["phases"][i]["phase"],
+            ["flight", "impact", "slide and tumble", "rest"][i]
+        );
+        r["phases"][i]["position_error_edges"].as_f64().unwrap()
+    };
+    assert!(phase("ideal", 0) < 0.1 && phase("ideal", 2) > 0.5, "{json}");
+    assert!(
+        table.contains("\n| source | flight | impact | slide and tumble | rest |\n|---|"),
+        "{table}"
+    );
     if engines.iter().any(|e| e == "mujoco") {
         let mujoco = error("mujoco");
         assert!(

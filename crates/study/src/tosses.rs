@@ -532,6 +532,35 @@ pub struct TossMeasures {
     pub rest_time_error_s: f64,
     /// Bounces, simulated minus recorded.
     pub bounce_error: f64,
+    /// The centre's mean error over the samples of each of the recorded
+    /// toss's [`PHASES`], edges (`None` for a phase it has no sample in).
+    pub phase_edges: [Option<f64>; 4],
+}
+
+/// The phases of a toss, from the recorded toss's events: flight until its
+/// first impact, the impact ([`IMPACT_WINDOW_S`] from the first touch),
+/// sliding and tumbling until it comes to rest, and rest. A toss that
+/// never touches the ground is all flight.
+pub const PHASES: [&str; 4] = ["flight", "impact", "slide and tumble", "rest"];
+/// How long the impact phase lasts from the first touch, s: about 7 of the
+/// motion capture's samples at 148 Hz, the first bounce's contact.
+pub const IMPACT_WINDOW_S: f64 = 0.05;
+
+/// The phase (an index of [`PHASES`]) of the time `t_s` of a toss whose
+/// recorded events are `events`.
+pub fn phase_of(events: &TossEvents, t_s: f64) -> usize {
+    match events.impact_s {
+        Some(impact) if t_s >= impact => {
+            if t_s >= events.rest_s {
+                3
+            } else if t_s < impact + IMPACT_WINDOW_S {
+                1
+            } else {
+                2
+            }
+        }
+        _ => 0,
+    }
 }
 
 /// A box whose lowest corner is this close to the ground (in edges, 5 mm
@@ -612,7 +641,14 @@ pub fn toss_measures(object: &TossedBox, toss: &Toss, run: &Trajectory) -> Optio
         / held.len() as f64;
     let real = toss_events(object, &toss.time_s, &toss.poses);
     let sim = toss_events(object, &toss.time_s, &held);
+    let mut sums = [(0.0, 0usize); 4];
+    for (k, &t) in toss.time_s.iter().enumerate() {
+        let phase = &mut sums[phase_of(&real, t)];
+        phase.0 += gap(k);
+        phase.1 += 1;
+    }
     Some(TossMeasures {
+        phase_edges: sums.map(|(sum, n)| (n > 0).then(|| sum / n as f64)),
         impact_error_s: sim.impact_s.zip(real.impact_s).map(|(s, r)| s - r),
         rest_time_error_s: sim.rest_s - real.rest_s,
         bounce_error: sim.bounces as f64 - real.bounces as f64,
@@ -670,6 +706,10 @@ pub struct TossRow {
     pub rest_time_error_s: Option<(f64, f64, f64)>,
     /// Bounces, simulated minus recorded.
     pub bounce_error: Option<(f64, f64, f64)>,
+    /// The centre's error in each of the recorded tosses' [`PHASES`],
+    /// edges: the mean over the tosses that have the phase of each toss's
+    /// mean over the phase's samples.
+    pub phase_edges: [Option<(f64, f64, f64)>; 4],
     /// Tosses simulated per second of wall time (engines only).
     pub tosses_per_s: Option<f64>,
 }
@@ -823,6 +863,7 @@ pub fn toss_row(
         impact_error_ms: pick(&|m| m.impact_error_s.map(|e| 1e3 * e)),
         rest_time_error_s: pick(&|m| Some(m.rest_time_error_s)),
         bounce_error: pick(&|m| Some(m.bounce_error)),
+        phase_edges: [0, 1, 2, 3].map(|i| pick(&|m| m.phase_edges[i])),
         tosses_per_s: wall.filter(|w| *w > 0.0).map(|w| runs.len() as f64 / w),
     }
 }
@@ -847,6 +888,11 @@ pub fn toss_row_json(r: &TossRow) -> Value {
         "rest_time_error_s_ci95": r.rest_time_error_s.map(|(_, lo, hi)| [lo, hi]),
         "bounce_error": r.bounce_error.map(|(m, _, _)| m),
         "bounce_error_ci95": r.bounce_error.map(|(_, lo, hi)| [lo, hi]),
+        "phases": PHASES.iter().zip(&r.phase_edges).map(|(name, v)| json!({
+            "phase": name,
+            "position_error_edges": v.map(|(m, _, _)| m),
+            "position_error_edges_ci95": v.map(|(_, lo, hi)| [lo, hi]),
+        })).collect::<Vec<_>>(),
         "tosses_per_s": r.tosses_per_s,
     })
 }
@@ -902,7 +948,52 @@ pub fn toss_markdown(rows: &[TossRow], set: &TossSet) -> String {
             r.tosses, r.failed
         ));
     }
+    s.push_str(&phases_markdown(&sorted, set));
     s.push_str(&events_markdown(&sorted, set));
+    s
+}
+
+/// The table of errors by phase: each source's centre error in the
+/// recorded tosses' flight, impact, slide and tumble, and rest.
+fn phases_markdown(sorted: &[&TossRow], set: &TossSet) -> String {
+    let mut samples = [0usize; 4];
+    for t in &set.tosses {
+        let events = toss_events(&set.object, &t.time_s, &t.poses);
+        for &time in &t.time_s {
+            samples[phase_of(&events, time)] += 1;
+        }
+    }
+    let total = samples.iter().sum::<usize>().max(1) as f64;
+    let shares: Vec<String> = PHASES
+        .iter()
+        .zip(samples)
+        .map(|(p, n)| format!("{p} {:.0} %", 100.0 * n as f64 / total))
+        .collect();
+    let mut s = format!(
+        "\n## Error by phase\n\n\
+         Each recorded toss split at its own events: flight until its first impact, the impact ({:.0} ms from the first touch), slide and tumble until it comes to rest, then rest (of the recorded samples: {}). The box centre's error in each phase, averaged over the phase's samples, then over the tosses that have the phase, in box edges, with its 95 % interval:\n\n\
+         | source | {} |\n|---|---:|---:|---:|---:|\n",
+        1e3 * IMPACT_WINDOW_S,
+        shares.join(", "),
+        PHASES.join(" | ")
+    );
+    for r in sorted {
+        let label = if r.source == PHYSICS_FREE_ENGINE {
+            "physics-free"
+        } else {
+            r.source.as_str()
+        };
+        let cells: Vec<String> = r
+            .phase_edges
+            .iter()
+            .map(|v| {
+                v.map_or("n/a".to_string(), |(m, lo, hi)| {
+                    format!("{m:.3} [{lo:.3}, {hi:.3}]")
+                })
+            })
+            .collect();
+        s.push_str(&format!("| {label} | {} |\n", cells.join(" | ")));
+    }
     s
 }
 
@@ -1026,6 +1117,77 @@ mod tests {
         let aloft = vec![Pose::new(Vec3::new(0.0, 0.0, 1.0), Quat::IDENTITY); 3];
         let e = toss_events(&cube(), &[0.0, 0.1, 0.2], &aloft);
         assert_eq!((e.impact_s, e.bounces, e.rest_s), (None, 0, 0.0));
+    }
+
+    #[test]
+    fn each_phase_is_measured_on_its_own_samples() {
+        // A 0.1 m cube dropped onto the ground, where it lands at 0.2 s at
+        // 1 m/s along x and slides to a stop at 0.45 s (samples every
+        // 0.01 s): flight, impact (0.2-0.25 s), slide (until it is within
+        // 2 mm of its end, 0.42 s), rest.
+        let time_s: Vec<f64> = (0..60).map(|k| k as f64 / 100.0).collect();
+        let poses: Vec<Pose> = time_s
+            .iter()
+            .map(|&t| {
+                let z = (0.35 - 7.5 * t * t).max(0.05);
+                let s = (t - 0.2).clamp(0.0, 0.25);
+                Pose::new(Vec3::new(s - 2.0 * s * s, 0.0, z), Quat::IDENTITY)
+            })
+            .collect();
+        let toss = Toss {
+            id: "1".into(),
+            time_s: time_s.clone(),
+            poses: poses.clone(),
+            v0_m_s: Vec3::ZERO,
+            w0_rad_s: Vec3::ZERO,
+        };
+        let events = toss_events(&cube(), &time_s, &poses);
+        let (impact, rest) = (events.impact_s.unwrap(), events.rest_s);
+        assert!(
+            (impact - 0.2).abs() < 1e-9 && (rest - 0.42).abs() < 1e-9,
+            "{events:?}"
+        );
+        let phases: Vec<usize> = time_s.iter().map(|&t| phase_of(&events, t)).collect();
+        assert_eq!(
+            [0, 1, 2, 3].map(|p| phases.iter().filter(|&&q| q == p).count()),
+            [20, 5, 17, 18]
+        );
+        assert!(phases.windows(2).all(|w| w[0] <= w[1]), "{phases:?}");
+        for (&t, &p) in time_s.iter().zip(&phases) {
+            let expected = if t < impact {
+                0
+            } else if t >= rest {
+                3
+            } else if t < impact + IMPACT_WINDOW_S {
+                1
+            } else {
+                2
+            };
+            assert_eq!(p, expected, "at {t} s");
+        }
+        // A run off by 1 cm in flight and 3 cm from the impact on.
+        let mut run = Trajectory::with_bodies(&["cube"]);
+        for (&t, p) in time_s.iter().zip(&poses) {
+            let dx = if t < impact { 0.01 } else { 0.03 };
+            run.time_s.push(t);
+            run.bodies[0].poses.push(Some(Pose::new(
+                p.position_m + Vec3::new(dx, 0.0, 0.0),
+                p.orientation,
+            )));
+        }
+        let m = toss_measures(&cube(), &toss, &run).unwrap();
+        let close = |v: Option<f64>, e: f64| v.is_some_and(|v| (v - e).abs() < 1e-12);
+        assert!(close(m.phase_edges[0], 0.1), "{:?}", m.phase_edges);
+        for v in &m.phase_edges[1..] {
+            assert!(close(*v, 0.3), "{:?}", m.phase_edges);
+        }
+        // Never near the ground: all flight.
+        let aloft = TossEvents {
+            impact_s: None,
+            rest_s: 0.0,
+            bounces: 0,
+        };
+        assert_eq!(phase_of(&aloft, 5.0), 0);
     }
 
     #[test]

@@ -246,13 +246,16 @@ pub struct Polished {
 
 /// The physical limits a parameter's bounds may be widened to, from its
 /// key's last part; `None` for a key without one (never widened). An
-/// object's mass is none: it is weighed, not fitted, and a search that
-/// lightens it (MuJoCo's and DART's wrist-only tunes took the study's
-/// 88 g cube down to 1 g, which then flew 4.8 m) is buying wrist error with
-/// an impossible object; its bounds stay where the space puts them.
+/// object's mass and friction are none: the mass is weighed, not fitted,
+/// and the friction is its material's, whose range the space states (a
+/// block's on a table in the default spaces). A search that lightens the
+/// cube (MuJoCo's and DART's wrist-only tunes took the study's 88 g cube
+/// down to 1 g, which then flew 4.8 m) or makes it slippery as ice (the
+/// tunes' 0.014-0.07) is buying wrist error with an impossible object;
+/// their bounds stay where the space puts them.
 pub fn physical_limits(key: &str) -> Option<(f64, f64)> {
     let field = key.rsplit('.').next().unwrap_or(key);
-    if key.starts_with("objects.") && field == "mass_kg" {
+    if key.starts_with("objects.") && matches!(field, "mass_kg" | "friction") {
         return None;
     }
     Some(match (key, field) {
@@ -363,6 +366,20 @@ mod tests {
         let mass = dim("objects.cube.mass_kg", 0.05, 0.15, Scale::Linear);
         assert!(widen(&mass, false).is_none(), "a weighed mass stays");
         assert!(widen(&mass, true).is_none(), "a weighed mass stays");
+        let friction = dim("objects.cube.friction", 0.15, 1.0, Scale::Log);
+        assert!(
+            widen(&friction, false).is_none(),
+            "a material's friction stays"
+        );
+        assert!(
+            widen(&friction, true).is_none(),
+            "a material's friction stays"
+        );
+        let joint = dim("joints.j2.frictionloss", 0.0, 2.0, Scale::Linear);
+        assert!(
+            widen(&joint, true).is_some(),
+            "a joint's friction loss widens"
+        );
         let delay = dim("controller.delay_s", 0.0, 0.15, Scale::Linear);
         assert_eq!(widen(&delay, true).unwrap().high, 0.3);
     }
