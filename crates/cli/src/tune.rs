@@ -343,7 +343,7 @@ fn cross_validate(
         let out = args.out.join(format!("fold-{}", f.number));
         let fold_spec = TuneSpec {
             out: out.clone(),
-            ..spec.with_space(spec.space.clone())
+            ..spec.clone()
         };
         let label = format!("fold {}/{k}: ", f.number);
         let result = tune_with_bar(&target, simulator, &fold_spec, ui, &label)?;

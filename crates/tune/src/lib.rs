@@ -46,6 +46,7 @@ pub fn default_space_file(assets: &Path, engine: &str) -> PathBuf {
 }
 
 /// Everything a tune is asked to do.
+#[derive(Clone)]
 pub struct TuneSpec {
     /// The engine.
     pub engine: String,
@@ -78,15 +79,8 @@ impl TuneSpec {
     /// The same tune over another space.
     pub fn with_space(&self, space: Space) -> TuneSpec {
         TuneSpec {
-            engine: self.engine.clone(),
             space,
-            fit_registration: self.fit_registration,
-            set: self.set.clone(),
-            search: self.search,
-            out: self.out.clone(),
-            polish: self.polish,
-            baseline_space: self.baseline_space.clone(),
-            start_from_baseline: self.start_from_baseline,
+            ..self.clone()
         }
     }
 }
@@ -220,17 +214,7 @@ impl Tuner<'_> {
     pub fn value_names(&self) -> Vec<String> {
         let mut n: Vec<String> = self.spec.space.dims.iter().map(|d| d.key.clone()).collect();
         if self.fits_registration() {
-            n.extend(
-                [
-                    "registration.rx_deg",
-                    "registration.ry_deg",
-                    "registration.rz_deg",
-                    "registration.tx_mm",
-                    "registration.ty_mm",
-                    "registration.tz_mm",
-                ]
-                .map(String::from),
-            );
+            n.extend(space::REGISTRATION_KEYS.map(String::from));
         }
         n
     }

@@ -88,6 +88,18 @@ pub struct RegistrationBounds {
     pub translation_mm: f64,
 }
 
+/// The names of the registration offset's six values, as the tune records
+/// them (after the space's parameters, when the registration is fitted):
+/// rotations about x, y and z in degrees, then translations in mm.
+pub const REGISTRATION_KEYS: [&str; 6] = [
+    "registration.rx_deg",
+    "registration.ry_deg",
+    "registration.rz_deg",
+    "registration.tx_mm",
+    "registration.ty_mm",
+    "registration.tz_mm",
+];
+
 /// A parameter space.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct Space {
@@ -327,15 +339,7 @@ impl Space {
             }
         }
         if space.registration.is_some() {
-            const KEYS: [&str; 6] = [
-                "registration.rx_deg",
-                "registration.ry_deg",
-                "registration.rz_deg",
-                "registration.tx_mm",
-                "registration.ty_mm",
-                "registration.tz_mm",
-            ];
-            let found: Vec<f64> = KEYS
+            let found: Vec<f64> = REGISTRATION_KEYS
                 .iter()
                 .filter_map(|k| values.iter().find(|(n, _)| n == k).map(|(_, v)| *v))
                 .collect();
