@@ -948,19 +948,33 @@ pub fn toss_markdown(rows: &[TossRow], set: &TossSet) -> String {
             r.tosses, r.failed
         ));
     }
-    s.push_str(&phases_markdown(&sorted, set));
-    s.push_str(&events_markdown(&sorted, set));
+    let real: Vec<TossEvents> = set
+        .tosses
+        .iter()
+        .map(|t| toss_events(&set.object, &t.time_s, &t.poses))
+        .collect();
+    s.push_str(&phases_markdown(&sorted, set, &real));
+    s.push_str(&events_markdown(&sorted, &real));
     s
+}
+
+/// A source's name in the secondary tables: `physics-free` for the
+/// physics-free row.
+fn short_label(r: &TossRow) -> &str {
+    if r.source == PHYSICS_FREE_ENGINE {
+        "physics-free"
+    } else {
+        &r.source
+    }
 }
 
 /// The table of errors by phase: each source's centre error in the
 /// recorded tosses' flight, impact, slide and tumble, and rest.
-fn phases_markdown(sorted: &[&TossRow], set: &TossSet) -> String {
+fn phases_markdown(sorted: &[&TossRow], set: &TossSet, real: &[TossEvents]) -> String {
     let mut samples = [0usize; 4];
-    for t in &set.tosses {
-        let events = toss_events(&set.object, &t.time_s, &t.poses);
+    for (t, events) in set.tosses.iter().zip(real) {
         for &time in &t.time_s {
-            samples[phase_of(&events, time)] += 1;
+            samples[phase_of(events, time)] += 1;
         }
     }
     let total = samples.iter().sum::<usize>().max(1) as f64;
@@ -978,11 +992,7 @@ fn phases_markdown(sorted: &[&TossRow], set: &TossSet) -> String {
         PHASES.join(" | ")
     );
     for r in sorted {
-        let label = if r.source == PHYSICS_FREE_ENGINE {
-            "physics-free"
-        } else {
-            r.source.as_str()
-        };
+        let label = short_label(r);
         let cells: Vec<String> = r
             .phase_edges
             .iter()
@@ -999,12 +1009,7 @@ fn phases_markdown(sorted: &[&TossRow], set: &TossSet) -> String {
 
 /// The contact events' table: each source's impact time, time of rest and
 /// bounces against the recorded ones.
-fn events_markdown(sorted: &[&TossRow], set: &TossSet) -> String {
-    let real: Vec<TossEvents> = set
-        .tosses
-        .iter()
-        .map(|t| toss_events(&set.object, &t.time_s, &t.poses))
-        .collect();
+fn events_markdown(sorted: &[&TossRow], real: &[TossEvents]) -> String {
     let n = real.len().max(1) as f64;
     let impacts: Vec<f64> = real.iter().filter_map(|e| e.impact_s).collect();
     let mut s = format!(
@@ -1026,11 +1031,7 @@ fn events_markdown(sorted: &[&TossRow], set: &TossSet) -> String {
         })
     };
     for r in sorted {
-        let label = if r.source == PHYSICS_FREE_ENGINE {
-            "physics-free"
-        } else {
-            r.source.as_str()
-        };
+        let label = short_label(r);
         s.push_str(&format!(
             "| {label} | {} | {} | {} |\n",
             cell(r.impact_error_ms, 1),
