@@ -201,9 +201,10 @@ def test_interrupted_run_keeps_its_finished_runs(tmp_path):
     # The finished runs are whole and load; no child is left.
     for id in kept:
         assert len(rg.load_run(d, id)) > 100
-    # A rerun completes the rest and leaves the kept ones untouched.
+    # A rerun completes the rest (two at a time: nothing interrupts it)
+    # and leaves the kept ones untouched.
     before = {id: (d / "runs" / ("%s.csv" % id)).read_bytes() for id in kept}
-    batch = rg.run("scene2", "mujoco", out=out, repeats=12, jobs=1, perturb={"sensor_noise_deg": 0.1}, progress=False)
+    batch = rg.run("scene2", "mujoco", out=out, repeats=12, jobs=2, perturb={"sensor_noise_deg": 0.1}, progress=False)
     g = batch.groups.iloc[0]
     assert (g["ok"], g["kept"]) == (12 - len(kept), len(kept)), batch.groups
     assert len(finished(d)) == 12
