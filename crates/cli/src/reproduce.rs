@@ -18,6 +18,7 @@ use crate::ui::Ui;
 use anyhow::{bail, Context, Result};
 use realitygap_analysis::compare::{AnalysisMode, CompareOptions, SceneReport};
 use realitygap_analysis::table::{self, Format};
+use realitygap_report::html::ExtraSection;
 use realitygap_runner::slurm::Executor;
 use realitygap_runner::{BatchSpec, Launcher};
 use realitygap_study::provenance::provenance_for_study;
@@ -236,10 +237,12 @@ pub fn reproduce_keeping_problems(
     }
 
     let mut tosses = None;
+    let mut sections = Vec::new();
     if args.tosses && data.is_some() {
         let t = Instant::now();
-        let (md, line, failed) = replay_builtin_tosses(args, &engines, ui)?;
+        let (md, line, failed, section) = replay_builtin_tosses(args, &engines, ui)?;
         problems.extend(failed);
+        sections.push(section);
         if args.verbose {
             ui.say(format!("\n{}", md.trim_end_matches('\n')));
         } else {
@@ -251,7 +254,7 @@ pub fn reproduce_keeping_problems(
 
     ui.note("[3/3] writing the report".into());
     let t = Instant::now();
-    let index_html = write_report(args, &reports, &study, &study_path, &roots)?;
+    let index_html = write_report(args, &reports, &study, &study_path, &roots, &sections)?;
     timings.push(("report".into(), t.elapsed().as_secs_f64()));
 
     timings.push(("total".into(), started.elapsed().as_secs_f64()));
@@ -336,12 +339,13 @@ fn simulate(
 
 /// The second study: the cube tosses built in replayed in `engines` (the
 /// physics-free one as the ballistic row) at their defaults into
-/// `OUT/tosses/`; the table, and the tosses that failed as problems.
+/// `OUT/tosses/`; the table, the summary's line, the tosses that failed as
+/// problems, and the report's section.
 fn replay_builtin_tosses(
     args: &ReproduceRequest,
     engines: &[String],
     ui: &dyn Ui,
-) -> Result<(String, String, Vec<String>)> {
+) -> Result<(String, String, Vec<String>, ExtraSection)> {
     use realitygap_study::toss_study::TossStudy;
     use realitygap_study::tosses::{replay_tosses, toss_markdown};
     let file = realitygap_study::data_source::assets_dir().join(CONTACTNETS_STUDY);
@@ -416,20 +420,29 @@ fn replay_builtin_tosses(
             .join(", "),
         out.join("tosses.md").display()
     );
-    Ok((toss_markdown(&rows, &set), line, failed))
+    let replay = realitygap_study::tosses::replay_scenes(&rows, &set, &out)?;
+    let section = realitygap_study::tosses::report_section(
+        &rows,
+        &set,
+        "tosses/tosses.md in the output folder",
+        replay,
+    );
+    Ok((toss_markdown(&rows, &set), line, failed, section))
 }
 
 /// The second built-in study, in the assets folder.
 pub const CONTACTNETS_STUDY: &str = "studies/contactnets2020.toml";
 
 /// Stage 3: tables, figures and `OUT/report/index.html`, with the
-/// provenance of every source and of this call; the page's path.
+/// provenance of every source and of this call, and `sections` (the
+/// tosses') after the summary; the page's path.
 fn write_report(
     args: &ReproduceRequest,
     reports: &[SceneReport],
     study: &Study,
     study_path: &Path,
     roots: &Roots,
+    sections: &[ExtraSection],
 ) -> Result<PathBuf> {
     let mut provenance = provenance_for_study(study, study_path, roots, args.mode);
     provenance.details.extend(args.data.provenance());
@@ -441,7 +454,7 @@ fn write_report(
         args.repeats.to_string(),
     ));
     let report_dir = args.out.join("report");
-    let files = realitygap_report::write_report(reports, &provenance, &report_dir)
+    let files = realitygap_report::write_report_with(reports, &provenance, &report_dir, sections)
         .with_context(|| format!("writing the report into {}", report_dir.display()))?;
     Ok(files.index_html)
 }

@@ -217,6 +217,43 @@ fn reproduce_with_the_builtin_data_gives_the_table_of_paper_data() {
         html.contains("paper-data.tar.zst"),
         "provenance names the built-in data"
     );
+    // The report's tosses: the verdict, the figure (inlined and as files,
+    // a line per source) and the table by phase.
+    let at = html
+        .find("<section id=\"tosses\">")
+        .expect("a tosses section");
+    let section = &html[at..];
+    let section = &section[..section.find("</section>").unwrap()];
+    assert!(
+        section.contains(
+            "On 456 real cube tosses, the engine closest to the real cube at its defaults is"
+        ) && section.contains("the physics-free row&#39;s"),
+        "{section}"
+    );
+    assert!(section.contains("<th>Slide and tumble</th>"), "{section}");
+    for source in ["rapier", "ode", "physics-free"] {
+        assert!(
+            section.contains(&format!("<tr><td>{source}</td>")),
+            "{source}: {section}"
+        );
+    }
+    let svg =
+        std::fs::read_to_string(out_dir.join("report/figures/tosses_centre_error.svg")).unwrap();
+    for source in ["rapier", "ode", "physics-free"] {
+        assert!(svg.contains(source), "{source} in the figure's legend");
+    }
+    assert!(section.contains("href=\"figures/tosses_centre_error.png\""));
+    assert!(out_dir
+        .join("report/figures/tosses_centre_error.png")
+        .is_file());
+    // The 3D replay's menu gains three tosses (the median and quartiles of
+    // the closest engine's error), the real cube and each source's.
+    assert_eq!(
+        html.matches("{\"name\":\"toss ").count(),
+        3,
+        "three tosses in the 3D replay"
+    );
+    assert!(html.contains("(median of "), "the median toss named");
 
     let cross = tables(with(&[os("--data"), os("none")]));
     assert!(!cross.contains("V-Rep"), "{cross}");

@@ -167,6 +167,10 @@ pub enum FigureKind {
     CubeDisplacement,
     /// Change of the mean cube pitch since the start, degrees.
     CubePitch,
+    /// The tossed cube's centre error against the time from the recorded
+    /// first impact, cube edges (the second study's figure,
+    /// [`crate::tosses::toss_figure`]; not one of a scene's, [`FigureKind::ALL`]).
+    TossCentreError,
 }
 
 impl FigureKind {
@@ -185,6 +189,7 @@ impl FigureKind {
             FigureKind::ReferenceDistance => "reference_distance",
             FigureKind::CubeDisplacement => "cube_displacement",
             FigureKind::CubePitch => "cube_pitch",
+            FigureKind::TossCentreError => "toss_centre_error",
         }
     }
 
@@ -195,6 +200,7 @@ impl FigureKind {
             FigureKind::ReferenceDistance => format!("Wrist distance to the mean of '{reference}'"),
             FigureKind::CubeDisplacement => "Cube displacement from its start".into(),
             FigureKind::CubePitch => "Cube pitch change".into(),
+            FigureKind::TossCentreError => "Cube centre error from the first impact".into(),
         }
     }
 
@@ -205,6 +211,7 @@ impl FigureKind {
             FigureKind::ReferenceDistance => "distance to reference (m)",
             FigureKind::CubeDisplacement => "cube displacement (m)",
             FigureKind::CubePitch => "pitch change (deg)",
+            FigureKind::TossCentreError => "centre error (cube edges)",
         }
     }
 
@@ -212,6 +219,7 @@ impl FigureKind {
     pub fn unit(self) -> &'static str {
         match self {
             FigureKind::CubePitch => "deg",
+            FigureKind::TossCentreError => "edges",
             _ => "m",
         }
     }
@@ -223,6 +231,9 @@ impl FigureKind {
             FigureKind::ReferenceDistance => &series.wrist_distance_to_reference_m,
             FigureKind::CubeDisplacement => &series.cube_displacement_m,
             FigureKind::CubePitch => &series.cube_pitch_change_deg,
+            // A scene's series has none: the tosses' figure is built from
+            // the toss table's curves.
+            FigureKind::TossCentreError => &[],
         }
     }
 
@@ -444,6 +455,8 @@ pub fn available_kinds(report: &SceneReport) -> Vec<FigureKind> {
                 .iter()
                 .any(|s| !s.series.wrist_distance_to_reference_m.is_empty()),
             FigureKind::CubeDisplacement | FigureKind::CubePitch => cube_scene && has(*k),
+            // Not a scene's figure.
+            FigureKind::TossCentreError => false,
         })
         .collect()
 }
@@ -491,7 +504,7 @@ fn line_of(s: &SourceSummary, kind: FigureKind, style: LineStyle) -> Line {
 
 /// Formats a magnitude for captions: 3 significant digits, scientific
 /// beyond 1e4.
-fn fmt_mag(v: f64) -> String {
+pub(crate) fn fmt_mag(v: f64) -> String {
     if !v.is_finite() {
         format!("{v}")
     } else if v.abs() >= 1e4 {
@@ -689,7 +702,11 @@ fn caption(
 /// [`FigureKind::cap`] of the typical magnitude (the median of the lines'
 /// largest magnitudes), with 5 % headroom; lines beyond it are returned as
 /// off-scale and will be clipped.
-fn y_range(kind: FigureKind, lines: &[Line], band: Option<&Band>) -> ((f64, f64), Vec<OffScale>) {
+pub(crate) fn y_range(
+    kind: FigureKind,
+    lines: &[Line],
+    band: Option<&Band>,
+) -> ((f64, f64), Vec<OffScale>) {
     let mut maxima: Vec<f64> = lines
         .iter()
         .filter_map(Line::max_abs)

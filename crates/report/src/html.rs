@@ -107,7 +107,8 @@ pub fn render_index(
 }
 
 /// A section of the report besides the scenes, placed after the summary:
-/// a title, paragraphs (plain text) and a table (plain-text cells).
+/// a title, paragraphs (plain text), figures and a table (plain-text
+/// cells).
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct ExtraSection {
     /// The section's anchor (`id`), e.g. `stitching`.
@@ -120,6 +121,11 @@ pub struct ExtraSection {
     pub header: Vec<String>,
     /// The table's rows.
     pub rows: Vec<Vec<String>>,
+    /// Figures after the paragraphs, inlined, each also written as
+    /// `figures/<stem>.svg` and `.png` by [`crate::write_report_with`].
+    pub figures: Vec<Figure>,
+    /// Scenes the 3D replay adds after the study's (its scene menu).
+    pub replay: Vec<crate::replay3d::ExtraScene>,
 }
 
 fn extra_section(h: &mut String, s: &ExtraSection) {
@@ -131,6 +137,26 @@ fn extra_section(h: &mut String, s: &ExtraSection) {
     );
     for p in &s.paragraphs {
         let _ = writeln!(h, "<p>{}</p>", escape(p));
+    }
+    if !s.figures.is_empty() {
+        h.push_str("<div class=\"figures\">\n");
+        for f in &s.figures {
+            // A figure that cannot be drawn is named, not left out silently.
+            let svg = f.to_svg().map_or_else(
+                |e| format!("<p>{}</p>", escape(&e.to_string())),
+                |svg| inline_svg(&svg, &f.title),
+            );
+            let _ = writeln!(
+                h,
+                "<figure id=\"{}\">\n{}\n<figcaption>{} <a href=\"figures/{}.svg\">SVG</a> &middot; <a href=\"figures/{}.png\">PNG</a></figcaption>\n</figure>",
+                anchor("fig", &f.stem),
+                svg,
+                escape(&f.caption),
+                escape(&f.stem),
+                escape(&f.stem)
+            );
+        }
+        h.push_str("</div>\n");
     }
     if !s.header.is_empty() {
         h.push_str("<table>\n<thead><tr>");
@@ -201,9 +227,14 @@ pub fn render_index_with(
 
     verdict_section(&mut h, reports);
     summary(&mut h, reports, downloads);
+    let replay: Vec<crate::replay3d::ExtraScene> = extra
+        .iter()
+        .flat_map(|x| x.replay.iter().cloned())
+        .collect();
     h.push_str(&crate::replay3d::section(
         reports,
         &crate::figures::SourceStyles::for_reports(reports),
+        &replay,
     ));
     for x in extra {
         extra_section(&mut h, x);
@@ -963,6 +994,8 @@ mod tests {
             paragraphs: vec!["a>b & c".into()],
             header: vec!["Source".into(), "Error".into()],
             rows: vec![vec!["stitched ode>mujoco".into(), "1.0".into()]],
+            figures: Vec::new(),
+            replay: Vec::new(),
         };
         let html = render_index_with(&reports, &[], &Provenance::new("t"), &[], &[extra]);
         assert!(html.contains("<li><a href=\"#stitching\">Stitching &lt;engines&gt;</a></li>"));

@@ -32,6 +32,7 @@ pub mod joint_space;
 pub mod provenance;
 mod render;
 pub mod replay3d;
+pub mod tosses;
 pub mod verdict;
 
 pub use figures::{Figure, FigureKind, SourceStyles};
@@ -206,6 +207,17 @@ pub fn write_report_with(
             "registration.json".into(),
             "capture-frame registration (JSON)".into(),
         ));
+    }
+    // The extra sections' figures, as files beside the scenes'.
+    for f in extra.iter().flat_map(|s| &s.figures) {
+        files.figures_svg.push(write(
+            &fig_dir.join(format!("{}.svg", f.stem)),
+            f.to_svg()?,
+        )?);
+        files.figures_png.push(write(
+            &fig_dir.join(format!("{}.png", f.stem)),
+            f.to_png()?,
+        )?);
     }
     let page = html::render_index_with(reports, &entries, provenance, &downloads, extra);
     files.index_html = write(&out_dir.join("index.html"), page)?;

@@ -8,6 +8,10 @@
 //! millimetres and, for orientations, 3 decimals: about 30 kB per source and
 //! scene.
 //!
+//! Other studies add scenes of their own ([`ExtraScene`]): the cube tosses
+//! add a few tosses, the real cube (black) against each source's, a cube
+//! drawn at every recorded sample.
+//!
 //! The page reads its location's hash: `#replay=S:T` shows the replay
 //! alone, at scene index `S` and `T` seconds (for links and screenshots).
 
@@ -81,9 +85,36 @@ fn push_source(out: &mut String, s: &SourceSummary, style: &LineStyle, reference
     out.push('}');
 }
 
+/// A scene of the replay from another study: a box alone, the recorded
+/// one (the reference) and each source's, at the recorded samples.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct ExtraScene {
+    /// The name in the scene menu.
+    pub name: String,
+    /// The time between samples, s.
+    pub dt_s: f64,
+    /// The box's edge, m.
+    pub edge_m: f64,
+    /// The recorded box first, then each source's.
+    pub sources: Vec<ExtraSource>,
+}
+
+/// One box's track in an [`ExtraScene`].
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct ExtraSource {
+    /// Its name in the legend.
+    pub name: String,
+    /// `recorded`, `simulated` or `physics-free`.
+    pub kind: String,
+    /// The box's centre per sample, m (`None`: no pose there).
+    pub position_m: Vec<Option<[f64; 3]>>,
+    /// Its orientation per sample (w, x, y, z).
+    pub orientation: Vec<Option<[f64; 4]>>,
+}
+
 /// The replay's data as JSON: per scene its name, control period, steps,
-/// goal, cube edge and sources (the reference first).
-pub fn data_json(reports: &[SceneReport], styles: &SourceStyles) -> String {
+/// goal, cube edge and sources (the reference first); then `extra`'s.
+pub fn data_json(reports: &[SceneReport], styles: &SourceStyles, extra: &[ExtraScene]) -> String {
     let mut out = String::from("{\"scenes\":[");
     for (k, r) in reports.iter().enumerate() {
         if k > 0 {
@@ -112,21 +143,71 @@ pub fn data_json(reports: &[SceneReport], styles: &SourceStyles) -> String {
         }
         out.push_str("]}");
     }
+    for (k, x) in extra.iter().enumerate() {
+        if k > 0 || !reports.is_empty() {
+            out.push(',');
+        }
+        let steps = x
+            .sources
+            .iter()
+            .map(|s| s.position_m.len())
+            .max()
+            .unwrap_or(0);
+        let _ = write!(
+            out,
+            "{{\"name\":{},\"dt\":{},\"steps\":{},\"phases\":[],\"goal\":null,\"cube_edge\":{},\"sources\":[",
+            json_str(&x.name),
+            x.dt_s,
+            steps,
+            mm(x.edge_m)
+        );
+        for (i, src) in x.sources.iter().enumerate() {
+            if i > 0 {
+                out.push(',');
+            }
+            let reference = i == 0;
+            let style = if reference {
+                LineStyle::REFERENCE
+            } else {
+                LineStyle::for_source(i - 1)
+            };
+            let _ =
+                write!(
+                out,
+                "{{\"name\":{},\"kind\":{},\"color\":\"{}\",\"dash\":{},\"reference\":{},\"cube\":",
+                json_str(&src.name),
+                json_str(&src.kind),
+                style.hex(),
+                style.dash.map_or("[]".into(), |(a, b)| format!("[{a},{b}]")),
+                reference
+            );
+            push_track(&mut out, &src.position_m);
+            out.push_str(",\"cubeq\":");
+            push_quats(&mut out, &src.orientation);
+            out.push('}');
+        }
+        out.push_str("]}");
+    }
     out.push_str("]}");
     out
 }
 
-/// The section's HTML: the controls, the canvas, the data and the renderer.
-pub fn section(reports: &[SceneReport], styles: &SourceStyles) -> String {
+/// The section's HTML: the controls, the canvas, the data and the renderer;
+/// `extra` scenes after the study's.
+pub fn section(reports: &[SceneReport], styles: &SourceStyles, extra: &[ExtraScene]) -> String {
     let mut h = String::new();
     h.push_str("<section id=\"replay\">\n<h2>3D replay</h2>\n");
-    h.push_str("<p>The mean wrist position of the reference (black, thick) and of each source over time, and for a scene with a cube the mean cube pose (drawn as a cube of the study's 0.075 m edge). Drag to rotate, scroll to zoom; the slider sets the time. Distances in the world frame of the scene (z up, the arm's base at the origin; grid lines every 0.1 m).</p>\n");
+    h.push_str("<p>The mean wrist position of the reference (black, thick) and of each source over time, and for a scene with a cube the mean cube pose (drawn as a cube of the study's 0.075 m edge). Drag to rotate, scroll to zoom; the slider sets the time. Distances in the world frame of the scene (z up, the arm's base at the origin; grid lines every 0.1 m).");
+    if !extra.is_empty() {
+        h.push_str(" The scene menu also holds single tosses of the second study: the real cube (black) and each source's, from the toss's first recorded sample, in the frame of the recording (the table top at z = 0).");
+    }
+    h.push_str("</p>\n");
     h.push_str("<div class=\"replay-controls\"><label>Scene <select id=\"replay-scene\"></select></label> <button type=\"button\" id=\"replay-play\">Play</button> <input type=\"range\" id=\"replay-time\" min=\"0\" max=\"0\" value=\"0\" step=\"1\" aria-label=\"time\"> <output id=\"replay-clock\">0.00 s</output></div>\n");
     h.push_str("<div class=\"replay-view\"><canvas id=\"replay-canvas\" width=\"760\" height=\"520\" aria-label=\"3D replay\"></canvas><div id=\"replay-legend\"></div></div>\n");
     let _ = writeln!(
         h,
         "<script type=\"application/json\" id=\"replay-data\">{}</script>",
-        data_json(reports, styles)
+        data_json(reports, styles, extra)
             .replace('<', "\\u003c")
             .replace('>', "\\u003e")
             .replace('&', "\\u0026")
@@ -222,7 +303,7 @@ mod tests {
         r.sources[0].series.cube_mean_m = vec![Some([0.5, 0.0, 0.0375]); 100];
         r.sources[0].series.cube_mean_quat = vec![Some([1.0, 0.0, 0.0, 0.0]); 100];
         let styles = SourceStyles::for_reports(std::slice::from_ref(&r));
-        let json = data_json(std::slice::from_ref(&r), &styles);
+        let json = data_json(std::slice::from_ref(&r), &styles, &[]);
         let v: serde_json::Value = serde_json::from_str(&json).expect("valid JSON");
         let scene = &v["scenes"][0];
         assert_eq!(scene["steps"], 100);
@@ -244,8 +325,49 @@ mod tests {
         let mut r = testdata::scene();
         r.sources[0].source = "</script><b>x".into();
         let styles = SourceStyles::for_reports(std::slice::from_ref(&r));
-        let html = section(std::slice::from_ref(&r), &styles);
+        let html = section(std::slice::from_ref(&r), &styles, &[]);
         assert!(!html.contains("</script><b>"), "{html}");
         assert!(html.contains("id=\"replay-time\""));
+    }
+
+    /// A scene of another study follows the study's: its boxes' tracks in
+    /// millimetres, the recorded one first and drawn as the reference.
+    #[test]
+    fn an_extra_scene_follows_with_its_boxes() {
+        let r = testdata::scene();
+        let styles = SourceStyles::for_reports(std::slice::from_ref(&r));
+        let track = |x: f64| ExtraSource {
+            name: format!("at {x}"),
+            kind: "simulated".into(),
+            position_m: vec![Some([x, 0.0, 0.05]), None, Some([x, 0.1, 0.05])],
+            orientation: vec![Some([1.0, 0.0, 0.0, 0.0]), None, Some([1.0, 0.0, 0.0, 0.0])],
+        };
+        let toss = ExtraScene {
+            name: "toss 7".into(),
+            dt_s: 1.0 / 148.0,
+            edge_m: 0.1048,
+            sources: vec![track(0.2), track(0.3)],
+        };
+        let json = data_json(
+            std::slice::from_ref(&r),
+            &styles,
+            std::slice::from_ref(&toss),
+        );
+        let v: serde_json::Value = serde_json::from_str(&json).expect("valid JSON");
+        let scene = &v["scenes"][1];
+        assert_eq!(scene["name"], "toss 7");
+        assert_eq!(scene["steps"], 3);
+        assert_eq!(scene["cube_edge"], 105);
+        assert_eq!(scene["sources"][0]["reference"], true);
+        assert_eq!(scene["sources"][0]["color"], "#000000");
+        assert_eq!(scene["sources"][1]["cube"][0], 300);
+        assert!(scene["sources"][1]["cube"][3].is_null());
+        assert_eq!(scene["sources"][1]["cubeq"].as_array().unwrap().len(), 12);
+        // Alone (no scene of the arm) it is still valid JSON.
+        let alone = data_json(&[], &styles, std::slice::from_ref(&toss));
+        assert!(
+            serde_json::from_str::<serde_json::Value>(&alone).is_ok(),
+            "{alone}"
+        );
     }
 }

@@ -1008,6 +1008,8 @@ pub fn report_section(result: &StitchStudy) -> ExtraSection {
         .map(String::from)
         .to_vec(),
         rows,
+        figures: Vec::new(),
+        replay: Vec::new(),
     }
 }
 

@@ -24,6 +24,7 @@ use realitygap_core::robot::RobotModel;
 use realitygap_core::scene::Scene;
 use realitygap_core::trajectory::Trajectory;
 use realitygap_data::{EngineInfo, RunEntry, RunStatus as StoredStatus, RunStore, SourceKind};
+use realitygap_report::html::ExtraSection;
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -535,6 +536,35 @@ pub struct TossMeasures {
     /// The centre's mean error over the samples of each of the recorded
     /// toss's [`PHASES`], edges (`None` for a phase it has no sample in).
     pub phase_edges: [Option<f64>; 4],
+    /// The centre's mean error in each of the [`CURVE_BINS`] time bins
+    /// from the recorded first impact ([`curve_bin`]), edges (`None`: no
+    /// sample there, or a toss that never touches the ground).
+    pub curve: [Option<f64>; CURVE_BINS],
+}
+
+/// The figure's time bins, from the recorded first impact: the first
+/// starts this long before it, s (most tosses fly 0.1-0.3 s before it).
+pub const CURVE_FROM_S: f64 = -0.3;
+/// Each bin's width, s (3 of the motion capture's samples at 148 Hz).
+pub const CURVE_BIN_S: f64 = 0.02;
+/// Bins: to 1.5 s after the first impact.
+pub const CURVE_BINS: usize = 90;
+/// A bin is drawn when at least this many tosses have a sample in it, and
+/// a tenth of the tosses ([`curve_min_tosses`]): the tosses end 0.5-2.5 s
+/// after their impact, and a bin of a few tosses is noise.
+pub const CURVE_MIN_TOSSES: usize = 10;
+
+/// The tosses a bin of a set of `tosses` needs to be drawn.
+pub fn curve_min_tosses(tosses: usize) -> usize {
+    CURVE_MIN_TOSSES.max(tosses / 10)
+}
+
+/// The bin of a time `dt_s` from the recorded first impact, if any.
+pub fn curve_bin(dt_s: f64) -> Option<usize> {
+    // A hair's allowance: a sample at a bin's edge (the impact's own, at
+    // 0.3 s / 0.02 s = 14.999...) falls in the bin it starts.
+    let k = ((dt_s - CURVE_FROM_S) / CURVE_BIN_S + 1e-9).floor();
+    (k >= 0.0 && k < CURVE_BINS as f64).then_some(k as usize)
 }
 
 /// The phases of a toss, from the recorded toss's events: flight until its
@@ -642,13 +672,20 @@ pub fn toss_measures(object: &TossedBox, toss: &Toss, run: &Trajectory) -> Optio
     let real = toss_events(object, &toss.time_s, &toss.poses);
     let sim = toss_events(object, &toss.time_s, &held);
     let mut sums = [(0.0, 0usize); 4];
+    let mut bins = [(0.0, 0usize); CURVE_BINS];
     for (k, &t) in toss.time_s.iter().enumerate() {
         let phase = &mut sums[phase_of(&real, t)];
         phase.0 += gap(k);
         phase.1 += 1;
+        if let Some(b) = real.impact_s.and_then(|i| curve_bin(t - i)) {
+            bins[b].0 += gap(k);
+            bins[b].1 += 1;
+        }
     }
+    let mean = |(sum, n): (f64, usize)| (n > 0).then(|| sum / n as f64);
     Some(TossMeasures {
-        phase_edges: sums.map(|(sum, n)| (n > 0).then(|| sum / n as f64)),
+        phase_edges: sums.map(mean),
+        curve: bins.map(mean),
         impact_error_s: sim.impact_s.zip(real.impact_s).map(|(s, r)| s - r),
         rest_time_error_s: sim.rest_s - real.rest_s,
         bounce_error: sim.bounces as f64 - real.bounces as f64,
@@ -712,6 +749,14 @@ pub struct TossRow {
     pub phase_edges: [Option<(f64, f64, f64)>; 4],
     /// Tosses simulated per second of wall time (engines only).
     pub tosses_per_s: Option<f64>,
+    /// The centre's error against the time from the recorded first
+    /// impact: per bin of [`curve_bin`], the mean over the tosses with a
+    /// sample there of each toss's mean, edges; `None` in a bin with fewer
+    /// tosses than [`curve_min_tosses`].
+    pub curve: Vec<Option<f64>>,
+    /// Each toss's headline error, in the set's order (`None`: it failed
+    /// or has no sample).
+    pub per_toss_edges: Vec<Option<f64>>,
 }
 
 /// Replays every toss of `set` in each engine and the physics-free model,
@@ -832,6 +877,7 @@ pub fn toss_row(
     wall: Option<f64>,
 ) -> TossRow {
     let mut errors = Vec::new();
+    let mut per_toss_edges = Vec::with_capacity(set.tosses.len());
     let mut measures = Vec::new();
     let mut failed = 0;
     for (toss, r) in set.tosses.iter().zip(runs) {
@@ -840,12 +886,15 @@ pub fn toss_row(
                 if !matches!(status, RunStatus::Completed) {
                     failed += 1;
                 }
-                if let Some(e) = toss_error_edges(&set.object, toss, t) {
-                    errors.push(e);
-                }
+                let e = toss_error_edges(&set.object, toss, t);
+                errors.extend(e);
+                per_toss_edges.push(e);
                 measures.extend(toss_measures(&set.object, toss, t));
             }
-            Err(_) => failed += 1,
+            Err(_) => {
+                failed += 1;
+                per_toss_edges.push(None);
+            }
         }
     }
     let pick = |f: &dyn Fn(&TossMeasures) -> Option<f64>| {
@@ -865,6 +914,14 @@ pub fn toss_row(
         bounce_error: pick(&|m| Some(m.bounce_error)),
         phase_edges: [0, 1, 2, 3].map(|i| pick(&|m| m.phase_edges[i])),
         tosses_per_s: wall.filter(|w| *w > 0.0).map(|w| runs.len() as f64 / w),
+        curve: (0..CURVE_BINS)
+            .map(|b| {
+                let v: Vec<f64> = measures.iter().filter_map(|m| m.curve[b]).collect();
+                (v.len() >= curve_min_tosses(set.tosses.len()))
+                    .then(|| v.iter().sum::<f64>() / v.len() as f64)
+            })
+            .collect(),
+        per_toss_edges,
     }
 }
 
@@ -894,11 +951,27 @@ pub fn toss_row_json(r: &TossRow) -> Value {
             "position_error_edges_ci95": v.map(|(_, lo, hi)| [lo, hi]),
         })).collect::<Vec<_>>(),
         "tosses_per_s": r.tosses_per_s,
+        "error_from_first_impact": {
+            "bin_s": CURVE_BIN_S,
+            "min_tosses": curve_min_tosses(r.tosses + r.failed),
+            "points": curve_points(r).iter().map(|(t, v)| json!([t, v])).collect::<Vec<_>>(),
+        },
     })
 }
 
-/// The toss table in Markdown, best first.
-pub fn toss_markdown(rows: &[TossRow], set: &TossSet) -> String {
+/// A row's curve as (bin centre from the recorded first impact, s; mean
+/// error, edges).
+pub fn curve_points(r: &TossRow) -> Vec<(f64, Option<f64>)> {
+    r.curve
+        .iter()
+        .enumerate()
+        .map(|(b, v)| (CURVE_FROM_S + (b as f64 + 0.5) * CURVE_BIN_S, *v))
+        .collect()
+}
+
+/// The rows best first: by the headline, every source measured on all the
+/// tosses before any that failed on some.
+fn sorted_rows<'r>(rows: &'r [TossRow], set: &TossSet) -> Vec<&'r TossRow> {
     let mut sorted: Vec<&TossRow> = rows.iter().collect();
     sorted.sort_by(|a, b| {
         // A source that failed on some tosses is measured on fewer: it is
@@ -912,6 +985,12 @@ pub fn toss_markdown(rows: &[TossRow], set: &TossSet) -> String {
         let (ka, kb) = (k(a), k(b));
         ka.0.cmp(&kb.0).then(ka.1.total_cmp(&kb.1))
     });
+    sorted
+}
+
+/// The toss table in Markdown, best first.
+pub fn toss_markdown(rows: &[TossRow], set: &TossSet) -> String {
+    let sorted = sorted_rows(rows, set);
     let mut s = format!(
         "# Tosses: {} real tosses of a {:.4} m, {} kg box ({})\n\n\
          Position error of the box centre, averaged over each toss's recorded samples, in box edges (the headline); the same at 0.1 s and 0.3 s after the first sample and at the last (the rest pose); the orientation's mean error in degrees. Each is the mean over tosses with its 95 % bootstrap interval over tosses. Lower is closer.\n\n\
@@ -956,6 +1035,237 @@ pub fn toss_markdown(rows: &[TossRow], set: &TossSet) -> String {
     s.push_str(&phases_markdown(&sorted, set, &real));
     s.push_str(&events_markdown(&sorted, &real));
     s
+}
+
+/// The tosses' section of the report (`reproduce`'s index.html): the
+/// verdict in sentences made from the rows, the figure of the centre's
+/// error against the time from the first impact, and the table with the
+/// error by phase. `table` names the full Markdown table's file.
+pub fn report_section(
+    rows: &[TossRow],
+    set: &TossSet,
+    table: &str,
+    replay: Vec<realitygap_report::replay3d::ExtraScene>,
+) -> ExtraSection {
+    let sorted = sorted_rows(rows, set);
+    let cell = |v: Option<(f64, f64, f64)>, digits: usize| {
+        v.map_or("n/a".to_string(), |(m, lo, hi)| {
+            format!("{m:.digits$} [{lo:.digits$}, {hi:.digits$}]")
+        })
+    };
+    let mut paragraphs = verdict(&sorted, set);
+    paragraphs.push(format!(
+        "Each toss starts from its first recorded pose and twist; every engine at its defaults, the physics-free row a ballistic flight frozen where the cube first touches the ground. The centre's error is averaged over a toss's recorded samples, in cube edges ({:.4} m), then over the tosses, with its 95 % bootstrap interval over tosses; the phases are the recorded toss's own (the impact: {:.0} ms from the first touch). Every measure, the contact events and the speeds: {table}.",
+        set.object.edge_m,
+        1e3 * IMPACT_WINDOW_S
+    ));
+    let mut header = vec!["Source".to_string(), "Centre error (edges)".to_string()];
+    header.extend(PHASES.iter().map(|p| {
+        let mut p = p.to_string();
+        p[..1].make_ascii_uppercase();
+        p
+    }));
+    header.extend(["Rest pose (edges)", "Orientation (deg)", "Tosses (failed)"].map(String::from));
+    let rows: Vec<Vec<String>> = sorted
+        .iter()
+        .map(|r| {
+            let mut row = vec![short_label(r).to_string(), cell(r.error_edges, 3)];
+            row.extend(r.phase_edges.iter().map(|v| cell(*v, 3)));
+            row.push(cell(r.rest_edges, 3));
+            row.push(cell(r.orientation_deg, 1));
+            row.push(format!("{} ({})", r.tosses, r.failed));
+            row
+        })
+        .collect();
+    let curves: Vec<realitygap_report::tosses::TossCurve> = sorted
+        .iter()
+        .map(|r| realitygap_report::tosses::TossCurve {
+            source: short_label(r).to_string(),
+            points: curve_points(r),
+        })
+        .collect();
+    let figure = realitygap_report::tosses::toss_figure(
+        &curves,
+        realitygap_report::tosses::CurveMaking {
+            bin_s: CURVE_BIN_S,
+            min_tosses: curve_min_tosses(set.tosses.len()),
+            impact_window_s: IMPACT_WINDOW_S,
+            tosses: set.tosses.len(),
+        },
+    );
+    ExtraSection {
+        id: "tosses".into(),
+        title: format!(
+            "The cube tosses: {} real tosses in every engine",
+            set.tosses.len()
+        ),
+        paragraphs,
+        header,
+        rows,
+        figures: vec![figure],
+        replay,
+    }
+}
+
+/// The tosses the report's 3D replay shows: those at the quartiles and the
+/// median of the closest engine's error (the engine first in `rows`' best
+/// order), each with the real cube and every source's, read back from
+/// `out/<source>/` (as [`replay_tosses`] wrote them).
+pub fn replay_scenes(
+    rows: &[TossRow],
+    set: &TossSet,
+    out: &Path,
+) -> Result<Vec<realitygap_report::replay3d::ExtraScene>> {
+    use realitygap_report::replay3d::{ExtraScene, ExtraSource};
+    let sorted = sorted_rows(rows, set);
+    let Some(best) = sorted
+        .iter()
+        .find(|r| r.source != PHYSICS_FREE_ENGINE && r.error_edges.is_some())
+    else {
+        return Ok(Vec::new());
+    };
+    let mut ranked: Vec<(usize, f64)> = best
+        .per_toss_edges
+        .iter()
+        .enumerate()
+        .filter_map(|(i, e)| e.map(|e| (i, e)))
+        .collect();
+    ranked.sort_by(|a, b| a.1.total_cmp(&b.1));
+    if ranked.is_empty() {
+        return Ok(Vec::new());
+    }
+    let track = |name: &str, kind: &str, poses: &[Pose]| ExtraSource {
+        name: name.into(),
+        kind: kind.into(),
+        position_m: poses
+            .iter()
+            .map(|p| Some([p.position_m.x, p.position_m.y, p.position_m.z]))
+            .collect(),
+        orientation: poses
+            .iter()
+            .map(|p| {
+                let q = p.orientation;
+                Some([q.w, q.x, q.y, q.z])
+            })
+            .collect(),
+    };
+    let mut scenes = Vec::new();
+    let mut chosen: Vec<(usize, &str)> = Vec::new();
+    for (q, what) in [
+        (0.5, "median"),
+        (0.25, "lower quartile"),
+        (0.75, "upper quartile"),
+    ] {
+        let k = ((ranked.len() - 1) as f64 * q).round() as usize;
+        if !chosen.iter().any(|c| c.0 == ranked[k].0) {
+            chosen.push((ranked[k].0, what));
+        }
+    }
+    for (i, what) in chosen {
+        let toss = &set.tosses[i];
+        let mut sources = vec![track("real", "recorded", &toss.poses)];
+        for r in &sorted {
+            let dir = out.join(&r.source);
+            let store = RunStore::open(&dir)
+                .with_context(|| format!("reading the tosses of {}", dir.display()))?;
+            // A toss that failed in this source has no run: no box drawn.
+            let Ok(run) = store.read_run(&toss.id) else {
+                continue;
+            };
+            let Some(poses) = held_poses(&set.object, toss, &run) else {
+                continue;
+            };
+            let kind = if r.source == PHYSICS_FREE_ENGINE {
+                "physics-free"
+            } else {
+                "simulated"
+            };
+            sources.push(track(short_label(r), kind, &poses));
+        }
+        let dt_s = if toss.time_s.len() > 1 {
+            (toss.time_s[toss.time_s.len() - 1] - toss.time_s[0]) / (toss.time_s.len() - 1) as f64
+        } else {
+            1.0 / 148.0
+        };
+        scenes.push(ExtraScene {
+            name: format!(
+                "toss {} ({} of {}: {:.2} edges)",
+                toss.id,
+                what,
+                best.source,
+                best.per_toss_edges[i].unwrap_or(f64::NAN)
+            ),
+            dt_s,
+            edge_m: set.object.edge_m,
+            sources,
+        });
+    }
+    Ok(scenes)
+}
+
+/// The tosses' verdict, in sentences made from the rows (best first): the
+/// closest source, whether the engines beat the physics-free row (their
+/// intervals apart from its interval), and where the closest engine and
+/// the physics-free row differ by phase.
+fn verdict(sorted: &[&TossRow], set: &TossSet) -> Vec<String> {
+    let fmt = |v: (f64, f64, f64)| format!("{:.3} [{:.3}, {:.3}]", v.0, v.1, v.2);
+    let free = sorted.iter().find(|r| r.source == PHYSICS_FREE_ENGINE);
+    let engines: Vec<&&TossRow> = sorted
+        .iter()
+        .filter(|r| r.source != PHYSICS_FREE_ENGINE && r.error_edges.is_some())
+        .collect();
+    let Some(best) = engines.first() else {
+        return vec!["No engine replayed a toss: nothing to compare.".into()];
+    };
+    let best_e = best.error_edges.expect("filtered on it");
+    let mut first = format!(
+        "On {} real cube tosses, the engine closest to the real cube at its defaults is {}: its centre strays {} cube edges on average over a toss",
+        set.tosses.len(),
+        best.source,
+        fmt(best_e)
+    );
+    let Some(free_e) = free.and_then(|f| f.error_edges) else {
+        first.push('.');
+        return vec![first];
+    };
+    first.push_str(&format!(", the physics-free row's {}.", fmt(free_e)));
+    let ahead: Vec<&str> = engines
+        .iter()
+        .filter(|r| r.error_edges.is_some_and(|e| e.2 < free_e.1))
+        .map(|r| r.source.as_str())
+        .collect();
+    let behind: Vec<&str> = engines
+        .iter()
+        .filter(|r| r.error_edges.is_some_and(|e| e.1 > free_e.2))
+        .map(|r| r.source.as_str())
+        .collect();
+    let n = engines.len();
+    let are = |k: usize| if k == 1 { "is" } else { "are" };
+    let second = match (ahead.len(), behind.len()) {
+        (0, 0) => format!("No engine of {n} is clearly closer or farther than the physics-free row: every interval overlaps its interval, so contact physics at the defaults does not pay on these tosses."),
+        (0, b) => format!("No engine of {n} beats the physics-free row: {b} {} clearly farther from the real cube ({}), the rest overlap it. Contact physics at the defaults does not pay here.", are(b), behind.join(", ")),
+        (a, 0) => format!("{a} of {n} engines {} clearly closer than the physics-free row (their intervals lie below its interval): {}.", are(a), ahead.join(", ")),
+        (a, b) => format!("{a} of {n} engines {} clearly closer than the physics-free row (their intervals lie below its interval): {}; {b} {} clearly farther: {}.", are(a), ahead.join(", "), are(b), behind.join(", ")),
+    };
+    let mut out = vec![first, second];
+    if let Some(free) = free {
+        let phases: Vec<String> = PHASES
+            .iter()
+            .zip(best.phase_edges.iter().zip(&free.phase_edges))
+            .filter_map(|(p, (b, f))| {
+                let (b, f) = ((*b)?.0, (*f)?.0);
+                Some(format!("{p} {b:.3} against {f:.3}"))
+            })
+            .collect();
+        if !phases.is_empty() {
+            out.push(format!(
+                "By phase of the recorded toss, {} against the physics-free row (edges): {}.",
+                best.source,
+                phases.join(", ")
+            ));
+        }
+    }
+    out
 }
 
 /// A source's name in the secondary tables: `physics-free` for the
@@ -1182,6 +1492,23 @@ mod tests {
         for v in &m.phase_edges[1..] {
             assert!(close(*v, 0.3), "{:?}", m.phase_edges);
         }
+        // The curve from the impact (0.2 s): 0.1 edges in the bins from
+        // 0.2 s before it, 0.3 from it to 0.39 s after, nothing elsewhere.
+        for (b, v) in m.curve.iter().enumerate() {
+            let expected = match b {
+                5..=14 => Some(0.1),
+                15..=34 => Some(0.3),
+                _ => None,
+            };
+            assert_eq!(v.is_some(), expected.is_some(), "bin {b}: {v:?}");
+            if let Some(e) = expected {
+                assert!(close(*v, e), "bin {b}: {v:?}");
+            }
+        }
+        assert_eq!(curve_bin(-0.3), Some(0));
+        assert_eq!(curve_bin(0.0), Some(15));
+        assert_eq!(curve_bin(-0.31), None);
+        assert_eq!(curve_bin(1.5), None);
         // Never near the ground: all flight.
         let aloft = TossEvents {
             impact_s: None,
@@ -1241,6 +1568,87 @@ mod tests {
         assert!(
             (x[0] - 0.0).abs() < 1e-9 && (x[1] - 1.5).abs() < 1e-9 && (x[2] - 2.0).abs() < 1e-9,
             "{x:?}"
+        );
+    }
+
+    /// A row of the toss table with the headline `e` and the flight and
+    /// rest phases' errors.
+    fn row(source: &str, e: (f64, f64, f64), flight: f64, rest: f64) -> TossRow {
+        TossRow {
+            source: source.into(),
+            tosses: 40,
+            failed: 0,
+            error_edges: Some(e),
+            at_0_1_edges: None,
+            at_0_3_edges: None,
+            rest_edges: Some((rest, rest, rest)),
+            orientation_deg: Some((10.0, 9.0, 11.0)),
+            impact_error_ms: None,
+            rest_time_error_s: None,
+            bounce_error: None,
+            phase_edges: [
+                Some((flight, flight, flight)),
+                None,
+                None,
+                Some((rest, rest, rest)),
+            ],
+            tosses_per_s: None,
+            curve: (0..CURVE_BINS).map(|b| (b > 3).then_some(e.0)).collect(),
+            per_toss_edges: vec![Some(e.0); 40],
+        }
+    }
+
+    /// The report's section: the verdict from the numbers (closest
+    /// engine, who beats the physics-free row, by phase), the table best
+    /// first with a column per phase, and the figure with a line per row.
+    #[test]
+    fn the_report_section_says_who_beats_the_physics_free_row() {
+        let set = TossSet {
+            dir: PathBuf::from("tosses"),
+            object: cube(),
+            tosses: (0..40).map(|_| parabola(Vec3::ZERO, 10)).collect(),
+        };
+        let free = row(PHYSICS_FREE_ENGINE, (1.5, 1.4, 1.6), 0.05, 1.8);
+        let rows = [
+            row("ode", (2.0, 1.8, 2.2), 0.05, 2.1),
+            free.clone(),
+            row("mujoco", (0.3, 0.25, 0.35), 0.04, 0.2),
+            row("rapier", (1.45, 1.3, 1.7), 0.05, 1.6),
+        ];
+        let s = report_section(&rows, &set, "tosses/tosses.md", Vec::new());
+        assert_eq!(s.id, "tosses");
+        let text = s.paragraphs.join("\n");
+        assert!(
+            text.contains("the engine closest to the real cube at its defaults is mujoco: its centre strays 0.300 [0.250, 0.350] cube edges")
+                && text.contains("the physics-free row's 1.500 [1.400, 1.600]"),
+            "{text}"
+        );
+        assert!(
+            text.contains("1 of 3 engines is clearly closer than the physics-free row (their intervals lie below its interval): mujoco; 1 is clearly farther: ode."),
+            "{text}"
+        );
+        assert!(
+            text.contains("mujoco against the physics-free row (edges): flight 0.040 against 0.050, rest 0.200 against 1.800."),
+            "{text}"
+        );
+        assert!(text.contains("tosses/tosses.md"), "{text}");
+        let order: Vec<&str> = s.rows.iter().map(|r| r[0].as_str()).collect();
+        assert_eq!(order, ["mujoco", "rapier", "physics-free", "ode"]);
+        assert_eq!(s.header.len(), 2 + 4 + 3);
+        assert_eq!(s.header[2], "Flight");
+        assert!(s.rows.iter().all(|r| r.len() == s.header.len()));
+        assert_eq!(s.rows[0][3], "n/a", "mujoco has no impact phase here");
+        assert_eq!(s.figures.len(), 1);
+        assert_eq!(s.figures[0].lines.len(), 4);
+        assert_eq!(s.figures[0].lines[0].name, "mujoco");
+        // No engine ahead and none behind: said so.
+        let close = [row("mujoco", (1.45, 1.3, 1.7), 0.05, 1.6), free];
+        let text = report_section(&close, &set, "t.md", Vec::new())
+            .paragraphs
+            .join("\n");
+        assert!(
+            text.contains("No engine of 1 is clearly closer or farther than the physics-free row"),
+            "{text}"
         );
     }
 }
