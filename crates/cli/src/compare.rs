@@ -1,6 +1,7 @@
 //! `realitygap compare`: a study's accumulated-error table and measures,
-//! or the joint-space table of a replay's folder, evaluated once and
-//! written in any format. Shared by the command and the Python package.
+//! the joint-space table of a replay's folder, or the toss table of a
+//! replay of tosses, evaluated once and written in any format. Shared by
+//! the command and the Python package.
 
 use anyhow::Result;
 use realitygap_analysis::compare::SceneReport;
@@ -40,6 +41,13 @@ pub enum Comparison {
         /// The joint-space tables, when asked for.
         joint: Option<Vec<JointTable>>,
     },
+    /// A replay of tosses: per source, the toss table's row.
+    Tosses {
+        /// The rows.
+        rows: Vec<realitygap_study::tosses::TossRow>,
+        /// The real tosses.
+        set: realitygap_study::tosses::TossSet,
+    },
     /// A replay's folder: per source, the joint-space row.
     Replay {
         /// The rows.
@@ -65,6 +73,13 @@ pub fn evaluate(request: &CompareRequest) -> Result<Comparison> {
     }
     if request.link.is_some() {
         anyhow::bail!("--link belongs to the comparison of a replay's folder (the output of `realitygap replay`)");
+    }
+    if realitygap_study::tosses::is_toss_replay_folder(&request.study) {
+        if request.joint_space {
+            anyhow::bail!("--joint-space belongs to a study of the arm, not to a replay of tosses");
+        }
+        let (rows, set) = realitygap_study::tosses::compare_toss_replay(&request.study)?;
+        return Ok(Comparison::Tosses { rows, set });
     }
     let (mut study, roots) = load_study(&request.study, &request.data, request.results.clone())?;
     add_sources(&mut study, &request.added_sources);
@@ -106,6 +121,21 @@ impl Comparison {
                 }
                 (None, _) => table::render(reports, format),
             }),
+            Comparison::Tosses { rows, set } => {
+                use realitygap_study::tosses::{toss_csv, toss_markdown, toss_row_json};
+                Ok(match format {
+                    Format::Markdown => toss_markdown(rows, set),
+                    Format::Csv => toss_csv(rows, set),
+                    Format::Json => {
+                        let rows: Vec<serde_json::Value> = rows.iter().map(toss_row_json).collect();
+                        serde_json::to_string_pretty(&rows)? + "\n"
+                    }
+                    other => anyhow::bail!(
+                        "--format {}: the toss table is written as md, csv or json",
+                        format!("{other:?}").to_lowercase()
+                    ),
+                })
+            }
             Comparison::Replay { rows, joints, link } => {
                 use realitygap_study::replay::{
                     joint_space_csv, joint_space_json, joint_space_markdown,

@@ -137,6 +137,42 @@ fn every_toss_is_replayed_in_every_engine_and_the_physics_free_model() {
             "mujoco {mujoco} against physics-free {ideal}"
         );
     }
+
+    // `compare` of the replay's folder measures the stored runs again
+    // against the real tosses its manifests name: the same rows as the
+    // replay's own table (the speeds aside, which a comparison cannot
+    // know), in Markdown, JSON and CSV.
+    let compare = |format: &str| {
+        let o = realitygap(&["compare", out.to_str().unwrap(), "--format", format]);
+        assert!(o.status.success(), "{format}: {}", text(&o.stderr));
+        text(&o.stdout)
+    };
+    let md = compare("md");
+    let headline = |t: &str| -> Vec<String> {
+        t.lines()
+            .filter(|l| l.starts_with("| ") && !l.starts_with("| source"))
+            .map(|l| l.rsplit_once(" | ").unwrap().0.to_string())
+            .collect()
+    };
+    assert_eq!(headline(&md), headline(&table), "{md}\n{table}");
+    let again: serde_json::Value = serde_json::from_str(&compare("json")).unwrap();
+    for row in rows {
+        let other = again
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["source"] == row["source"])
+            .unwrap();
+        assert_eq!(other["position_error_edges"], row["position_error_edges"]);
+        assert_eq!(other["phases"], row["phases"]);
+    }
+    let csv = compare("csv");
+    assert!(csv.starts_with("source,tosses,failed,position_error_edges,position_error_edges_low,"));
+    assert_eq!(csv.lines().count(), 1 + rows.len(), "{csv}");
+    assert!(csv.contains("\nphysics-free,3,0,"), "{csv}");
+    // A folder with no replayed tosses is not taken for one.
+    let o = realitygap(&["compare", real.to_str().unwrap(), "--format", "md"]);
+    assert!(!o.status.success());
 }
 
 #[test]

@@ -117,6 +117,48 @@ pub fn state_round_trip(
     max_gap(&positions(&a, k), &positions(&b, k))
 }
 
+/// [`state_round_trip`] with the whole state and with its portable part
+/// from one run: `scene` runs to tick `k` once, both states are taken
+/// there, and each is loaded into a fresh simulation continued to `2k`.
+/// Returns (native, portable) gaps, m: what two calls of
+/// [`state_round_trip`] return, at two thirds of their simulation.
+pub fn state_round_trips(
+    subject: Subject<'_>,
+    scene: &Scene,
+    robot: &RobotModel,
+    k: usize,
+) -> (f64, f64) {
+    let params = PhysicalParams::none();
+    let (scene, mut first) = load(subject, scene, robot, &params);
+    let control = ControlParams::default();
+    let mut run = ControllerLoop::new(&scene, &RunOptions::default(), &control);
+    run.start(first.as_mut()).unwrap();
+    run.advance(first.as_mut(), k).unwrap();
+    let native = first.state().unwrap();
+    let portable = native.portable();
+    let resumed = run.clone();
+    run.advance(first.as_mut(), 2 * k).unwrap();
+    let a = run.finish();
+    assert_eq!(a.status, RunStatus::Completed, "{:?}", a.status);
+    let reference = positions(&a, k);
+    let gap = |state: &crate::engine::SimState| {
+        let (_, mut second) = load(subject, &scene, robot, &params);
+        second.set_state(state).unwrap();
+        assert!(
+            (second.time_s() - state.time_s).abs() < 1e-9,
+            "set_state must set the time: {} vs {}",
+            second.time_s(),
+            state.time_s
+        );
+        let mut again = resumed.clone();
+        again.advance(second.as_mut(), 2 * k).unwrap();
+        let b = again.finish();
+        assert_eq!(b.status, RunStatus::Completed, "{:?}", b.status);
+        max_gap(&reference, &positions(&b, k))
+    };
+    (gap(&native), gap(&portable))
+}
+
 /// Runs `scene` in `from` to tick `k`, loads the portable state into a
 /// fresh simulation of `to`, and returns the largest distance between the
 /// tracked positions the two report right after, m. Also checks that the

@@ -386,6 +386,7 @@ fn compare<'py>(
         let kind = match &c {
             realitygap::compare::Comparison::Study { .. } => "study",
             realitygap::compare::Comparison::Replay { .. } => "replay",
+            realitygap::compare::Comparison::Tosses { .. } => "tosses",
         };
         Ok((
             kind,

@@ -111,6 +111,97 @@ pub fn is_toss_store(dir: &Path) -> bool {
     })
 }
 
+/// The scene name of the results directories `replay` writes for tosses.
+pub const TOSS_SCENE: &str = "tosses";
+
+/// The results directories of `dir` that `replay` wrote for tosses (each
+/// subfolder whose manifest's scene is [`TOSS_SCENE`]), by name.
+fn toss_replay_stores(dir: &Path) -> Vec<RunStore> {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Vec::new();
+    };
+    let mut stores: Vec<RunStore> = entries
+        .filter_map(|e| e.ok())
+        .filter(|e| e.path().is_dir())
+        .filter_map(|e| RunStore::open(&e.path()).ok())
+        .filter(|s| s.manifest().scene.as_deref() == Some(TOSS_SCENE))
+        .collect();
+    stores.sort_by(|a, b| a.manifest().source.cmp(&b.manifest().source));
+    stores
+}
+
+/// Whether `dir` is the output folder of `replay` of tosses.
+pub fn is_toss_replay_folder(dir: &Path) -> bool {
+    !toss_replay_stores(dir).is_empty()
+}
+
+/// Measures the output folder of `replay` of tosses again (`compare`):
+/// the real tosses from the folder its manifests name (`settings.real`),
+/// every source's stored runs against them. A toss a source has no
+/// finished run of counts as failed. Returns the rows and the tosses.
+pub fn compare_toss_replay(dir: &Path) -> Result<(Vec<TossRow>, TossSet)> {
+    let stores = toss_replay_stores(dir);
+    if stores.is_empty() {
+        bail!(
+            "{}: no results directory of replayed tosses in it",
+            dir.display()
+        );
+    }
+    let mut real: Option<(PathBuf, String)> = None;
+    for store in &stores {
+        let named = store
+            .manifest()
+            .settings
+            .get("real")
+            .and_then(Value::as_str)
+            .ok_or_else(|| {
+                anyhow!(
+                    "{}: manifest.json: settings.real (the real tosses' folder) is missing",
+                    store.dir().display()
+                )
+            })?;
+        match &real {
+            None => real = Some((PathBuf::from(named), store.manifest().source.clone())),
+            Some((first, source)) if first != Path::new(named) => bail!(
+                "{}: the sources replayed different tosses: {source} those of {}, {} those of {named}",
+                dir.display(),
+                first.display(),
+                store.manifest().source
+            ),
+            Some(_) => {}
+        }
+    }
+    let (real, _) = real.expect("at least one store");
+    let set = read_tosses(&real, TossStart::First)
+        .with_context(|| format!("the real tosses of {} (settings.real)", dir.display()))?;
+    let mut rows = Vec::new();
+    for store in &stores {
+        let runs: Vec<Result<TossRun, String>> = set
+            .tosses
+            .iter()
+            .map(|toss| {
+                let entry = store
+                    .run(&toss.id)
+                    .ok_or_else(|| format!("toss {} was not replayed", toss.id))?;
+                let status = match entry.status {
+                    StoredStatus::Ok | StoredStatus::Unstable => RunStatus::Completed,
+                    StoredStatus::Diverged => RunStatus::Diverged {
+                        t_s: f64::NAN,
+                        reason: entry.message.clone().unwrap_or_default(),
+                    },
+                    StoredStatus::Failed => {
+                        return Err(entry.message.clone().unwrap_or_else(|| "failed".into()))
+                    }
+                };
+                let run = store.read_run(&toss.id).map_err(|e| e.to_string())?;
+                Ok((run, status, entry.wall_time_s.unwrap_or(0.0), 0))
+            })
+            .collect();
+        rows.push(toss_row(&store.manifest().source, &set, &runs, None));
+    }
+    Ok((rows, set))
+}
+
 /// Reads every finished toss of `dir`: poses, and the first sample's twist
 /// from `runs/<id>.velocities.csv`.
 pub fn read_tosses(dir: &Path, start: TossStart) -> Result<TossSet> {
@@ -857,8 +948,12 @@ fn open_store(
     engine: Option<&dyn Engine>,
     _set: &TossSet,
 ) -> Result<RunStore> {
-    let mut store =
-        RunStore::create_or_open(&out.join(name), name, SourceKind::Simulated, Some("tosses"))?;
+    let mut store = RunStore::create_or_open(
+        &out.join(name),
+        name,
+        SourceKind::Simulated,
+        Some(TOSS_SCENE),
+    )?;
     if let Some(engine) = engine {
         store.set_engine(EngineInfo {
             name: engine.name().to_string(),
@@ -967,6 +1062,53 @@ pub fn curve_points(r: &TossRow) -> Vec<(f64, Option<f64>)> {
         .enumerate()
         .map(|(b, v)| (CURVE_FROM_S + (b as f64 + 0.5) * CURVE_BIN_S, *v))
         .collect()
+}
+
+/// The toss table as CSV, best first: one row per source, each measure's
+/// mean and its 95 % interval's ends (empty where not measured).
+pub fn toss_csv(rows: &[TossRow], set: &TossSet) -> String {
+    /// A measure's mean and interval in a row.
+    type Pick = fn(&TossRow) -> Option<(f64, f64, f64)>;
+    let mut header = vec!["source".to_string(), "tosses".into(), "failed".into()];
+    let mut measures: Vec<(String, Pick)> = vec![
+        ("position_error_edges".into(), |r| r.error_edges),
+        ("at_0_1_s_edges".into(), |r| r.at_0_1_edges),
+        ("at_0_3_s_edges".into(), |r| r.at_0_3_edges),
+        ("rest_edges".into(), |r| r.rest_edges),
+        ("orientation_deg".into(), |r| r.orientation_deg),
+        ("impact_error_ms".into(), |r| r.impact_error_ms),
+        ("rest_time_error_s".into(), |r| r.rest_time_error_s),
+        ("bounce_error".into(), |r| r.bounce_error),
+    ];
+    let phases: [Pick; 4] = [
+        |r| r.phase_edges[0],
+        |r| r.phase_edges[1],
+        |r| r.phase_edges[2],
+        |r| r.phase_edges[3],
+    ];
+    for (name, f) in PHASES.iter().zip(phases) {
+        measures.push((format!("{}_edges", name.replace(' ', "_")), f));
+    }
+    for (name, _) in &measures {
+        header.extend([name.clone(), format!("{name}_low"), format!("{name}_high")]);
+    }
+    let mut out = header.join(",") + "\n";
+    for r in sorted_rows(rows, set) {
+        let mut cells = vec![
+            short_label(r).to_string(),
+            r.tosses.to_string(),
+            r.failed.to_string(),
+        ];
+        for (_, f) in &measures {
+            match f(r) {
+                Some((m, lo, hi)) => cells.extend([m, lo, hi].map(|v| v.to_string())),
+                None => cells.extend(["", "", ""].map(String::from)),
+            }
+        }
+        out.push_str(&cells.join(","));
+        out.push('\n');
+    }
+    out
 }
 
 /// The rows best first: by the headline, every source measured on all the

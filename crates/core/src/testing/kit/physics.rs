@@ -24,16 +24,14 @@ pub const TAKEN: [(&str, usize); 2] = [("scene1_single_joint", 40), ("scene3_cub
 /// [`KitSpec::round_trip_m`].
 pub fn state_round_trips(engine: &dyn Engine, spec: &KitSpec) {
     for (i, (name, k)) in TAKEN.into_iter().enumerate() {
-        for (j, what) in ["native", "portable"].into_iter().enumerate() {
-            let gap = with_subject(engine, spec, |s| {
-                conformance::state_round_trip(
-                    s,
-                    &testing::scene(name),
-                    &testing::mico2(),
-                    k,
-                    j == 1,
-                )
-            });
+        // Both states from one run to tick k (conformance::state_round_trips).
+        let (native, portable) = with_subject(engine, spec, |s| {
+            conformance::state_round_trips(s, &testing::scene(name), &testing::mico2(), k)
+        });
+        for (j, (what, gap)) in [("native", native), ("portable", portable)]
+            .into_iter()
+            .enumerate()
+        {
             let tolerance = spec.round_trip_m[i][j];
             report(
                 engine,
