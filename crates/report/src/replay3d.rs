@@ -63,18 +63,25 @@ fn json_str(s: &str) -> String {
     serde_json::to_string(s).unwrap_or_else(|_| "\"\"".into())
 }
 
-fn push_source(out: &mut String, s: &SourceSummary, style: &LineStyle, reference: bool) {
+/// A source's opening: `{"name":..,"kind":..,"color":..,"dash":..,"reference":..`
+/// (its tracks follow, then `}`).
+fn push_source_head(out: &mut String, name: &str, kind: &str, style: &LineStyle, reference: bool) {
     let _ = write!(
         out,
-        "{{\"name\":{},\"kind\":{},\"color\":\"{}\",\"dash\":{},\"reference\":{},\"wrist\":",
-        json_str(&s.source),
-        json_str(&s.kind),
+        "{{\"name\":{},\"kind\":{},\"color\":\"{}\",\"dash\":{},\"reference\":{}",
+        json_str(name),
+        json_str(kind),
         style.hex(),
         style
             .dash
             .map_or("[]".into(), |(a, b)| format!("[{a},{b}]")),
         reference
     );
+}
+
+fn push_source(out: &mut String, s: &SourceSummary, style: &LineStyle, reference: bool) {
+    push_source_head(out, &s.source, &s.kind, style, reference);
+    out.push_str(",\"wrist\":");
     push_track(out, &s.series.wrist_mean_m);
     if !s.series.cube_mean_m.is_empty() {
         out.push_str(",\"cube\":");
@@ -171,16 +178,8 @@ pub fn data_json(reports: &[SceneReport], styles: &SourceStyles, extra: &[ExtraS
             } else {
                 LineStyle::for_source(i - 1)
             };
-            let _ =
-                write!(
-                out,
-                "{{\"name\":{},\"kind\":{},\"color\":\"{}\",\"dash\":{},\"reference\":{},\"cube\":",
-                json_str(&src.name),
-                json_str(&src.kind),
-                style.hex(),
-                style.dash.map_or("[]".into(), |(a, b)| format!("[{a},{b}]")),
-                reference
-            );
+            push_source_head(&mut out, &src.name, &src.kind, &style, reference);
+            out.push_str(",\"cube\":");
             push_track(&mut out, &src.position_m);
             out.push_str(",\"cubeq\":");
             push_quats(&mut out, &src.orientation);

@@ -1048,7 +1048,8 @@ pub fn toss_row_json(r: &TossRow) -> Value {
         "tosses_per_s": r.tosses_per_s,
         "error_from_first_impact": {
             "bin_s": CURVE_BIN_S,
-            "min_tosses": curve_min_tosses(r.tosses + r.failed),
+            // One entry per toss of the set: the threshold the curve used.
+            "min_tosses": curve_min_tosses(r.per_toss_edges.len()),
             "points": curve_points(r).iter().map(|(t, v)| json!([t, v])).collect::<Vec<_>>(),
         },
     })
@@ -1303,13 +1304,17 @@ pub fn replay_scenes(
             chosen.push((ranked[k].0, what));
         }
     }
+    let stores = sorted
+        .iter()
+        .map(|r| {
+            let dir = out.join(&r.source);
+            RunStore::open(&dir).with_context(|| format!("reading the tosses of {}", dir.display()))
+        })
+        .collect::<Result<Vec<_>>>()?;
     for (i, what) in chosen {
         let toss = &set.tosses[i];
         let mut sources = vec![track("real", "recorded", &toss.poses)];
-        for r in &sorted {
-            let dir = out.join(&r.source);
-            let store = RunStore::open(&dir)
-                .with_context(|| format!("reading the tosses of {}", dir.display()))?;
+        for (r, store) in sorted.iter().zip(&stores) {
             // A toss that failed in this source has no run: no box drawn.
             let Ok(run) = store.read_run(&toss.id) else {
                 continue;
