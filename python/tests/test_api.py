@@ -305,6 +305,32 @@ def test_replay_of_recordings(recordings, root, tmp_path):
     assert again.kind == "replay"
 
 
+def test_replay_of_tosses_and_their_comparison_equal_the_command(cli, root, tmp_path):
+    # The three real tosses committed beside the reader (the data's authors'
+    # files), imported by the command, replayed from Python.
+    real = tmp_path / "real"
+    cli("import", "contactnets", root / "crates/contactnets/tests/data/tosses", "--out", real)
+    r = rg.replay(real, engines=["mujoco", "ideal"], out=tmp_path / "replay",
+                  params={"objects": {"cube": {"friction": 0.18}}}, progress=False)
+    assert r.kind == "tosses"
+    assert list(r.table["source"]) == ["mujoco", "physics-free"], r.table
+    assert (r.table["tosses"] == 3).all()
+    assert Path(r.report).name == "index.html" and Path(r.report).is_file()
+    assert "with the given parameters" in Path(r.report).read_text()
+    again = r.compare()
+    assert again.kind == "tosses"
+    m = again.measures
+    assert set(m["source"]) == {"mujoco", "ideal"}
+    # The same numbers as the command's comparison of the folder.
+    command = json.loads(cli("compare", tmp_path / "replay", "--format", "json").stdout)
+    by_source = {row["source"]: row["position_error_edges"] for row in command}
+    for _, row in m.iterrows():
+        assert row["position_error_edges"] == by_source[row["source"]]
+    mujoco = m.set_index("source").loc["mujoco", "position_error_edges"]
+    ideal = m.set_index("source").loc["ideal", "position_error_edges"]
+    assert 0 < mujoco < ideal, m
+
+
 # ------------------------------------------------------------ reproduce
 
 

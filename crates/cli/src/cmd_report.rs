@@ -5,12 +5,14 @@ use anyhow::{Context, Result};
 use realitygap_report::write_report;
 use realitygap_study::provenance::{measure_details, provenance_for_study};
 use realitygap_study::{evaluate_measured, load_study, DataSource};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Arguments of `realitygap report`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// A study file (TOML).
+    /// A study file (TOML), or the output folder of `replay` of tosses
+    /// (then its stored runs are measured again, as `compare` does, and
+    /// the other options are not used).
     pub study: PathBuf,
     /// Folder that the study's file patterns are relative to: `builtin`
     /// (the default: the study's recordings built into the project,
@@ -36,6 +38,9 @@ pub struct Args {
 
 /// Runs the command.
 pub fn run(args: Args) -> Result<()> {
+    if realitygap_study::tosses::is_toss_replay_folder(&args.study) {
+        return toss_report(&args.study, &args.out);
+    }
     let measure = args.measure.measure();
     let (mut study, roots) = load_study(&args.study, &args.data, args.results.clone())?;
     let added = args
@@ -54,5 +59,40 @@ pub fn run(args: Args) -> Result<()> {
         files.index_html.display()
     );
     println!("{}", files.index_html.display());
+    Ok(())
+}
+
+/// The report of a replay's folder of tosses: its toss table (also as
+/// `tosses.md`, `.csv` and `.json` beside the page), the verdict, the
+/// error against time from the first impact, and the 3D replay of three
+/// tosses.
+fn toss_report(dir: &Path, out: &Path) -> Result<()> {
+    use realitygap_study::tosses::{self, ReplayedWith};
+    let (rows, set) = tosses::compare_toss_replay(dir)?;
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let json: Vec<serde_json::Value> = rows.iter().map(tosses::toss_row_json).collect();
+    for (name, text) in [
+        ("tosses.md", tosses::toss_markdown(&rows, &set)),
+        ("tosses.csv", tosses::toss_csv(&rows, &set)),
+        ("tosses.json", serde_json::to_string_pretty(&json)? + "\n"),
+    ] {
+        let path = out.join(name);
+        std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))?;
+    }
+    let index = tosses::write_toss_report(
+        &rows,
+        &set,
+        dir,
+        out,
+        ReplayedWith::of_folder(dir),
+        "tosses.md, tosses.csv and tosses.json beside this page",
+    )?;
+    eprintln!(
+        "report: {} tosses, {} sources: the figure (SVG and PNG), the table and {}",
+        set.tosses.len(),
+        rows.len(),
+        index.display()
+    );
+    println!("{}", index.display());
     Ok(())
 }

@@ -39,11 +39,19 @@ pub struct ReplayOptions {
 
 /// What a replay made.
 pub struct Replayed {
-    /// Per source (the physics-free model first), the joint-space row.
+    /// `replay` (a robot's episodes) or `tosses` (tossed objects), as
+    /// `compare` of the folder names it.
+    pub kind: &'static str,
+    /// The table as CSV: the joint-space table, or the toss table.
+    pub csv: String,
+    /// The rows as JSON: [`Replayed::rows`], or the toss table's rows.
+    pub json: String,
+    /// Per source (the physics-free model first), the joint-space row
+    /// (none for tosses).
     pub rows: Vec<JointSpaceRow>,
     /// The replayed joints' names.
     pub joints: Vec<String>,
-    /// The joint-space table in Markdown (OUT/joint_space.md).
+    /// The table in Markdown (OUT/joint_space.md, or OUT/tosses.md).
     pub table: String,
     /// `OUT/report/index.html`.
     pub index_html: PathBuf,
@@ -214,6 +222,9 @@ pub fn replay(args: &ReplayOptions, launcher: &Launcher, ui: &dyn Ui) -> Result<
         );
     }
     Ok(Replayed {
+        kind: "replay",
+        csv: realitygap_study::replay::joint_space_csv(&rows, &names),
+        json: serde_json::to_string(&rows)?,
         rows,
         joints: names,
         table,
@@ -258,14 +269,24 @@ fn replay_tosses(
         },
     )?;
     bar.finish();
+    use realitygap_study::tosses::{toss_csv, toss_row_json, write_toss_report, ReplayedWith};
     let table = realitygap_study::tosses::toss_markdown(&rows, &set);
     ui.say(table.clone());
+    let index_html = write_toss_report(
+        &rows,
+        &set,
+        &args.out,
+        &args.out.join("report"),
+        ReplayedWith::of_params(params),
+        "tosses.md and tosses.json in the replay's folder",
+    )?;
     let failed: usize = rows.iter().map(|r| r.failed).sum();
     ui.say(format!(
-        "replayed {} tosses in {} engines and the physics-free model ({KINEMATIC}): {failed} diverged or failed; the table {}",
+        "replayed {} tosses in {} engines and the physics-free model ({KINEMATIC}): {failed} diverged or failed; the table {}, the report {}",
         set.tosses.len(),
         engines.len(),
-        args.out.join("tosses.md").display()
+        args.out.join("tosses.md").display(),
+        index_html.display()
     ));
     let errors: usize = rows.iter().map(|r| set.tosses.len() - r.tosses).sum();
     if errors > 0 {
@@ -274,11 +295,15 @@ fn replay_tosses(
             args.out.display()
         );
     }
+    let json: Vec<serde_json::Value> = rows.iter().map(toss_row_json).collect();
     Ok(Replayed {
+        kind: "tosses",
+        csv: toss_csv(&rows, &set),
+        json: serde_json::to_string(&json)?,
         rows: Vec::new(),
         joints: Vec::new(),
         table,
-        index_html: args.out.join("tosses.md"),
+        index_html,
     })
 }
 

@@ -424,6 +424,7 @@ fn replay_builtin_tosses(
     let section = realitygap_study::tosses::report_section(
         &rows,
         &set,
+        realitygap_study::tosses::ReplayedWith::Defaults,
         "tosses/tosses.md in the output folder",
         replay,
     );

@@ -173,6 +173,61 @@ fn every_toss_is_replayed_in_every_engine_and_the_physics_free_model() {
     // A folder with no replayed tosses is not taken for one.
     let o = realitygap(&["compare", real.to_str().unwrap(), "--format", "md"]);
     assert!(!o.status.success());
+
+    // `report` of the replay's folder: a page of the tosses alone (the
+    // verdict, the table, the figure, the 3D replay of the quartiles'
+    // tosses), the table's files beside it; the parameters the engines ran
+    // with (the published friction) are named, not called defaults.
+    let site = tmp.path().join("site");
+    let o = realitygap(&[
+        "report",
+        out.to_str().unwrap(),
+        "--out",
+        site.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let page = std::fs::read_to_string(site.join("index.html")).unwrap();
+    assert_eq!(
+        text(&o.stdout).trim(),
+        site.join("index.html").to_str().unwrap()
+    );
+    assert!(
+        page.contains("<section id=\"tosses\">")
+            && page.contains("On 3 real cube tosses, the engine closest to the real cube with the given parameters is ")
+            && page.contains("id=\"replay-data\"")
+            && page.contains("\"name\":\"toss ")
+            && page.contains("href=\"provenance.json\""),
+        "{page}"
+    );
+    assert!(!page.contains("at its defaults"), "{page}");
+    assert!(
+        !page.contains("id=\"summary\"") && !page.contains("href=\"table.md\""),
+        "no scene table in a page of tosses"
+    );
+    assert!(site.join("figures/tosses_centre_error.svg").is_file());
+    assert!(site.join("figures/tosses_centre_error.png").is_file());
+    assert!(!site.join("table.md").exists());
+    assert_eq!(
+        headline(&std::fs::read_to_string(site.join("tosses.md")).unwrap()),
+        headline(&table)
+    );
+    let again: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(site.join("tosses.json")).unwrap()).unwrap();
+    assert_eq!(again.as_array().unwrap().len(), rows.len());
+    assert_eq!(
+        std::fs::read_to_string(site.join("tosses.csv")).unwrap(),
+        csv
+    );
+    // Each engine's manifest records what it ran with.
+    let engine = engines.iter().find(|e| *e != "ideal").unwrap();
+    let manifest: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(out.join(engine).join("manifest.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(
+        manifest["settings"]["params"]["objects"]["cube"]["friction"], 0.18,
+        "{manifest}"
+    );
 }
 
 #[test]

@@ -578,13 +578,18 @@ fn replay<'py>(
         toss_start: Default::default(),
     };
     let launcher = launcher(py)?;
-    let (csv, markdown, json, report) = long_call(py, reporter, move |ui| {
+    let (kind, csv, markdown, json, report) = long_call(py, reporter, move |ui| {
         let r = realitygap::replay::replay(&options, &launcher, ui)?;
-        let csv = realitygap_study::replay::joint_space_csv(&r.rows, &r.joints);
-        let json = serde_json::to_string(&r.rows)?;
-        Ok((csv, r.table, json, r.index_html.display().to_string()))
+        Ok((
+            r.kind,
+            r.csv,
+            r.table,
+            r.json,
+            r.index_html.display().to_string(),
+        ))
     })?;
     let d = PyDict::new(py);
+    d.set_item("kind", kind)?;
     d.set_item("csv", csv)?;
     d.set_item("markdown", markdown)?;
     d.set_item("json", json)?;

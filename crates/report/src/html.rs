@@ -206,7 +206,20 @@ pub fn render_index_with(
         escape(mode_name(mode)),
     );
     // Contents.
-    h.push_str("<nav><ul>\n<li><a href=\"#verdict\">Verdict</a></li>\n<li><a href=\"#summary\">Accumulated error</a></li>\n<li><a href=\"#replay\">3D replay</a></li>\n");
+    let replay: Vec<crate::replay3d::ExtraScene> = extra
+        .iter()
+        .flat_map(|x| x.replay.iter().cloned())
+        .collect();
+    // Without scenes (a study of tossed objects alone) the page is the
+    // extra sections: no verdict or table of scenes.
+    let scenes = !reports.is_empty();
+    h.push_str("<nav><ul>\n");
+    if scenes {
+        h.push_str("<li><a href=\"#verdict\">Verdict</a></li>\n<li><a href=\"#summary\">Accumulated error</a></li>\n");
+    }
+    if scenes || !replay.is_empty() {
+        h.push_str("<li><a href=\"#replay\">3D replay</a></li>\n");
+    }
     for x in extra {
         let _ = writeln!(
             h,
@@ -225,17 +238,19 @@ pub fn render_index_with(
     }
     h.push_str("<li><a href=\"#provenance\">Provenance</a></li>\n</ul></nav>\n");
 
-    verdict_section(&mut h, reports);
-    summary(&mut h, reports, downloads);
-    let replay: Vec<crate::replay3d::ExtraScene> = extra
-        .iter()
-        .flat_map(|x| x.replay.iter().cloned())
-        .collect();
-    h.push_str(&crate::replay3d::section(
-        reports,
-        &crate::figures::SourceStyles::for_reports(reports),
-        &replay,
-    ));
+    if scenes {
+        verdict_section(&mut h, reports);
+        summary(&mut h, reports, downloads);
+    } else {
+        files_note(&mut h, downloads);
+    }
+    if scenes || !replay.is_empty() {
+        h.push_str(&crate::replay3d::section(
+            reports,
+            &crate::figures::SourceStyles::for_reports(reports),
+            &replay,
+        ));
+    }
     for x in extra {
         extra_section(&mut h, x);
     }
@@ -382,6 +397,13 @@ fn summary(h: &mut String, reports: &[SceneReport], downloads: &[(String, String
             escape(&runs.selection)
         );
     }
+    files_note(h, downloads);
+    h.push_str("</section>\n");
+}
+
+/// The line of links to the report's files (none when `downloads` is
+/// empty).
+fn files_note(h: &mut String, downloads: &[(String, String)]) {
     if !downloads.is_empty() {
         h.push_str("<p class=\"note\">Files: ");
         let links: Vec<String> = downloads
@@ -391,7 +413,6 @@ fn summary(h: &mut String, reports: &[SceneReport], downloads: &[(String, String
         h.push_str(&links.join(" &middot; "));
         h.push_str("</p>\n");
     }
-    h.push_str("</section>\n");
 }
 
 fn phase_label(r: &SceneReport, i: usize) -> String {

@@ -120,14 +120,16 @@ fn write_tables(
 }
 
 /// [`write_report`] with `extra` sections in `index.html`, after the
-/// summary.
+/// summary. With no scene `reports` (a study of tossed objects alone) the
+/// page is the `extra` sections and the provenance, and no scene table or
+/// series is written.
 pub fn write_report_with(
     reports: &[SceneReport],
     provenance: &Provenance,
     out_dir: &Path,
     extra: &[html::ExtraSection],
 ) -> Result<ReportFiles, ReportError> {
-    if reports.is_empty() {
+    if reports.is_empty() && extra.is_empty() {
         return Err(ReportError::Empty);
     }
     let fig_dir = out_dir.join("figures");
@@ -164,11 +166,13 @@ pub fn write_report_with(
         svgs.push(svg);
     }
 
-    write_tables(reports, out_dir, &mut files)?;
-    let series = serde_json::to_string(&table::to_json(reports, true)).unwrap_or_default();
-    files
-        .data
-        .push(write(&out_dir.join("series.json"), series + "\n")?);
+    if !reports.is_empty() {
+        write_tables(reports, out_dir, &mut files)?;
+        let series = serde_json::to_string(&table::to_json(reports, true)).unwrap_or_default();
+        files
+            .data
+            .push(write(&out_dir.join("series.json"), series + "\n")?);
+    }
     let registration = reports
         .iter()
         .find_map(|r| r.registration.as_ref())
@@ -194,14 +198,18 @@ pub fn write_report_with(
             png_file,
         })
         .collect();
-    let mut downloads: Vec<(String, String)> = vec![
-        ("table.md".into(), "table (Markdown)".into()),
-        ("table.csv".into(), "table (CSV)".into()),
-        ("table.json".into(), "measures (JSON)".into()),
-        ("table.tex".into(), "table (LaTeX)".into()),
-        ("series.json".into(), "per-step series (JSON)".into()),
-        ("provenance.json".into(), "provenance (JSON)".into()),
-    ];
+    let mut downloads: Vec<(String, String)> = if reports.is_empty() {
+        Vec::new()
+    } else {
+        vec![
+            ("table.md".into(), "table (Markdown)".into()),
+            ("table.csv".into(), "table (CSV)".into()),
+            ("table.json".into(), "measures (JSON)".into()),
+            ("table.tex".into(), "table (LaTeX)".into()),
+            ("series.json".into(), "per-step series (JSON)".into()),
+        ]
+    };
+    downloads.push(("provenance.json".into(), "provenance (JSON)".into()));
     if registration.is_some() {
         downloads.push((
             "registration.json".into(),

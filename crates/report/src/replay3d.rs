@@ -196,9 +196,14 @@ pub fn data_json(reports: &[SceneReport], styles: &SourceStyles, extra: &[ExtraS
 pub fn section(reports: &[SceneReport], styles: &SourceStyles, extra: &[ExtraScene]) -> String {
     let mut h = String::new();
     h.push_str("<section id=\"replay\">\n<h2>3D replay</h2>\n");
-    h.push_str("<p>The mean wrist position of the reference (black, thick) and of each source over time, and for a scene with a cube the mean cube pose (drawn as a cube of the study's 0.075 m edge). Drag to rotate, scroll to zoom; the slider sets the time. Distances in the world frame of the scene (z up, the arm's base at the origin; grid lines every 0.1 m).");
-    if !extra.is_empty() {
-        h.push_str(" The scene menu also holds single tosses of the second study: the real cube (black) and each source's, from the toss's first recorded sample, in the frame of the recording (the table top at z = 0).");
+    if reports.is_empty() {
+        // Tosses alone (a report of a replay's folder of tosses).
+        h.push_str("<p>Single tosses: the real cube (black) and each source's, from the toss's first recorded sample, in the frame of the recording (z up, the table top at z = 0; grid lines every 0.1 m). Drag to rotate, scroll to zoom; the slider sets the time.");
+    } else {
+        h.push_str("<p>The mean wrist position of the reference (black, thick) and of each source over time, and for a scene with a cube the mean cube pose (drawn as a cube of the study's 0.075 m edge). Drag to rotate, scroll to zoom; the slider sets the time. Distances in the world frame of the scene (z up, the arm's base at the origin; grid lines every 0.1 m).");
+        if !extra.is_empty() {
+            h.push_str(" The scene menu also holds single tosses of the second study: the real cube (black) and each source's, from the toss's first recorded sample, in the frame of the recording (the table top at z = 0).");
+        }
     }
     h.push_str("</p>\n");
     h.push_str("<div class=\"replay-controls\"><label>Scene <select id=\"replay-scene\"></select></label> <button type=\"button\" id=\"replay-play\">Play</button> <input type=\"range\" id=\"replay-time\" min=\"0\" max=\"0\" value=\"0\" step=\"1\" aria-label=\"time\"> <output id=\"replay-clock\">0.00 s</output></div>\n");

@@ -130,6 +130,62 @@ fn toss_replay_stores(dir: &Path) -> Vec<RunStore> {
     stores
 }
 
+/// What the engines of a toss table ran with, as its report says.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ReplayedWith {
+    /// Every engine at its defaults (`reproduce`, `replay` without
+    /// `--params`).
+    Defaults,
+    /// The parameters of a `--params` file (recorded in each engine's
+    /// manifest, `settings.params`).
+    Params,
+}
+
+impl ReplayedWith {
+    /// "at its defaults" / "with the given parameters", after an
+    /// engine's name.
+    fn engine_phrase(self) -> &'static str {
+        match self {
+            ReplayedWith::Defaults => "at its defaults",
+            ReplayedWith::Params => "with the given parameters",
+        }
+    }
+
+    /// "at the defaults" / "with these parameters", after "contact physics".
+    fn physics_phrase(self) -> &'static str {
+        match self {
+            ReplayedWith::Defaults => "at the defaults",
+            ReplayedWith::Params => "with these parameters",
+        }
+    }
+
+    /// What a replay with `params` runs with (the file they came from
+    /// aside).
+    pub fn of_params(params: &PhysicalParams) -> ReplayedWith {
+        let json = |p: &PhysicalParams| serde_json::to_value(p).unwrap_or(Value::Null);
+        if json(params) == json(&PhysicalParams::default()) {
+            ReplayedWith::Defaults
+        } else {
+            ReplayedWith::Params
+        }
+    }
+
+    /// What a replay's folder of tosses ran with: [`ReplayedWith::Defaults`]
+    /// when every engine's manifest records the default parameters.
+    pub fn of_folder(dir: &Path) -> ReplayedWith {
+        let defaults = serde_json::to_value(PhysicalParams::default()).unwrap_or(Value::Null);
+        let all_default = toss_replay_stores(dir)
+            .iter()
+            .filter(|s| s.manifest().engine.is_some())
+            .all(|s| s.manifest().settings.get("params") == Some(&defaults));
+        if all_default {
+            ReplayedWith::Defaults
+        } else {
+            ReplayedWith::Params
+        }
+    }
+}
+
 /// Whether `dir` is the output folder of `replay` of tosses.
 pub fn is_toss_replay_folder(dir: &Path) -> bool {
     !toss_replay_stores(dir).is_empty()
@@ -911,6 +967,9 @@ pub fn replay_tosses(
             "initial_state": "the first recorded pose and twist",
             "ground_height_m": 0.0,
             "real": set.dir.display().to_string(),
+            // What the engine ran with (`--params`; every field unset: its
+            // defaults), for `compare` and `report` of this folder.
+            "params": serde_json::to_value(params).unwrap_or(Value::Null),
         }))?;
         for (toss, r) in set.tosses.iter().zip(&runs) {
             let mut entry = RunEntry::new(&toss.id);
@@ -1187,6 +1246,7 @@ pub fn toss_markdown(rows: &[TossRow], set: &TossSet) -> String {
 pub fn report_section(
     rows: &[TossRow],
     set: &TossSet,
+    with: ReplayedWith,
     table: &str,
     replay: Vec<realitygap_report::replay3d::ExtraScene>,
 ) -> ExtraSection {
@@ -1196,9 +1256,10 @@ pub fn report_section(
             format!("{m:.digits$} [{lo:.digits$}, {hi:.digits$}]")
         })
     };
-    let mut paragraphs = verdict(&sorted, set);
+    let mut paragraphs = verdict(&sorted, set, with);
     paragraphs.push(format!(
-        "Each toss starts from its first recorded pose and twist; every engine at its defaults, the physics-free row a ballistic flight frozen where the cube first touches the ground. The centre's error is averaged over a toss's recorded samples, in cube edges ({:.4} m), then over the tosses, with its 95 % bootstrap interval over tosses; the phases are the recorded toss's own (the impact: {:.0} ms from the first touch). Every measure, the contact events and the speeds: {table}.",
+        "Each toss starts from its first recorded pose and twist; every engine {}, the physics-free row a ballistic flight frozen where the cube first touches the ground. The centre's error is averaged over a toss's recorded samples, in cube edges ({:.4} m), then over the tosses, with its 95 % bootstrap interval over tosses; the phases are the recorded toss's own (the impact: {:.0} ms from the first touch). Every measure, the contact events and the speeds: {table}.",
+        with.engine_phrase(),
         set.object.edge_m,
         1e3 * IMPACT_WINDOW_S
     ));
@@ -1248,6 +1309,34 @@ pub fn report_section(
         figures: vec![figure],
         replay,
     }
+}
+
+/// A report of the tosses replayed into `replay_dir` (as [`replay_tosses`]
+/// wrote them, measured as `rows`): `report_dir/index.html`, a page of the
+/// toss section alone (the verdict, the figure, the table, the 3D replay of
+/// three tosses), its figure under `report_dir/figures/`. `table` names
+/// where the full table is; the page's path.
+pub fn write_toss_report(
+    rows: &[TossRow],
+    set: &TossSet,
+    replay_dir: &Path,
+    report_dir: &Path,
+    with: ReplayedWith,
+    table: &str,
+) -> Result<PathBuf> {
+    let replay = replay_scenes(rows, set, replay_dir)?;
+    let section = report_section(rows, set, with, table, replay);
+    let mut provenance =
+        realitygap_report::Provenance::new(format!("Cube tosses: {}", replay_dir.display()));
+    provenance.results_dir = Some(replay_dir.display().to_string());
+    provenance.data_dir = Some(set.dir.display().to_string());
+    provenance.details.push((
+        "tosses".into(),
+        format!("{} real tosses of {}", set.tosses.len(), set.dir.display()),
+    ));
+    let files = realitygap_report::write_report_with(&[], &provenance, report_dir, &[section])
+        .with_context(|| format!("writing the report into {}", report_dir.display()))?;
+    Ok(files.index_html)
 }
 
 /// The tosses the report's 3D replay shows: those at the quartiles and the
@@ -1354,7 +1443,7 @@ pub fn replay_scenes(
 /// closest source, whether the engines beat the physics-free row (their
 /// intervals apart from its interval), and where the closest engine and
 /// the physics-free row differ by phase.
-fn verdict(sorted: &[&TossRow], set: &TossSet) -> Vec<String> {
+fn verdict(sorted: &[&TossRow], set: &TossSet, with: ReplayedWith) -> Vec<String> {
     let fmt = |v: (f64, f64, f64)| format!("{:.3} [{:.3}, {:.3}]", v.0, v.1, v.2);
     let free = sorted.iter().find(|r| r.source == PHYSICS_FREE_ENGINE);
     let engines: Vec<&&TossRow> = sorted
@@ -1366,8 +1455,9 @@ fn verdict(sorted: &[&TossRow], set: &TossSet) -> Vec<String> {
     };
     let best_e = best.error_edges.expect("filtered on it");
     let mut first = format!(
-        "On {} real cube tosses, the engine closest to the real cube at its defaults is {}: its centre strays {} cube edges on average over a toss",
+        "On {} real cube tosses, the engine closest to the real cube {} is {}: its centre strays {} cube edges on average over a toss",
         set.tosses.len(),
+        with.engine_phrase(),
         best.source,
         fmt(best_e)
     );
@@ -1389,8 +1479,8 @@ fn verdict(sorted: &[&TossRow], set: &TossSet) -> Vec<String> {
     let n = engines.len();
     let are = |k: usize| if k == 1 { "is" } else { "are" };
     let second = match (ahead.len(), behind.len()) {
-        (0, 0) => format!("No engine of {n} is clearly closer or farther than the physics-free row: every interval overlaps its interval, so contact physics at the defaults does not pay on these tosses."),
-        (0, b) => format!("No engine of {n} beats the physics-free row: {b} {} clearly farther from the real cube ({}), the rest overlap it. Contact physics at the defaults does not pay here.", are(b), behind.join(", ")),
+        (0, 0) => format!("No engine of {n} is clearly closer or farther than the physics-free row: every interval overlaps its interval, so contact physics {} does not pay on these tosses.", with.physics_phrase()),
+        (0, b) => format!("No engine of {n} beats the physics-free row: {b} {} clearly farther from the real cube ({}), the rest overlap it. Contact physics {} does not pay here.", are(b), behind.join(", "), with.physics_phrase()),
         (a, 0) => format!("{a} of {n} engines {} clearly closer than the physics-free row (their intervals lie below its interval): {}.", are(a), ahead.join(", ")),
         (a, b) => format!("{a} of {n} engines {} clearly closer than the physics-free row (their intervals lie below its interval): {}; {b} {} clearly farther: {}.", are(a), ahead.join(", "), are(b), behind.join(", ")),
     };
@@ -1762,7 +1852,13 @@ mod tests {
             row("mujoco", (0.3, 0.25, 0.35), 0.04, 0.2),
             row("rapier", (1.45, 1.3, 1.7), 0.05, 1.6),
         ];
-        let s = report_section(&rows, &set, "tosses/tosses.md", Vec::new());
+        let s = report_section(
+            &rows,
+            &set,
+            ReplayedWith::Defaults,
+            "tosses/tosses.md",
+            Vec::new(),
+        );
         assert_eq!(s.id, "tosses");
         let text = s.paragraphs.join("\n");
         assert!(
@@ -1790,11 +1886,14 @@ mod tests {
         assert_eq!(s.figures[0].lines[0].name, "mujoco");
         // No engine ahead and none behind: said so.
         let close = [row("mujoco", (1.45, 1.3, 1.7), 0.05, 1.6), free];
-        let text = report_section(&close, &set, "t.md", Vec::new())
+        let text = report_section(&close, &set, ReplayedWith::Params, "t.md", Vec::new())
             .paragraphs
             .join("\n");
         assert!(
-            text.contains("No engine of 1 is clearly closer or farther than the physics-free row"),
+            text.contains("No engine of 1 is clearly closer or farther than the physics-free row")
+                && text.contains("the real cube with the given parameters is mujoco")
+                && text.contains("so contact physics with these parameters does not pay")
+                && !text.contains("defaults"),
             "{text}"
         );
     }

@@ -278,7 +278,8 @@ def compare(
     """Compares sources against a reference (``realitygap compare``).
 
     ``study``: a study file (default the built-in study) or the output
-    folder of :func:`replay` (the joint-space comparison). The keywords are
+    folder of :func:`replay` (the joint-space comparison, or of tossed
+    objects the toss table: ``kind`` ``"tosses"``). The keywords are
     the command's options: ``data`` (``"builtin"``, ``"none"`` or a
     folder), ``results``, ``mode`` (``"default"`` or ``"study"``),
     ``alignment``, ``registration`` (``"estimate"``, ``"none"`` or a file),
@@ -505,12 +506,16 @@ def run(
 
 
 class Replay:
-    """A replay (``realitygap replay``): ``table`` (the joint-space table:
-    per source and joint, RMS and largest angle error, tracking delay),
-    ``rows`` (its JSON), ``markdown``, ``report`` (index.html) and ``out``."""
+    """A replay (``realitygap replay``): ``kind`` (``"replay"``, a robot's
+    episodes, or ``"tosses"``, tossed objects), ``table`` (the joint-space
+    table: per source and joint, RMS and largest angle error, tracking
+    delay; or the toss table: per source the cube centre's error in cube
+    edges, by phase, with intervals), ``rows`` (its JSON), ``markdown``,
+    ``report`` (index.html) and ``out``."""
 
     def __init__(self, out: str, d: Dict[str, Any]) -> None:
         self.out = out
+        self.kind = d["kind"]
         self.csv = d["csv"]
         self.markdown = d["markdown"]
         self.rows = json.loads(d["json"])
@@ -548,7 +553,11 @@ def replay(
     first joint state, with the physics-free model beside them
     (``realitygap replay``). ``robot``: its URDF (default: the one the
     import recorded); ``params``: servo gains and other parameters (a file
-    or a dict); ``scene``: a scene instead of the generated one."""
+    or a dict); ``scene``: a scene instead of the generated one.
+    ``recordings`` may also be tossed objects (``realitygap import
+    contactnets``): every toss from its first recorded pose and twist
+    (``kind`` ``"tosses"``; ``robot``, ``scene`` and ``packages`` do not
+    apply)."""
     pk = ["%s=%s" % (k, os.fspath(v)) for k, v in packages.items()] if isinstance(packages, dict) else _names(packages)
     r = _reporter(progress)
     d = _native.replay(
