@@ -278,6 +278,28 @@ def test_serve_answers_every_op(capsys):
     assert "stray print from the adapter" in captured.err
 
 
+def test_profile_counts_and_times_each_operation(tmp_path, monkeypatch):
+    """REALITYGAP_ENGINE_PROFILE=DIR: DIR/<pid>.json, per operation the
+    requests answered (refused ones too) and their seconds; a second
+    serve() in the same process rewrites it."""
+    profile = tmp_path / "profile"
+    monkeypatch.setenv("REALITYGAP_ENGINE_PROFILE", str(profile))
+    serve_lines([{"op": "hello", "protocol": 1}, {"op": "load", "model": toy_model()},
+                 {"op": "step", "n": 3}, {"op": "step", "n": 2}, {"op": "nonsense"}, "not json"])
+    written = json.loads((profile / ("%d.json" % os.getpid())).read_text())
+    assert written["pid"] == os.getpid() and written["adapter"] == "toy"
+    ops = written["ops"]
+    assert {k: v[0] for k, v in ops.items()} == {"hello": 1, "load": 1, "step": 2, "nonsense": 1, "None": 1}
+    assert all(v[1] >= 0 for v in ops.values())
+    serve_lines([{"op": "hello", "protocol": 1}])
+    assert json.loads((profile / ("%d.json" % os.getpid())).read_text())["ops"] == {"hello": [1, pytest.approx(0, abs=1)]}
+    assert [p.name for p in profile.iterdir()] == ["%d.json" % os.getpid()]
+    monkeypatch.delenv("REALITYGAP_ENGINE_PROFILE")
+    (profile / ("%d.json" % os.getpid())).unlink()
+    serve_lines([{"op": "hello", "protocol": 1}])
+    assert list(profile.iterdir()) == []
+
+
 def test_native_state_round_trips_through_serve():
     model = toy_model()
     replies = serve_lines([

@@ -17,9 +17,10 @@
 //! settings, parameters, command laws) and keeps that child idle for
 //! `check_settings`; [`Engine::load_with`] takes the idle child (or starts
 //! one), and a simulation that ends gives its child back, so a process
-//! that runs one simulation after another starts the engine once. A child
-//! that fails is stopped and never reused: a crash ends one run, never a
-//! batch.
+//! that runs one simulation after another starts the engine once; so does
+//! a child that refused a model (an `error` reply). A child that breaks
+//! the protocol (crashes, hangs, garbles) is stopped and never reused: a
+//! crash ends one run, never a batch.
 
 pub mod child;
 pub mod model;
@@ -425,9 +426,20 @@ impl Engine for RemoteEngine {
             }
             None => self.start(timeout).map_err(|m| self.load_error(m))?.0,
         };
-        let fields = child
-            .call(&json!({"op": "load", "model": description}))
-            .map_err(|f| engine_error(self.inner.name, f, |m| self.load_error(m)))?;
+        let fields = match child.call(&json!({"op": "load", "model": description})) {
+            Ok(fields) => fields,
+            Err(f) => {
+                // A refused model leaves a healthy child: it waits for the
+                // next load (starting one costs seconds: Newton 3.3 s).
+                if matches!(f, Failure::Engine { .. }) && !child.is_broken() {
+                    let mut idle = self.inner.control.lock().unwrap_or_else(|e| e.into_inner());
+                    if idle.is_none() {
+                        *idle = Some(child);
+                    }
+                }
+                return Err(engine_error(self.inner.name, f, |m| self.load_error(m)));
+            }
+        };
         let reply = Reply {
             op: "load",
             fields: &fields,

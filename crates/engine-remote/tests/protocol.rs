@@ -2,7 +2,8 @@
 //! NaN or a short vector, closes its output or refuses, at `hello`,
 //! `load` or `step`. Each is a failed load or a diverged run with its
 //! reason (and the process's last messages), never a hung or crashed
-//! caller; the process is gone afterwards. The misbehaving engine is
+//! caller; the process is gone afterwards (but for a refusal: that
+//! process waits for the next load). The misbehaving engine is
 //! `tests/adapters/misbehave.py` (standard library only).
 
 use realitygap_core::controller::{simulate, RunOptions, RunStatus};
@@ -13,6 +14,10 @@ use realitygap_engine_remote::RemoteEngine;
 use std::time::Instant;
 
 fn misbehave(when: &str, what: &str) -> RemoteEngine {
+    misbehave_with(when, what, Vec::new())
+}
+
+fn misbehave_with(when: &str, what: &str, env: Vec<(String, String)>) -> RemoteEngine {
     let script = testing::workspace().join("crates/engine-remote/tests/adapters/misbehave.py");
     RemoteEngine::new(
         "misbehave",
@@ -23,7 +28,7 @@ fn misbehave(when: &str, what: &str) -> RemoteEngine {
                 when.into(),
                 what.into(),
             ],
-            env: Vec::new(),
+            env,
         },
     )
 }
@@ -126,6 +131,31 @@ fn failures_at_load_and_hello_are_load_errors() {
     assert!(engine
         .version()
         .starts_with("unavailable: the engine process exited"));
+}
+
+/// A process that refuses a model is healthy: the next load reuses it
+/// (starting one costs seconds: Newton's imports take 3.3 s), where a
+/// process that crashed is replaced.
+#[test]
+fn a_refused_load_keeps_its_process_and_a_crash_does_not() {
+    let dir = std::env::temp_dir().join(format!("realitygap-protocol-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let starts = |what: &str| {
+        let file = dir.join(what);
+        let _ = std::fs::remove_file(&file);
+        let engine = misbehave_with(
+            "load",
+            what,
+            vec![("MISBEHAVE_STARTS".into(), file.display().to_string())],
+        );
+        for _ in 0..3 {
+            assert!(run(&engine, 30.0).is_err());
+        }
+        std::fs::read_to_string(&file).unwrap().lines().count()
+    };
+    assert_eq!(starts("refuse"), 1);
+    assert_eq!(starts("crash"), 3);
+    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]

@@ -12,7 +12,8 @@ does what its second argument says:
     refuse   answers an `error` reply of kind `load`
 
 It simulates nothing: every joint stays at 0, objects where the scene
-puts them.
+puts them. With MISBEHAVE_STARTS=FILE in its environment it appends its
+process id to FILE as it starts (the tests count the processes).
 """
 import json
 import os
@@ -21,6 +22,9 @@ import sys
 import time
 
 when, what = sys.argv[1], sys.argv[2]
+if os.environ.get("MISBEHAVE_STARTS"):
+    with open(os.environ["MISBEHAVE_STARTS"], "a") as f:
+        f.write("%d\n" % os.getpid())
 
 
 def bits(values):
