@@ -2,7 +2,6 @@
 
 use crate::cmd_compare::MeasureArgs;
 use anyhow::{Context, Result};
-use realitygap_report::write_report;
 use realitygap_study::provenance::{measure_details, provenance_for_study};
 use realitygap_study::{evaluate_measured, load_study, DataSource};
 use std::path::{Path, PathBuf};
@@ -34,6 +33,13 @@ pub struct Args {
     /// Folder to write the report into (created if missing).
     #[arg(long)]
     pub out: PathBuf,
+    /// The output folder of a cross-validated tune (`tune STUDY --folds K
+    /// --out DIR`), or its crossval.json; repeat it for each engine. The
+    /// verdict then opens with whether any tuned engine beats the
+    /// physics-free model behind its fitted actuator stage on runs it did
+    /// not see, and a section holds their table and figures.
+    #[arg(long, value_name = "DIR")]
+    pub crossval: Vec<PathBuf>,
 }
 
 /// Runs the command.
@@ -42,6 +48,9 @@ pub fn run(args: Args) -> Result<()> {
         return toss_report(&args.study, &args.out);
     }
     let measure = args.measure.measure();
+    let sections: Vec<_> = realitygap::compare::crossval_section(&args.crossval)?
+        .into_iter()
+        .collect();
     let (mut study, roots) = load_study(&args.study, &args.data, args.results.clone())?;
     let added = args
         .physics_free
@@ -51,7 +60,7 @@ pub fn run(args: Args) -> Result<()> {
     let mut provenance = provenance_for_study(&study, &args.study, &roots, measure.mode);
     provenance.details.extend(args.data.provenance());
     provenance.details.extend(measure_details(&measure));
-    let files = write_report(&reports, &provenance, &args.out)
+    let files = realitygap_report::write_report_with(&reports, &provenance, &args.out, &sections)
         .with_context(|| format!("writing the report into {}", args.out.display()))?;
     eprintln!(
         "report: {} figures (SVG and PNG), tables and {}",

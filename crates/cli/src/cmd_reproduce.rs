@@ -49,6 +49,13 @@ pub struct Args {
     /// (DIR/physics-free-actuator) shows as "physics-free (tuned)".
     #[arg(long, value_name = "DIR")]
     pub tuned: Vec<PathBuf>,
+    /// The output folder of a cross-validated tune (`tune STUDY --folds K
+    /// --out DIR`; repeatable): the report's verdict opens with whether
+    /// any tuned engine beats the physics-free model behind its fitted
+    /// actuator stage on runs it did not see, and a section holds their
+    /// table and figures.
+    #[arg(long, value_name = "DIR")]
+    pub crossval: Vec<PathBuf>,
     /// Also compare in joint space (`compare --joint-space`): every
     /// engine's joint angles against the real arm's, found by inverse
     /// kinematics of its wrist capture; written to joint_space.md and
@@ -93,6 +100,7 @@ pub fn run(args: Args) -> Result<()> {
         timeout_s: args.timeout_s,
         params: args.params,
         tuned: args.tuned,
+        crossval: args.crossval,
         joint_space: args.joint_space,
         runs: args.runs,
         holdout: args.holdout,

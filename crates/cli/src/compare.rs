@@ -388,3 +388,19 @@ fn fitted_physics_free(given: &Path) -> Result<PathBuf> {
     };
     Ok(std::path::absolute(file)?)
 }
+
+/// The report's section of the cross-validated tunes in `folders` (each
+/// `tune --folds K`'s output folder, or its `crossval.json`); none when
+/// `folders` is empty.
+pub fn crossval_section(
+    folders: &[std::path::PathBuf],
+) -> anyhow::Result<Option<realitygap_report::html::ExtraSection>> {
+    if folders.is_empty() {
+        return Ok(None);
+    }
+    let cvs: Vec<realitygap_tune::crossval::CrossValidation> = folders
+        .iter()
+        .map(|f| realitygap_tune::crossval::read(f))
+        .collect::<anyhow::Result<_>>()?;
+    Ok(Some(realitygap_tune::crossval::report_section(&cvs)))
+}

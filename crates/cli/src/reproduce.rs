@@ -53,6 +53,11 @@ pub struct ReproduceRequest {
     /// Output folders of `realitygap tune`: each engine again with its
     /// tuned.toml, as "`<engine> (tuned)`".
     pub tuned: Vec<PathBuf>,
+    /// Output folders of `realitygap tune --folds K`: the report's verdict
+    /// opens with whether any tuned engine beats the physics-free model
+    /// behind its fitted actuator stage on runs it did not see, and a
+    /// section holds their table and figures.
+    pub crossval: Vec<PathBuf>,
     /// Also compare in joint space.
     pub joint_space: bool,
     /// With `joint_space`: the real runs to fit the IK registration on.
@@ -85,6 +90,7 @@ impl Default for ReproduceRequest {
             timeout_s: None,
             params: None,
             tuned: Vec::new(),
+            crossval: Vec::new(),
             joint_space: false,
             runs: None,
             holdout: None,
@@ -177,6 +183,8 @@ pub fn reproduce_keeping_problems(
     // the physics-free model then show, untuned and tuned).
     let tuned =
         TunedEngine::with_physics_free(&args.tuned, realitygap_tune::outputs::PHYSICS_FREE_DIR)?;
+    // Read before the long work, so a wrong folder fails at once.
+    let crossval = crate::compare::crossval_section(&args.crossval)?;
     let t = Instant::now();
     let mut problems = simulate(args, &scenes, &engines, &runs_dir, None, launcher, ui)?;
     for te in &tuned {
@@ -252,6 +260,7 @@ pub fn reproduce_keeping_problems(
         timings.push(("tosses".into(), t.elapsed().as_secs_f64()));
     }
 
+    sections.extend(crossval);
     ui.note("[3/3] writing the report".into());
     let t = Instant::now();
     let index_html = write_report(args, &reports, &study, &study_path, &roots, &sections)?;

@@ -354,16 +354,9 @@ fn cross_validate(
     }
     let cv = crossval::gather(&spec.engine, runs, &folds, &folders, &summaries)?;
     let markdown = crossval::markdown(&cv);
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating {}", args.out.display()))?;
-    let md = args.out.join("crossval.md");
-    std::fs::write(&md, &markdown).with_context(|| format!("writing {}", md.display()))?;
-    let json = args.out.join("crossval.json");
-    std::fs::write(&json, serde_json::to_string_pretty(&cv)? + "\n")
-        .with_context(|| format!("writing {}", json.display()))?;
+    let written = crossval::write(&cv, &args.out)?;
     ui.say(markdown.trim_end().to_string());
-    files.insert(0, md);
-    files.insert(1, json);
+    files.splice(0..0, written);
     say_files(ui, &files);
     Ok(Tuned { markdown, files })
 }

@@ -882,6 +882,87 @@ fn folds_cross_validate_over_consecutive_runs() {
         "{md}"
     );
     assert!(stdout.contains("Cross-validated over 3 folds"), "{stdout}");
+    // By phase of the schedule: each fold's phase errors sum to its
+    // scene's, and the figures of the error against time are written.
+    let phases = &cv["phases"][0];
+    assert_eq!(phases["scene"], "scene1_single_joint");
+    let tuned_phases = phases["rows"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r["source"] == "tuned")
+        .expect("the tuned row by phase");
+    for i in 0..3 {
+        let sum: f64 = tuned_phases["phases"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|p| p["folds"][i].as_f64().unwrap())
+            .sum();
+        let scene = tuned["scenes"][0]["folds"][i].as_f64().unwrap();
+        assert!(
+            (sum - scene).abs() < 1e-9 * scene.max(1.0),
+            "{sum} vs {scene}"
+        );
+    }
+    assert_eq!(
+        phases["t_s"].as_array().unwrap().len(),
+        phases["curves"][0]["distance_m"].as_array().unwrap().len()
+    );
+    assert!(md.contains("## By phase of the schedule"), "{md}");
+    for kind in ["distance", "height"] {
+        for ext in ["svg", "png"] {
+            let f = out.join(format!(
+                "figures/crossval_mujoco_scene1_single_joint_held_out_{kind}.{ext}"
+            ));
+            assert!(f.is_file(), "{}", f.display());
+        }
+    }
+    // A report given the cross-validation opens its verdict with it.
+    let site = d.join("site");
+    let study = d.join("study.toml");
+    let o = realitygap(&[
+        "report",
+        study.to_str().unwrap(),
+        "--data",
+        "none",
+        "--crossval",
+        out.to_str().unwrap(),
+        "--out",
+        site.to_str().unwrap(),
+    ]);
+    let html = std::fs::read_to_string(site.join("index.html"))
+        .unwrap_or_else(|e| panic!("{e}: {}", String::from_utf8_lossy(&o.stderr)));
+    let first = html.find("<p class=\"verdict\">").expect("a verdict");
+    assert!(
+        html[first..]
+            .starts_with("<p class=\"verdict\">Tuned and cross-validated (3 folds of runs 1-6"),
+        "{}",
+        &html[first..first + 300]
+    );
+    assert!(html.contains("<section id=\"crossval\">"));
+    assert!(site
+        .join("figures/crossval_mujoco_scene1_single_joint_held_out_distance.svg")
+        .is_file());
+    // A folder with no cross-validation is refused before anything is written.
+    let site2 = d.join("site2");
+    let o = realitygap(&[
+        "report",
+        study.to_str().unwrap(),
+        "--data",
+        "none",
+        "--crossval",
+        d.to_str().unwrap(),
+        "--out",
+        site2.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("crossval.json") && err.contains("tune --folds"),
+        "{err}"
+    );
+    assert!(!site2.exists());
     // Seven folds of six runs, and folds with a held-out range.
     let out2 = d.join("cv7");
     let mut args = tune_args(d, out2.to_str().unwrap(), "16");

@@ -736,6 +736,7 @@ fn reproduce<'py>(
         timeout_s,
         params,
         tuned,
+        crossval: Vec::new(),
         joint_space,
         runs,
         holdout,

@@ -171,6 +171,13 @@ pub enum FigureKind {
     /// first impact, cube edges (the second study's figure,
     /// [`crate::tosses::toss_figure`]; not one of a scene's, [`FigureKind::ALL`]).
     TossCentreError,
+    /// A cross-validated tune's held-out wrist error against time, the
+    /// mean over the folds, metres ([`crate::held_out`]; not one of a
+    /// scene's).
+    HeldOutDistance,
+    /// A cross-validated tune's held-out wrist height minus the real
+    /// wrist's, the mean over the folds, metres (negative: below).
+    HeldOutHeight,
 }
 
 impl FigureKind {
@@ -190,6 +197,8 @@ impl FigureKind {
             FigureKind::CubeDisplacement => "cube_displacement",
             FigureKind::CubePitch => "cube_pitch",
             FigureKind::TossCentreError => "toss_centre_error",
+            FigureKind::HeldOutDistance => "held_out_distance",
+            FigureKind::HeldOutHeight => "held_out_height",
         }
     }
 
@@ -201,6 +210,8 @@ impl FigureKind {
             FigureKind::CubeDisplacement => "Cube displacement from its start".into(),
             FigureKind::CubePitch => "Cube pitch change".into(),
             FigureKind::TossCentreError => "Cube centre error from the first impact".into(),
+            FigureKind::HeldOutDistance => "Held-out wrist error, mean over the folds".into(),
+            FigureKind::HeldOutHeight => "Held-out wrist height error, mean over the folds".into(),
         }
     }
 
@@ -212,6 +223,8 @@ impl FigureKind {
             FigureKind::CubeDisplacement => "cube displacement (m)",
             FigureKind::CubePitch => "pitch change (deg)",
             FigureKind::TossCentreError => "centre error (cube edges)",
+            FigureKind::HeldOutDistance => "distance to the real wrist (m)",
+            FigureKind::HeldOutHeight => "height minus the real wrist's (m)",
         }
     }
 
@@ -232,8 +245,11 @@ impl FigureKind {
             FigureKind::CubeDisplacement => &series.cube_displacement_m,
             FigureKind::CubePitch => &series.cube_pitch_change_deg,
             // A scene's series has none: the tosses' figure is built from
-            // the toss table's curves.
-            FigureKind::TossCentreError => &[],
+            // the toss table's curves, the held-out ones from a
+            // cross-validation's folds.
+            FigureKind::TossCentreError
+            | FigureKind::HeldOutDistance
+            | FigureKind::HeldOutHeight => &[],
         }
     }
 
@@ -245,7 +261,7 @@ impl FigureKind {
 
     /// Whether values are non-negative by nature (the y axis starts at 0).
     fn non_negative(self) -> bool {
-        self != FigureKind::CubePitch
+        !matches!(self, FigureKind::CubePitch | FigureKind::HeldOutHeight)
     }
 
     /// Largest value a sane series may reach, given a typical scale of the
@@ -455,8 +471,10 @@ pub fn available_kinds(report: &SceneReport) -> Vec<FigureKind> {
                 .iter()
                 .any(|s| !s.series.wrist_distance_to_reference_m.is_empty()),
             FigureKind::CubeDisplacement | FigureKind::CubePitch => cube_scene && has(*k),
-            // Not a scene's figure.
-            FigureKind::TossCentreError => false,
+            // Not a scene's figures.
+            FigureKind::TossCentreError
+            | FigureKind::HeldOutDistance
+            | FigureKind::HeldOutHeight => false,
         })
         .collect()
 }

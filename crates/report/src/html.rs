@@ -115,6 +115,9 @@ pub struct ExtraSection {
     pub id: String,
     /// Its heading.
     pub title: String,
+    /// Sentences the page's verdict opens with, before the scenes' own
+    /// (empty: none).
+    pub lead: Vec<String>,
     /// Paragraphs before the table.
     pub paragraphs: Vec<String>,
     /// The table's column headings (no table when empty).
@@ -239,7 +242,11 @@ pub fn render_index_with(
     h.push_str("<li><a href=\"#provenance\">Provenance</a></li>\n</ul></nav>\n");
 
     if scenes {
-        verdict_section(&mut h, reports);
+        let lead: Vec<&str> = extra
+            .iter()
+            .flat_map(|x| x.lead.iter().map(String::as_str))
+            .collect();
+        verdict_section(&mut h, reports, &lead);
         summary(&mut h, reports, downloads);
     } else {
         files_note(&mut h, downloads);
@@ -267,10 +274,14 @@ pub fn render_index_with(
 }
 
 /// The verdict in sentences, first in the page.
-fn verdict_section(h: &mut String, reports: &[SceneReport]) {
+fn verdict_section(h: &mut String, reports: &[SceneReport], lead: &[&str]) {
     let v = crate::verdict::verdict(reports);
     h.push_str("<section id=\"verdict\">\n<h2>Verdict</h2>\n");
-    for line in &v.overall {
+    for line in lead
+        .iter()
+        .copied()
+        .chain(v.overall.iter().map(String::as_str))
+    {
         let _ = writeln!(h, "<p class=\"verdict\">{}</p>", escape(line));
     }
     h.push_str("<ul>\n");
@@ -1012,6 +1023,7 @@ mod tests {
         let extra = ExtraSection {
             id: "stitching".into(),
             title: "Stitching <engines>".into(),
+            lead: Vec::new(),
             paragraphs: vec!["a>b & c".into()],
             header: vec!["Source".into(), "Error".into()],
             rows: vec![vec!["stitched ode>mujoco".into(), "1.0".into()]],

@@ -27,6 +27,7 @@
 pub mod convergence;
 pub mod figures;
 pub mod frontier;
+pub mod held_out;
 pub mod html;
 pub mod joint_space;
 pub mod provenance;

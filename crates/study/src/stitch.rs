@@ -995,6 +995,7 @@ pub fn report_section(result: &StitchStudy) -> ExtraSection {
     ExtraSection {
         id: "stitching".into(),
         title: "Stitching engines per phase".into(),
+        lead: Vec::new(),
         paragraphs,
         header: [
             "Scene",

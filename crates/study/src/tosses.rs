@@ -1303,6 +1303,7 @@ pub fn report_section(
             "The cube tosses: {} real tosses in every engine",
             set.tosses.len()
         ),
+        lead: Vec::new(),
         paragraphs,
         header,
         rows,

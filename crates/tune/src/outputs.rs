@@ -196,6 +196,88 @@ pub struct Comparison {
     pub objective_m: [f64; 2],
     /// The physics-free rows.
     pub baselines: Vec<BaselineRow>,
+    /// Per scene, where in time each source's error lies: its error per
+    /// phase of the schedule, and (not serialised) its error against time.
+    pub phases: Vec<ScenePhases>,
+}
+
+/// One scene's errors by phase and against time, per source.
+#[derive(Debug, Clone, Serialize)]
+pub struct ScenePhases {
+    /// Scene.
+    pub scene: String,
+    /// Start times of the schedule's phases, s (the first is 0).
+    pub phases_s: Vec<f64>,
+    /// Step times, s.
+    #[serde(skip)]
+    pub t_s: Vec<f64>,
+    /// `untuned`, `tuned`, then the physics-free rows.
+    pub sources: Vec<SourcePhases>,
+}
+
+/// One source's share of [`ScenePhases`].
+#[derive(Debug, Clone, Serialize)]
+pub struct SourcePhases {
+    /// The source, as the comparison names it.
+    pub source: String,
+    /// Accumulated wrist error per phase, metres (they sum to the
+    /// scene's).
+    pub phase_errors_m: Vec<f64>,
+    /// Per step, the mean wrist's distance to the real mean wrist, m.
+    #[serde(skip)]
+    pub distance_m: Vec<Option<f64>>,
+    /// Per step, the mean wrist's height minus the real mean wrist's, m
+    /// (negative: below the real arm's wrist).
+    #[serde(skip)]
+    pub height_m: Vec<Option<f64>>,
+}
+
+impl SourcePhases {
+    /// The source `name`'s measures in the scene report `r` (its first
+    /// source), or `None` when it was not measured.
+    fn of(name: &str, r: &SceneReport) -> Option<SourcePhases> {
+        let s = r.sources.first()?;
+        s.accumulated_error_m?;
+        let real = &r.reference.series.wrist_mean_m;
+        let height_m = s
+            .series
+            .wrist_mean_m
+            .iter()
+            .enumerate()
+            .map(|(k, w)| Some(w.as_ref()?[2] - real.get(k)?.as_ref()?[2]))
+            .collect();
+        Some(SourcePhases {
+            source: name.to_string(),
+            phase_errors_m: s.phase_errors_m.clone(),
+            distance_m: s.series.wrist_distance_to_reference_m.clone(),
+            height_m,
+        })
+    }
+}
+
+/// The scenes' [`ScenePhases`] of the sources `named` (name, its reports).
+fn scene_phases(named: &[(&str, &Reports)]) -> Vec<ScenePhases> {
+    let Some((_, first)) = named.first() else {
+        return Vec::new();
+    };
+    first
+        .reports
+        .iter()
+        .enumerate()
+        .map(|(i, r)| ScenePhases {
+            scene: r.scene.clone(),
+            phases_s: r.phases_s.clone(),
+            t_s: r
+                .sources
+                .first()
+                .map(|s| s.series.t_s.clone())
+                .unwrap_or_default(),
+            sources: named
+                .iter()
+                .filter_map(|(name, rep)| SourcePhases::of(name, rep.reports.get(i)?))
+                .collect(),
+        })
+        .collect()
 }
 
 /// The tuned parameters simulated again at half the tuned timestep and
@@ -511,6 +593,7 @@ fn comparison(tuner: &Tuner<'_>, untuned: &Reports, tuned: &Reports, runs: Strin
             score_of(&tuned.reports, &tuner.target.scenes).objective,
         ],
         baselines: Vec::new(),
+        phases: Vec::new(),
     }
 }
 
@@ -613,18 +696,30 @@ fn to_within_5pct(end: &SearchEnd, best: f64) -> Option<usize> {
 
 /// Scores of the physics-free rows (`(name, trajectories, registration)`)
 /// on `selection`, against the tuned engine's reports there.
-fn baseline_rows(
+/// The comparison of `untuned` and `tuned` on `selection` (its runs
+/// named `runs`), with the physics-free `rows` scored on the same runs
+/// and every source's errors by phase.
+fn compared(
     tuner: &Tuner<'_>,
+    (untuned, tuned): (&Reports, &Reports),
     rows: &[(String, Vec<realitygap_core::Trajectory>, Registration)],
-    tuned: &Reports,
     selection: &RunSelection,
-) -> Result<Vec<BaselineRow>> {
-    rows.iter()
-        .map(|(name, trajs, reg)| {
-            let r = score_source(tuner, name, trajs.clone(), *reg, name, selection)?;
-            Ok(baseline_row(name, &r, tuned))
-        })
-        .collect()
+    runs: String,
+) -> Result<Comparison> {
+    let mut c = comparison(tuner, untuned, tuned, runs);
+    let scored: Vec<Reports> = rows
+        .iter()
+        .map(|(name, trajs, reg)| score_source(tuner, name, trajs.clone(), *reg, name, selection))
+        .collect::<Result<_>>()?;
+    c.baselines = rows
+        .iter()
+        .zip(&scored)
+        .map(|((name, _, _), r)| baseline_row(name, r, tuned))
+        .collect();
+    let mut named: Vec<(&str, &Reports)> = vec![("untuned", untuned), ("tuned", tuned)];
+    named.extend(rows.iter().map(|r| r.0.as_str()).zip(&scored));
+    c.phases = scene_phases(&named);
+    Ok(c)
 }
 
 /// The answer in words: does the tuned engine beat the physics-free rows?
@@ -730,13 +825,17 @@ pub fn finish(
     let runs_text = |r: &Option<realitygap_analysis::selection::RunRange>| {
         r.as_ref().map_or("all".to_string(), |r| r.text.clone())
     };
-    let mut training = comparison(tuner, &a, &b, runs_text(&train_sel.runs));
-    training.baselines = baseline_rows(tuner, &rows, &b, &train_sel)?;
+    let training = compared(
+        tuner,
+        (&a, &b),
+        &rows,
+        &train_sel,
+        runs_text(&train_sel.runs),
+    )?;
     let (holdout, held_out_tuned) = match tuner.target.holdout_selection() {
         Some(sel) => {
             let (a, b) = evaluate_both(tuner, &untuned, &tuned, &registration, &sel)?;
-            let mut c = comparison(tuner, &a, &b, runs_text(&sel.holdout));
-            c.baselines = baseline_rows(tuner, &rows, &b, &sel)?;
+            let c = compared(tuner, (&a, &b), &rows, &sel, runs_text(&sel.holdout))?;
             (Some(c), Some((sel, b)))
         }
         None => (None, None),
@@ -1356,6 +1455,7 @@ mod tests {
             total_tuned: None,
             objective_m: [75.0, 12.0],
             baselines: vec![],
+            phases: vec![],
         }
     }
 
