@@ -273,6 +273,20 @@ def test_tune_with_folds_is_cross_validated(tmp_path):
     assert cv.differences.empty
     assert cv.verdict.startswith("Cross-validated over 2 folds of runs 1-20")
     assert "Cross-validated" in cv.markdown
+    # By phase: every scene's phases, each fold's sum over them its scene's.
+    ph = cv.phases
+    tuned = ph[ph["source"] == "tuned"]
+    assert set(tuned["scene"]) == set(t["scene"]) - {"total"}
+    for scene, g in tuned.groupby("scene"):
+        whole = t[(t["source"] == "tuned") & (t["scene"] == scene)].iloc[0]["mean_m"]
+        assert abs(g["mean_m"].sum() - whole) < 1e-9 * whole
+        assert list(g["phase"]) == list(range(1, len(g) + 1))
+    # The report of a study with it holds its section.
+    rep = rg.reproduce(tmp_path / "study", engines="ideal", repeats=1, tosses=False,
+                       crossval=cv, progress=False)
+    with open(rep.report, encoding="utf-8") as f:
+        html = f.read()
+    assert '<section id="crossval">' in html
 
 
 def test_tune_of_tosses_gives_the_held_out_table_and_the_contact(root, tmp_path):

@@ -79,11 +79,10 @@ fn toss_report(dir: &Path, out: &Path) -> Result<()> {
     use realitygap_study::tosses::{self, ReplayedWith};
     let (rows, set) = tosses::compare_toss_replay(dir)?;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let json: Vec<serde_json::Value> = rows.iter().map(tosses::toss_row_json).collect();
     for (name, text) in [
         ("tosses.md", tosses::toss_markdown(&rows, &set)),
         ("tosses.csv", tosses::toss_csv(&rows, &set)),
-        ("tosses.json", serde_json::to_string_pretty(&json)? + "\n"),
+        ("tosses.json", tosses::toss_json(&rows)),
     ] {
         let path = out.join(name);
         std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))?;

@@ -122,14 +122,11 @@ impl Comparison {
                 (None, _) => table::render(reports, format),
             }),
             Comparison::Tosses { rows, set } => {
-                use realitygap_study::tosses::{toss_csv, toss_markdown, toss_row_json};
+                use realitygap_study::tosses::{toss_csv, toss_json, toss_markdown};
                 Ok(match format {
                     Format::Markdown => toss_markdown(rows, set),
                     Format::Csv => toss_csv(rows, set),
-                    Format::Json => {
-                        let rows: Vec<serde_json::Value> = rows.iter().map(toss_row_json).collect();
-                        serde_json::to_string_pretty(&rows)? + "\n"
-                    }
+                    Format::Json => toss_json(rows),
                     other => anyhow::bail!(
                         "--format {}: the toss table is written as md, csv or json",
                         format!("{other:?}").to_lowercase()

@@ -269,7 +269,7 @@ fn replay_tosses(
         },
     )?;
     bar.finish();
-    use realitygap_study::tosses::{toss_csv, toss_row_json, write_toss_report, ReplayedWith};
+    use realitygap_study::tosses::{toss_csv, toss_json, write_toss_report, ReplayedWith};
     let table = realitygap_study::tosses::toss_markdown(&rows, &set);
     ui.say(table.clone());
     let index_html = write_toss_report(
@@ -295,11 +295,10 @@ fn replay_tosses(
             args.out.display()
         );
     }
-    let json: Vec<serde_json::Value> = rows.iter().map(toss_row_json).collect();
     Ok(Replayed {
         kind: "tosses",
         csv: toss_csv(&rows, &set),
-        json: serde_json::to_string(&json)?,
+        json: toss_json(&rows),
         rows: Vec::new(),
         joints: Vec::new(),
         table,

@@ -431,11 +431,8 @@ impl Engine for RemoteEngine {
             Err(f) => {
                 // A refused model leaves a healthy child: it waits for the
                 // next load (starting one costs seconds: Newton 3.3 s).
-                if matches!(f, Failure::Engine { .. }) && !child.is_broken() {
-                    let mut idle = self.inner.control.lock().unwrap_or_else(|e| e.into_inner());
-                    if idle.is_none() {
-                        *idle = Some(child);
-                    }
+                if matches!(f, Failure::Engine { .. }) {
+                    sim::give_back(&self.inner.control, child);
                 }
                 return Err(engine_error(self.inner.name, f, |m| self.load_error(m)));
             }

@@ -23,6 +23,19 @@ use std::sync::{Arc, Mutex};
 /// simulation after another starts the engine once.
 pub(crate) type IdleSlot = Arc<Mutex<Option<Child>>>;
 
+/// Puts `child` back into `slot` for the next `check_settings` or `load`,
+/// unless it is broken (it is dropped, and the next request starts a new
+/// one) or the slot already holds one.
+pub(crate) fn give_back(slot: &IdleSlot, child: Child) {
+    if child.is_broken() {
+        return;
+    }
+    let mut idle = slot.lock().unwrap_or_else(|e| e.into_inner());
+    if idle.is_none() {
+        *idle = Some(child);
+    }
+}
+
 /// Turns a failed request into the engine error of its kind; a broken
 /// child is `broken(message)`.
 pub(crate) fn engine_error(
@@ -242,15 +255,8 @@ impl RemoteSimulation {
 
 impl Drop for RemoteSimulation {
     fn drop(&mut self) {
-        let Some(child) = self.child.get_mut().take() else {
-            return;
-        };
-        if child.is_broken() {
-            return;
-        }
-        let mut slot = self.idle.lock().unwrap_or_else(|e| e.into_inner());
-        if slot.is_none() {
-            *slot = Some(child);
+        if let Some(child) = self.child.get_mut().take() {
+            give_back(&self.idle, child);
         }
     }
 }

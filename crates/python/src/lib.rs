@@ -700,7 +700,7 @@ fn tune<'py>(
 #[pyfunction]
 #[pyo3(signature = (*, out, data="builtin", repeats=20, engines=Vec::new(), scenes=Vec::new(),
     jobs=None, mode="default", timeout_s=None, params=None, tuned=Vec::new(),
-    joint_space=false, runs=None, holdout=None, tosses=true, reporter=None))]
+    crossval=Vec::new(), joint_space=false, runs=None, holdout=None, tosses=true, reporter=None))]
 #[allow(clippy::too_many_arguments)]
 fn reproduce<'py>(
     py: Python<'py>,
@@ -714,6 +714,7 @@ fn reproduce<'py>(
     timeout_s: Option<f64>,
     params: Option<PathBuf>,
     tuned: Vec<PathBuf>,
+    crossval: Vec<PathBuf>,
     joint_space: bool,
     runs: Option<String>,
     holdout: Option<String>,
@@ -736,7 +737,7 @@ fn reproduce<'py>(
         timeout_s,
         params,
         tuned,
-        crossval: Vec::new(),
+        crossval,
         joint_space,
         runs,
         holdout,

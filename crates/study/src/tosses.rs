@@ -993,11 +993,8 @@ pub fn replay_tosses(
     let table = toss_markdown(&rows, set);
     std::fs::write(out.join("tosses.md"), &table)
         .with_context(|| format!("writing {}", out.join("tosses.md").display()))?;
-    let json = Value::Array(rows.iter().map(toss_row_json).collect());
-    std::fs::write(
-        out.join("tosses.json"),
-        serde_json::to_string_pretty(&json)? + "\n",
-    )?;
+    std::fs::write(out.join("tosses.json"), toss_json(&rows))
+        .with_context(|| format!("writing {}", out.join("tosses.json").display()))?;
     Ok(rows)
 }
 
@@ -1077,6 +1074,13 @@ pub fn toss_row(
             .collect(),
         per_toss_edges,
     }
+}
+
+/// The toss table as `tosses.json` holds it: an array of
+/// [`toss_row_json`], pretty-printed, ending in a newline.
+pub fn toss_json(rows: &[TossRow]) -> String {
+    let rows: Vec<Value> = rows.iter().map(toss_row_json).collect();
+    serde_json::to_string_pretty(&rows).unwrap_or_else(|_| "[]".into()) + "\n"
 }
 
 /// A row of the toss table as JSON.

@@ -821,6 +821,31 @@ class CrossValidated:
     def folds(self) -> List[TuneResult]:
         return [TuneResult(self.engine, f["folder"], "", []) for f in self.json["folds"]]
 
+    @property
+    def phases(self) -> "pd.DataFrame":
+        """Per scene, phase of the schedule (numbered from 1, with its start
+        in seconds) and source, the held-out accumulated error's mean over
+        folds with its 95 % t interval; for the tuned engine minus each
+        physics-free row, ``source`` is ``"tuned minus <row>"`` and
+        ``folds_below_zero`` counts the folds the engine wins."""
+        import pandas as pd
+
+        rows = []
+        for p in self.json.get("phases", []):
+            named = [(r["source"], r, False) for r in p["rows"]]
+            named += [("tuned minus " + d["source"], d, True) for d in p["differences"]]
+            for name, r, diff in named:
+                for i, c in enumerate(r["phases"]):
+                    if c is None:
+                        continue
+                    row = {"scene": p["scene"], "phase": i + 1, "start_s": p["phases_s"][i],
+                           "source": name, "mean_m": c["mean"], "low_m": c["interval"][0],
+                           "high_m": c["interval"][1]}
+                    if diff:
+                        row["folds_below_zero"] = sum(1 for v in c["folds"] if v < 0)
+                    rows.append(row)
+        return pd.DataFrame(rows)
+
     def __repr__(self) -> str:
         return "CrossValidated(%r, %d folds: %s)" % (self.engine, len(self.json["folds"]), self.verdict)
 
@@ -857,6 +882,7 @@ def reproduce(
     timeout_s: Optional[float] = None,
     params: Optional[Params] = None,
     tuned: Union[None, PathLike, TuneResult, Sequence[Union[PathLike, TuneResult]]] = None,
+    crossval: Union[None, PathLike, "CrossValidated", Sequence[Union[PathLike, "CrossValidated"]]] = None,
     joint_space: bool = False,
     runs: Optional[str] = None,
     holdout: Optional[str] = None,
@@ -868,9 +894,13 @@ def reproduce(
     study's recorded simulators, the table, the figures and
     ``out/report/index.html``. ``tuned``: tunes (:class:`TuneResult` or
     their folders) whose engines run again tuned, as "<engine> (tuned)"
-    rows. ``tosses``: also replay the 456 real cube tosses built in, in every
-    engine beside the physics-free row (``tosses``: their table, Markdown).
-    Resumes where an earlier call stopped."""
+    rows. ``crossval``: cross-validated tunes (:class:`CrossValidated` or
+    their folders): the report's verdict opens with whether any tuned engine
+    beats the physics-free model behind its fitted actuator stage on runs it
+    did not see, and a section holds their table and figures. ``tosses``:
+    also replay the 456 real cube tosses built in, in every engine beside
+    the physics-free row (``tosses``: their table, Markdown). Resumes where
+    an earlier call stopped."""
     if tuned is None:
         tuned_list: List[Any] = []
     elif isinstance(tuned, (str, os.PathLike, TuneResult)):
@@ -878,6 +908,13 @@ def reproduce(
     else:
         tuned_list = list(tuned)
     tuned_dirs = [t.out if isinstance(t, TuneResult) else os.fspath(t) for t in tuned_list]
+    if crossval is None:
+        cv_list: List[Any] = []
+    elif isinstance(crossval, (str, os.PathLike, CrossValidated)):
+        cv_list = [crossval]
+    else:
+        cv_list = list(crossval)
+    cv_dirs = [c.out if isinstance(c, CrossValidated) else os.fspath(c) for c in cv_list]
     scene_list = None if scenes is None else [
         scene_file(s) for s in ([scenes] if isinstance(scenes, (str, os.PathLike)) else scenes)
     ]
@@ -893,6 +930,7 @@ def reproduce(
         timeout_s=timeout_s,
         params=_params_file(params, out),
         tuned=tuned_dirs,
+        crossval=cv_dirs,
         joint_space=joint_space,
         runs=runs,
         holdout=holdout,

@@ -108,6 +108,7 @@ def reproduce(
     timeout_s: Optional[float] = None,
     params: Optional[str] = None,
     tuned: List[str] = ...,
+    crossval: List[str] = ...,
     joint_space: bool = False,
     runs: Optional[str] = None,
     holdout: Optional[str] = None,
