@@ -45,6 +45,13 @@ pub struct Args {
 /// Runs the command.
 pub fn run(args: Args) -> Result<()> {
     if realitygap_study::tosses::is_toss_replay_folder(&args.study) {
+        if let Some(first) = args.crossval.first() {
+            anyhow::bail!(
+                "--crossval {}: a cross-validated tune of the arm belongs to the study's report; {} holds replayed tosses",
+                first.display(),
+                args.study.display()
+            );
+        }
         return toss_report(&args.study, &args.out);
     }
     let measure = args.measure.measure();

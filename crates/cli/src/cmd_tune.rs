@@ -129,6 +129,21 @@ pub struct Args {
     /// have).
     #[arg(long, value_name = "space|physics-free", default_value = "space", value_parser = ["space", "physics-free"], conflicts_with = "no_baseline")]
     pub start: String,
+    /// Pull the engine's search toward the physics-free model's fit: the
+    /// objective adds W x the sum, over the keys both fits share (the
+    /// actuator stage, delay, acceleration limit, encoder offsets,
+    /// registration), of each key's squared distance from the physics-free
+    /// model's fitted value as a fraction of its range in the engine's
+    /// space (in metres of accumulated wrist error per key moved across
+    /// its whole range). The physics-free model is then fitted first.
+    /// Choose W by cross-validation (--folds); 0 (the default): no pull.
+    #[arg(
+        long,
+        value_name = "W",
+        default_value_t = 0.0,
+        conflicts_with = "no_baseline"
+    )]
+    pub prior_weight: f64,
     /// Engine settings over the space's: a parameters file's
     /// `[engine.NAME]` table, such as the `recommended.toml` that
     /// `realitygap frontier` writes.
@@ -178,6 +193,7 @@ pub fn run(args: Args) -> Result<()> {
         keep_registration: args.keep_registration,
         no_baseline: args.no_baseline,
         start_from_baseline: args.start == "physics-free",
+        prior_weight: args.prior_weight,
         settings: args.settings,
         set: args.set,
         robot: args.robot,

@@ -71,6 +71,9 @@ pub struct TuneRequest {
     /// Start the engine's search at the physics-free model's fitted
     /// actuator stage and registration (fitted first).
     pub start_from_baseline: bool,
+    /// Pull the engine's keys that the physics-free model's fit shares
+    /// toward its fitted values ([`TuneSpec::prior_weight`]); 0: none.
+    pub prior_weight: f64,
     /// Engine settings over the space's (a parameters file).
     pub settings: Option<PathBuf>,
     /// Engine settings over the space's and `settings`: KEY=VALUE.
@@ -110,6 +113,7 @@ impl Default for TuneRequest {
             keep_registration: false,
             no_baseline: false,
             start_from_baseline: false,
+            prior_weight: 0.0,
             settings: None,
             set: Vec::new(),
             robot: None,
@@ -151,10 +155,22 @@ fn range(v: &Option<String>, flag: &str) -> Result<Option<RunRange>> {
 
 /// Runs the tune `request` asks for; says the summary on `ui`.
 pub fn tune(request: &TuneRequest, launcher: &Launcher, ui: &dyn Ui) -> Result<Tuned> {
+    if !request.prior_weight.is_finite() || request.prior_weight < 0.0 {
+        anyhow::bail!(
+            "--prior-weight {}: expected a finite number >= 0",
+            request.prior_weight
+        );
+    }
+    if request.prior_weight > 0.0 && request.recordings.is_some() {
+        anyhow::bail!("--prior-weight belongs to a tune against a study's real runs (it pulls toward the physics-free model's fit): leave it out with --recordings");
+    }
     if let Some(recordings) = &request.recordings {
         return tune_recordings(request, recordings, ui);
     }
     if let Some(study) = request.study.as_deref().filter(|s| is_toss_study(s)) {
+        if request.prior_weight > 0.0 {
+            anyhow::bail!("--prior-weight pulls an arm's tune toward the physics-free model's fit; a study of tosses has none: leave it out");
+        }
         return crate::tune_tosses::tune_tosses(request, study, ui);
     }
     let args = request;
@@ -242,6 +258,8 @@ pub fn tune(request: &TuneRequest, launcher: &Launcher, ui: &dyn Ui) -> Result<T
             Some(Space::from_file(&f)?)
         },
         start_from_baseline: args.start_from_baseline,
+        prior_weight: args.prior_weight,
+        prior: Vec::new(),
     };
     ui.note(settings_line(&spec, &space_file));
     let simulator = Simulator {

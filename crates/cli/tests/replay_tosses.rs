@@ -205,6 +205,24 @@ fn every_toss_is_replayed_in_every_engine_and_the_physics_free_model() {
         "no scene table in a page of tosses"
     );
     assert!(site.join("figures/tosses_centre_error.svg").is_file());
+    // A cross-validated tune of the arm has no place on a page of tosses:
+    // refused with both names, nothing written.
+    let site2 = tmp.path().join("site2");
+    let o = realitygap(&[
+        "report",
+        out.to_str().unwrap(),
+        "--out",
+        site2.to_str().unwrap(),
+        "--crossval",
+        "cv-folder",
+    ]);
+    assert!(!o.status.success());
+    let err = text(&o.stderr);
+    assert!(
+        err.contains("--crossval cv-folder") && err.contains("holds replayed tosses"),
+        "{err}"
+    );
+    assert!(!site2.exists());
     assert!(site.join("figures/tosses_centre_error.png").is_file());
     assert!(!site.join("table.md").exists());
     assert_eq!(

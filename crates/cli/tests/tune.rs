@@ -1074,3 +1074,84 @@ fn the_search_can_start_from_the_fitted_physics_free_row() {
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
     assert!(!realitygap(&args).status.success());
 }
+
+/// `--prior-weight W`: the physics-free row is fitted first and the
+/// engine's keys it shares are pulled toward its fitted values; with a
+/// weight far above the wrist's errors the engine's delay and actuator
+/// frequency end at the physics-free row's (the search starts at the
+/// space's own start, far from them). The summary's objective names the
+/// pull; a negative weight, or one with `--no-baseline`, is refused.
+#[test]
+fn a_prior_pulls_the_shared_keys_to_the_physics_free_row() {
+    let tmp = synthetic();
+    let d = tmp.path();
+    std::fs::remove_dir_all(d.join("runs")).unwrap();
+    noisy_known_runs(d, "mujoco");
+    let space = std::fs::read_to_string(d.join("space.toml")).unwrap();
+    std::fs::write(
+        d.join("space.toml"),
+        format!("{space}\"actuator.frequency_rad_s\" = {{ low = 4.0, high = 200.0, scale = \"log\", start = 100.0 }}\n"),
+    )
+    .unwrap();
+    let out = d.join("pulled");
+    let mut args = tune_args(d, out.to_str().unwrap(), "16");
+    args.extend(["--prior-weight", "1e6", "--iterations", "3"].map(String::from));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let stderr = String::from_utf8(ok(realitygap(&args)).stderr).unwrap();
+    assert!(
+        stderr.contains("pulled toward the physics-free model's fitted values with weight 1000000 m per range: controller.delay_s, actuator.frequency_rad_s"),
+        "{stderr}"
+    );
+    let read = |p: PathBuf| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
+    };
+    let value = |s: &serde_json::Value, key: &str, field: &str| -> f64 {
+        s["parameters"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|p| p["key"] == key)
+            .unwrap()[field]
+            .as_f64()
+            .unwrap()
+    };
+    let s = read(out.join("summary.json"));
+    assert!(
+        s["objective"].as_str().unwrap().contains("--prior-weight"),
+        "{}",
+        s["objective"]
+    );
+    let b = read(out.join("physics-free-actuator/summary.json"));
+    let delay = (
+        value(&b, "controller.delay_s", "value"),
+        value(&s, "controller.delay_s", "value"),
+    );
+    assert_eq!(value(&s, "controller.delay_s", "start"), 0.0);
+    assert!(
+        (delay.1 - delay.0).abs() < 0.01 * 0.15,
+        "delay {delay:?}\n{}",
+        std::fs::read_to_string(out.join("summary.md")).unwrap()
+    );
+    let f = (
+        value(&b, "actuator.frequency_rad_s", "value"),
+        value(&s, "actuator.frequency_rad_s", "value"),
+    );
+    assert!(
+        (f.1 / f.0).ln().abs() < 0.01 * (200.0f64 / 4.0).ln(),
+        "frequency {f:?}"
+    );
+    // Refused: a negative weight, and no physics-free row to pull toward.
+    for extra in [
+        &["--prior-weight=-1"][..],
+        &["--prior-weight", "1", "--no-baseline"],
+    ] {
+        let mut args = tune_args(d, d.join("refused").to_str().unwrap(), "8");
+        args.extend(extra.iter().map(|s| s.to_string()));
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let o = realitygap(&args);
+        assert!(!o.status.success());
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains("--prior-weight"), "{err}");
+    }
+    assert!(!d.join("refused").join("history.csv").exists());
+}

@@ -604,7 +604,7 @@ fn replay<'py>(
 #[pyo3(signature = (*, engine, out, study=None, recordings=None, params=None, scene=None,
     efforts=false, iterations=None, data="builtin", space=None, runs=None, holdout=None,
     folds=None, budget=None, seed=1, restarts=false, jobs=None, cube_weight=None, keep_registration=false,
-    baseline=true, start="space", settings=None, set=Vec::new(), robot=None, packages=Vec::new(), reporter=None))]
+    baseline=true, start="space", prior_weight=0.0, settings=None, set=Vec::new(), robot=None, packages=Vec::new(), reporter=None))]
 #[allow(clippy::too_many_arguments)]
 fn tune<'py>(
     py: Python<'py>,
@@ -629,6 +629,7 @@ fn tune<'py>(
     keep_registration: bool,
     baseline: bool,
     start: &str,
+    prior_weight: f64,
     settings: Option<PathBuf>,
     set: Vec<String>,
     robot: Option<String>,
@@ -671,6 +672,7 @@ fn tune<'py>(
                 )))
             }
         },
+        prior_weight,
         settings,
         set,
         robot,

@@ -689,6 +689,15 @@ fn caption(
         ));
     }
     c.push('.');
+    c.push_str(&caption_tail(omitted, off_scale, kind.unit()));
+    c
+}
+
+/// The end of a figure's caption: the sources not plotted, with why, and
+/// those clipped at the plot's edge, with how far they reach (`unit`).
+/// Empty when every source is drawn within the plot.
+pub(crate) fn caption_tail(omitted: &[Omitted], off_scale: &[OffScale], unit: &str) -> String {
+    let mut c = String::new();
     if !omitted.is_empty() {
         let o: Vec<String> = omitted
             .iter()
@@ -699,14 +708,7 @@ fn caption(
     if !off_scale.is_empty() {
         let o: Vec<String> = off_scale
             .iter()
-            .map(|o| {
-                format!(
-                    "{} (up to {} {})",
-                    o.source,
-                    fmt_mag(o.max_abs),
-                    kind.unit()
-                )
-            })
+            .map(|o| format!("{} (up to {} {unit})", o.source, fmt_mag(o.max_abs)))
             .collect();
         c.push_str(&format!(
             " Clipped at the edge of the plot: {}.",
@@ -913,6 +915,12 @@ impl Figure {
     /// The figure as a PNG file's bytes (RGB, `WIDTH_PX` x `HEIGHT_PX`).
     pub fn to_png(&self) -> Result<Vec<u8>, FigureError> {
         crate::render::png(self, WIDTH_PX, HEIGHT_PX).map_err(|m| self.error(m))
+    }
+
+    /// Writes `DIR/<stem>.svg` and `DIR/<stem>.png`; the two paths.
+    pub fn write(&self, dir: &std::path::Path) -> Result<Vec<std::path::PathBuf>, FigureError> {
+        crate::render::write(self, dir, &self.stem, (WIDTH_PX, HEIGHT_PX))
+            .map_err(|m| self.error(m))
     }
 
     fn error(&self, message: String) -> FigureError {

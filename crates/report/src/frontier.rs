@@ -153,12 +153,8 @@ impl FrontierFigure {
 
     /// Writes `DIR/<stem>.svg` and `DIR/<stem>.png`; the two paths.
     pub fn write(&self, dir: &Path) -> Result<Vec<PathBuf>, FrontierFigureError> {
-        let svg = dir.join(format!("{}.svg", self.stem));
-        let png = dir.join(format!("{}.png", self.stem));
-        let io = |p: &Path, e: std::io::Error| self.error(format!("writing {}: {e}", p.display()));
-        std::fs::write(&svg, self.to_svg()?).map_err(|e| io(&svg, e))?;
-        std::fs::write(&png, self.to_png()?).map_err(|e| io(&png, e))?;
-        Ok(vec![svg, png])
+        crate::render::write(self, dir, &self.stem, (WIDTH_PX, HEIGHT_PX))
+            .map_err(|m| self.error(m))
     }
 
     fn groups(&self) -> Vec<&str> {

@@ -5,7 +5,7 @@
 //! minus the real wrist's (a servo that sags under gravity reads as a
 //! negative height while the arm holds still).
 
-use crate::figures::{fmt_mag, y_range, Figure, FigureKind, Line, LineStyle, Omitted};
+use crate::figures::{y_range, Figure, FigureKind, Line, LineStyle, Omitted};
 
 /// The legend's name of the physics-free model behind its fitted
 /// actuator stage (a legend has room for about 18 characters).
@@ -101,23 +101,7 @@ pub fn held_out_figure(kind: FigureKind, curves: &[HeldOutCurve], m: &HeldOutMak
     if !named.is_empty() {
         caption.push_str(&format!(" {}.", named.join("; ")));
     }
-    if !omitted.is_empty() {
-        let o: Vec<String> = omitted
-            .iter()
-            .map(|o| format!("{} ({})", o.source, o.reason))
-            .collect();
-        caption.push_str(&format!(" Not plotted: {}.", o.join("; ")));
-    }
-    if !off_scale.is_empty() {
-        let o: Vec<String> = off_scale
-            .iter()
-            .map(|o| format!("{} (up to {} m)", o.source, fmt_mag(o.max_abs)))
-            .collect();
-        caption.push_str(&format!(
-            " Clipped at the edge of the plot: {}.",
-            o.join("; ")
-        ));
-    }
+    caption.push_str(&crate::figures::caption_tail(&omitted, &off_scale, "m"));
     Figure {
         scene: m.scene.to_string(),
         kind,

@@ -131,13 +131,21 @@ pub struct ExtraSection {
     pub replay: Vec<crate::replay3d::ExtraScene>,
 }
 
-fn extra_section(h: &mut String, s: &ExtraSection) {
+/// An extra section; `lead_elsewhere`: its lead sentences already open the
+/// page's verdict, else they open the section (a page with no scenes has
+/// no verdict).
+fn extra_section(h: &mut String, s: &ExtraSection, lead_elsewhere: bool) {
     let _ = writeln!(
         h,
         "<section id=\"{}\">\n<h2>{}</h2>",
         escape(&s.id),
         escape(&s.title)
     );
+    if !lead_elsewhere {
+        for l in &s.lead {
+            let _ = writeln!(h, "<p class=\"lead\"><strong>{}</strong></p>", escape(l));
+        }
+    }
     for p in &s.paragraphs {
         let _ = writeln!(h, "<p>{}</p>", escape(p));
     }
@@ -259,7 +267,7 @@ pub fn render_index_with(
         ));
     }
     for x in extra {
-        extra_section(&mut h, x);
+        extra_section(&mut h, x, scenes);
     }
     for r in reports {
         let figs: Vec<&FigureEntry<'_>> = figures
@@ -1036,5 +1044,36 @@ mod tests {
         assert!(html.contains("<tr><td>stitched ode&gt;mujoco</td><td>1.0</td></tr>"));
         let (summary, section) = (html.find("id=\"summary\""), html.find("id=\"stitching\""));
         assert!(summary < section, "the section follows the summary");
+    }
+
+    /// A lead opens the verdict on a page with scenes, and its own section
+    /// on a page without (no verdict there): shown once either way.
+    #[test]
+    fn a_sections_lead_is_shown_once_with_or_without_scenes() {
+        let extra = ExtraSection {
+            id: "crossval".into(),
+            title: "Does physics pay?".into(),
+            lead: vec!["No tuned engine beats <it>.".into()],
+            paragraphs: vec!["Folds.".into()],
+            header: Vec::new(),
+            rows: Vec::new(),
+            figures: Vec::new(),
+            replay: Vec::new(),
+        };
+        let escaped = "No tuned engine beats &lt;it&gt;.";
+        let with = render_index_with(
+            &[testdata::scene()],
+            &[],
+            &Provenance::new("t"),
+            &[],
+            std::slice::from_ref(&extra),
+        );
+        assert_eq!(with.matches(escaped).count(), 1, "{with}");
+        assert!(with.find(escaped) < with.find("id=\"crossval\""));
+        let without = render_index_with(&[], &[], &Provenance::new("t"), &[], &[extra]);
+        assert_eq!(without.matches(escaped).count(), 1);
+        assert!(without.contains(&format!(
+            "<h2>Does physics pay?</h2>\n<p class=\"lead\"><strong>{escaped}</strong></p>\n<p>Folds.</p>"
+        )));
     }
 }

@@ -219,14 +219,9 @@ pub fn write_report_with(
     }
     // The extra sections' figures, as files beside the scenes'.
     for f in extra.iter().flat_map(|s| &s.figures) {
-        files.figures_svg.push(write(
-            &fig_dir.join(format!("{}.svg", f.stem)),
-            f.to_svg()?,
-        )?);
-        files.figures_png.push(write(
-            &fig_dir.join(format!("{}.png", f.stem)),
-            f.to_png()?,
-        )?);
+        let mut written = f.write(&fig_dir)?.into_iter();
+        files.figures_svg.extend(written.next());
+        files.figures_png.extend(written.next());
     }
     let page = html::render_index_with(reports, &entries, provenance, &downloads, extra);
     files.index_html = write(&out_dir.join("index.html"), page)?;

@@ -35,6 +35,22 @@ pub(crate) trait Draw {
     fn draw_on<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String>;
 }
 
+/// Writes `figure` as `DIR/<stem>.svg` and `DIR/<stem>.png` (`width` x
+/// `height`); the two paths. The message names the file that failed.
+pub(crate) fn write<T: Draw>(
+    figure: &T,
+    dir: &std::path::Path,
+    stem: &str,
+    (width, height): (u32, u32),
+) -> Result<Vec<std::path::PathBuf>, String> {
+    let svg_path = dir.join(format!("{stem}.svg"));
+    let png_path = dir.join(format!("{stem}.png"));
+    let io = |p: &std::path::Path, e: std::io::Error| format!("writing {}: {e}", p.display());
+    std::fs::write(&svg_path, svg(figure, width, height)?).map_err(|e| io(&svg_path, e))?;
+    std::fs::write(&png_path, png(figure, width, height)?).map_err(|e| io(&png_path, e))?;
+    Ok(vec![svg_path, png_path])
+}
+
 /// `figure` as an SVG document of `width` x `height` user units.
 pub(crate) fn svg<T: Draw>(figure: &T, width: u32, height: u32) -> Result<String, String> {
     ensure_font()?;

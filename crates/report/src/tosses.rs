@@ -2,7 +2,7 @@
 //! time from each toss's recorded first impact, one line per source, the
 //! impact marked, so that flight, impact and what follows read apart.
 
-use crate::figures::{fmt_mag, y_range, Figure, FigureKind, Line, LineStyle};
+use crate::figures::{y_range, Figure, FigureKind, Line, LineStyle};
 
 /// One source's curve: (time from the recorded first impact, s; the mean
 /// over the tosses of the centre error, cube edges) per time bin, `None`
@@ -73,23 +73,7 @@ pub fn toss_figure(curves: &[TossCurve], making: CurveMaking) -> Figure {
         making.min_tosses,
         making.impact_window_s * 1e3
     );
-    if !omitted.is_empty() {
-        let o: Vec<String> = omitted
-            .iter()
-            .map(|o| format!("{} ({})", o.source, o.reason))
-            .collect();
-        caption.push_str(&format!(" Not plotted: {}.", o.join("; ")));
-    }
-    if !off_scale.is_empty() {
-        let o: Vec<String> = off_scale
-            .iter()
-            .map(|o| format!("{} (up to {} edges)", o.source, fmt_mag(o.max_abs)))
-            .collect();
-        caption.push_str(&format!(
-            " Clipped at the edge of the plot: {}.",
-            o.join("; ")
-        ));
-    }
+    caption.push_str(&crate::figures::caption_tail(&omitted, &off_scale, "edges"));
     Figure {
         scene: "tosses".into(),
         kind,

@@ -583,33 +583,37 @@ const DRAWN: [&str; 3] = ["tuned", "physics-free + actuator (fitted)", "physics-
 /// The figures of `cv`: per scene, the held-out wrist distance and
 /// height against time, averaged over the folds.
 pub fn figures(cv: &CrossValidation) -> Vec<Figure> {
+    cv.phases
+        .iter()
+        .flat_map(|p| scene_figures(cv, p))
+        .collect()
+}
+
+/// The held-out distance and height figures of one scene of `cv`.
+fn scene_figures(cv: &CrossValidation, p: &PhaseBreakdown) -> [Figure; 2] {
     use realitygap_report::held_out::{held_out_figure, HeldOutCurve, HeldOutMaking};
-    let mut out = Vec::new();
-    for p in &cv.phases {
-        let making = HeldOutMaking {
-            scene: &p.scene,
-            engine: &cv.engine,
-            folds: cv.folds.len(),
-            t_s: &p.t_s,
-            phases_s: &p.phases_s,
-        };
-        for kind in [FigureKind::HeldOutDistance, FigureKind::HeldOutHeight] {
-            let curves: Vec<HeldOutCurve> = DRAWN
-                .iter()
-                .filter_map(|name| p.curves.iter().find(|c| c.source == *name))
-                .map(|c| HeldOutCurve {
-                    source: legend(&cv.engine, &c.source),
-                    values: if kind == FigureKind::HeldOutHeight {
-                        c.height_m.clone()
-                    } else {
-                        c.distance_m.clone()
-                    },
-                })
-                .collect();
-            out.push(held_out_figure(kind, &curves, &making));
-        }
-    }
-    out
+    let making = HeldOutMaking {
+        scene: &p.scene,
+        engine: &cv.engine,
+        folds: cv.folds.len(),
+        t_s: &p.t_s,
+        phases_s: &p.phases_s,
+    };
+    [FigureKind::HeldOutDistance, FigureKind::HeldOutHeight].map(|kind| {
+        let curves: Vec<HeldOutCurve> = DRAWN
+            .iter()
+            .filter_map(|name| p.curves.iter().find(|c| c.source == *name))
+            .map(|c| HeldOutCurve {
+                source: legend(&cv.engine, &c.source),
+                values: if kind == FigureKind::HeldOutHeight {
+                    c.height_m.clone()
+                } else {
+                    c.distance_m.clone()
+                },
+            })
+            .collect();
+        held_out_figure(kind, &curves, &making)
+    })
 }
 
 /// A source's name in a figure's legend.
@@ -636,11 +640,7 @@ pub fn write(cv: &CrossValidation, out: &Path) -> Result<Vec<PathBuf>> {
     std::fs::write(&json, serde_json::to_string_pretty(cv)? + "\n").map_err(|e| io(&json, e))?;
     files.push(json);
     for f in figures(cv) {
-        let svg = dir.join(format!("{}.svg", f.stem));
-        std::fs::write(&svg, f.to_svg()?).map_err(|e| io(&svg, e))?;
-        let png = dir.join(format!("{}.png", f.stem));
-        std::fs::write(&png, f.to_png()?).map_err(|e| io(&png, e))?;
-        files.extend([svg, png]);
+        files.extend(f.write(&dir)?);
     }
     Ok(files)
 }
@@ -706,11 +706,15 @@ pub fn lead(cvs: &[CrossValidation]) -> Option<String> {
         )
     };
     let (win, rest): (Vec<_>, Vec<_>) = scored.iter().partition(|(_, d)| d.interval[1] < 0.0);
-    let mut folds: Vec<String> = scored
-        .iter()
-        .map(|(c, d)| format!("{} folds of runs 1-{}", d.folds.len(), c.runs))
-        .collect();
-    folds.dedup();
+    // Each description once, in the order first met (engines may be
+    // cross-validated over different folds).
+    let mut folds: Vec<String> = Vec::new();
+    for (c, d) in &scored {
+        let f = format!("{} folds of runs 1-{}", d.folds.len(), c.runs);
+        if !folds.contains(&f) {
+            folds.push(f);
+        }
+    }
     let how = format!(
         "Tuned and cross-validated ({}, each run held out once; tuned engine minus the physics-free model behind its fitted actuator stage, held-out wrist total with a 95 % interval over folds)",
         folds.join("; ")
@@ -801,9 +805,11 @@ pub fn report_section(cvs: &[CrossValidation]) -> realitygap_report::html::Extra
                 pushes.join(", ")
             },
         ]);
-        if let Some((i, _)) = worst {
-            let scene = c.scenes.get(i);
-            figs.extend(figures(c).into_iter().filter(|f| Some(&f.scene) == scene));
+        if let Some(p) = worst.and_then(|(i, _)| {
+            let scene = c.scenes.get(i)?;
+            c.phases.iter().find(|p| p.scene == *scene)
+        }) {
+            figs.extend(scene_figures(c, p));
         }
     }
     realitygap_report::html::ExtraSection {
@@ -1045,6 +1051,14 @@ mod tests {
         let all = lead(std::slice::from_ref(&win)).unwrap();
         assert!(all.contains("every tuned engine measured beats"), "{all}");
         assert!(lead(&[]).is_none());
+        // Fold counts that differ are each named once, in order met.
+        let mut three = cv_of("rapier", [0.3, 0.2, 0.4, 0.0]);
+        three.differences[0].total = Spread::of(&[Some(0.3), Some(0.2), Some(0.4)]);
+        let mixed = lead(&[lose.clone(), three, tie.clone()]).unwrap();
+        assert!(
+            mixed.contains("(4 folds of runs 1-20; 3 folds of runs 1-20, each run"),
+            "{mixed}"
+        );
 
         let section = report_section(&[lose, win]);
         assert_eq!(section.lead, [some]);

@@ -73,6 +73,90 @@ pub struct TuneSpec {
     /// delay, the acceleration limit, the encoder offsets) and the
     /// registration. `false`: the search starts at the space's `start`.
     pub start_from_baseline: bool,
+    /// The weight of the pull toward the physics-free model's fitted
+    /// values (`--prior-weight`): the objective adds `weight` x the sum,
+    /// over the keys both fits share ([`TuneSpec::prior`]), of each key's
+    /// squared distance from the physics-free model's value as a fraction
+    /// of its range in the engine's space (in its scale). Metres of
+    /// accumulated wrist error per key moved across its whole range. 0:
+    /// no pull.
+    pub prior_weight: f64,
+    /// The keys pulled and their centres, set by [`tune`] from the
+    /// physics-free model's fit when [`TuneSpec::prior_weight`] > 0.
+    pub prior: Vec<PriorKey>,
+}
+
+/// One key of the pull toward the physics-free model's fitted values
+/// ([`TuneSpec::prior_weight`]).
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
+pub struct PriorKey {
+    /// The key, as in [`Tuner::value_names`].
+    pub key: String,
+    /// The physics-free model's fitted value.
+    pub centre: f64,
+    /// The engine's range of the key (its bounds, in the engine's space
+    /// before the polish widens any).
+    pub low: f64,
+    /// Upper end of that range.
+    pub high: f64,
+    /// Whether the key is searched in its logarithm.
+    pub log: bool,
+}
+
+impl PriorKey {
+    /// The distance of `value` from the centre, as a fraction of the
+    /// range (signed; not clamped, so a widened bound keeps pulling).
+    pub fn distance(&self, value: f64) -> f64 {
+        if self.log {
+            (value.max(f64::MIN_POSITIVE).ln() - self.centre.max(f64::MIN_POSITIVE).ln())
+                / (self.high.ln() - self.low.ln())
+        } else {
+            (value - self.centre) / (self.high - self.low)
+        }
+    }
+}
+
+/// The keys of `space` (the registration's when `fit_registration`) that
+/// `values` (the physics-free model's fit, by key) also has, centred on
+/// those values: what [`TuneSpec::prior_weight`] pulls.
+pub fn prior_keys(
+    space: &Space,
+    fit_registration: bool,
+    values: &[(String, f64)],
+) -> Vec<PriorKey> {
+    let centre = |key: &str| values.iter().find(|(k, _)| k == key).map(|(_, v)| *v);
+    let mut keys: Vec<PriorKey> = space
+        .dims
+        .iter()
+        .filter_map(|d| {
+            Some(PriorKey {
+                key: d.key.clone(),
+                centre: centre(&d.key)?,
+                low: d.low,
+                high: d.high,
+                log: d.scale == space::Scale::Log,
+            })
+        })
+        .collect();
+    if let Some(b) = space.registration.filter(|_| fit_registration) {
+        for (i, k) in space::REGISTRATION_KEYS.iter().enumerate() {
+            let bound = if i < 3 {
+                b.rotation_deg
+            } else {
+                b.translation_mm
+            };
+            if let Some(c) = centre(k) {
+                keys.push(PriorKey {
+                    key: k.to_string(),
+                    centre: c,
+                    low: -bound,
+                    high: bound,
+                    log: false,
+                });
+            }
+        }
+    }
+    keys
 }
 
 impl TuneSpec {
@@ -110,6 +194,9 @@ struct Resume {
     train: Option<String>,
     holdout: Option<String>,
     cube_weight_per_step: f64,
+    /// Absent from the files of tunes made before the pull existed.
+    #[serde(default)]
+    prior_weight: f64,
 }
 
 /// A tune: the candidates' parameters and registrations, and their
@@ -157,9 +244,27 @@ impl Tuner<'_> {
     /// The polish's residuals at normalised coordinates `u`
     /// ([`objective::Target::residuals`]).
     pub fn residuals(&self, u: &[f64]) -> Result<Vec<f64>, String> {
-        let p = self.params(u)?;
-        let trajs = self.simulator.simulate(&self.target.scenes, &p)?;
-        self.target.residuals(trajs, &self.registration(u))
+        Ok(self.errors(u)?.residuals(None))
+    }
+
+    /// The pull toward the physics-free model's values at `u`
+    /// ([`TuneSpec::prior_weight`]): one residual per pulled key, whose
+    /// squares sum to the objective's added term. Empty without a pull.
+    pub fn prior_residuals(&self, u: &[f64]) -> Vec<f64> {
+        if self.spec.prior_weight <= 0.0 || self.spec.prior.is_empty() {
+            return Vec::new();
+        }
+        let names = self.value_names();
+        let values = self.values(u);
+        let w = self.spec.prior_weight.sqrt();
+        self.spec
+            .prior
+            .iter()
+            .filter_map(|p| {
+                let i = names.iter().position(|n| *n == p.key)?;
+                Some(w * p.distance(values[i]))
+            })
+            .collect()
     }
 
     /// The errors at normalised coordinates `u`
@@ -167,7 +272,9 @@ impl Tuner<'_> {
     pub fn errors(&self, u: &[f64]) -> Result<objective::Errors, String> {
         let p = self.params(u)?;
         let trajs = self.simulator.simulate(&self.target.scenes, &p)?;
-        self.target.errors(trajs, &self.registration(u))
+        let mut errors = self.target.errors(trajs, &self.registration(u))?;
+        errors.prior = self.prior_residuals(u);
+        Ok(errors)
     }
 
     /// The search's evaluation of normalised coordinates `u`.
@@ -176,8 +283,13 @@ impl Tuner<'_> {
             Ok(p) => self.score(&p, &self.registration(u)),
             Err(m) => Score::failed(m),
         };
+        let pull: f64 = if score.failed.is_some() {
+            0.0
+        } else {
+            self.prior_residuals(u).iter().map(|r| r * r).sum()
+        };
         Outcome {
-            objective: score.objective,
+            objective: score.objective + pull,
             parts: self.parts(&score),
             failed: score.failed,
         }
@@ -257,6 +369,7 @@ fn resume_state(spec: &TuneSpec, target: &Target) -> Resume {
         train: target.train.runs.as_ref().map(|r| r.text.clone()),
         holdout: target.holdout.as_ref().map(|r| r.text.clone()),
         cube_weight_per_step: target.cube_weight_per_step,
+        prior_weight: spec.prior_weight,
     }
 }
 
@@ -383,6 +496,8 @@ fn fit_baseline(
         polish: spec.polish,
         baseline_space: None,
         start_from_baseline: false,
+        prior_weight: 0.0,
+        prior: Vec::new(),
     };
     let b = fit(target, &sim, &bspec, &|_| {}, &|_| {})?;
     let pspec = b.polished_spec(&bspec);
@@ -426,16 +541,35 @@ pub fn tune(
         .baseline_space
         .as_ref()
         .filter(|_| spec.engine != outputs::PHYSICS_FREE);
+    if spec.prior_weight > 0.0 && physics_free.is_none() {
+        bail!("--prior-weight pulls toward the physics-free model's fitted actuator stage, which this tune does not fit (--no-baseline, or the engine is the physics-free model)");
+    }
     let (fitted, baseline, seeded) = match physics_free {
-        Some(space) if spec.start_from_baseline => {
-            note("fitting the physics-free model's actuator stage first: the engine's search starts from it".into());
+        Some(space) if spec.start_from_baseline || spec.prior_weight > 0.0 => {
+            note("fitting the physics-free model's actuator stage first".into());
             let (baseline, values) = fit_baseline(target, simulator, spec, space)?;
-            let (seeded, moved) = spec.space.starting_at(&values);
-            note(format!(
-                "the search starts at the physics-free model's fitted {}",
-                moved.join(", ")
-            ));
-            let seeded = spec.with_space(seeded);
+            let mut seeded = spec.clone();
+            if spec.start_from_baseline {
+                let (space, moved) = spec.space.starting_at(&values);
+                note(format!(
+                    "the search starts at the physics-free model's fitted {}",
+                    moved.join(", ")
+                ));
+                seeded = seeded.with_space(space);
+            }
+            if spec.prior_weight > 0.0 {
+                seeded.prior = prior_keys(&seeded.space, seeded.fit_registration, &values);
+                note(format!(
+                    "pulled toward the physics-free model's fitted values with weight {} m per range: {}",
+                    spec.prior_weight,
+                    seeded
+                        .prior
+                        .iter()
+                        .map(|p| p.key.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ));
+            }
             realitygap_runner::interrupt::check()?;
             let fitted = fit(target, simulator, &seeded, progress, note)?;
             (fitted, Some(baseline), Some(seeded))
@@ -464,4 +598,65 @@ pub fn tune(
         summary,
         files,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Each shared key is centred on the physics-free model's value and
+    /// measured in the engine's range and scale; the registration in its
+    /// bounds; keys the physics-free fit lacks are not pulled.
+    #[test]
+    fn the_pull_measures_each_shared_key_in_the_engines_range_and_scale() {
+        let space = Space::from_toml_str(
+            r#"
+[registration]
+rotation_deg = 2.0
+translation_mm = 15.0
+
+[params]
+"controller.delay_s" = { low = 0.0, high = 0.15, start = 0.0 }
+"actuator.frequency_rad_s" = { low = 4.0, high = 200.0, scale = "log", start = 100.0 }
+"joints.j.damping" = { low = 0.0, high = 5.0, start = 0.0 }
+"#,
+            Path::new("space.toml"),
+        )
+        .unwrap();
+        let fitted: Vec<(String, f64)> = [
+            ("controller.delay_s", 0.03),
+            ("actuator.frequency_rad_s", 20.0),
+            ("registration.rx_deg", 0.5),
+            ("registration.tz_mm", -3.0),
+            ("something.else", 1.0),
+        ]
+        .iter()
+        .map(|(k, v)| (k.to_string(), *v))
+        .collect();
+        let keys = prior_keys(&space, true, &fitted);
+        let names: Vec<&str> = keys.iter().map(|k| k.key.as_str()).collect();
+        assert_eq!(
+            names,
+            [
+                "controller.delay_s",
+                "actuator.frequency_rad_s",
+                "registration.rx_deg",
+                "registration.tz_mm"
+            ]
+        );
+        // 15 ms past the centre is a tenth of the range.
+        assert!((keys[0].distance(0.045) - 0.1).abs() < 1e-12);
+        assert!((keys[0].distance(0.015) + 0.1).abs() < 1e-12);
+        // Log scale: a factor of 50 (the range's) is the whole range.
+        assert!((keys[1].distance(20.0 * 50.0) - 1.0).abs() < 1e-12);
+        assert!((keys[1].distance(20.0 / 50.0f64.sqrt()) + 0.5).abs() < 1e-12);
+        // The registration within its bounds (+-2 deg, +-15 mm).
+        assert!((keys[2].distance(1.5) - 0.25).abs() < 1e-12);
+        assert!((keys[3].distance(0.0) - 0.1).abs() < 1e-12);
+        // Past a bound the pull keeps growing (a widened polish bound).
+        assert!((keys[0].distance(0.33) - 2.0).abs() < 1e-12);
+        // Without a fitted registration, no registration key.
+        let keys = prior_keys(&space, false, &fitted);
+        assert_eq!(keys.len(), 2);
+    }
 }

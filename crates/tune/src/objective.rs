@@ -443,6 +443,10 @@ pub struct Errors {
     pub wrist: Vec<Option<[f64; 3]>>,
     /// Per scene with a cube, its weighted final pose error.
     pub cube: Vec<f64>,
+    /// The pull toward the physics-free model's values
+    /// ([`crate::Tuner::prior_residuals`]): residuals whose squares are
+    /// added to the objective. Empty without a pull.
+    pub prior: Vec<f64>,
 }
 
 /// Weights of the reweighted least squares ([`Errors::weights`]).
@@ -456,7 +460,9 @@ impl Errors {
     /// The objective: the wrist errors' lengths and the cubes' errors,
     /// summed.
     pub fn objective(&self) -> f64 {
-        self.wrist.iter().flatten().map(norm).sum::<f64>() + self.cube.iter().sum::<f64>()
+        self.wrist.iter().flatten().map(norm).sum::<f64>()
+            + self.cube.iter().sum::<f64>()
+            + self.prior.iter().map(|r| r * r).sum::<f64>()
     }
 
     /// Reweighting at this point: each error's length, floored at
@@ -487,6 +493,7 @@ impl Errors {
                 .iter()
                 .map(|e| e.map(|e| norm(&e).sqrt()).unwrap_or(0.0))
                 .chain(self.cube.iter().map(|c| c.sqrt()))
+                .chain(self.prior.iter().copied())
                 .collect(),
             Some(w) => {
                 let mut r = Vec::with_capacity(3 * self.wrist.len() + self.cube.len());
@@ -495,6 +502,7 @@ impl Errors {
                     r.extend(e.iter().map(|x| x * w));
                 }
                 r.extend(self.cube.iter().zip(&w.cube).map(|(c, w)| c * w));
+                r.extend(self.prior.iter().copied());
                 r
             }
         }
@@ -692,6 +700,28 @@ impl Simulator {
 mod tests {
     use super::*;
     use std::path::Path;
+
+    /// The pull's residuals are added to the objective as their squares,
+    /// and both kinds of residuals keep summing to the objective.
+    #[test]
+    fn the_pull_adds_its_squares_to_the_objective_and_the_residuals() {
+        let plain = Errors {
+            wrist: vec![Some([0.03, 0.04, 0.0]), None, Some([0.0, 0.0, 0.01])],
+            cube: vec![0.02],
+            prior: Vec::new(),
+        };
+        let pulled = Errors {
+            prior: vec![0.1, -0.2],
+            ..plain.clone()
+        };
+        assert!((plain.objective() - 0.08).abs() < 1e-12);
+        assert!((pulled.objective() - (0.08 + 0.01 + 0.04)).abs() < 1e-12);
+        let squares = |r: Vec<f64>| r.iter().map(|x| x * x).sum::<f64>();
+        assert!((squares(pulled.residuals(None)) - pulled.objective()).abs() < 1e-12);
+        let w = pulled.weights(1e-6);
+        assert!((squares(pulled.residuals(Some(&w))) - pulled.objective()).abs() < 1e-12);
+        assert_eq!(pulled.residuals(Some(&w)).len(), 3 * 3 + 1 + 2);
+    }
 
     #[test]
     fn the_turn_between_two_cube_rotations_is_their_geodesic_angle() {

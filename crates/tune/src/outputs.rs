@@ -4,7 +4,7 @@
 //! `tuned.toml`, `registration.json`, `summary.json`, `summary.md` and
 //! `convergence.svg`/`.png` (`history.csv` is written by the search).
 
-use crate::objective::{score_of, FAILED_OBJECTIVE};
+use crate::objective::score_of;
 use crate::search::SearchEnd;
 use crate::space::{Dim, Scale};
 use crate::Tuner;
@@ -415,7 +415,6 @@ fn registration_summary(
 /// The sensitivity of the objective around the optimum `u`.
 pub(crate) fn sensitivity(tuner: &Tuner<'_>, u: &[f64], best: f64) -> Vec<Sensitivity> {
     let dims = &tuner.spec.space.dims;
-    let registration = tuner.registration(u);
     let optimum = tuner.spec.space.values(u);
     let jobs: Vec<(usize, usize, f64)> = dims
         .iter()
@@ -439,16 +438,12 @@ pub(crate) fn sensitivity(tuner: &Tuner<'_>, u: &[f64], best: f64) -> Vec<Sensit
     let run = || -> Vec<f64> {
         jobs.par_iter()
             .map(|&(i, _, v)| {
-                let mut values = optimum.clone();
-                values[i] = v;
-                match tuner
-                    .spec
-                    .space
-                    .params(&values, &tuner.spec.engine, &tuner.spec.set)
-                {
-                    Ok(p) => tuner.score(&p, &registration).objective,
-                    Err(_) => FAILED_OBJECTIVE,
-                }
+                // The search's own objective (with the pull toward the
+                // physics-free fit, when asked), so that the probe compares
+                // like with like.
+                let mut x = u.to_vec();
+                x[i] = dims[i].unit(v);
+                tuner.evaluate(&x).objective
             })
             .collect()
     };
@@ -1110,6 +1105,20 @@ fn objective_text(tuner: &Tuner<'_>) -> String {
         "the accumulated wrist error (m) summed over the scenes, on the training runs".to_string();
     if !cubes.is_empty() {
         t.push_str(&format!(", plus {}", cubes.join(" and ")));
+    }
+    if tuner.spec.prior_weight > 0.0 && !tuner.spec.prior.is_empty() {
+        t.push_str(&format!(
+            ", plus {} x the sum of the squared distances of {} keys from the physics-free model's fitted values, each as a fraction of its range (--prior-weight; {})",
+            tuner.spec.prior_weight,
+            tuner.spec.prior.len(),
+            tuner
+                .spec
+                .prior
+                .iter()
+                .map(|p| format!("{} {}", p.key, p.centre))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
     }
     t
 }

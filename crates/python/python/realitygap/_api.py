@@ -714,6 +714,7 @@ def tune(
     keep_registration: bool = False,
     baseline: bool = True,
     start: str = "space",
+    prior_weight: float = 0.0,
     robot: Optional[str] = None,
     packages: Union[None, Dict[str, PathLike], Sequence[str]] = None,
     params: Optional[Params] = None,
@@ -735,7 +736,9 @@ def tune(
     ``iterations``). ``baseline=False`` leaves out the physics-free model
     behind its own fitted actuator stage (about half a study tune's time);
     ``start="physics-free"`` fits it first and starts the engine's search at
-    its fitted actuator stage and registration. A rerun with the same options resumes from
+    its fitted actuator stage and registration; ``prior_weight`` (metres per
+    range, ``--prior-weight``) pulls the engine's shared keys toward that fit's
+    values. A rerun with the same options resumes from
     ``history.csv``; Ctrl-C keeps the finished generations."""
     if recordings is None and study is None:
         study = builtin_study()
@@ -763,6 +766,7 @@ def tune(
         keep_registration=keep_registration,
         baseline=baseline,
         start=start,
+        prior_weight=prior_weight,
         settings=_path(settings),
         set=_key_values(set),
         robot=robot,

@@ -90,6 +90,7 @@ def tune(
     keep_registration: bool = False,
     baseline: bool = True,
     start: str = "space",
+    prior_weight: float = 0.0,
     settings: Optional[str] = None,
     set: List[str] = ...,
     robot: Optional[str] = None,
