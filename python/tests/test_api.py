@@ -260,6 +260,15 @@ def test_tune_briefly_gives_params_summary_history_intervals(tmp_path):
     assert t.markdown
 
 
+def test_tune_refuses_a_pull_it_cannot_honour(tmp_path):
+    # prior_weight reaches the command's checks: negative, or with no
+    # physics-free row to pull toward (the physics-free model itself).
+    with pytest.raises(rg.RealityGapError, match=r"--prior-weight -1: expected a finite number >= 0"):
+        rg.tune("mujoco", out=tmp_path / "a", prior_weight=-1.0, budget=4, progress=False)
+    with pytest.raises(rg.RealityGapError, match="--prior-weight pulls toward the physics-free model"):
+        rg.tune("ideal", out=tmp_path / "b", prior_weight=1.0, budget=4, iterations=0, progress=False)
+
+
 def test_tune_with_folds_is_cross_validated(tmp_path):
     cv = rg.tune("ideal", out=tmp_path / "cv", folds=2, budget=6, iterations=0, jobs=2, progress=False)
     assert isinstance(cv, rg.CrossValidated)
