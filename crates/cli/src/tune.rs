@@ -153,6 +153,45 @@ fn range(v: &Option<String>, flag: &str) -> Result<Option<RunRange>> {
     })
 }
 
+/// The options of a study tune that differ from the defaults, as typed,
+/// to name a cross-validation among others of the same engine.
+fn non_default_options(args: &TuneRequest) -> Vec<String> {
+    let d = TuneRequest::default();
+    let mut o = Vec::new();
+    if let Some(s) = &args.space {
+        o.push(format!("--space {}", s.display()));
+    }
+    if let Some(s) = &args.settings {
+        o.push(format!("--settings {}", s.display()));
+    }
+    o.extend(args.set.iter().map(|s| format!("--set {s}")));
+    if args.cube_weight != d.cube_weight {
+        o.push(format!("--cube-weight {}", args.cube_weight));
+    }
+    if args.start_from_baseline {
+        o.push("--start physics-free".into());
+    }
+    if args.prior_weight > 0.0 {
+        o.push(format!("--prior-weight {}", args.prior_weight));
+    }
+    if args.keep_registration {
+        o.push("--keep-registration".into());
+    }
+    if let Some(b) = args.budget {
+        o.push(format!("--budget {b}"));
+    }
+    if let Some(i) = args.iterations {
+        o.push(format!("--iterations {i}"));
+    }
+    if args.seed != d.seed {
+        o.push(format!("--seed {}", args.seed));
+    }
+    if args.restarts {
+        o.push("--restarts".into());
+    }
+    o
+}
+
 /// Runs the tune `request` asks for; says the summary on `ui`.
 pub fn tune(request: &TuneRequest, launcher: &Launcher, ui: &dyn Ui) -> Result<Tuned> {
     if !request.prior_weight.is_finite() || request.prior_weight < 0.0 {
@@ -370,7 +409,8 @@ fn cross_validate(
         files.push(out.join("summary.md"));
         summaries.push(result.summary);
     }
-    let cv = crossval::gather(&spec.engine, runs, &folds, &folders, &summaries)?;
+    let mut cv = crossval::gather(&spec.engine, runs, &folds, &folders, &summaries)?;
+    cv.options = non_default_options(args);
     let markdown = crossval::markdown(&cv);
     let written = crossval::write(&cv, &args.out)?;
     ui.say(markdown.trim_end().to_string());

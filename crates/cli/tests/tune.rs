@@ -814,6 +814,19 @@ fn folds_cross_validate_over_consecutive_runs() {
         .map(|f| f["fold"]["holdout"].as_str().unwrap())
         .collect();
     assert_eq!(holdouts, ["1-2", "3-4", "5-6"]);
+    // The options that differ from the defaults name the tune.
+    let space = format!("--space {}", d.join("space.toml").display());
+    assert_eq!(
+        cv["options"],
+        serde_json::json!([space, "--budget 16", "--iterations 1"])
+    );
+    let md = std::fs::read_to_string(out.join("crossval.md")).unwrap();
+    assert!(
+        md.starts_with(&format!(
+            "# Cross-validated tune of mujoco ({space} --budget 16 --iterations 1)\n"
+        )),
+        "{md}"
+    );
     let row = |source: &str| {
         cv["rows"]
             .as_array()

@@ -168,6 +168,23 @@ pub struct CrossValidation {
     pub phases: Vec<PhaseBreakdown>,
     /// The answer in words.
     pub verdict: String,
+    /// The tune's options that differ from the defaults, as typed (e.g.
+    /// `--prior-weight 10`); empty at the defaults. Absent from the files
+    /// of cross-validations made before it existed.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub options: Vec<String>,
+}
+
+impl CrossValidation {
+    /// The engine, with the options it was tuned with when not the
+    /// defaults: `mujoco` or `mujoco (--prior-weight 10)`.
+    pub fn label(&self) -> String {
+        if self.options.is_empty() {
+            self.engine.clone()
+        } else {
+            format!("{} ({})", self.engine, self.options.join(" "))
+        }
+    }
 }
 
 /// One scene's held-out errors by phase of its schedule, over the folds.
@@ -434,6 +451,7 @@ pub fn gather(
         differences,
         phases: gather_phases(&per_fold),
         verdict,
+        options: Vec::new(),
     })
 }
 
@@ -517,7 +535,8 @@ fn signed(s: &Option<Spread>) -> String {
 pub fn markdown(cv: &CrossValidation) -> String {
     let mut m = format!(
         "# Cross-validated tune of {}\n\n{}\n\n",
-        cv.engine, cv.verdict
+        cv.label(),
+        cv.verdict
     );
     m.push_str(
         "Accumulated wrist error on each fold's held-out runs (m): the mean over folds, a 95 % \
@@ -697,7 +716,7 @@ pub fn lead(cvs: &[CrossValidation]) -> Option<String> {
     let part = |(c, d): &(&CrossValidation, &Spread)| {
         format!(
             "{} {:+.2} m [{:+.2}, {:+.2}], ahead in {} of {} folds",
-            c.engine,
+            c.label(),
             d.mean,
             d.interval[0],
             d.interval[1],
@@ -705,7 +724,13 @@ pub fn lead(cvs: &[CrossValidation]) -> Option<String> {
             d.folds.len()
         )
     };
-    let (win, rest): (Vec<_>, Vec<_>) = scored.iter().partition(|(_, d)| d.interval[1] < 0.0);
+    // Ahead: the interval below zero; behind: above; level: across it.
+    let pick = |f: &dyn Fn(&Spread) -> bool| -> Vec<&(&CrossValidation, &Spread)> {
+        scored.iter().filter(|(_, d)| f(d)).collect()
+    };
+    let win = pick(&|d| d.interval[1] < 0.0);
+    let lose = pick(&|d| d.interval[0] > 0.0);
+    let level = pick(&|d| d.interval[1] >= 0.0 && d.interval[0] <= 0.0);
     // Each description once, in the order first met (engines may be
     // cross-validated over different folds).
     let mut folds: Vec<String> = Vec::new();
@@ -722,24 +747,55 @@ pub fn lead(cvs: &[CrossValidation]) -> Option<String> {
     let names = |v: &[&(&CrossValidation, &Spread)]| -> String {
         v.iter().map(|x| part(x)).collect::<Vec<_>>().join("; ")
     };
-    Some(if win.is_empty() {
-        format!(
-            "{how}, no tuned engine beats the physics-free model on runs it did not see: physics does not pay on this arm's wrist ({}).",
-            names(&rest)
-        )
-    } else if rest.is_empty() {
+    let who = |v: &[&(&CrossValidation, &Spread)]| -> String {
+        v.iter()
+            .map(|(c, _)| c.label())
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let is = |v: &[&(&CrossValidation, &Spread)]| if v.len() == 1 { "is" } else { "are" };
+    // The level and the behind, as clauses after the first.
+    let mut tail = String::new();
+    if !level.is_empty() && !win.is_empty() {
+        tail.push_str(&format!(
+            "; {} {} level with it ({})",
+            who(&level),
+            is(&level),
+            names(&level)
+        ));
+    }
+    if !lose.is_empty() && lose.len() < scored.len() {
+        tail.push_str(&format!(
+            "; {} {} behind it ({})",
+            who(&lose),
+            is(&lose),
+            names(&lose)
+        ));
+    }
+    Some(if win.len() == scored.len() {
         format!(
             "{how}, every tuned engine measured beats the physics-free model on runs it did not see ({}).",
             names(&win)
         )
-    } else {
+    } else if !win.is_empty() {
         format!(
-            "{how}, {} beat{} the physics-free model on runs {} did not see ({}); the others do not ({}).",
-            win.iter().map(|(c, _)| c.engine.as_str()).collect::<Vec<_>>().join(", "),
+            "{how}, {} beat{} the physics-free model on runs {} did not see ({}){tail}.",
+            who(&win),
             if win.len() == 1 { "s" } else { "" },
             if win.len() == 1 { "it" } else { "they" },
             names(&win),
-            names(&rest)
+        )
+    } else if !level.is_empty() {
+        format!(
+            "{how}, no tuned engine is ahead of the physics-free model on runs it did not see by more than the folds' spread: {} {} level with it ({}){tail}.",
+            who(&level),
+            is(&level),
+            names(&level),
+        )
+    } else {
+        format!(
+            "{how}, no tuned engine beats the physics-free model on runs it did not see: physics does not pay on this arm's wrist ({}).",
+            names(&lose)
         )
     })
 }
@@ -784,7 +840,7 @@ pub fn report_section(cvs: &[CrossValidation]) -> realitygap_report::html::Extra
             .filter_map(|f| f.cube_push_m.map(|[_, t]| format!("{t:.3}")))
             .collect();
         rows.push(vec![
-            c.engine.clone(),
+            c.label(),
             interval(total("tuned")),
             interval(total(FITTED_ROW)),
             d.map_or("n/a".into(), |d| {
@@ -982,8 +1038,13 @@ mod tests {
             differences: Vec::new(),
             phases: vec![p.clone()],
             verdict: String::new(),
+            options: vec!["--prior-weight 10".into()],
         };
         let md = markdown(&cv);
+        assert!(
+            md.starts_with("# Cross-validated tune of mujoco (--prior-weight 10)\n"),
+            "{md}"
+        );
         assert!(md.contains("### scene2_two_joints"), "{md}");
         assert!(md.contains("| 2: 0.1-0.3 s | 4.00 ["), "{md}");
         assert!(md.contains("+1.50 ["), "{md}");
@@ -1025,6 +1086,7 @@ mod tests {
             }],
             phases: Vec::new(),
             verdict: format!("{engine}'s own verdict"),
+            options: Vec::new(),
         }
     }
 
@@ -1036,10 +1098,20 @@ mod tests {
         let tie = cv_of("ode", [-0.1, 0.1, 0.05, -0.02]);
         let win = cv_of("dart", [-0.5, -0.6, -0.4, -0.55]);
         let none = lead(&[lose.clone(), tie.clone()]).unwrap();
-        assert!(none.contains("no tuned engine beats"), "{none}");
-        assert!(none.contains("mujoco +1.40 m ["), "{none}");
-        assert!(none.contains("ode +0.01 m") && none.contains(", ahead in 2 of 4 folds"));
+        assert!(
+            none.contains(", no tuned engine is ahead of the physics-free model on runs it did not see by more than the folds' spread: ode is level with it (ode +0.01 m ["),
+            "{none}"
+        );
+        assert!(
+            none.contains(", ahead in 2 of 4 folds); mujoco is behind it (mujoco +1.40 m ["),
+            "{none}"
+        );
         assert!(none.contains("4 folds of runs 1-20"), "{none}");
+        let behind = lead(std::slice::from_ref(&lose)).unwrap();
+        assert!(
+            behind.contains("no tuned engine beats the physics-free model on runs it did not see: physics does not pay on this arm's wrist (mujoco +1.40 m"),
+            "{behind}"
+        );
         let some = lead(&[lose.clone(), win.clone()]).unwrap();
         assert!(
             some.contains(
@@ -1047,7 +1119,20 @@ mod tests {
             ),
             "{some}"
         );
-        assert!(some.contains("the others do not (mujoco"), "{some}");
+        assert!(some.contains("); mujoco is behind it (mujoco"), "{some}");
+        let three = lead(&[lose.clone(), win.clone(), tie.clone()]).unwrap();
+        assert!(
+            three.contains("; ode is level with it (ode +0.01 m")
+                && three.contains("; mujoco is behind it"),
+            "{three}"
+        );
+        let mut pulled = win.clone();
+        pulled.options = vec!["--prior-weight 10".into()];
+        let named = lead(&[pulled]).unwrap();
+        assert!(
+            named.contains("did not see (dart (--prior-weight 10) -0.51 m"),
+            "{named}"
+        );
         let all = lead(std::slice::from_ref(&win)).unwrap();
         assert!(all.contains("every tuned engine measured beats"), "{all}");
         assert!(lead(&[]).is_none());
