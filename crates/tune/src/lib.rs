@@ -558,17 +558,6 @@ pub fn tune(
                 seeded = seeded.with_space(space);
             }
             if spec.prior_weight > 0.0 {
-                // A centre beyond the engine's bounds would leave a pull
-                // no point can undo (the physics-free row's polish widens
-                // its own bounds): take it in.
-                let (space, widened) = seeded.space.taking_in(&values);
-                if !widened.is_empty() {
-                    note(format!(
-                        "bounds moved out to the physics-free model's fitted values, which the pull aims at: {}",
-                        widened.join(", ")
-                    ));
-                }
-                seeded = seeded.with_space(space);
                 seeded.prior = prior_keys(&seeded.space, seeded.fit_registration, &values);
                 note(format!(
                     "pulled toward the physics-free model's fitted values with weight {} m per range: {}",

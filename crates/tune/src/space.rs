@@ -351,31 +351,6 @@ impl Space {
         (space, moved)
     }
 
-    /// The space with each bound moved out to take in `values` (keys as in
-    /// [`Dim::key`]) that lie beyond it, so that a search can reach them;
-    /// a log-scaled key's bound only to a value above 0. Returns the space
-    /// and, per bound moved, `key low|high A -> B`.
-    pub fn taking_in(&self, values: &[(String, f64)]) -> (Space, Vec<String>) {
-        let mut space = self.clone();
-        let mut moved = Vec::new();
-        for d in &mut space.dims {
-            let Some(&(_, v)) = values.iter().find(|(k, _)| *k == d.key) else {
-                continue;
-            };
-            if !v.is_finite() || (d.scale == Scale::Log && v <= 0.0) {
-                continue;
-            }
-            if v < d.low {
-                moved.push(format!("{} low {} -> {v}", d.key, d.low));
-                d.low = v;
-            } else if v > d.high {
-                moved.push(format!("{} high {} -> {v}", d.key, d.high));
-                d.high = v;
-            }
-        }
-        (space, moved)
-    }
-
     /// The parameter values (in file order) at normalised coordinates `u`.
     pub fn values(&self, u: &[f64]) -> Vec<f64> {
         self.dims.iter().zip(u).map(|(d, &x)| d.value(x)).collect()
@@ -644,43 +619,6 @@ mod tests {
 #[cfg(test)]
 mod starting_at_tests {
     use super::*;
-
-    #[test]
-    fn taking_in_moves_only_the_bounds_a_value_lies_beyond() {
-        let s = Space::from_toml_str(
-            "[params]\n\
-             \"controller.delay_s\" = { low = 0.0, high = 0.15, start = 0.0 }\n\
-             \"actuator.frequency_rad_s\" = { low = 4.0, high = 200.0, scale = \"log\", start = 100.0 }\n\
-             \"joints.j.offset_deg\" = { low = -3.0, high = 3.0, start = 0.0 }\n",
-            Path::new("s.toml"),
-        )
-        .unwrap();
-        let values: Vec<(String, f64)> = [
-            ("controller.delay_s", 0.05),
-            ("actuator.frequency_rad_s", 957.0),
-            ("joints.j.offset_deg", -4.25),
-            ("other", 9.0),
-        ]
-        .iter()
-        .map(|(k, v)| (k.to_string(), *v))
-        .collect();
-        let (t, moved) = s.taking_in(&values);
-        assert_eq!(
-            moved,
-            [
-                "actuator.frequency_rad_s high 200 -> 957",
-                "joints.j.offset_deg low -3 -> -4.25"
-            ]
-        );
-        assert_eq!((t.dims[0].low, t.dims[0].high), (0.0, 0.15));
-        assert_eq!(t.dims[1].high, 957.0);
-        assert_eq!(t.dims[2].low, -4.25);
-        // Starts stay; a log key never reaches 0.
-        assert_eq!(t.dims[1].start, 100.0);
-        let (u, moved) = s.taking_in(&[("actuator.frequency_rad_s".into(), 0.0)]);
-        assert!(moved.is_empty());
-        assert_eq!(u.dims[1].low, 4.0);
-    }
 
     #[test]
     fn starting_at_moves_the_named_starts_and_the_registration() {
