@@ -1001,12 +1001,10 @@ fn folds_cross_validate_over_consecutive_runs() {
     assert!(!out2.join("fold-1").exists());
 }
 
-/// `--start physics-free`: the physics-free row is fitted first and the
-/// engine's search starts at its fitted values of the keys both spaces
-/// have (here the delay and the actuator's frequency), which the summary
-/// says; `--no-baseline` leaves that row out, and cannot go with it.
-#[test]
-fn the_search_can_start_from_the_fitted_physics_free_row() {
+/// The synthetic study with noisy runs of known truth, and a space that
+/// also searches the actuator stage's frequency: two keys (with the delay)
+/// that the physics-free row's space shares.
+fn known_runs_with_a_loop() -> tempfile::TempDir {
     let tmp = synthetic();
     let d = tmp.path();
     std::fs::remove_dir_all(d.join("runs")).unwrap();
@@ -1017,6 +1015,34 @@ fn the_search_can_start_from_the_fitted_physics_free_row() {
         format!("{space}\"actuator.frequency_rad_s\" = {{ low = 4.0, high = 200.0, scale = \"log\", start = 100.0 }}\n"),
     )
     .unwrap();
+    tmp
+}
+
+/// A JSON file's value.
+fn json_file(p: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
+}
+
+/// A summary's parameter `key`'s `field` (`value`, `start`, ...).
+fn parameter(summary: &serde_json::Value, key: &str, field: &str) -> f64 {
+    summary["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p["key"] == key)
+        .unwrap_or_else(|| panic!("no parameter {key}"))[field]
+        .as_f64()
+        .unwrap()
+}
+
+/// `--start physics-free`: the physics-free row is fitted first and the
+/// engine's search starts at its fitted values of the keys both spaces
+/// have (here the delay and the actuator's frequency), which the summary
+/// says; `--no-baseline` leaves that row out, and cannot go with it.
+#[test]
+fn the_search_can_start_from_the_fitted_physics_free_row() {
+    let tmp = known_runs_with_a_loop();
+    let d = tmp.path();
     let out = d.join("seeded");
     let mut args = tune_args(d, out.to_str().unwrap(), "16");
     args.extend(["--start", "physics-free", "--iterations", "1"].map(String::from));
@@ -1026,9 +1052,7 @@ fn the_search_can_start_from_the_fitted_physics_free_row() {
         stderr.contains("the search starts at the physics-free model's fitted controller.delay_s, actuator.frequency_rad_s"),
         "{stderr}"
     );
-    let read = |p: PathBuf| -> serde_json::Value {
-        serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
-    };
+    let read = |p: PathBuf| json_file(&p);
     let s = read(out.join("summary.json"));
     assert!(
         s["start"].as_str().unwrap().contains("physics-free"),
@@ -1037,22 +1061,8 @@ fn the_search_can_start_from_the_fitted_physics_free_row() {
     );
     let b = read(out.join("physics-free-actuator/summary.json"));
     for key in ["controller.delay_s", "actuator.frequency_rad_s"] {
-        let fitted = b["parameters"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|p| p["key"] == key)
-            .unwrap()["value"]
-            .as_f64()
-            .unwrap();
-        let start = s["parameters"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|p| p["key"] == key)
-            .unwrap()["start"]
-            .as_f64()
-            .unwrap();
+        let fitted = parameter(&b, key, "value");
+        let start = parameter(&s, key, "start");
         assert!(
             (start - fitted).abs() <= 1e-9 * fitted.abs().max(1.0),
             "{key}: {start} against {fitted}"
@@ -1096,16 +1106,8 @@ fn the_search_can_start_from_the_fitted_physics_free_row() {
 /// pull; a negative weight, or one with `--no-baseline`, is refused.
 #[test]
 fn a_prior_pulls_the_shared_keys_to_the_physics_free_row() {
-    let tmp = synthetic();
+    let tmp = known_runs_with_a_loop();
     let d = tmp.path();
-    std::fs::remove_dir_all(d.join("runs")).unwrap();
-    noisy_known_runs(d, "mujoco");
-    let space = std::fs::read_to_string(d.join("space.toml")).unwrap();
-    std::fs::write(
-        d.join("space.toml"),
-        format!("{space}\"actuator.frequency_rad_s\" = {{ low = 4.0, high = 200.0, scale = \"log\", start = 100.0 }}\n"),
-    )
-    .unwrap();
     let out = d.join("pulled");
     let mut args = tune_args(d, out.to_str().unwrap(), "16");
     args.extend(["--prior-weight", "1e6", "--iterations", "3"].map(String::from));
@@ -1115,26 +1117,14 @@ fn a_prior_pulls_the_shared_keys_to_the_physics_free_row() {
         stderr.contains("pulled toward the physics-free model's fitted values with weight 1000000 m per range: controller.delay_s, actuator.frequency_rad_s"),
         "{stderr}"
     );
-    let read = |p: PathBuf| -> serde_json::Value {
-        serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
-    };
-    let value = |s: &serde_json::Value, key: &str, field: &str| -> f64 {
-        s["parameters"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|p| p["key"] == key)
-            .unwrap()[field]
-            .as_f64()
-            .unwrap()
-    };
-    let s = read(out.join("summary.json"));
+    let value = parameter;
+    let s = json_file(&out.join("summary.json"));
     assert!(
         s["objective"].as_str().unwrap().contains("--prior-weight"),
         "{}",
         s["objective"]
     );
-    let b = read(out.join("physics-free-actuator/summary.json"));
+    let b = json_file(&out.join("physics-free-actuator/summary.json"));
     let delay = (
         value(&b, "controller.delay_s", "value"),
         value(&s, "controller.delay_s", "value"),
