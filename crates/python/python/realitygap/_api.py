@@ -737,8 +737,8 @@ def tune(
     behind its own fitted actuator stage (about half a study tune's time);
     ``start="physics-free"`` fits it first and starts the engine's search at
     its fitted actuator stage and registration; ``prior_weight`` (metres per
-    range, ``--prior-weight``) pulls the engine's encoder offsets, delay and
-    registration toward that fit's values. A rerun with the same options resumes from
+    range, ``--prior-weight``) pulls the engine's shared keys toward that fit's
+    values. A rerun with the same options resumes from
     ``history.csv``; Ctrl-C keeps the finished generations."""
     if recordings is None and study is None:
         study = builtin_study()
