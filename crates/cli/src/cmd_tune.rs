@@ -130,9 +130,9 @@ pub struct Args {
     #[arg(long, value_name = "space|physics-free", default_value = "space", value_parser = ["space", "physics-free"], conflicts_with = "no_baseline")]
     pub start: String,
     /// Pull the engine's search toward the physics-free model's fit: the
-    /// objective adds W x the sum, over the kinematics both fits share (the
-    /// encoder offsets, the command delay, the registration; not the
-    /// actuator's loop), of each key's squared distance from the physics-free
+    /// objective adds W x the sum, over the keys both fits share (the
+    /// actuator stage, delay, acceleration limit, encoder offsets,
+    /// registration), of each key's squared distance from the physics-free
     /// model's fitted value as a fraction of its range in the engine's
     /// space (in metres of accumulated wrist error per key moved across
     /// its whole range). The physics-free model is then fitted first.

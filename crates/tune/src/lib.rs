@@ -75,8 +75,7 @@ pub struct TuneSpec {
     pub start_from_baseline: bool,
     /// The weight of the pull toward the physics-free model's fitted
     /// values (`--prior-weight`): the objective adds `weight` x the sum,
-    /// over the kinematics both fits share ([`TuneSpec::prior`],
-    /// [`is_pulled_key`]), of each key's
+    /// over the keys both fits share ([`TuneSpec::prior`]), of each key's
     /// squared distance from the physics-free model's value as a fraction
     /// of its range in the engine's space (in its scale). Metres of
     /// accumulated wrist error per key moved across its whole range. 0:
@@ -117,22 +116,9 @@ impl PriorKey {
     }
 }
 
-/// Whether the pull ([`TuneSpec::prior_weight`]) takes a key: the
-/// kinematics both models share, the encoder offsets
-/// (`joints.J.offset_deg`) and the command delay. Not the actuator's
-/// loop or acceleration limit: behind an engine they shape its motion
-/// together with its physics, and the physics-free model's, which alone
-/// shape its motion, are not values the engine should be near (its loop
-/// ends at 731-957 rad/s and a damping ratio of 0.05, beyond the engine's
-/// bounds).
-pub fn is_pulled_key(key: &str) -> bool {
-    key.ends_with(".offset_deg") || key == "controller.delay_s"
-}
-
-/// The keys of `space` that `values` (the physics-free model's fit, by
-/// key) also has and the pull takes ([`is_pulled_key`]), and the
-/// registration's when `fit_registration`, centred on those values: what
-/// [`TuneSpec::prior_weight`] pulls.
+/// The keys of `space` (the registration's when `fit_registration`) that
+/// `values` (the physics-free model's fit, by key) also has, centred on
+/// those values: what [`TuneSpec::prior_weight`] pulls.
 pub fn prior_keys(
     space: &Space,
     fit_registration: bool,
@@ -142,7 +128,6 @@ pub fn prior_keys(
     let mut keys: Vec<PriorKey> = space
         .dims
         .iter()
-        .filter(|d| is_pulled_key(&d.key))
         .filter_map(|d| {
             Some(PriorKey {
                 key: d.key.clone(),
@@ -634,7 +619,6 @@ translation_mm = 15.0
 "controller.delay_s" = { low = 0.0, high = 0.15, start = 0.0 }
 "actuator.frequency_rad_s" = { low = 4.0, high = 200.0, scale = "log", start = 100.0 }
 "joints.j.damping" = { low = 0.0, high = 5.0, start = 0.0 }
-"joints.j.offset_deg" = { low = -3.0, high = 3.0, start = 0.0 }
 "#,
             Path::new("space.toml"),
         )
@@ -642,8 +626,6 @@ translation_mm = 15.0
         let fitted: Vec<(String, f64)> = [
             ("controller.delay_s", 0.03),
             ("actuator.frequency_rad_s", 20.0),
-            ("joints.j.offset_deg", -1.0),
-            ("joints.j.damping", 1.0),
             ("registration.rx_deg", 0.5),
             ("registration.tz_mm", -3.0),
             ("something.else", 1.0),
@@ -653,13 +635,11 @@ translation_mm = 15.0
         .collect();
         let keys = prior_keys(&space, true, &fitted);
         let names: Vec<&str> = keys.iter().map(|k| k.key.as_str()).collect();
-        // The kinematics only: not the loop's frequency (shared) nor the
-        // joint's damping (the engine's own).
         assert_eq!(
             names,
             [
                 "controller.delay_s",
-                "joints.j.offset_deg",
+                "actuator.frequency_rad_s",
                 "registration.rx_deg",
                 "registration.tz_mm"
             ]
@@ -667,22 +647,14 @@ translation_mm = 15.0
         // 15 ms past the centre is a tenth of the range.
         assert!((keys[0].distance(0.045) - 0.1).abs() < 1e-12);
         assert!((keys[0].distance(0.015) + 0.1).abs() < 1e-12);
-        assert!((keys[1].distance(0.2) - 0.2).abs() < 1e-12);
+        // Log scale: a factor of 50 (the range's) is the whole range.
+        assert!((keys[1].distance(20.0 * 50.0) - 1.0).abs() < 1e-12);
+        assert!((keys[1].distance(20.0 / 50.0f64.sqrt()) + 0.5).abs() < 1e-12);
         // The registration within its bounds (+-2 deg, +-15 mm).
         assert!((keys[2].distance(1.5) - 0.25).abs() < 1e-12);
         assert!((keys[3].distance(0.0) - 0.1).abs() < 1e-12);
         // Past a bound the pull keeps growing (a widened polish bound).
         assert!((keys[0].distance(0.33) - 2.0).abs() < 1e-12);
-        // Log scale: a factor of 50 (the range's) is the whole range.
-        let log = PriorKey {
-            key: "actuator.frequency_rad_s".into(),
-            centre: 20.0,
-            low: 4.0,
-            high: 200.0,
-            log: true,
-        };
-        assert!((log.distance(20.0 * 50.0) - 1.0).abs() < 1e-12);
-        assert!((log.distance(20.0 / 50.0f64.sqrt()) + 0.5).abs() < 1e-12);
         // Without a fitted registration, no registration key.
         let keys = prior_keys(&space, false, &fitted);
         assert_eq!(keys.len(), 2);

@@ -1108,8 +1108,9 @@ fn objective_text(tuner: &Tuner<'_>) -> String {
     }
     if tuner.spec.prior_weight > 0.0 && !tuner.spec.prior.is_empty() {
         t.push_str(&format!(
-            ", plus {} x the sum over the pulled keys of each one's squared distance from the physics-free model's fitted value, as a fraction of its range (--prior-weight; key and value: {})",
+            ", plus {} x the sum of the squared distances of {} keys from the physics-free model's fitted values, each as a fraction of its range (--prior-weight; {})",
             tuner.spec.prior_weight,
+            tuner.spec.prior.len(),
             tuner
                 .spec
                 .prior
