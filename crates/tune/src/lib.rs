@@ -101,6 +101,11 @@ pub struct PriorKey {
     pub high: f64,
     /// Whether the key is searched in its logarithm.
     pub log: bool,
+    /// The key's position in [`Tuner::values`] (the space's keys, then the
+    /// registration's), resolved once so that an evaluation finds it
+    /// without comparing names.
+    #[serde(skip)]
+    pub index: usize,
 }
 
 impl PriorKey {
@@ -128,13 +133,15 @@ pub fn prior_keys(
     let mut keys: Vec<PriorKey> = space
         .dims
         .iter()
-        .filter_map(|d| {
+        .enumerate()
+        .filter_map(|(index, d)| {
             Some(PriorKey {
                 key: d.key.clone(),
                 centre: centre(&d.key)?,
                 low: d.low,
                 high: d.high,
                 log: d.scale == space::Scale::Log,
+                index,
             })
         })
         .collect();
@@ -152,6 +159,7 @@ pub fn prior_keys(
                     low: -bound,
                     high: bound,
                     log: false,
+                    index: space.dims.len() + i,
                 });
             }
         }
@@ -241,8 +249,8 @@ impl Tuner<'_> {
         }
     }
 
-    /// The polish's residuals at normalised coordinates `u`
-    /// ([`objective::Target::residuals`]).
+    /// The polish's residuals at normalised coordinates `u`: the
+    /// errors' ([`Tuner::errors`]), the pull's included.
     pub fn residuals(&self, u: &[f64]) -> Result<Vec<f64>, String> {
         Ok(self.errors(u)?.residuals(None))
     }
@@ -254,16 +262,12 @@ impl Tuner<'_> {
         if self.spec.prior_weight <= 0.0 || self.spec.prior.is_empty() {
             return Vec::new();
         }
-        let names = self.value_names();
         let values = self.values(u);
         let w = self.spec.prior_weight.sqrt();
         self.spec
             .prior
             .iter()
-            .filter_map(|p| {
-                let i = names.iter().position(|n| *n == p.key)?;
-                Some(w * p.distance(values[i]))
-            })
+            .filter_map(|p| Some(w * p.distance(*values.get(p.index)?)))
             .collect()
     }
 
@@ -655,6 +659,10 @@ translation_mm = 15.0
         assert!((keys[3].distance(0.0) - 0.1).abs() < 1e-12);
         // Past a bound the pull keeps growing (a widened polish bound).
         assert!((keys[0].distance(0.33) - 2.0).abs() < 1e-12);
+        // Each key's place among a tune's values: the space's keys, then
+        // the registration's six (rx, ry, rz, tx, ty, tz).
+        let index: Vec<usize> = keys.iter().map(|k| k.index).collect();
+        assert_eq!(index, [0, 1, 3, 8]);
         // Without a fitted registration, no registration key.
         let keys = prior_keys(&space, false, &fitted);
         assert_eq!(keys.len(), 2);

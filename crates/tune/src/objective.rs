@@ -381,19 +381,6 @@ impl Target {
 }
 
 impl Target {
-    /// The residuals of one simulated trajectory per scene, registered by
-    /// `registration`, on the training runs: the square root of each
-    /// compared step's wrist distance (0 where a step is not compared),
-    /// then, per scene with a cube, the square root of its weighted final
-    /// pose error. Their squares sum to [`Target::score`]'s objective.
-    pub fn residuals(
-        &self,
-        trajectories: Vec<Trajectory>,
-        registration: &Registration,
-    ) -> std::result::Result<Vec<f64>, String> {
-        Ok(self.errors(trajectories, registration)?.residuals(None))
-    }
-
     /// The errors of one simulated trajectory per scene, registered by
     /// `registration`, on the training runs: each compared step's wrist
     /// error (the simulated mean minus the reference's), then, per scene
