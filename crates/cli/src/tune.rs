@@ -155,38 +155,77 @@ fn range(v: &Option<String>, flag: &str) -> Result<Option<RunRange>> {
 
 /// The options of a study tune that differ from the defaults, as typed,
 /// to name a cross-validation among others of the same engine.
+///
+/// Every field of the request is named below, without `..`: a new option
+/// does not compile until it is either written into the label or said
+/// not to change the fit.
 fn non_default_options(args: &TuneRequest) -> Vec<String> {
+    let TuneRequest {
+        // What is tuned, on which runs, where it goes: the run's identity,
+        // named by the cross-validation itself.
+        study: _,
+        data: _,
+        engine: _,
+        out: _,
+        runs: _,
+        holdout: _,
+        folds: _,
+        // Where and how verbosely it runs: the same fit.
+        jobs: _,
+        executor: _,
+        verbose: _,
+        // A recordings tune's options, refused with a study.
+        recordings: _,
+        params: _,
+        scene: _,
+        efforts: _,
+        robot: _,
+        packages: _,
+        // Leaves a row out of the comparison; the engine's fit is the same.
+        no_baseline: _,
+        space,
+        settings,
+        set,
+        cube_weight,
+        start_from_baseline,
+        prior_weight,
+        keep_registration,
+        budget,
+        iterations,
+        seed,
+        restarts,
+    } = args;
     let d = TuneRequest::default();
     let mut o = Vec::new();
-    if let Some(s) = &args.space {
+    if let Some(s) = space {
         o.push(format!("--space {}", s.display()));
     }
-    if let Some(s) = &args.settings {
+    if let Some(s) = settings {
         o.push(format!("--settings {}", s.display()));
     }
-    o.extend(args.set.iter().map(|s| format!("--set {s}")));
-    if args.cube_weight != d.cube_weight {
-        o.push(format!("--cube-weight {}", args.cube_weight));
+    o.extend(set.iter().map(|s| format!("--set {s}")));
+    if *cube_weight != d.cube_weight {
+        o.push(format!("--cube-weight {cube_weight}"));
     }
-    if args.start_from_baseline {
+    if *start_from_baseline {
         o.push("--start physics-free".into());
     }
-    if args.prior_weight > 0.0 {
-        o.push(format!("--prior-weight {}", args.prior_weight));
+    if *prior_weight > 0.0 {
+        o.push(format!("--prior-weight {prior_weight}"));
     }
-    if args.keep_registration {
+    if *keep_registration {
         o.push("--keep-registration".into());
     }
-    if let Some(b) = args.budget {
+    if let Some(b) = budget {
         o.push(format!("--budget {b}"));
     }
-    if let Some(i) = args.iterations {
+    if let Some(i) = iterations {
         o.push(format!("--iterations {i}"));
     }
-    if args.seed != d.seed {
-        o.push(format!("--seed {}", args.seed));
+    if *seed != d.seed {
+        o.push(format!("--seed {seed}"));
     }
-    if args.restarts {
+    if *restarts {
         o.push("--restarts".into());
     }
     o
