@@ -1,8 +1,11 @@
 """The engine-adapter SDK (realitygap_engine) and its MuJoCo adapter.
 
-Run with the dependencies' environment (numpy, mujoco, pytest):
+``scripts/test-python`` runs it against the installed wheel, which ships
+the SDK beside ``realitygap``. Run alone from the source tree, with the
+dependencies' environment (numpy, mujoco, pytest), it falls back to the
+source tree's copy:
 
-    /root/.cache/realitygap/py-deps-venv/bin/python -m pytest python/tests/test_engine_sdk.py
+    ~/.cache/realitygap/py-deps-venv/bin/python -m pytest python/tests/test_engine_sdk.py
 
 The SDK is tested in process on in-memory streams with a toy adapter (a
 point mass on one slide joint); the MuJoCo adapter as the child process
@@ -26,9 +29,11 @@ import pytest
 # the tests from a scratch folder, with REALITYGAP_ROOT set).
 PYTHON_DIR = (Path(os.environ["REALITYGAP_ROOT"]) / "python" if os.environ.get("REALITYGAP_ROOT")
               else Path(__file__).resolve().parents[1])
-sys.path.insert(0, str(PYTHON_DIR))
-
-import realitygap_engine as rge  # noqa: E402
+try:
+    import realitygap_engine as rge
+except ImportError:  # not installed: the source tree's copy
+    sys.path.insert(0, str(PYTHON_DIR))
+    import realitygap_engine as rge  # noqa: E402
 
 
 def child_env() -> dict:
@@ -40,6 +45,26 @@ def child_env() -> dict:
 
 # --------------------------------------------------------------------------
 # Bits
+
+
+def test_the_sdk_ships_in_the_wheel_beside_realitygap():
+    """``pip install realitygap`` gives an adapter's author the SDK, as
+    ``realitygap_engine`` and as ``realitygap.engine``: the source tree's
+    files (those the binary embeds for its children), adapters included."""
+    if not os.environ.get("REALITYGAP_ROOT"):
+        pytest.skip("run from the source tree, not by scripts/test-python: no wheel to check")
+    installed = Path(rge.__file__).resolve().parent
+    assert "site-packages" in installed.parts, installed
+    assert PYTHON_DIR.resolve() not in installed.parents
+    source = PYTHON_DIR / "realitygap_engine"
+    ours = sorted(p.relative_to(source) for p in source.rglob("*.py"))
+    assert ours == sorted(p.relative_to(installed) for p in installed.rglob("*.py"))
+    for rel in ours:
+        assert (installed / rel).read_bytes() == (source / rel).read_bytes(), rel
+    import realitygap.engine as packaged
+
+    assert packaged.Adapter is rge.Adapter and packaged.serve is rge.serve
+    assert sorted(packaged.__all__) == sorted(rge.__all__)
 
 
 def test_bits_round_trip_is_exact():
