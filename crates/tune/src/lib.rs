@@ -88,7 +88,7 @@ pub struct TuneSpec {
 
 /// One key of the pull toward the physics-free model's fitted values
 /// ([`TuneSpec::prior_weight`]).
-#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct PriorKey {
     /// The key, as in [`Tuner::value_names`].
     pub key: String,
@@ -101,14 +101,19 @@ pub struct PriorKey {
     pub high: f64,
     /// Whether the key is searched in its logarithm.
     pub log: bool,
-    /// The key's position in [`Tuner::values`] (the space's keys, then the
-    /// registration's), resolved once so that an evaluation finds it
-    /// without comparing names.
-    #[serde(skip)]
-    pub index: usize,
+    /// The key's position in [`Tuner::values`] for the spec's space,
+    /// resolved by [`prior_keys`] and again by [`TuneSpec::with_space`]
+    /// so that an evaluation finds it without comparing names.
+    index: usize,
 }
 
 impl PriorKey {
+    /// The key's position in [`Tuner::values`] (the space's keys, then the
+    /// registration's).
+    pub fn index(&self) -> usize {
+        self.index
+    }
+
     /// The distance of `value` from the centre, as a fraction of the
     /// range (signed; not clamped, so a widened bound keeps pulling).
     pub fn distance(&self, value: f64) -> f64 {
@@ -119,6 +124,15 @@ impl PriorKey {
             (value - self.centre) / (self.high - self.low)
         }
     }
+}
+
+/// The position of `key` among a tune's values over `space`: the space's
+/// keys, then the registration's six when it is fitted.
+fn place_of(space: &Space, fit_registration: bool, key: &str) -> Option<usize> {
+    space.dims.iter().position(|d| d.key == key).or_else(|| {
+        let i = space::REGISTRATION_KEYS.iter().position(|k| *k == key)?;
+        (fit_registration && space.registration.is_some()).then_some(space.dims.len() + i)
+    })
 }
 
 /// The keys of `space` (the registration's when `fit_registration`) that
@@ -169,9 +183,28 @@ pub fn prior_keys(
 
 impl TuneSpec {
     /// The same tune over another space.
+    /// The pulled keys keep their centres and ranges, and are placed
+    /// again among the new space's values.
+    ///
+    /// # Panics
+    ///
+    /// When the new space lacks a pulled key: the later spaces of a tune
+    /// (the polish's widened bounds, the physics-free start) keep the
+    /// first space's keys.
     pub fn with_space(&self, space: Space) -> TuneSpec {
+        let prior = self
+            .prior
+            .iter()
+            .map(|p| PriorKey {
+                index: place_of(&space, self.fit_registration, &p.key).unwrap_or_else(|| {
+                    panic!("the pulled key {} is not in the tune's new space", p.key)
+                }),
+                ..p.clone()
+            })
+            .collect();
         TuneSpec {
             space,
+            prior,
             ..self.clone()
         }
     }
@@ -267,7 +300,7 @@ impl Tuner<'_> {
         self.spec
             .prior
             .iter()
-            .filter_map(|p| Some(w * p.distance(*values.get(p.index)?)))
+            .map(|p| w * p.distance(values[p.index]))
             .collect()
     }
 
@@ -608,6 +641,29 @@ pub fn tune(
 mod tests {
     use super::*;
 
+    /// A tune of `space` with nothing else asked.
+    fn spec_over(space: Space) -> TuneSpec {
+        TuneSpec {
+            engine: "mujoco".into(),
+            space,
+            fit_registration: true,
+            set: EngineSettings::new(),
+            search: SearchOptions {
+                budget: 1,
+                seed: 0,
+                jobs: 1,
+                restarts: false,
+                stall_m: None,
+            },
+            out: PathBuf::new(),
+            polish: polish::PolishOptions::default(),
+            baseline_space: None,
+            start_from_baseline: false,
+            prior_weight: 1.0,
+            prior: Vec::new(),
+        }
+    }
+
     /// Each shared key is centred on the physics-free model's value and
     /// measured in the engine's range and scale; the registration in its
     /// bounds; keys the physics-free fit lacks are not pulled.
@@ -661,8 +717,32 @@ translation_mm = 15.0
         assert!((keys[0].distance(0.33) - 2.0).abs() < 1e-12);
         // Each key's place among a tune's values: the space's keys, then
         // the registration's six (rx, ry, rz, tx, ty, tz).
-        let index: Vec<usize> = keys.iter().map(|k| k.index).collect();
+        let index: Vec<usize> = keys.iter().map(|k| k.index()).collect();
         assert_eq!(index, [0, 1, 3, 8]);
+        // A new space (here the registration's keys first among the
+        // params' ordering changed) places the keys again.
+        let reordered = Space::from_toml_str(
+            r#"
+[registration]
+rotation_deg = 2.0
+translation_mm = 15.0
+
+[params]
+"joints.j.damping" = { low = 0.0, high = 5.0, start = 0.0 }
+"actuator.frequency_rad_s" = { low = 4.0, high = 200.0, scale = "log", start = 100.0 }
+"controller.delay_s" = { low = 0.0, high = 0.15, start = 0.0 }
+"#,
+            Path::new("space.toml"),
+        )
+        .unwrap();
+        let spec = TuneSpec {
+            prior: keys.clone(),
+            ..spec_over(space.clone())
+        }
+        .with_space(reordered);
+        let index: Vec<usize> = spec.prior.iter().map(|k| k.index()).collect();
+        assert_eq!(index, [2, 1, 3, 8]);
+        assert_eq!(spec.prior[0].centre, keys[0].centre);
         // Without a fitted registration, no registration key.
         let keys = prior_keys(&space, false, &fitted);
         assert_eq!(keys.len(), 2);
