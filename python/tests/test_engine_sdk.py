@@ -841,7 +841,6 @@ def test_timing_printout():
         child_s = (time.perf_counter() - start) / 3
     finally:
         c.close()
-    sys.path.insert(0, str(PYTHON_DIR))
     from realitygap_engine.adapters.mujoco import MujocoSimulation, parse_settings
     sim = MujocoSimulation(pendulum(settings={"timestep_s": 1e-3}), parse_settings({"timestep_s": 1e-3}), "t")
     start = time.perf_counter()
