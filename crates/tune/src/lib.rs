@@ -143,21 +143,11 @@ pub fn prior_keys(
     fit_registration: bool,
     values: &[(String, f64)],
 ) -> Vec<PriorKey> {
-    let centre = |key: &str| values.iter().find(|(k, _)| k == key).map(|(_, v)| *v);
-    let mut keys: Vec<PriorKey> = space
+    // Each key with its range: the space's, then the registration's.
+    let mut ranges: Vec<(String, f64, f64, bool)> = space
         .dims
         .iter()
-        .enumerate()
-        .filter_map(|(index, d)| {
-            Some(PriorKey {
-                key: d.key.clone(),
-                centre: centre(&d.key)?,
-                low: d.low,
-                high: d.high,
-                log: d.scale == space::Scale::Log,
-                index,
-            })
-        })
+        .map(|d| (d.key.clone(), d.low, d.high, d.scale == space::Scale::Log))
         .collect();
     if let Some(b) = space.registration.filter(|_| fit_registration) {
         for (i, k) in space::REGISTRATION_KEYS.iter().enumerate() {
@@ -166,23 +156,29 @@ pub fn prior_keys(
             } else {
                 b.translation_mm
             };
-            if let Some(c) = centre(k) {
-                keys.push(PriorKey {
-                    key: k.to_string(),
-                    centre: c,
-                    low: -bound,
-                    high: bound,
-                    log: false,
-                    index: space.dims.len() + i,
-                });
-            }
+            ranges.push((k.to_string(), -bound, bound, false));
         }
     }
-    keys
+    ranges
+        .into_iter()
+        .filter_map(|(key, low, high, log)| {
+            let centre = values.iter().find(|(k, _)| *k == key)?.1;
+            let index = place_of(space, fit_registration, &key)?;
+            Some(PriorKey {
+                key,
+                centre,
+                low,
+                high,
+                log,
+                index,
+            })
+        })
+        .collect()
 }
 
 impl TuneSpec {
     /// The same tune over another space.
+    ///
     /// The pulled keys keep their centres and ranges, and are placed
     /// again among the new space's values.
     ///

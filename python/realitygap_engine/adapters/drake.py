@@ -62,9 +62,10 @@ settings, sampled output ports off so that the plant's discrete state
   SAP's implicit, clamped velocity constraint: regularized Coulomb friction
   (Drake's near-rigid regularization bounds its stiffness; the stuck joint
   creeps). Refused under ``tamsi``;
-- parameters: ``joints.*.armature`` is the servo actuator's rotor inertia
-  (gear ratio 1: the reflected inertia added to the joint's diagonal of
-  the mass matrix). Drake has no coefficient of restitution (its
+- parameters: ``joints.*.armature`` is the rotor inertia of every
+  actuator on the joint (gear ratio 1: the reflected inertia added to the
+  joint's diagonal of the mass matrix; Drake takes the last actuator's,
+  so the dry-friction actuator carries it too). Drake has no coefficient of restitution (its
   Hunt-Crossley dissipation gives a velocity-dependent one) and its contact
   stiffness and dissipation are absolute (N/m, Pa, s/m or s), not the
   per-unit-mass time constant and damping ratio of ``[contact]``: those
@@ -550,19 +551,26 @@ def build(model, options: dict):
             p, d = _gains(s, "velocity")
             s.actuator.set_controller_gains(PdControllerGains(p=p, d=d))
 
-    servo_of = {s.joint_name: s for s in built.servos}
+    # Drake gives a DOF the reflected inertia of the last actuator on its
+    # joint (each actuator's value replaces the one before; measured on
+    # Drake 1.51.1), so a joint with a servo and a dry-friction actuator
+    # takes the armature only if every actuator on it carries it.
+    on_joint: dict[str, list] = {}
+    for s in built.servos:
+        on_joint.setdefault(s.joint_name, []).append(s.actuator)
+    for jname, actuator in zip(frictionloss, built.friction):
+        on_joint.setdefault(jname, []).append(actuator)
     for jname, value in armature.items():
         key = f"joints.{jname}.armature"
         a = _param_number(key, value, lambda v: v >= 0, ">= 0 and finite")
         if jname not in joints:
             raise rge.ParamError(key, f"{jname} is not a joint of the model: held and fixed joints are welded there; "
                                  "Drake honours joint parameters on the controlled joints")
-        if jname not in servo_of:
-            actuator = plant.AddJointActuator(f"armature:{jname}", joints[jname])
-        else:
-            actuator = servo_of[jname].actuator
-        actuator.set_default_gear_ratio(1.0)
-        actuator.set_default_rotor_inertia(a)
+        if jname not in on_joint:
+            on_joint[jname] = [plant.AddJointActuator(f"armature:{jname}", joints[jname])]
+        for actuator in on_joint[jname]:
+            actuator.set_default_gear_ratio(1.0)
+            actuator.set_default_rotor_inertia(a)
 
     # The objects.
     object_names = []

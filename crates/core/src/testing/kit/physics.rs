@@ -328,7 +328,8 @@ pub fn gravity(engine: &dyn Engine, spec: &KitSpec) {
 }
 
 /// Armature 0.5 kg m^2 on joint 2 slows its fall with the servos off by
-/// the spec's ratio; on the rotor under a constant torque, an armature
+/// the spec's ratio, with and without dry friction on the joint (where
+/// the engine honours `frictionloss`); on the rotor under a constant torque, an armature
 /// equal to its inertia halves the angle turned in a second (reflected
 /// inertia), to the spec's tolerance.
 pub fn armature(engine: &dyn Engine, spec: &KitSpec) {
@@ -349,6 +350,19 @@ pub fn armature(engine: &dyn Engine, spec: &KitSpec) {
         heavy < plain * ratio,
         "armature 0.5: {heavy} rad, none: {plain} rad"
     );
+    // The same with dry friction on the joint: an engine that models it
+    // as a second element on the joint (Drake's second actuator) keeps
+    // the armature.
+    if honours(engine, ParamKey::JointFrictionloss) {
+        let rubbing = "frictionloss = 1.0\n";
+        let plain = fall(engine, spec, rubbing);
+        let heavy = fall(engine, spec, &format!("armature = 0.5\n{rubbing}"));
+        report(engine, "armature_fall_ratio_with_friction", heavy / plain, ratio);
+        assert!(
+            heavy < plain * ratio,
+            "armature 0.5 and frictionloss 1: {heavy} rad, frictionloss alone: {plain} rad"
+        );
+    }
     if !spec.takes_efforts {
         return;
     }
