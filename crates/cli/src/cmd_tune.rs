@@ -146,11 +146,13 @@ pub struct Args {
     pub prior_weight: f64,
     /// Engine settings over the space's: a parameters file's
     /// `[engine.NAME]` table, such as the `recommended.toml` that
-    /// `realitygap frontier` writes.
+    /// `realitygap frontier` writes. With --recordings: over the replay
+    /// scene's and --params' settings.
     #[arg(long, value_name = "FILE")]
     pub settings: Option<PathBuf>,
     /// Engine setting over the space's and --settings: KEY=VALUE
-    /// (repeatable).
+    /// (repeatable). With --recordings: over the replay scene's, --params'
+    /// and --settings.
     #[arg(long = "set", value_name = "[ENGINE.]KEY=VALUE")]
     pub set: Vec<String>,
     /// Robot instead of the scenes' (as for `run`).

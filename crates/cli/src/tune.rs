@@ -6,10 +6,12 @@
 use crate::ui::Ui;
 use anyhow::{Context, Result};
 use realitygap_analysis::selection::RunRange;
+use realitygap_core::engine::EngineSettings;
 use realitygap_core::params::PhysicalParams;
 use realitygap_runner::prepare::{engine_names, find_engine, overrides_for};
 use realitygap_runner::slurm::Executor;
 use realitygap_runner::Launcher;
+use realitygap_runner::Registry;
 use realitygap_study::data_source::assets_dir;
 use realitygap_study::toss_study::is_toss_study;
 use realitygap_study::{load_study, DataSource};
@@ -273,24 +275,7 @@ pub fn tune(request: &TuneRequest, launcher: &Launcher, ui: &dyn Ui) -> Result<T
         .clone()
         .unwrap_or_else(|| default_space_file(&assets_dir(), engine.name()));
     let space = Space::from_file(&space_file)?;
-    let mut set = match &args.settings {
-        Some(f) => PhysicalParams::from_file(f)?
-            .engine_settings
-            .remove(engine.name())
-            .with_context(|| {
-                format!(
-                    "--settings {}: no [engine.{}] table",
-                    f.display(),
-                    engine.name()
-                )
-            })?,
-        None => Default::default(),
-    };
-    set.extend(overrides_for(
-        &args.set,
-        engine.name(),
-        &engine_names(registry),
-    )?);
+    let set = settings_over(args, engine.name(), registry)?;
     let (study, roots) = load_study(&study_file, &args.data, None)?;
     let target_for = |runs: Option<RunRange>, holdout: Option<RunRange>| {
         Target::new(&study, &roots, runs, holdout, args.cube_weight)
@@ -458,6 +443,20 @@ fn cross_validate(
     Ok(Tuned { markdown, files })
 }
 
+/// The engine settings of `--settings` (its `[engine.NAME]` table) with
+/// `--set` over them.
+fn settings_over(args: &TuneRequest, engine: &str, registry: Registry) -> Result<EngineSettings> {
+    let mut set = match &args.settings {
+        Some(f) => PhysicalParams::from_file(f)?
+            .engine_settings
+            .remove(engine)
+            .with_context(|| format!("--settings {}: no [engine.{engine}] table", f.display()))?,
+        None => Default::default(),
+    };
+    set.extend(overrides_for(&args.set, engine, &engine_names(registry))?);
+    Ok(set)
+}
+
 /// `tune --recordings`: the engine fitted to a robot's own episodes in
 /// joint space.
 fn tune_recordings(args: &TuneRequest, recordings: &Path, ui: &dyn Ui) -> Result<Tuned> {
@@ -468,7 +467,17 @@ fn tune_recordings(args: &TuneRequest, recordings: &Path, ui: &dyn Ui) -> Result
         anyhow::bail!("--recordings runs on this machine only (--executor local)");
     }
     let engine = find_engine(crate::engines, &args.engine)?;
-    let known = realitygap_runner::prepare::read_params(args.params.as_deref())?;
+    let mut known = realitygap_runner::prepare::read_params(args.params.as_deref())?;
+    // --settings and --set over the scene's and --params' settings: the
+    // replay takes the engine settings of the known parameters.
+    let set = settings_over(args, engine.name(), crate::engines)?;
+    if !set.is_empty() {
+        known
+            .engine_settings
+            .entry(engine.name().to_string())
+            .or_default()
+            .extend(set);
+    }
     let urdf = args.robot.as_ref().map(PathBuf::from);
     let prepared =
         realitygap_study::replay::prepare_replay(&realitygap_study::replay::ReplayRequest {

@@ -453,6 +453,24 @@ fn bad_requests_are_named() {
     let stderr = text(&run.stderr);
     assert!(!run.status.success());
     assert!(stderr.contains("--holdout \"5\""), "{stderr}");
+    // --set reaches the replay's engine (it was once ignored with
+    // --recordings): a value the engine refuses is a load error naming it.
+    let run = realitygap(&[
+        "tune",
+        "--recordings",
+        &path(&real),
+        "--engine",
+        "mujoco",
+        "--params",
+        &path(&truth_params(&dir, &["damping"])),
+        "--set",
+        "integrator=sideways",
+        "--out",
+        &path(&dir.join("v")),
+    ]);
+    let stderr = text(&run.stderr);
+    assert!(!run.status.success(), "{stderr}");
+    assert!(stderr.contains("sideways"), "{stderr}");
 }
 
 #[test]

@@ -357,7 +357,12 @@ pub fn armature(engine: &dyn Engine, spec: &KitSpec) {
         let rubbing = "frictionloss = 1.0\n";
         let plain = fall(engine, spec, rubbing);
         let heavy = fall(engine, spec, &format!("armature = 0.5\n{rubbing}"));
-        report(engine, "armature_fall_ratio_with_friction", heavy / plain, ratio);
+        report(
+            engine,
+            "armature_fall_ratio_with_friction",
+            heavy / plain,
+            ratio,
+        );
         assert!(
             heavy < plain * ratio,
             "armature 0.5 and frictionloss 1: {heavy} rad, frictionloss alone: {plain} rad"
