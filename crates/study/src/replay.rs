@@ -252,8 +252,8 @@ pub fn scene_toml(
                 let _ = writeln!(s, "servo = \"kv\"");
             }
             // No self-collision, as MuJoCo above (Bullet, ODE and DART have
-            // none by default).
-            "rapier" | "physx" => {
+            // none by default; Drake's and Newton's adapters do).
+            "rapier" | "physx" | "drake" | "newton" => {
                 let _ = writeln!(s, "self_collision = false");
             }
             _ => {}
