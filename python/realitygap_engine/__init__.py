@@ -495,6 +495,9 @@ class _Session:
         self.kp: list[Any] = []
         self.names: list[str] = []
         self.last_t: float | None = None
+        # The last command kinds found valid for this model (a replay
+        # sends the same kinds with every step's values).
+        self.checked_kinds: list[str] | None = None
 
 
 def _vector(request: Mapping[str, Any], key: str, what: str, n: int | None, error=UsageError) -> np.ndarray:
@@ -527,7 +530,10 @@ def _reading_json(session: _Session, r: Reading) -> dict:
                            f"for {session.joints} controlled joints")
     if poses.size != 7 * session.tracked:
         raise RuntimeError(f"the adapter's reading has {poses.size} pose numbers for {session.tracked} tracked frames (7 each)")
-    if not (math.isfinite(t) and np.isfinite(q).all() and np.isfinite(qd).all() and np.isfinite(poses).all()):
+    # One vector, checked and written at once (a replay reads at every
+    # recorded sample): the time, q, qd, poses.
+    flat = np.concatenate(((t,), q, qd, poses))
+    if not np.isfinite(flat).all():
         # Say what is not finite: no NaN ever leaves as bits.
         if not math.isfinite(t):
             raise UnstableError(f"non-finite time ({display(t)})", session.last_t)
@@ -537,7 +543,11 @@ def _reading_json(session: _Session, r: Reading) -> dict:
         raise UnstableError(f"non-finite pose of tracked frame {i // 7} (component {i % 7}: "
                             f"{display(poses[i])}) at t = {display(t)} s", t)
     session.last_t = t
-    return {"t": bits([t]), "q": bits(q), "qd": bits(qd), "poses": bits(poses)}
+    text = bits(flat)
+    a = 16
+    b = a + 16 * q.size
+    c = b + 16 * qd.size
+    return {"t": text[:a], "q": text[a:b], "qd": text[b:c], "poses": text[c:]}
 
 
 def _full_state_json(session: _Session, s: FullState) -> dict:
@@ -608,7 +618,7 @@ def _parse_full_state(session: _Session, request: Mapping[str, Any]) -> FullStat
 
 
 def _parse_commands(session: _Session, raw: Any) -> tuple[list[str], np.ndarray]:
-    if not isinstance(raw, Mapping):
+    if not isinstance(raw, (dict, Mapping)):  # dict first: the fast check
         raise UsageError('`commands` must be {"kinds": [...], "values": BITS}')
     kinds = raw.get("kinds")
     if not isinstance(kinds, list) or not all(isinstance(k, str) for k in kinds):
@@ -616,17 +626,25 @@ def _parse_commands(session: _Session, raw: Any) -> tuple[list[str], np.ndarray]
     values = _vector(raw, "values", "commands", None)
     if len(kinds) != session.joints or values.size != session.joints:
         raise UsageError(f"{len(kinds)} command kinds and {values.size} values for {session.joints} controlled joints")
-    known = session.adapter.commands or {k: "" for k in COMMAND_KINDS}
-    for i, (k, v) in enumerate(zip(kinds, values)):
-        joint = session.names[i] if i < len(session.names) else str(i)
-        if k not in known:
-            raise UsageError(f'joint "{joint}": unknown command kind "{k}" (this engine takes: {", ".join(known)})')
-        if not math.isfinite(v):
-            raise UsageError(f'the {k} command of joint "{joint}" is {display(v)}')
-        if k == "position" and i < len(session.kp) and session.kp[i] is None:
-            raise UsageError(
-                f'joint "{joint}" takes a position command but its actuator has no position gain: '
-                f"set kp in the scene's [[actuator]] or joints.{joint}.kp in the parameters")
+
+    def joint(i: int) -> str:
+        return session.names[i] if i < len(session.names) else str(i)
+
+    # The kinds are checked when they change (a replay sends the same
+    # kinds at every step), the values every time.
+    if kinds != session.checked_kinds:
+        known = session.adapter.commands or {k: "" for k in COMMAND_KINDS}
+        for i, k in enumerate(kinds):
+            if k not in known:
+                raise UsageError(f'joint "{joint(i)}": unknown command kind "{k}" (this engine takes: {", ".join(known)})')
+            if k == "position" and i < len(session.kp) and session.kp[i] is None:
+                raise UsageError(
+                    f'joint "{joint(i)}" takes a position command but its actuator has no position gain: '
+                    f"set kp in the scene's [[actuator]] or joints.{joint(i)}.kp in the parameters")
+        session.checked_kinds = list(kinds)
+    if not np.isfinite(values).all():
+        i = int(np.flatnonzero(~np.isfinite(values))[0])
+        raise UsageError(f'the {kinds[i]} command of joint "{joint(i)}" is {display(values[i])}')
     return list(kinds), values
 
 
@@ -673,6 +691,7 @@ def _handle(session: _Session, request: Mapping[str, Any]) -> dict:
         session.joints = len(actuators)
         session.names = [str(a.get("joint", i)) for i, a in enumerate(actuators)]
         session.kp = [a.get("kp") for a in actuators]
+        session.checked_kinds = None
         session.tracked = len(model.get("tracked") or [])
         session.objects = [o.get("name") for o in (model.get("objects") or [])]
         sim = adapter.load(model)
@@ -741,7 +760,7 @@ def _run_segments(session: _Session, request: Mapping[str, Any]) -> dict:
     readings: list[dict] = []
     try:
         for i, seg in enumerate(segments):
-            if not isinstance(seg, Mapping):
+            if not isinstance(seg, (dict, Mapping)):  # dict first: the fast check
                 raise UsageError(f"segment {i} is not a JSON object")
             n = seg.get("steps", 0)
             if not isinstance(n, int) or isinstance(n, bool) or n < 0:

@@ -221,8 +221,9 @@ def _rotation(q: np.ndarray) -> np.ndarray:
 
 
 def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    w1, x1, y1, z1 = a
-    w2, x2, y2, z2 = b
+    # Python floats: the same IEEE arithmetic as numpy's scalars, faster.
+    w1, x1, y1, z1 = np.asarray(a, dtype=np.float64).tolist()
+    w2, x2, y2, z2 = np.asarray(b, dtype=np.float64).tolist()
     return np.array([
         w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
         w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
@@ -597,6 +598,15 @@ class MujocoSimulation(rge.Simulation):
         for (name, qa, da), (_n, quat, v, w) in zip(self.objects, built.objects):
             self.d.qvel[da:da + 3] = v
             self.d.qvel[da + 3:da + 6] = _rotation(quat).T @ w
+        # Views into mjData, read and cleared at every step: the
+        # instability warnings' counts, the joint positions and velocities.
+        self._warnings = self.d.warning.number
+        self._warning_kinds = np.array([int(kind) for kind, _ in _INSTABILITY_WARNINGS], dtype=np.intp)
+        self._qpos, self._qvel = self.d.qpos, self.d.qvel
+        self._xpos, self._xquat, self._xmat = self.d.xpos, self.d.xquat, self.d.xmat
+        # Whether the body poses (mj_kinematics) lag qpos: a step leaves
+        # them at the step's start, and a reading brings them up to date.
+        self._poses_stale = False
         mujoco.mj_forward(m, self.d)
         self._clear_warnings()
         self.issues = self._stability()
@@ -656,18 +666,21 @@ class MujocoSimulation(rge.Simulation):
     # -- stepping
 
     def _clear_warnings(self) -> None:
-        warning = self.d.warning
-        for kind, _ in _INSTABILITY_WARNINGS:
-            warning[kind].number = 0
-        _MESSAGES.clear()
+        self._warnings[self._warning_kinds] = 0
+        if _MESSAGES:
+            _MESSAGES.clear()
 
     def _unstable(self, t0: float, n: int) -> rge.UnstableError | None:
-        warning = self.d.warning
-        for kind, text in _INSTABILITY_WARNINGS:
-            if warning[kind].number > 0:
-                break
+        # The cheap test first (a step's cost is a few microseconds): no
+        # warning and finite sums of squares mean every value is finite
+        # (MuJoCo resets a state past mjMAXVAL = 1e10 with a warning).
+        warnings, qpos, qvel = self._warnings, self._qpos, self._qvel
+        if warnings[self._warning_kinds].any():
+            text = next(text for (_, text), code in zip(_INSTABILITY_WARNINGS, self._warning_kinds)
+                        if warnings[code] > 0)
         else:
-            if np.isfinite(self.d.qpos).all() and np.isfinite(self.d.qvel).all():
+            if math.isfinite(np.dot(qpos, qpos) + np.dot(qvel, qvel)) or \
+                    (np.isfinite(qpos).all() and np.isfinite(qvel).all()):
                 return None
             text = "non-finite joint position or velocity"
         where = f"at t = {rge.display(t0)} s" if n == 1 else \
@@ -697,24 +710,31 @@ class MujocoSimulation(rge.Simulation):
             error = self._unstable(t0, 1)
             if error is not None:
                 raise error
-        # Body poses at the current qpos (mj_step computed them before
-        # integrating).
-        mujoco.mj_kinematics(m, d)
+        # mj_step computed the body poses before integrating: they are
+        # brought to the new qpos when read.
+        self._poses_stale = True
+
+    def _poses_now(self) -> None:
+        if self._poses_stale:
+            mujoco.mj_kinematics(self.m, self.d)
+            self._poses_stale = False
 
     # -- reading
 
     def _body_pose(self, b: int, opos, oquat) -> np.ndarray:
-        d = self.d
-        p = d.xpos[b]
-        q = d.xquat[b]
+        p = self._xpos[b]
+        q = self._xquat[b]
         if opos is None:
             return np.concatenate([p, q])
-        return np.concatenate([p + d.xmat[b].reshape(3, 3) @ opos, _quat_mul(q, oquat)])
+        return np.concatenate([p + self._xmat[b].reshape(3, 3) @ opos, _quat_mul(q, oquat)])
 
     def reading(self) -> rge.Reading:
         d = self.d
-        poses = np.array([self._body_pose(b, p, q) for b, p, q in self.tracked]).reshape(-1)
-        return rge.Reading(float(d.time), d.qpos[self.qpos_adr].copy(), d.qvel[self.dof_adr].copy(), poses)
+        self._poses_now()
+        poses = np.concatenate([self._body_pose(b, p, q) for b, p, q in self.tracked]) if self.tracked \
+            else np.zeros(0)
+        # (Indexing with an array copies.)
+        return rge.Reading(float(d.time), self._qpos[self.qpos_adr], self._qvel[self.dof_adr], poses)
 
     # -- commands
 
@@ -743,6 +763,10 @@ class MujocoSimulation(rge.Simulation):
         self.kinds[i] = kind
 
     def set_commands(self, kinds, values) -> None:
+        if list(kinds) == self.kinds:
+            # The same laws (a replay's every step): the values alone.
+            self.d.ctrl[self.ctrl_adr] = values
+            return
         for i, (kind, value) in enumerate(zip(kinds, values)):
             if kind == "position" and self.kp[i] is None:
                 raise rge.UsageError(f'joint "{self.joint_names[i]}" takes a position command but its actuator has no position gain')
