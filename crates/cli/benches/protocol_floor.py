@@ -8,11 +8,17 @@ A 7-joint serial arm (capsules, position servos) in MuJoCo at 1 ms,
   linked engine's loop costs, near enough);
 - ``commands``: a Python loop that writes the step's commands and steps;
 - ``commands_and_state``: the same, and reads the joint state back each
-  step (what a replay does where the recording samples every step).
+  step (what a replay does where the recording samples every step);
+- ``iiwa_pattern``: the schedule of the protocol bench's iiwa replay
+  (``cargo bench -p realitygap --bench protocol``): the recording samples
+  every 5 steps and commands every 10, so the loop steps 5 at a time
+  (``nstep=5``), reads the joint state and one body's pose (its
+  kinematics brought to the step's end) before each, and writes the
+  commands before every other.
 
 Prints each time, microseconds per step and the ratio to ``nstep``: no
 out-of-process adapter written in Python can replay such a recording
-faster than the ``commands`` ratio over the linked engine.
+faster than its ratio over the linked engine.
 
     ~/.cache/realitygap/fixtures-venv/bin/python crates/cli/benches/protocol_floor.py
 """
@@ -59,6 +65,20 @@ def main() -> None:
             state[k, :m.nv] = d.qpos
             state[k, m.nv:] = d.qvel
 
+    tip = m.nbody - 1
+    reads = np.empty((STEPS // 5, 2 * m.nv + 7))
+
+    def iiwa_pattern() -> None:
+        for k in range(STEPS // 5):
+            mujoco.mj_kinematics(m, d)
+            reads[k, :m.nv] = d.qpos
+            reads[k, m.nv:2 * m.nv] = d.qvel
+            reads[k, 2 * m.nv:2 * m.nv + 3] = d.xpos[tip]
+            reads[k, 2 * m.nv + 3:] = d.xquat[tip]
+            if k % 2 == 0:
+                d.ctrl[:] = commands[5 * k]
+            mujoco.mj_step(m, d, nstep=5)
+
     def best(f) -> float:
         times = []
         for _ in range(REPEATS):
@@ -71,7 +91,7 @@ def main() -> None:
     base = best(nstep)
     print(f"MuJoCo {mujoco.__version__}, 7-joint arm at 1 ms, {STEPS} steps, best of {REPEATS}")
     for name, f in (("nstep", nstep), ("commands", with_commands),
-                    ("commands_and_state", with_commands_and_state)):
+                    ("commands_and_state", with_commands_and_state), ("iiwa_pattern", iiwa_pattern)):
         b = base if f is nstep else best(f)
         print(f"{name:>20}: {b * 1e3:7.1f} ms  {b / STEPS * 1e6:5.2f} us/step  {b / base:4.2f}x")
 
