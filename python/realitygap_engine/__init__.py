@@ -630,8 +630,11 @@ def _parse_commands(session: _Session, raw: Any) -> tuple[list[str], np.ndarray]
     def joint(i: int) -> str:
         return session.names[i] if i < len(session.names) else str(i)
 
-    # The kinds are checked when they change (a replay sends the same
-    # kinds at every step), the values every time.
+    # The values every time, first (as the linked engines check), the
+    # kinds when they change (a replay sends the same kinds at every step).
+    if not np.isfinite(values).all():
+        i = int(np.flatnonzero(~np.isfinite(values))[0])
+        raise UsageError(f'the {kinds[i]} command of joint "{joint(i)}" is {display(values[i])}')
     if kinds != session.checked_kinds:
         known = session.adapter.commands or {k: "" for k in COMMAND_KINDS}
         for i, k in enumerate(kinds):
@@ -642,9 +645,6 @@ def _parse_commands(session: _Session, raw: Any) -> tuple[list[str], np.ndarray]
                     f'joint "{joint(i)}" takes a position command but its actuator has no position gain: '
                     f"set kp in the scene's [[actuator]] or joints.{joint(i)}.kp in the parameters")
         session.checked_kinds = list(kinds)
-    if not np.isfinite(values).all():
-        i = int(np.flatnonzero(~np.isfinite(values))[0])
-        raise UsageError(f'the {kinds[i]} command of joint "{joint(i)}" is {display(values[i])}')
     return list(kinds), values
 
 

@@ -35,9 +35,10 @@ description, as realitygap's linked MuJoCo engine builds its MJCF
 
 Stepping is ``mj_step`` (``nstep`` at once when the package has it); MuJoCo's
 bad-position/velocity/acceleration warnings (it resets the state when they
-fire) and non-finite positions become ``unstable`` errors. After stepping
-the kinematics are recomputed so that the body poses belong to the joint
-positions of the reading. The native state is ``mj_getState`` of
+fire) and non-finite positions become ``unstable`` errors. A reading
+brings the kinematics to the current joint positions first (``mj_step``
+leaves them at the step's start), so that the body poses belong to the
+joint positions of the reading. The native state is ``mj_getState`` of
 ``mjSTATE_INTEGRATION`` (time, qpos, qvel, act, warm start, controls, ...)
 with the servos' command kinds: an exact restore.
 """
@@ -693,6 +694,9 @@ class MujocoSimulation(rge.Simulation):
     def step(self, n: int) -> None:
         m, d = self.m, self.d
         self._clear_warnings()
+        # mj_step computes the body poses before integrating (and a
+        # failed step resets qpos): they are brought to qpos when read.
+        self._poses_stale = True
         if _HAS_NSTEP:
             t0 = float(d.time)
             mujoco.mj_step(m, d, nstep=n)
@@ -710,9 +714,6 @@ class MujocoSimulation(rge.Simulation):
             error = self._unstable(t0, 1)
             if error is not None:
                 raise error
-        # mj_step computed the body poses before integrating: they are
-        # brought to the new qpos when read.
-        self._poses_stale = True
 
     def _poses_now(self) -> None:
         if self._poses_stale:
