@@ -248,6 +248,13 @@ fn pose_residual(model: &Pose, measured: &Pose) -> (Vec3, Vec3) {
     (dp, dr)
 }
 
+/// A frame is solved once an accepted step moves no joint by more than
+/// this, rad (50 nm at the wrist, far below the capture's noise). At 1e-9
+/// the study's joint-space IK took 41 % more time (20.5 s against 14.4,
+/// 6.9 against 5.9 million iterations for 477 772 frames) for tables that
+/// differ by at most 3.7e-7 of a value.
+const STEP_DONE_RAD: f64 = 1e-7;
+
 /// Solves one frame: the controlled joints' angles that put the marker
 /// (`marker_in_link` on the tracked link) at `measured` (world), pulled
 /// weakly towards `prior`, starting from `start`. Returns the angles and
@@ -328,7 +335,7 @@ pub fn solve_frame(
                 .collect();
             let (tc, tr, ta, tm) = cost(&trial);
             if tc < c {
-                let small = step.iter().all(|d| d.abs() < 1e-9);
+                let small = step.iter().all(|d| d.abs() < STEP_DONE_RAD);
                 q = trial;
                 c = tc;
                 r = tr;
