@@ -1,15 +1,26 @@
-//! Builds the C++ shim (`shim/dart_shim.cc`) over DART's C++ API with
-//! `cxx-build`, against the system's DART 6.12 (Debian's `libdart-dev`,
+//! Builds the C++ shim (`shim/dart_shim.cc` and its C entry points
+//! `shim/dart_capi.cc`) over DART's C++ API into a shared library of its
+//! own, against the system's DART 6.12 (Debian's `libdart-dev`,
 //! `libdart-collision-ode-dev`, `libdart-collision-bullet-dev`), found
-//! through pkg-config (`dart`, `ode`, `bullet`).
+//! through pkg-config (`dart`, `ode`, `bullet`). The crate embeds that
+//! library and loads it when a DART world is first made (`src/ffi.rs`):
+//! DART and FCL bind about 70 000 symbols when they load (18 of a
+//! process's 21.5 ms start), so a process that makes no DART world does
+//! not pay for them. The version of DART's headers (`DART_VERSION` in
+//! `dart/config.hpp`) becomes a constant, so naming it loads nothing.
 //!
 //! Also adds the MuJoCo library directory (MUJOCO_DYNAMIC_LINK_DIR, set by
 //! the workspace's .cargo/config.toml) as an rpath of this crate's tests and
 //! benchmarks, which compare against the MuJoCo engine.
 
+use std::path::PathBuf;
+use std::process::Command;
+
 fn probe(name: &str, version: &str, package: &str) -> pkg_config::Library {
     match pkg_config::Config::new()
         .atleast_version(version)
+        // Only the shim's library links these, not the crate.
+        .cargo_metadata(false)
         .probe(name)
     {
         Ok(library) => library,
@@ -23,10 +34,32 @@ fn probe(name: &str, version: &str, package: &str) -> pkg_config::Library {
     }
 }
 
+/// `DART_VERSION` of the first `dart/config.hpp` under `includes`.
+fn header_version(includes: &[PathBuf]) -> String {
+    for dir in includes {
+        let path = dir.join("dart/config.hpp");
+        let Ok(text) = std::fs::read_to_string(&path) else {
+            continue;
+        };
+        for line in text.lines() {
+            let mut words = line.split_whitespace();
+            if let (Some("#define"), Some("DART_VERSION"), Some(v)) =
+                (words.next(), words.next(), words.next())
+            {
+                return v.trim_matches('"').to_string();
+            }
+        }
+        eprintln!("{} has no DART_VERSION", path.display());
+        std::process::exit(1);
+    }
+    eprintln!("no dart/config.hpp under DART's include folders {includes:?}");
+    std::process::exit(1);
+}
+
 fn main() {
     println!("cargo::rerun-if-changed=shim/dart_shim.h");
     println!("cargo::rerun-if-changed=shim/dart_shim.cc");
-    println!("cargo::rerun-if-changed=src/ffi.rs");
+    println!("cargo::rerun-if-changed=shim/dart_capi.cc");
     println!("cargo::rerun-if-env-changed=MUJOCO_DYNAMIC_LINK_DIR");
     if let Ok(dir) = std::env::var("MUJOCO_DYNAMIC_LINK_DIR") {
         println!("cargo::rustc-link-arg-tests=-Wl,-rpath,{dir}");
@@ -43,26 +76,67 @@ fn main() {
         "cargo::rustc-env=REALITYGAP_DART_PKG_VERSION={}",
         dart.version
     );
-    // The collision detectors beside DART's own and FCL: separate libraries
-    // of the same Debian source package (no pkg-config file of their own).
-    println!("cargo::rustc-link-lib=dart-collision-ode");
-    println!("cargo::rustc-link-lib=dart-collision-bullet");
+    println!(
+        "cargo::rustc-env=REALITYGAP_DART_HEADER_VERSION={}",
+        header_version(&dart.include_paths)
+    );
 
-    let mut build = cxx_build::bridge("src/ffi.rs");
-    build
-        .file("shim/dart_shim.cc")
-        .std("c++17")
-        // DART's and Eigen's headers are noisy at -Wall; the shim's own
-        // warnings are checked by building it with -Wall by hand.
-        .warnings(false)
-        .flag_if_supported("-Wno-deprecated-declarations");
+    let out = PathBuf::from(std::env::var("OUT_DIR").expect("cargo sets OUT_DIR"))
+        .join("librealitygap_dart.so");
+    // The profile's optimisation, as the shim had when cxx-build compiled
+    // it; no debug information (the library is embedded in every binary).
+    let compiler = cc::Build::new().cpp(true).debug(false).get_compiler();
+    let mut cmd: Command = compiler.to_command();
+    // Default visibility, as when the shim was linked into the binary: the
+    // DART templates it instantiates stay shared with libdart's.
+    cmd.args(["-std=c++17", "-shared", "-fPIC", "-w"])
+        .args(["shim/dart_shim.cc", "shim/dart_capi.cc", "-o"])
+        .arg(&out)
+        .arg("-Wl,--no-undefined");
     for include in dart
         .include_paths
         .iter()
         .chain(&ode.include_paths)
         .chain(&bullet.include_paths)
     {
-        build.include(include);
+        cmd.arg("-I").arg(include);
     }
-    build.compile("realitygap_dart_shim");
+    for dir in dart
+        .link_paths
+        .iter()
+        .chain(&ode.link_paths)
+        .chain(&bullet.link_paths)
+    {
+        cmd.arg("-L").arg(dir);
+    }
+    // The collision detectors beside DART's own and FCL: separate libraries
+    // of the same Debian source package (no pkg-config file of their own).
+    for lib in ["dart-collision-ode", "dart-collision-bullet"]
+        .iter()
+        .map(|s| s.to_string())
+        .chain(dart.libs.iter().cloned())
+        .chain(ode.libs.iter().cloned())
+        .chain(bullet.libs.iter().cloned())
+    {
+        cmd.arg(format!("-l{lib}"));
+    }
+    let shown = format!(
+        "{} {}",
+        cmd.get_program().to_string_lossy(),
+        cmd.get_args()
+            .map(|a| a.to_string_lossy())
+            .collect::<Vec<_>>()
+            .join(" ")
+    );
+    match cmd.status() {
+        Ok(s) if s.success() => {}
+        Ok(s) => {
+            eprintln!("building the DART shim failed ({s}): {shown}");
+            std::process::exit(1);
+        }
+        Err(e) => {
+            eprintln!("could not run the C++ compiler ({e}): {shown}");
+            std::process::exit(1);
+        }
+    }
 }

@@ -771,3 +771,69 @@ fn kv_engines_repeat_scene1_where_mujoco_ends() {
         }
     }
 }
+
+/// DART's libraries load only in a process that makes a DART world
+/// (crates/engine-dart/README.md, "Loaded when used"): the command's start
+/// and a run of another engine never pay for them, a DART run does.
+/// glibc's loader names every object it opens under `LD_DEBUG=files`; a
+/// run's child (`__run-one`) is asked to check its scene loads, which
+/// makes the engine's world.
+#[test]
+fn dart_loads_only_in_a_process_that_makes_a_dart_world() {
+    use std::io::Write;
+    let opens_dart = |args: &[&str], stdin: &str| -> bool {
+        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_realitygap"))
+            .args(args)
+            .env("LD_DEBUG", "files")
+            .stdin(std::process::Stdio::piped())
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        child
+            .stdin
+            .take()
+            .unwrap()
+            .write_all(stdin.as_bytes())
+            .unwrap();
+        let out = child.wait_with_output().unwrap();
+        let err = text(&out.stderr);
+        assert!(out.status.success(), "{args:?}: {err}");
+        assert!(err.contains("file="), "{args:?}: LD_DEBUG said nothing");
+        err.contains("libdart.so")
+    };
+    let check = |engine: &str| {
+        serde_json::json!({
+            "scene_file": scene_file("scene1_single_joint"),
+            "engine": engine,
+            "robot": null,
+            "packages": [],
+            "set": [],
+            "perturb": [],
+            "seed": 0,
+            "params": null,
+            "params_text": null,
+            "check_only": true,
+            "stitch": null,
+            "allow_unstable": false,
+            "replay": null,
+        })
+        .to_string()
+    };
+    assert!(
+        !opens_dart(&["--version"], ""),
+        "the command's start opened DART"
+    );
+    assert!(
+        !opens_dart(&["engines"], ""),
+        "listing the engines (DART's version) opened DART"
+    );
+    assert!(
+        !opens_dart(&["__run-one"], &check("mujoco")),
+        "a MuJoCo run opened DART"
+    );
+    assert!(
+        opens_dart(&["__run-one"], &check("dart")),
+        "a DART run did not open DART"
+    );
+}

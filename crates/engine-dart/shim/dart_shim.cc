@@ -2,7 +2,7 @@
 //
 // Two rules hold for every entry point that calls DART:
 // - what DART throws becomes a std::runtime_error naming the call, which
-//   cxx hands to Rust as an error;
+//   the C entry points (dart_capi.cc) hand to Rust as an error;
 // - what DART prints (`dtmsg`/`dtdbg` to std::cout, `dtwarn`/`dterr` to
 //   std::cerr) never reaches the process's streams: std::cout, std::cerr and
 //   std::clog get (once per process) a forwarding buffer that, on a thread
@@ -11,8 +11,7 @@
 //   The forwarding buffer keeps no put area, so no state is shared between
 //   threads.
 
-#include "realitygap-engine-dart/shim/dart_shim.h"
-#include "realitygap-engine-dart/src/ffi.rs.h"
+#include "dart_shim.h"
 
 #include <algorithm>
 #include <cmath>
@@ -167,7 +166,7 @@ void need(bool ok, const std::string& message)
 }
 
 void needLength(
-    rust::Slice<const double> s, std::size_t n, const char* what)
+    Slice<const double> s, std::size_t n, const char* what)
 {
   need(
       s.size() == n,
@@ -177,13 +176,13 @@ void needLength(
     need(std::isfinite(v), std::string(what) + " has a non-finite number");
 }
 
-Eigen::Vector3d vec3(rust::Slice<const double> s, const char* what)
+Eigen::Vector3d vec3(Slice<const double> s, const char* what)
 {
   needLength(s, 3, what);
   return Eigen::Vector3d(s[0], s[1], s[2]);
 }
 
-Eigen::Isometry3d pose(rust::Slice<const double> s, const char* what)
+Eigen::Isometry3d pose(Slice<const double> s, const char* what)
 {
   needLength(s, 7, what);
   Eigen::Quaterniond q(s[3], s[4], s[5], s[6]);
@@ -195,7 +194,7 @@ Eigen::Isometry3d pose(rust::Slice<const double> s, const char* what)
   return t;
 }
 
-void writePose(const Eigen::Isometry3d& t, rust::Slice<double> out)
+void writePose(const Eigen::Isometry3d& t, Slice<double> out)
 {
   if (out.size() < 7)
     return;
@@ -308,12 +307,7 @@ World::~World()
   }
 }
 
-rust::String dart_version()
-{
-  return rust::String(DART_VERSION);
-}
-
-void say(rust::Str text)
+void say(std::string_view text)
 {
   Capture capture;
   const std::string t(text);
@@ -324,18 +318,18 @@ void say(rust::Str text)
   std::clog << t << std::endl;
 }
 
-rust::String take_messages()
+std::string take_messages()
 {
-  rust::String out(tMessages);
+  std::string out(tMessages);
   tMessages.clear();
   return out;
 }
 
 std::unique_ptr<World> new_world(
     double timestep_s,
-    rust::Slice<const double> gravity,
-    rust::Str detector,
-    rust::Str lcp)
+    Slice<const double> gravity,
+    std::string_view detector,
+    std::string_view lcp)
 {
   return guarded("creating the DART world", [&] {
     need(
@@ -388,14 +382,14 @@ std::unique_ptr<World> new_world(
 }
 
 std::size_t World::add_robot_body(
-    rust::Str name,
+    std::string_view name,
     std::int64_t parent,
     std::uint8_t kind,
-    rust::Slice<const double> joint_pose,
-    rust::Slice<const double> axis,
+    Slice<const double> joint_pose,
+    Slice<const double> axis,
     double mass_kg,
-    rust::Slice<const double> com,
-    rust::Slice<const double> inertia)
+    Slice<const double> com,
+    Slice<const double> inertia)
 {
   return guarded("adding a robot body", [&]() -> std::size_t {
     auto& m = *mImpl;
@@ -521,10 +515,10 @@ void World::set_actuator(std::size_t joint, bool servo, double limit)
 }
 
 void World::set_drives(
-    rust::Slice<const double> command,
-    rust::Slice<const double> damping,
-    rust::Slice<const double> stiffness,
-    rust::Slice<const double> rest)
+    Slice<const double> command,
+    Slice<const double> damping,
+    Slice<const double> stiffness,
+    Slice<const double> rest)
 {
   guarded("setting the drives", [&] {
     auto& m = *mImpl;
@@ -605,8 +599,8 @@ void World::add_shape(
     bool object,
     std::size_t body,
     std::uint8_t kind,
-    rust::Slice<const double> dims,
-    rust::Slice<const double> at,
+    Slice<const double> dims,
+    Slice<const double> at,
     double friction,
     double restitution)
 {
@@ -648,9 +642,9 @@ void World::add_shape(
 
 void World::add_mesh(
     std::size_t body,
-    rust::Slice<const double> vertices,
-    rust::Slice<const std::uint32_t> indices,
-    rust::Slice<const double> at,
+    Slice<const double> vertices,
+    Slice<const std::uint32_t> indices,
+    Slice<const double> at,
     double friction)
 {
   guarded("adding a mesh", [&] {
@@ -734,10 +728,10 @@ void World::add_mesh(
 }
 
 std::size_t World::add_object(
-    rust::Str name,
+    std::string_view name,
     double mass_kg,
-    rust::Slice<const double> inertia,
-    rust::Slice<const double> at)
+    Slice<const double> inertia,
+    Slice<const double> at)
 {
   return guarded("adding an object", [&]() -> std::size_t {
     auto& m = *mImpl;
@@ -808,12 +802,12 @@ void World::step()
 }
 
 StepReport World::advance(
-    rust::Slice<const double> command,
-    rust::Slice<const double> damping,
-    rust::Slice<const double> stiffness,
-    rust::Slice<const double> rest,
-    rust::Slice<double> positions,
-    rust::Slice<double> velocities)
+    Slice<const double> command,
+    Slice<const double> damping,
+    Slice<const double> stiffness,
+    Slice<const double> rest,
+    Slice<double> positions,
+    Slice<double> velocities)
 {
   set_drives(command, damping, stiffness, rest);
   const std::size_t before = tMessages.size();
@@ -847,7 +841,7 @@ void World::step_raw(std::uint64_t n)
 }
 
 void World::joint_state(
-    rust::Slice<double> positions, rust::Slice<double> velocities) const
+    Slice<double> positions, Slice<double> velocities) const
 {
   const auto& joints = mImpl->joints;
   for (std::size_t i = 0; i < joints.size(); ++i)
@@ -860,7 +854,7 @@ void World::joint_state(
 }
 
 void World::set_joint_state(
-    rust::Slice<const double> positions, rust::Slice<const double> velocities)
+    Slice<const double> positions, Slice<const double> velocities)
 {
   guarded("setting the joint state", [&] {
     const auto& joints = mImpl->joints;
@@ -874,13 +868,13 @@ void World::set_joint_state(
   });
 }
 
-void World::body_pose(std::size_t body, rust::Slice<double> out) const
+void World::body_pose(std::size_t body, Slice<double> out) const
 {
   if (body < mImpl->bodies.size())
     writePose(mImpl->bodies[body]->getWorldTransform(), out);
 }
 
-void World::object_state(std::size_t i, rust::Slice<double> out) const
+void World::object_state(std::size_t i, Slice<double> out) const
 {
   if (i >= mImpl->objects.size() || out.size() < 13)
     return;
@@ -895,19 +889,19 @@ void World::object_state(std::size_t i, rust::Slice<double> out) const
   }
 }
 
-void World::set_object_state(std::size_t i, rust::Slice<const double> state)
+void World::set_object_state(std::size_t i, Slice<const double> state)
 {
   guarded("setting an object's state", [&] {
     auto* j = mImpl->freeJoint(i);
     needLength(state, 13, "the object state");
     const double* s = state.data();
-    j->setTransform(pose(rust::Slice<const double>(s, 7), "the object pose"));
+    j->setTransform(pose(Slice<const double>(s, 7), "the object pose"));
     j->setLinearVelocity(Eigen::Vector3d(s[7], s[8], s[9]));
     j->setAngularVelocity(Eigen::Vector3d(s[10], s[11], s[12]));
   });
 }
 
-void World::object_coordinates(std::size_t i, rust::Slice<double> out) const
+void World::object_coordinates(std::size_t i, Slice<double> out) const
 {
   if (i >= mImpl->objects.size() || out.size() < 12)
     return;
@@ -922,7 +916,7 @@ void World::object_coordinates(std::size_t i, rust::Slice<double> out) const
 }
 
 void World::set_object_coordinates(
-    std::size_t i, rust::Slice<const double> values)
+    std::size_t i, Slice<const double> values)
 {
   guarded("setting an object's coordinates", [&] {
     need(i < mImpl->objects.size(), "no object " + std::to_string(i));

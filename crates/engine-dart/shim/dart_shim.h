@@ -1,5 +1,7 @@
-// The C++ shim between realitygap's DART engine (Rust, through cxx) and
-// DART 6.12's C++ API. Kept thin: it builds skeletons, sets commands, steps
+// The C++ shim between realitygap's DART engine (Rust) and DART 6.12's C++
+// API. It is built as a shared library of its own (see build.rs) whose C
+// entry points (dart_capi.cc) the Rust side loads when it first needs
+// DART. Kept thin: it builds skeletons, sets commands, steps
 // and reads state; every decision (model planning, servo laws, checks) is
 // on the Rust side. Every entry point that calls DART catches what DART
 // throws and what it prints (see dart_shim.cc).
@@ -9,22 +11,69 @@
 #include <cstdint>
 #include <memory>
 
-#include "rust/cxx.h"
+#include <string>
+#include <string_view>
 
 namespace rgdart {
 
-class World;
-struct StepReport;
+// A view of `len` values at `ptr`, owned by the caller.
+template <typename T>
+class Slice
+{
+public:
+  Slice(T* ptr, std::size_t len) : mPtr(ptr), mLen(len)
+  {
+  }
+  std::size_t size() const
+  {
+    return mLen;
+  }
+  bool empty() const
+  {
+    return mLen == 0;
+  }
+  T* data() const
+  {
+    return mPtr;
+  }
+  T& operator[](std::size_t i) const
+  {
+    return mPtr[i];
+  }
+  T* begin() const
+  {
+    return mPtr;
+  }
+  T* end() const
+  {
+    return mPtr + mLen;
+  }
 
-rust::String dart_version();
-rust::String take_messages();
-void say(rust::Str text);
+private:
+  T* mPtr;
+  std::size_t mLen;
+};
+
+class World;
+
+// What a step saw (see `World::advance`); the same layout as the Rust
+// side's `ffi::StepReport`.
+struct StepReport
+{
+  bool objects_finite;
+  double max_speed;
+  double max_spin;
+  bool said;
+};
+
+std::string take_messages();
+void say(std::string_view text);
 
 std::unique_ptr<World> new_world(
     double timestep_s,
-    rust::Slice<const double> gravity,
-    rust::Str detector,
-    rust::Str lcp);
+    Slice<const double> gravity,
+    std::string_view detector,
+    std::string_view lcp);
 
 struct WorldImpl;
 
@@ -35,63 +84,63 @@ public:
   ~World();
 
   std::size_t add_robot_body(
-      rust::Str name,
+      std::string_view name,
       std::int64_t parent,
       std::uint8_t kind,
-      rust::Slice<const double> joint_pose,
-      rust::Slice<const double> axis,
+      Slice<const double> joint_pose,
+      Slice<const double> axis,
       double mass_kg,
-      rust::Slice<const double> com,
-      rust::Slice<const double> inertia);
+      Slice<const double> com,
+      Slice<const double> inertia);
   void set_joint_limits(std::size_t joint, double lower, double upper);
   void set_joint_friction(std::size_t joint, double friction);
   void set_actuator(std::size_t joint, bool servo, double limit);
   void set_drives(
-      rust::Slice<const double> command,
-      rust::Slice<const double> damping,
-      rust::Slice<const double> stiffness,
-      rust::Slice<const double> rest);
+      Slice<const double> command,
+      Slice<const double> damping,
+      Slice<const double> stiffness,
+      Slice<const double> rest);
   void add_shape(
       bool object,
       std::size_t body,
       std::uint8_t kind,
-      rust::Slice<const double> dims,
-      rust::Slice<const double> pose,
+      Slice<const double> dims,
+      Slice<const double> pose,
       double friction,
       double restitution);
   void add_mesh(
       std::size_t body,
-      rust::Slice<const double> vertices,
-      rust::Slice<const std::uint32_t> indices,
-      rust::Slice<const double> pose,
+      Slice<const double> vertices,
+      Slice<const std::uint32_t> indices,
+      Slice<const double> pose,
       double friction);
   std::size_t add_object(
-      rust::Str name,
+      std::string_view name,
       double mass_kg,
-      rust::Slice<const double> inertia,
-      rust::Slice<const double> pose);
+      Slice<const double> inertia,
+      Slice<const double> pose);
   void add_ground(double height, double friction, double restitution);
   void finish();
   void step();
   void step_raw(std::uint64_t n);
   StepReport advance(
-      rust::Slice<const double> command,
-      rust::Slice<const double> damping,
-      rust::Slice<const double> stiffness,
-      rust::Slice<const double> rest,
-      rust::Slice<double> positions,
-      rust::Slice<double> velocities);
+      Slice<const double> command,
+      Slice<const double> damping,
+      Slice<const double> stiffness,
+      Slice<const double> rest,
+      Slice<double> positions,
+      Slice<double> velocities);
   void joint_state(
-      rust::Slice<double> positions, rust::Slice<double> velocities) const;
+      Slice<double> positions, Slice<double> velocities) const;
   void set_joint_state(
-      rust::Slice<const double> positions,
-      rust::Slice<const double> velocities);
-  void body_pose(std::size_t body, rust::Slice<double> out) const;
-  void object_state(std::size_t i, rust::Slice<double> out) const;
-  void set_object_state(std::size_t i, rust::Slice<const double> state);
-  void object_coordinates(std::size_t i, rust::Slice<double> out) const;
+      Slice<const double> positions,
+      Slice<const double> velocities);
+  void body_pose(std::size_t body, Slice<double> out) const;
+  void object_state(std::size_t i, Slice<double> out) const;
+  void set_object_state(std::size_t i, Slice<const double> state);
+  void object_coordinates(std::size_t i, Slice<double> out) const;
   void set_object_coordinates(
-      std::size_t i, rust::Slice<const double> values);
+      std::size_t i, Slice<const double> values);
   void set_time(double t_s);
   std::size_t contact_count() const;
 

@@ -1,7 +1,8 @@
 //! The DART engine of realitygap: DART 6.12 (the Dynamic Animation and
 //! Robotics Toolkit, the physics of Gazebo's `dartsim` plugin) from
 //! Debian's `libdart-dev`, through a thin C++ shim (`shim/dart_shim.cc`)
-//! bridged with `cxx`.
+//! built as a library of its own and loaded when a DART world is first made
+//! (`ffi`).
 //!
 //! [`DartEngine`] implements [`realitygap_core::Engine`]. The robot is one
 //! DART skeleton in generalized coordinates (Featherstone's articulated
@@ -58,9 +59,10 @@ pub const MAX_SPEED_M_S: f64 = 100.0;
 /// up.
 pub const MAX_SPIN_RAD_S: f64 = 1000.0;
 
-/// The DART version of the headers the shim was built with, e.g. `6.12.1`.
+/// The DART version of the headers the shim was built with, e.g. `6.12.1`
+/// (`DART_VERSION`, read by build.rs: naming it loads nothing).
 pub fn dart_version() -> String {
-    ffi::dart_version()
+    env!("REALITYGAP_DART_HEADER_VERSION").to_string()
 }
 
 /// Prints `text` the ways DART prints (its `dtmsg`, `dtwarn`, `dterr`
@@ -69,7 +71,9 @@ pub fn dart_version() -> String {
 /// reaches no stream. For the tests of that capture.
 #[doc(hidden)]
 pub fn say_through_dart(text: &str) -> String {
-    ffi::say(text);
+    if let Err(e) = ffi::say(text) {
+        return format!("DART could not be loaded: {e}");
+    }
     forward_messages()
 }
 

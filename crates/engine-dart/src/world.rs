@@ -1,5 +1,5 @@
 //! Assembly: a [`Scene`] and its [`RobotModel`] become a DART world, built
-//! through the C++ shim (`shim/dart_shim.cc`, bridged in `src/ffi.rs`).
+//! through the C++ shim (`shim/dart_shim.cc`, reached through `src/ffi.rs`).
 //!
 //! 1. **Groups.** Core's shared planning ([`realitygap_core::robot::plan`])
 //!    splits the robot's links into rigid groups: a group starts at the
@@ -37,8 +37,8 @@
 //! state DART reports.
 
 use crate::ffi;
+use crate::ffi::UniquePtr;
 use crate::settings::{DartSettings, Detector, Servo};
-use cxx::UniquePtr;
 use realitygap_core::engine::{CommandKind, ModelVariation, ServoCommand};
 use realitygap_core::params::PhysicalParams;
 use realitygap_core::pose::{Pose, Quat, Vec3};
@@ -659,7 +659,7 @@ impl World {
     }
 
     /// The shim's world, mutable.
-    pub fn raw_mut(&mut self) -> std::pin::Pin<&mut ffi::World> {
+    pub fn raw_mut(&mut self) -> &mut ffi::World {
         self.world.pin_mut()
     }
 
