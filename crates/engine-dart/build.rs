@@ -34,9 +34,24 @@ fn probe(name: &str, version: &str, package: &str) -> pkg_config::Library {
     }
 }
 
-/// `DART_VERSION` of the first `dart/config.hpp` under `includes`.
+/// `DART_VERSION` of the first `dart/config.hpp` under `includes`, or
+/// under the compiler's usual folders (Debian's `dart.pc` names
+/// `/usr/include/dart`, whose `dart/config.hpp` is one level up).
 fn header_version(includes: &[PathBuf]) -> String {
-    for dir in includes {
+    let usual = [
+        PathBuf::from("/usr/include"),
+        PathBuf::from("/usr/local/include"),
+    ];
+    let parents = includes
+        .iter()
+        .filter_map(|d| d.parent().map(PathBuf::from));
+    let folders: Vec<PathBuf> = includes
+        .iter()
+        .cloned()
+        .chain(parents)
+        .chain(usual)
+        .collect();
+    for dir in &folders {
         let path = dir.join("dart/config.hpp");
         let Ok(text) = std::fs::read_to_string(&path) else {
             continue;
@@ -52,7 +67,7 @@ fn header_version(includes: &[PathBuf]) -> String {
         eprintln!("{} has no DART_VERSION", path.display());
         std::process::exit(1);
     }
-    eprintln!("no dart/config.hpp under DART's include folders {includes:?}");
+    eprintln!("no dart/config.hpp under {folders:?}");
     std::process::exit(1);
 }
 

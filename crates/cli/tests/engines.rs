@@ -779,12 +779,15 @@ fn kv_engines_repeat_scene1_where_mujoco_ends() {
 /// run's child (`__run-one`) is asked to check its scene loads, which
 /// makes the engine's world.
 #[test]
+#[cfg(all(feature = "dart", feature = "mujoco"))]
 fn dart_loads_only_in_a_process_that_makes_a_dart_world() {
     use std::io::Write;
     let opens_dart = |args: &[&str], stdin: &str| -> bool {
         let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_realitygap"))
             .args(args)
             .env("LD_DEBUG", "files")
+            // The loader's output must reach this test's pipe, not a file.
+            .env_remove("LD_DEBUG_OUTPUT")
             .stdin(std::process::Stdio::piped())
             .stdout(std::process::Stdio::piped())
             .stderr(std::process::Stdio::piped())

@@ -7,7 +7,8 @@
 //   a length;
 // - an entry point that can fail returns NULL on success, or the C++
 //   exception's message as a string from malloc, which the caller frees
-//   with rgdart_free; results go through pointers;
+//   with rgdart_free; results go through pointers (rgdart_take_messages,
+//   which cannot fail, returns its text the same way);
 // - nothing is thrown out of an entry point (noexcept: what escapes ends
 //   the process, as it did through cxx).
 

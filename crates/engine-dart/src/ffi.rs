@@ -7,7 +7,7 @@
 //! temporary file: the ~70 000 symbols DART and FCL bind at load cost a
 //! process 18 ms, which every run of another engine, every test binary and
 //! every command used to pay at start (`realitygap --version`: 21.5 ms
-//! with DART linked, 3.7 ms now). A machine without DART's libraries gets a
+//! with DART linked, 3.4-3.7 ms now). A machine without DART's libraries gets a
 //! clear error when a DART world is asked for, not a binary that will not
 //! start.
 //!
@@ -23,7 +23,8 @@ use std::sync::OnceLock;
 /// The shim's shared library, as build.rs made it.
 static LIBRARY: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/librealitygap_dart.so"));
 
-/// An error the shim returned: a C++ exception's message.
+/// An error of the shim: a C++ exception's message, or why the shim's
+/// library could not be loaded.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Exception(String);
 
@@ -151,13 +152,21 @@ fn open_from_memory() -> Result<*mut c_void, String> {
     if fd < 0 {
         return Err(format!("memfd_create: {}", std::io::Error::last_os_error()));
     }
-    // SAFETY: `fd` was just created and is owned here; it stays open until
-    // dlopen has read the library.
+    // SAFETY: `fd` was just created and is owned here.
     let mut file = unsafe { std::fs::File::from_raw_fd(fd) };
     file.write_all(LIBRARY)
         .map_err(|e| format!("writing the library to memory: {e}"))?;
     let path = std::ffi::CString::new(format!("/proc/self/fd/{fd}")).expect("no NUL");
-    open(&path)
+    let handle = open(&path)?;
+    // The loader knows the library by this path: the descriptor stays open
+    // for the life of the process, so that no other file takes its number.
+    std::mem::forget(file);
+    Ok(handle)
+}
+
+/// Whether a loader's error says a library is missing.
+fn missing_library(e: &str) -> bool {
+    e.contains("cannot open shared object file")
 }
 
 /// Writes the embedded library to a temporary file, opens it and removes
@@ -178,21 +187,31 @@ fn open_from_file() -> Result<*mut c_void, String> {
 }
 
 /// Loads the embedded library: from an anonymous file in memory, or, where
-/// that fails, from a temporary file removed once loaded.
+/// that fails for another reason than a missing library of DART's, from a
+/// temporary file removed once loaded.
 fn load() -> Result<Api, String> {
     let handle = open_from_memory().or_else(|memory| {
-        open_from_file().map_err(|file| {
-            let hint = if file.contains("cannot open shared object file") {
-                "; DART's libraries are missing: on Debian, `apt-get install libdart6.12 \
-                 libdart-collision-ode6.12 libdart-collision-bullet6.12` (scripts/setup \
-                 installs them)"
+        let tried = if missing_library(&memory) {
+            Err(memory)
+        } else {
+            open_from_file().map_err(|file| {
+                let both = format!("from memory: {memory}; from a temporary file: {file}");
+                if missing_library(&file) {
+                    file
+                } else {
+                    both
+                }
+            })
+        };
+        tried.map_err(|e| {
+            let hint = if missing_library(&e) {
+                "; on Debian, `apt-get install libdart6.12 libdart-collision-ode6.12 \
+                 libdart-collision-bullet6.12` installs DART and what it needs \
+                 (scripts/setup does)"
             } else {
                 ""
             };
-            format!(
-                "the DART engine could not load its library (from memory: {memory}; \
-                 from a temporary file: {file}){hint}"
-            )
+            format!("the DART engine could not load its library ({e}){hint}")
         })
     })?;
     // The library stays loaded for the life of the process.
@@ -297,7 +316,7 @@ impl<T> UniquePtr<T> {
     ///
     /// # Panics
     /// When there is none (a world is dropped only with its owner).
-    pub fn pin_mut(&mut self) -> &mut T {
+    pub fn get_mut(&mut self) -> &mut T {
         self.0
             .as_mut()
             .expect("a DART world is used after it was dropped")

@@ -72,7 +72,7 @@ pub fn dart_version() -> String {
 #[doc(hidden)]
 pub fn say_through_dart(text: &str) -> String {
     if let Err(e) = ffi::say(text) {
-        return format!("DART could not be loaded: {e}");
+        return e.to_string();
     }
     forward_messages()
 }

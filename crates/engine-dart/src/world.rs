@@ -445,7 +445,7 @@ pub fn build(recipe: &Recipe<'_>) -> Result<World, String> {
         };
         let body = world
             .world
-            .pin_mut()
+            .get_mut()
             .add_robot_body(
                 top,
                 parent,
@@ -512,7 +512,7 @@ pub fn build(recipe: &Recipe<'_>) -> Result<World, String> {
                             mesh_triangles(path, uri, *scale).map_err(context)?;
                         world
                             .world
-                            .pin_mut()
+                            .get_mut()
                             .add_mesh(g, &vertices, &indices, &at, mu)
                             .map_err(|e| context(e.what().to_string()))?;
                         continue;
@@ -520,7 +520,7 @@ pub fn build(recipe: &Recipe<'_>) -> Result<World, String> {
                 };
                 world
                     .world
-                    .pin_mut()
+                    .get_mut()
                     .add_shape(false, g, shape.0, &shape.1, &at, mu, 0.0)
                     .map_err(|e| context(e.what().to_string()))?;
             }
@@ -553,7 +553,7 @@ pub fn build(recipe: &Recipe<'_>) -> Result<World, String> {
             if lower.is_finite() || upper.is_finite() {
                 world
                     .world
-                    .pin_mut()
+                    .get_mut()
                     .set_joint_limits(i, lower, upper)
                     .map_err(|e| context(e.what().to_string()))?;
             }
@@ -561,14 +561,14 @@ pub fn build(recipe: &Recipe<'_>) -> Result<World, String> {
         if friction > 0.0 {
             world
                 .world
-                .pin_mut()
+                .get_mut()
                 .set_joint_friction(i, friction)
                 .map_err(|e| context(e.what().to_string()))?;
         }
         if settings.servo == Servo::Servo {
             world
                 .world
-                .pin_mut()
+                .get_mut()
                 .set_actuator(i, true, spec.force_limit)
                 .map_err(|e| context(e.what().to_string()))?;
         }
@@ -586,7 +586,7 @@ pub fn build(recipe: &Recipe<'_>) -> Result<World, String> {
         let mu = ground.friction.unwrap_or(DEFAULT_FRICTION) * friction_scale;
         world
             .world
-            .pin_mut()
+            .get_mut()
             .add_ground(ground.height_m, mu, 1.0)
             .map_err(|e| format!("the ground: {}", e.what()))?;
     }
@@ -604,14 +604,14 @@ pub fn build(recipe: &Recipe<'_>) -> Result<World, String> {
         let inertia = Vec3::new(y * y + z * z, x * x + z * z, x * x + y * y).scale(mass / 12.0);
         let i = world
             .world
-            .pin_mut()
+            .get_mut()
             .add_object(&o.name, mass, &vec3(inertia), &pose7(&o.pose))
             .map_err(|e| context(e.what().to_string()))?;
         let restitution = recipe.params.restitution(&o.name).unwrap_or(0.0);
         let mu = o.friction.unwrap_or(DEFAULT_FRICTION) * friction_scale;
         world
             .world
-            .pin_mut()
+            .get_mut()
             .add_shape(
                 true,
                 i,
@@ -630,7 +630,7 @@ pub fn build(recipe: &Recipe<'_>) -> Result<World, String> {
     }
     world
         .world
-        .pin_mut()
+        .get_mut()
         .finish()
         .map_err(|e| e.what().to_string())?;
     let link_frame = |l: usize| (plan.groups.group_of_link[l], plan.groups.link_in_group[l]);
@@ -660,7 +660,7 @@ impl World {
 
     /// The shim's world, mutable.
     pub fn raw_mut(&mut self) -> &mut ffi::World {
-        self.world.pin_mut()
+        self.world.get_mut()
     }
 
     /// The world pose of robot body `b`'s frame.
