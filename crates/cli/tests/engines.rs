@@ -805,23 +805,25 @@ fn dart_loads_only_in_a_process_that_makes_a_dart_world() {
         assert!(err.contains("file="), "{args:?}: LD_DEBUG said nothing");
         err.contains("libdart.so")
     };
+    // A run's job as the command hands it to its child: only check that the
+    // scene loads.
     let check = |engine: &str| {
-        serde_json::json!({
-            "scene_file": scene_file("scene1_single_joint"),
-            "engine": engine,
-            "robot": null,
-            "packages": [],
-            "set": [],
-            "perturb": [],
-            "seed": 0,
-            "params": null,
-            "params_text": null,
-            "check_only": true,
-            "stitch": null,
-            "allow_unstable": false,
-            "replay": null,
+        serde_json::to_string(&realitygap_runner::Job {
+            scene_file: scene_file("scene1_single_joint"),
+            engine: engine.into(),
+            robot: None,
+            packages: vec![],
+            set: vec![],
+            perturb: vec![],
+            seed: 0,
+            params: None,
+            params_text: None,
+            check_only: true,
+            stitch: None,
+            allow_unstable: false,
+            replay: None,
         })
-        .to_string()
+        .unwrap()
     };
     assert!(
         !opens_dart(&["--version"], ""),

@@ -8,7 +8,7 @@
 // - an entry point that can fail returns NULL on success, or the C++
 //   exception's message as a string from malloc, which the caller frees
 //   with rgdart_free; results go through pointers (rgdart_take_messages,
-//   which cannot fail, returns its text the same way);
+//   which cannot fail, returns its text the same way, NULL for none);
 // - nothing is thrown out of an entry point (noexcept: what escapes ends
 //   the process, as it did through cxx).
 
@@ -88,7 +88,9 @@ RGDART_API void rgdart_free(char* s) noexcept
 
 RGDART_API char* rgdart_take_messages() noexcept
 {
-  return copy(rgdart::take_messages());
+  // NULL when DART said nothing: no allocation for the usual case.
+  std::string said = rgdart::take_messages();
+  return said.empty() ? nullptr : copy(said);
 }
 
 RGDART_API void rgdart_say(const char* p, std::size_t n) noexcept
