@@ -220,8 +220,9 @@ struct Inner {
     /// installed), with the line that installs it.
     unavailable: Option<String>,
     hello: OnceLock<Result<Hello, String>>,
-    /// An idle child: the one `hello` started, or one whose simulation
-    /// ended; `check_settings` asks it, and `load` takes it.
+    /// The idle children: the one `hello` started, and those whose
+    /// simulation ended (at most [`sim::MAX_IDLE`]); `check_settings` asks
+    /// the newest, and `load` takes it.
     control: sim::IdleSlot,
 }
 
@@ -238,7 +239,7 @@ impl RemoteEngine {
                 launch,
                 unavailable,
                 hello: OnceLock::new(),
-                control: Arc::new(Mutex::new(None)),
+                control: Arc::new(Mutex::new(Vec::new())),
             }),
         }
     }
@@ -301,7 +302,7 @@ impl RemoteEngine {
             .hello
             .get_or_init(|| {
                 let (child, hello) = self.start(Duration::from_secs_f64(DEFAULT_TIMEOUT_S))?;
-                *self.inner.control.lock().unwrap_or_else(|e| e.into_inner()) = Some(child);
+                sim::give_back(&self.inner.control, child);
                 Ok(hello)
             })
             .as_ref()
@@ -360,11 +361,11 @@ impl Engine for RemoteEngine {
         SettingsReader::new(self.inner.name, settings, &hello.settings)?;
         let (timeout, rest) = self.split_timeout(settings)?;
         let mut control = self.inner.control.lock().unwrap_or_else(|e| e.into_inner());
-        if control.is_none() {
+        if control.is_empty() {
             let (child, _) = self.start(timeout).map_err(|m| self.load_error(m))?;
-            *control = Some(child);
+            control.push(child);
         }
-        let child = control.as_mut().expect("started");
+        let child = control.last_mut().expect("started");
         child.set_timeout(timeout);
         let result =
             child.call(&json!({"op": "check_settings", "settings": model::settings_json(&rest)}));
@@ -372,7 +373,7 @@ impl Engine for RemoteEngine {
             Ok(f) => f,
             Err(f) => {
                 if matches!(f, Failure::Broken(_)) {
-                    *control = None;
+                    control.pop();
                 }
                 return Err(engine_error(self.inner.name, f, |m| self.load_error(m)));
             }
@@ -418,7 +419,7 @@ impl Engine for RemoteEngine {
             .control
             .lock()
             .unwrap_or_else(|e| e.into_inner())
-            .take();
+            .pop();
         let mut child = match idle {
             Some(mut child) => {
                 child.set_timeout(timeout);

@@ -18,21 +18,29 @@ use std::cell::RefCell;
 use std::sync::{Arc, Mutex};
 
 /// Where a simulation's child goes back to when the simulation ends: its
-/// engine's idle slot, for the next `check_settings` or `load` (a second
-/// `load` replaces the child's simulation), so that a process running one
-/// simulation after another starts the engine once.
-pub(crate) type IdleSlot = Arc<Mutex<Option<Child>>>;
+/// engine's idle children, for the next `check_settings` or `load` (a
+/// second `load` replaces the child's simulation), so that a process
+/// running one simulation after another starts the engine once, and one
+/// running a few side by side (a state handed from one simulation to
+/// another, a reference beside a candidate) starts it once per
+/// simulation alive at the same time, not once per simulation.
+pub(crate) type IdleSlot = Arc<Mutex<Vec<Child>>>;
+
+/// The most idle children an engine keeps (each holds its engine's
+/// libraries and last model: a Newton child about 420 MB); a child that
+/// ends its simulation when this many wait is stopped.
+pub(crate) const MAX_IDLE: usize = 3;
 
 /// Puts `child` back into `slot` for the next `check_settings` or `load`,
 /// unless it is broken (it is dropped, and the next request starts a new
-/// one) or the slot already holds one.
+/// one) or the slot already holds [`MAX_IDLE`] children.
 pub(crate) fn give_back(slot: &IdleSlot, child: Child) {
     if child.is_broken() {
         return;
     }
     let mut idle = slot.lock().unwrap_or_else(|e| e.into_inner());
-    if idle.is_none() {
-        *idle = Some(child);
+    if idle.len() < MAX_IDLE {
+        idle.push(child);
     }
 }
 

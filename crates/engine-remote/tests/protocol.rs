@@ -7,7 +7,7 @@
 //! `tests/adapters/misbehave.py` (standard library only).
 
 use realitygap_core::controller::{simulate, RunOptions, RunStatus};
-use realitygap_core::engine::{Engine, EngineError, EngineSettings, SettingValue};
+use realitygap_core::engine::{Engine, EngineError, EngineSettings, ModelVariation, SettingValue};
 use realitygap_core::testing;
 use realitygap_engine_remote::child::Launch;
 use realitygap_engine_remote::RemoteEngine;
@@ -155,6 +155,44 @@ fn a_refused_load_keeps_its_process_and_a_crash_does_not() {
     };
     assert_eq!(starts("refuse"), 1);
     assert_eq!(starts("crash"), 3);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn simulations_side_by_side_reuse_their_processes() {
+    // Three simulations alive at once need three processes; once they
+    // end, the next three take those back instead of starting new ones
+    // (a handover, a reference beside a candidate), and a fourth alive at
+    // once starts one more.
+    let dir = std::env::temp_dir().join(format!("realitygap-side-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("starts");
+    let engine = misbehave_with(
+        "never",
+        "crash",
+        vec![("MISBEHAVE_STARTS".into(), file.display().to_string())],
+    );
+    let scene = testing::scene("scene1_single_joint");
+    let robot = testing::mico2();
+    let load = || {
+        engine
+            .load(
+                &scene,
+                &robot,
+                &EngineSettings::new(),
+                &ModelVariation::default(),
+            )
+            .unwrap()
+    };
+    let starts = || std::fs::read_to_string(&file).unwrap().lines().count();
+    let alive: Vec<_> = (0..3).map(|_| load()).collect();
+    assert_eq!(starts(), 3);
+    drop(alive);
+    let alive: Vec<_> = (0..3).map(|_| load()).collect();
+    assert_eq!(starts(), 3);
+    let fourth = load();
+    assert_eq!(starts(), 4);
+    drop((alive, fourth));
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
