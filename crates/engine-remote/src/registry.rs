@@ -126,13 +126,24 @@ pub fn venv_dir(adapter: &Adapter) -> PathBuf {
     venv_dir_in(adapter, &engines_dir())
 }
 
-fn venv_dir_in(adapter: &Adapter, root: &Path) -> PathBuf {
-    root.join(adapter.name).join("venv")
+/// The adapter's folder in the engines folder `root`: its environment
+/// (`venv`), the stamp of its requirements and its children's byte code.
+fn adapter_dir_in(adapter: &Adapter, root: &Path) -> PathBuf {
+    root.join(adapter.name)
 }
 
-/// The stamp that says the environment was made from these requirements.
+fn venv_dir_in(adapter: &Adapter, root: &Path) -> PathBuf {
+    adapter_dir_in(adapter, root).join("venv")
+}
+
+/// The stamp that says the environment in `root` was made from these
+/// requirements.
+fn stamp_file_in(adapter: &Adapter, root: &Path) -> PathBuf {
+    adapter_dir_in(adapter, root).join("requirements.txt")
+}
+
 fn stamp_file(adapter: &Adapter) -> PathBuf {
-    engines_dir().join(adapter.name).join("requirements.txt")
+    stamp_file_in(adapter, &engines_dir())
 }
 
 /// Whether the adapter's environment is made from its current list.
@@ -144,7 +155,7 @@ pub fn is_installed(adapter: &Adapter) -> bool {
 /// from its current list.
 pub fn is_installed_in(adapter: &Adapter, root: &Path) -> bool {
     venv_dir_in(adapter, root).join("bin/python").is_file()
-        && std::fs::read_to_string(root.join(adapter.name).join("requirements.txt"))
+        && std::fs::read_to_string(stamp_file_in(adapter, root))
             .ok()
             .as_deref()
             == Some(adapter.requirements)
@@ -159,7 +170,7 @@ pub fn install_line(name: &str) -> String {
 /// packages, from the package index pip is configured with), printing
 /// pip's progress.
 pub fn install(adapter: &Adapter) -> Result<(), String> {
-    let dir = engines_dir().join(adapter.name);
+    let dir = adapter_dir_in(adapter, &engines_dir());
     let venv = venv_dir(adapter);
     std::fs::remove_file(stamp_file(adapter)).ok();
     std::fs::create_dir_all(&dir).map_err(|e| format!("cannot make {}: {e}", dir.display()))?;
@@ -285,7 +296,7 @@ pub fn built_in_in(adapter: &Adapter, root: &Path) -> RemoteEngine {
         &venv_dir_in(adapter, root).join("bin/python"),
         adapter.module,
         adapter.name,
-        &root.join(adapter.name).join("pycache"),
+        &adapter_dir_in(adapter, root).join("pycache"),
     ) {
         Ok(launch) => RemoteEngine::new(adapter.name, launch),
         Err(e) => RemoteEngine::unavailable(adapter.name, e),
