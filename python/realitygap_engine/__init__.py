@@ -815,6 +815,112 @@ def _reply_for(session: _Session, op: Any, request: Any) -> dict:
         return {"error": UsageError(text).reply()}
 
 
+def _zygote_listen(request: Mapping[str, Any], stdin, fd: int | None):
+    """The ``zygote`` request: a listening socket at ``request["socket"]``
+    and the reply, or no socket and an error reply (the process then goes
+    on serving requests)."""
+    import socket
+
+    path = request.get("socket")
+    if not isinstance(path, str) or not path:
+        return None, {"error": UsageError("`socket` must be the path of a Unix socket").reply()}
+    try:
+        own_stdin = stdin.fileno() == 0
+    except (AttributeError, OSError, ValueError):
+        own_stdin = False
+    if not own_stdin or fd != 1 or not hasattr(os, "fork") or not hasattr(os, "pidfd_open"):
+        return None, {"error": UsageError("this process cannot fork engine children (a zygote needs "
+                                          "its own standard input and output, fork and pidfd_open)").reply()}
+    listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    try:
+        listener.bind(path)
+        listener.listen(64)
+    except OSError as e:
+        listener.close()
+        return None, {"error": UsageError(f"cannot listen on {path}: {e}").reply()}
+    return listener, {"ok": {"socket": path, "pid": os.getpid()}}
+
+
+def _zygote_serve(adapter: Adapter, listener, path: str, private: list[int], saved_stdout) -> int:
+    """The zygote's loop: for each connection, the child's standard
+    input, output and error arrive as file descriptors (SCM_RIGHTS); a
+    forked child takes them as its own, sends back its process id and a
+    pidfd of itself (realitygap's handle to kill it), and serves the
+    protocol; the zygote only forks. It ends when its standard input ends
+    (the realitygap process that started it has exited), removing the
+    socket."""
+    import select
+    import signal
+    import socket
+
+    # Forked children are reaped by the kernel: they are not this
+    # process's to wait for.
+    signal.signal(signal.SIGCHLD, signal.SIG_IGN)
+    try:
+        while True:
+            ready, _, _ = select.select([listener, 0], [], [])
+            if 0 in ready and not os.read(0, 4096):
+                return 0
+            if listener not in ready:
+                continue
+            conn, _ = listener.accept()
+            with conn:
+                try:
+                    _, fds, _, _ = socket.recv_fds(conn, 64, 3)
+                except OSError:
+                    continue
+                if len(fds) != 3:
+                    for f in fds:
+                        os.close(f)
+                    continue
+                pid = os.fork()
+                if pid == 0:
+                    _forked_child(adapter, listener, conn, fds, private, saved_stdout)
+                for f in fds:
+                    os.close(f)
+    finally:
+        listener.close()
+        try:
+            os.unlink(path)
+        except OSError:
+            pass
+
+
+def _forked_child(adapter: Adapter, listener, conn, fds: list[int], private: list[int], saved_stdout) -> None:
+    """A zygote's child: takes ``fds`` as its standard input, output and
+    error, answers the connection with its process id and pidfd, then
+    serves the protocol until its input ends. Never returns."""
+    import signal
+    import socket
+
+    code = 1
+    try:
+        signal.signal(signal.SIGCHLD, signal.SIG_DFL)
+        listener.close()
+        for f in private:
+            os.close(f)
+        for target, f in enumerate(fds):
+            os.dup2(f, target)
+        for f in fds:
+            if f > 2:
+                os.close(f)
+        pidfd = os.pidfd_open(os.getpid())
+        socket.send_fds(conn, [f"{os.getpid()}\n".encode()], [pidfd])
+        os.close(pidfd)
+        conn.close()
+        sys.stdout = saved_stdout
+        code = serve(adapter)
+    except BaseException:  # noqa: BLE001 - the child ends here whatever happens
+        traceback.print_exc(file=sys.stderr)
+    finally:
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except Exception:  # noqa: BLE001
+                pass
+        os._exit(code)
+
+
 def _lines(stdin) -> Iterable[str]:
     buffer = getattr(stdin, "buffer", None)
     if buffer is not None:
@@ -904,6 +1010,16 @@ def serve(adapter: Adapter, stdin=None, stdout=None) -> int:
             else:
                 if isinstance(request, Mapping):
                     op = request.get("op")
+                if op == "zygote":
+                    listener, reply = _zygote_listen(request, stdin, fd)
+                    write(json.dumps(reply, separators=(",", ":")) + "\n")
+                    if listener is None:
+                        continue
+                    # From here on this process only forks the children
+                    # (each served by serve() itself); its own input is
+                    # watched for its end.
+                    private = [out.fileno(), saved_fd1] if out is not None else []
+                    return _zygote_serve(adapter, listener, request["socket"], private, saved_sys_stdout)
                 reply = _reply_for(session, op, request)
             if profile_dir:
                 entry = profile.setdefault(str(op), [0, 0.0])

@@ -462,6 +462,71 @@ def test_native_output_goes_to_stderr_in_a_child_process():
     assert "native noise" in p.stderr and "python noise" in p.stderr
 
 
+def test_a_zygote_forks_children_that_serve_the_protocol(tmp_path):
+    """The `zygote` request as realitygap sends it: the process listens on
+    a Unix socket; each connection brings a child's standard input, output
+    and error (SCM_RIGHTS) and gets back the forked child's process id and
+    pidfd; each child serves the protocol on those pipes (stray output to
+    its own standard error), is killed through its pidfd, and the zygote
+    ends with its input, removing the socket."""
+    import signal
+    import socket
+
+    script = textwrap.dedent("""
+        import os, sys
+        sys.path.insert(0, %r)
+        import realitygap_engine as rge
+
+        class Forks(rge.Adapter):
+            name = "forks"
+            def version(self):
+                print("python noise")
+                return "Forks %%d" %% os.getpid()
+
+        sys.exit(rge.serve(Forks()))
+    """) % str(PYTHON_DIR)
+    zygote = subprocess.Popen([sys.executable, "-c", script], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True)
+    path = str(tmp_path / "z.sock")
+    zygote.stdin.write(json.dumps({"op": "zygote", "socket": path}) + "\n")
+    zygote.stdin.flush()
+    assert ok(json.loads(zygote.stdout.readline())) == {"socket": path, "pid": zygote.pid}
+
+    def fork():
+        pipes = [os.pipe() for _ in range(3)]
+        with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as conn:
+            conn.connect(path)
+            socket.send_fds(conn, [b"fork\n"], [pipes[0][0], pipes[1][1], pipes[2][1]])
+            for fd in (pipes[0][0], pipes[1][1], pipes[2][1]):
+                os.close(fd)
+            text, fds, _, _ = socket.recv_fds(conn, 64, 1)
+        assert len(fds) == 1, text
+        return int(text), fds[0], os.fdopen(pipes[0][1], "w"), os.fdopen(pipes[1][0]), os.fdopen(pipes[2][0])
+
+    children = [fork() for _ in range(2)]
+    pids = [c[0] for c in children]
+    assert len({zygote.pid, *pids}) == 3
+    for pid, _, stdin, stdout, _ in children:
+        stdin.write(json.dumps({"op": "hello", "protocol": 1}) + "\n")
+        stdin.flush()
+        assert ok(json.loads(stdout.readline()))["version"] == f"Forks {pid}"
+    # A child ends with its input, and dies by its pidfd.
+    pid, pidfd, stdin, stdout, stderr = children[0]
+    stdin.close()
+    assert stdout.read() == "" and "python noise" in stderr.read()
+    pid, pidfd, stdin, stdout, stderr = children[1]
+    signal.pidfd_send_signal(pidfd, signal.SIGKILL)
+    assert stdout.read() == ""
+    stdin.close()
+    assert zygote.poll() is None
+    zygote.stdin.close()
+    assert zygote.wait(timeout=30) == 0, zygote.stderr.read()
+    assert not os.path.exists(path)
+    # serve() over files that are not the process's own cannot fork.
+    reply, = serve_lines([{"op": "zygote", "socket": str(tmp_path / "y.sock")}])
+    assert "cannot fork" in err(reply, "usage")["message"]
+
+
 # --------------------------------------------------------------------------
 # The MuJoCo adapter as a child process
 

@@ -7,8 +7,9 @@
 
 use serde_json::{Map, Value};
 use std::collections::VecDeque;
-use std::io::{BufRead, BufReader, Write};
-use std::process::{ChildStdin, Command, Stdio};
+use std::io::{BufRead, BufReader, Read, Write};
+use std::os::fd::OwnedFd;
+use std::process::{Command, Stdio};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
@@ -60,10 +61,42 @@ impl Failure {
     }
 }
 
+/// An engine child's process.
+enum Process {
+    /// Started by this process.
+    Spawned(std::process::Child),
+    /// Forked by a zygote ([`crate::zygote`]): not this process's child,
+    /// so it is killed and waited for through its pidfd.
+    Forked(OwnedFd),
+}
+
+impl Process {
+    /// Kills the process and waits for its end; its exit status when it
+    /// was this process's child.
+    fn kill_and_wait(&mut self) -> Option<std::process::ExitStatus> {
+        match self {
+            Process::Spawned(child) => {
+                let _ = child.kill();
+                child.wait().ok()
+            }
+            Process::Forked(pidfd) => {
+                let _ = rustix::process::pidfd_send_signal(&*pidfd, rustix::process::Signal::KILL);
+                // A pidfd becomes readable when its process has ended.
+                let mut fds = [rustix::event::PollFd::new(
+                    &*pidfd,
+                    rustix::event::PollFlags::IN,
+                )];
+                while let Err(rustix::io::Errno::INTR) = rustix::event::poll(&mut fds, None) {}
+                None
+            }
+        }
+    }
+}
+
 /// A running engine child.
 pub struct Child {
-    process: std::process::Child,
-    stdin: Option<ChildStdin>,
+    process: Process,
+    stdin: Option<Box<dyn Write + Send>>,
     lines: Receiver<std::io::Result<String>>,
     stderr: Arc<Mutex<VecDeque<String>>>,
     stderr_reader: Option<JoinHandle<()>>,
@@ -72,8 +105,14 @@ pub struct Child {
 }
 
 impl Child {
-    /// Starts the child; `timeout` bounds the wait for each reply.
+    /// Starts the child, forked by the engine's zygote where it has one
+    /// ([`crate::zygote`]); `timeout` bounds the wait for each reply.
     pub fn spawn(launch: &Launch, timeout: Duration) -> Result<Child, String> {
+        crate::zygote::spawn(launch, timeout)
+    }
+
+    /// Starts the child as a process of its own.
+    pub(crate) fn spawn_process(launch: &Launch, timeout: Duration) -> Result<Child, String> {
         let (program, args) = launch
             .command
             .split_first()
@@ -86,8 +125,43 @@ impl Child {
             .stderr(Stdio::piped())
             .spawn()
             .map_err(|e| format!("cannot start `{}`: {e}", launch.command.join(" ")))?;
+        let stdin = process.stdin.take().expect("piped");
         let stdout = process.stdout.take().expect("piped");
-        let stderr_pipe = process.stderr.take().expect("piped");
+        let stderr = process.stderr.take().expect("piped");
+        Ok(Child::over(
+            Process::Spawned(process),
+            Box::new(stdin),
+            stdout,
+            stderr,
+            timeout,
+        ))
+    }
+
+    /// A child forked by a zygote, over the pipes it took as its standard
+    /// streams; `pidfd` is its handle.
+    pub(crate) fn forked(
+        pidfd: OwnedFd,
+        stdin: impl Write + Send + 'static,
+        stdout: impl Read + Send + 'static,
+        stderr: impl Read + Send + 'static,
+        timeout: Duration,
+    ) -> Child {
+        Child::over(
+            Process::Forked(pidfd),
+            Box::new(stdin),
+            stdout,
+            stderr,
+            timeout,
+        )
+    }
+
+    fn over(
+        process: Process,
+        stdin: Box<dyn Write + Send>,
+        stdout: impl Read + Send + 'static,
+        stderr_pipe: impl Read + Send + 'static,
+        timeout: Duration,
+    ) -> Child {
         let (tx, lines) = mpsc::channel();
         std::thread::spawn(move || {
             let mut reader = BufReader::new(stdout);
@@ -119,15 +193,15 @@ impl Child {
                 kept.push_back(line);
             }
         });
-        Ok(Child {
-            stdin: process.stdin.take(),
+        Child {
+            stdin: Some(stdin),
             process,
             lines,
             stderr,
             stderr_reader: Some(stderr_reader),
             timeout,
             broken: None,
-        })
+        }
     }
 
     /// Whether the child failed (and was stopped).
@@ -143,8 +217,7 @@ impl Child {
     /// Kills the child and collects its standard error: `reason` with the
     /// last lines, which every later request repeats.
     fn fail(&mut self, reason: String) -> Failure {
-        let _ = self.process.kill();
-        let status = self.process.wait().ok();
+        let status = self.process.kill_and_wait();
         // The standard error pipe closes with the process: its reader has
         // then kept everything the child wrote.
         if let Some(reader) = self.stderr_reader.take() {
@@ -223,7 +296,6 @@ impl Drop for Child {
         // Closing its input is the child's signal to exit; it is killed in
         // case it does not.
         self.stdin.take();
-        let _ = self.process.kill();
-        let _ = self.process.wait();
+        self.process.kill_and_wait();
     }
 }

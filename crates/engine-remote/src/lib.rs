@@ -11,7 +11,9 @@
 //! - [`sim`]: [`Simulation`] over the protocol, one message a control
 //!   period;
 //! - [`registry`]: the built-in Python adapters (`mujoco4`, ...), their
-//!   pinned environments, and a user's own engines (`engines.toml`).
+//!   pinned environments, and a user's own engines (`engines.toml`);
+//! - [`zygote`]: children forked from the engine's first process, which
+//!   imported the engine once.
 //!
 //! A [`RemoteEngine`] asks its child `hello` once (name, version,
 //! settings, parameters, command laws) and keeps that child idle for
@@ -20,13 +22,16 @@
 //! that runs one simulation after another starts the engine once; so does
 //! a child that refused a model (an `error` reply). A child that breaks
 //! the protocol (crashes, hangs, garbles) is stopped and never reused: a
-//! crash ends one run, never a batch.
+//! crash ends one run, never a batch. A child it starts is forked from
+//! the engine's zygote when the engine has one ([`zygote`]), so even the
+//! processes of a batch import the engine once between them.
 
 pub mod child;
 pub mod model;
 pub mod registry;
 pub mod sim;
 pub mod wire;
+pub mod zygote;
 
 use child::{Child, Failure, Launch};
 use realitygap_core::engine::{

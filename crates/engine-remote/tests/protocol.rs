@@ -220,3 +220,85 @@ fn a_missing_program_and_a_bad_timeout_are_clear() {
         "engine misbehave: setting `timeout_s`: must be a positive number of seconds, found 0"
     );
 }
+
+/// The processes alive whose command line names `marker` (zombies, which
+/// have ended, left out).
+fn alive_naming(marker: &str) -> usize {
+    std::fs::read_dir("/proc")
+        .unwrap()
+        .filter_map(|e| {
+            let dir = e.ok()?.path();
+            let cmdline = std::fs::read(dir.join("cmdline")).ok()?;
+            let stat = std::fs::read_to_string(dir.join("stat")).ok()?;
+            let state = stat.rsplit_once(") ")?.1.chars().next()?;
+            (String::from_utf8_lossy(&cmdline).contains(marker) && !matches!(state, 'Z' | 'X'))
+                .then_some(())
+        })
+        .count()
+}
+
+/// An engine written with the Python SDK (MuJoCo 4's adapter, in its
+/// kit environment) imports once: its first process becomes the zygote
+/// and every child is a fork of it, a process of its own. A fork that
+/// hangs past its timeout is killed through its pidfd like a started
+/// child, and the others go on. A process this one starts (as a batch's
+/// `__run-one`) finds the zygote in its environment.
+#[test]
+fn children_fork_from_the_engines_first_process() {
+    use realitygap_engine_remote::{registry, zygote};
+    let dir = std::env::temp_dir().join(format!("realitygap-fork-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let imports = dir.join("imports");
+    // The adapter's module run by a line that counts its imports; the
+    // file's path marks the processes.
+    let mut launch = registry::for_kit("mujoco4").launch().clone();
+    let m = launch.command.iter().position(|a| a == "-m").unwrap();
+    let module = launch.command[m + 1].clone();
+    launch.command.truncate(m);
+    launch.command.extend([
+        "-c".to_string(),
+        format!(
+            "import os, runpy\nopen({:?}, 'a').write('%d\\n' % os.getpid())\nrunpy.run_module({module:?}, run_name='__main__')",
+            imports.display().to_string()
+        ),
+    ]);
+    let marker = imports.display().to_string();
+    let engine = RemoteEngine::new("mujoco4", launch.clone());
+    let scene = testing::scene("scene1_single_joint");
+    let robot = testing::mico2();
+    let load = |settings: &EngineSettings| {
+        engine.load(&scene, &robot, settings, &ModelVariation::default())
+    };
+    let count = || std::fs::read_to_string(&imports).unwrap().lines().count();
+    let alive: Vec<_> = (0..3)
+        .map(|_| load(&EngineSettings::new()).unwrap())
+        .collect();
+    assert_eq!(count(), 1, "one import");
+    // The zygote and a child for each simulation alive.
+    assert_eq!(alive_naming(&marker), 4);
+    drop(alive);
+    let mut tight = EngineSettings::new();
+    tight.insert("timeout_s".into(), SettingValue::Float(1e-6));
+    let e = match load(&tight) {
+        Err(e) => e.to_string(),
+        Ok(_) => panic!("a load answered within a microsecond"),
+    };
+    // (To `check_settings` or to `load`, whichever comes first.)
+    assert!(
+        e.contains("within 0.000001 s (timeout_s); the engine process was stopped"),
+        "{e}"
+    );
+    // The child that timed out is gone; the zygote and two idle remain.
+    assert_eq!(alive_naming(&marker), 3);
+    // The others go on.
+    let again: Vec<_> = (0..3)
+        .map(|_| load(&EngineSettings::new()).unwrap())
+        .collect();
+    assert_eq!(alive_naming(&marker), 4);
+    drop(again);
+    assert_eq!(count(), 1, "still one import");
+    let handed = std::env::var(zygote::ZYGOTES_ENV).unwrap();
+    assert!(handed.contains(&zygote::key(&launch)), "{handed}");
+    drop(engine);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
