@@ -270,10 +270,6 @@ pub fn tune(request: &TuneRequest, launcher: &Launcher, ui: &dyn Ui) -> Result<T
         .context("give a study file, or --recordings DIR")?;
     let registry = crate::engines;
     let engine = find_engine(registry, &args.engine)?;
-    // An engine out of process starts here (its `hello`), once: the
-    // evaluations' processes (`__run-one`) then fork from its zygote
-    // instead of each importing the engine (engine_remote::zygote).
-    let _ = engine.version();
     let space_file = args
         .space
         .clone()

@@ -44,7 +44,15 @@ pub fn find_engine(registry: Registry, name: &str) -> Result<Box<dyn Engine>> {
     }
     let list = names.join(", ");
     match engines.into_iter().find(|e| e.name() == name) {
-        Some(e) => Ok(e),
+        Some(e) => {
+            // An engine out of process starts here (its `hello`), once per
+            // process: the runs this command hands to `__run-one` children
+            // then fork from its zygote instead of each importing the
+            // engine (realitygap_engine_remote::zygote). A linked engine
+            // just names its version.
+            let _ = e.version();
+            Ok(e)
+        }
         None => match realitygap_engine_remote::registry::adapter(name) {
             Some(_) => bail!(
                 "engine \"{name}\" is not installed: `{}` makes its environment (available: {list})",
