@@ -14,6 +14,7 @@
 //! adding or removing a source changes no other source's interval.
 
 use realitygap_core::controller::SplitMix64;
+use realitygap_core::fingerprint::Fingerprint;
 use realitygap_core::Vec3;
 use serde::{Deserialize, Serialize};
 
@@ -161,11 +162,7 @@ fn draw_counts(rng: &mut SplitMix64, n: usize, counts: &mut [f64]) {
 
 /// A stream seed for a source, from the bootstrap seed and its name (FNV-1a).
 fn stream_seed(seed: u64, name: &str) -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for b in name.bytes() {
-        h = (h ^ b as u64).wrapping_mul(0x0100_0000_01b3);
-    }
-    seed ^ h
+    seed ^ Fingerprint::new().eat(name.as_bytes()).value()
 }
 
 /// The bootstrap replicates of every source's accumulated error, metres:

@@ -17,6 +17,7 @@
 //!   trip, handover, parameter effects, gravity, divergence).
 //! - [`controller`]: the controller loop shared by every engine
 //!   ([`controller::run_scene`]) and the seeded per-run perturbations.
+//! - [`fingerprint`]: a stable hash (FNV-1a) for names, keys and seeds.
 //! - [`stitch`]: stitched runs, one engine per schedule phase, the state
 //!   handed over at each phase boundary.
 //!
@@ -29,6 +30,7 @@ pub mod actuator;
 pub mod conformance;
 pub mod controller;
 pub mod engine;
+pub mod fingerprint;
 pub mod instability;
 pub mod params;
 pub mod pose;

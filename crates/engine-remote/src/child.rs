@@ -80,13 +80,27 @@ impl Process {
                 child.wait().ok()
             }
             Process::Forked(pidfd) => {
-                let _ = rustix::process::pidfd_send_signal(&*pidfd, rustix::process::Signal::KILL);
-                // A pidfd becomes readable when its process has ended.
+                use rustix::io::Errno;
+                match rustix::process::pidfd_send_signal(&*pidfd, rustix::process::Signal::KILL) {
+                    // Sent, or the process had already ended: wait below.
+                    Ok(()) | Err(Errno::SRCH) => {}
+                    // Not ours to kill (it is always our own uid, so this
+                    // should not happen): waiting could block for ever.
+                    Err(_) => return None,
+                }
+                // A pidfd becomes readable when its process has ended. A
+                // killed process ends at once unless the kernel holds it
+                // (uninterruptible I/O); the wait is bounded all the same,
+                // so a stuck process never hangs the batch.
+                let bound = rustix::event::Timespec {
+                    tv_sec: 10,
+                    tv_nsec: 0,
+                };
                 let mut fds = [rustix::event::PollFd::new(
                     &*pidfd,
                     rustix::event::PollFlags::IN,
                 )];
-                while let Err(rustix::io::Errno::INTR) = rustix::event::poll(&mut fds, None) {}
+                while let Err(Errno::INTR) = rustix::event::poll(&mut fds, Some(&bound)) {}
                 None
             }
         }

@@ -23,6 +23,7 @@
 
 use crate::child::Launch;
 use crate::RemoteEngine;
+use realitygap_core::fingerprint::Fingerprint;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -60,13 +61,11 @@ pub fn engines_dir() -> PathBuf {
 /// A short fingerprint of the SDK's text (FNV-1a), naming its folder so
 /// that binaries of different SDKs never share one.
 fn sdk_stamp() -> String {
-    let mut h: u64 = 0xcbf29ce484222325;
+    let mut h = Fingerprint::new();
     for (path, text) in SDK {
-        for b in path.bytes().chain(text.bytes()) {
-            h = (h ^ b as u64).wrapping_mul(0x100000001b3);
-        }
+        h.eat(path.as_bytes()).eat(text.as_bytes());
     }
-    format!("{h:016x}")
+    h.hex()
 }
 
 /// The folder holding the SDK, written out on first use; the message says

@@ -11,8 +11,9 @@
 //! sends their far ends over the socket (SCM_RIGHTS), and gets back the
 //! child's process id and a pidfd (its handle to kill the child, which is
 //! the zygote's and not its own). The socket's path goes to the processes
-//! this one starts in `REALITYGAP_ENGINE_ZYGOTES`, so a batch's runs fork
-//! from their parent's zygote too.
+//! a batch starts in `REALITYGAP_ENGINE_ZYGOTES` ([`handed_down`], set by
+//! the runner on each command), so a batch's runs fork from their parent's
+//! zygote too.
 //!
 //! - An engine that does not answer `zygote` with its socket (an adapter
 //!   in another language, or an older SDK) keeps the old way: that first
@@ -24,6 +25,7 @@
 //! - `REALITYGAP_ENGINE_NO_ZYGOTE=1` starts every child afresh.
 
 use crate::child::{Child, Failure, Launch};
+use realitygap_core::fingerprint::Fingerprint;
 use serde_json::{json, Map, Value};
 use std::collections::HashMap;
 use std::io::{IoSlice, IoSliceMut};
@@ -58,22 +60,15 @@ fn states() -> &'static Mutex<HashMap<String, State>> {
 /// A launch's key: FNV-1a over its command and environment (the same in
 /// every process of a batch, whatever the build).
 pub fn key(launch: &Launch) -> String {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    let mut eat = |bytes: &[u8]| {
-        for &b in bytes.iter().chain(&[0u8]) {
-            h ^= u64::from(b);
-            h = h.wrapping_mul(0x0100_0000_01b3);
-        }
-    };
+    let mut h = Fingerprint::new();
     for part in &launch.command {
-        eat(part.as_bytes());
+        h.field(part.as_bytes());
     }
-    eat(b"env");
+    h.field(b"env");
     for (k, v) in &launch.env {
-        eat(k.as_bytes());
-        eat(v.as_bytes());
+        h.field(k.as_bytes()).field(v.as_bytes());
     }
-    format!("{h:016x}")
+    h.hex()
 }
 
 /// The zygotes handed down by the process that started this one.
@@ -154,11 +149,35 @@ fn socket_path() -> PathBuf {
     }
 }
 
-/// Adds `key`'s socket to what this process hands to the ones it starts.
+/// The zygotes this process started, by launch key.
+fn published() -> &'static Mutex<Map<String, Value>> {
+    static PUBLISHED: OnceLock<Mutex<Map<String, Value>>> = OnceLock::new();
+    PUBLISHED.get_or_init(Default::default)
+}
+
+/// Adds `key`'s socket to what this process hands to the ones it starts
+/// ([`handed_down`]). Kept apart from the process's environment, which a
+/// process with threads must not change (a native library may be reading
+/// it at that moment).
 fn publish(key: &str, path: &Path) {
-    let mut all = inherited();
+    let mut all = published().lock().unwrap_or_else(|e| e.into_inner());
     all.insert(key.to_string(), Value::String(path.display().to_string()));
-    std::env::set_var(ZYGOTES_ENV, Value::Object(all).to_string());
+}
+
+/// The environment variable (name and value) that hands this process's
+/// zygotes, and those it inherited, to a process it starts; `None` when it
+/// knows of none. Whoever starts realitygap processes that may run an
+/// engine out of process (the runner's batches) sets it on their command.
+pub fn handed_down() -> Option<(&'static str, String)> {
+    let mut all = inherited();
+    all.extend(
+        published()
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .iter()
+            .map(|(k, v)| (k.clone(), v.clone())),
+    );
+    (!all.is_empty()).then(|| (ZYGOTES_ENV, Value::Object(all).to_string()))
 }
 
 /// Asks the zygote at `path` for a child over three new pipes.

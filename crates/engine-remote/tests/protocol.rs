@@ -297,7 +297,8 @@ fn children_fork_from_the_engines_first_process() {
     assert_eq!(alive_naming(&marker), 4);
     drop(again);
     assert_eq!(count(), 1, "still one import");
-    let handed = std::env::var(zygote::ZYGOTES_ENV).unwrap();
+    let (name, handed) = zygote::handed_down().unwrap();
+    assert_eq!(name, zygote::ZYGOTES_ENV);
     assert!(handed.contains(&zygote::key(&launch)), "{handed}");
     drop(engine);
     std::fs::remove_dir_all(&dir).unwrap();

@@ -386,6 +386,8 @@ pub fn run_child(launcher: &Launcher, job: &Job, timeout_s: Option<f64>) -> Chil
     };
     let mut child = match Command::new(program)
         .args(&launcher.args)
+        // A run forks its engine's children from this process's zygote.
+        .envs(realitygap_engine_remote::zygote::handed_down())
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())

@@ -353,6 +353,10 @@ fn submit<K>(
         array.push_str(&format!("%{}", m.max(1)));
     }
     let mut cmd = Command::new("sbatch");
+    // sbatch exports its environment to the tasks: on this machine's node
+    // they fork their engine's children from this process's zygote (a task
+    // elsewhere cannot reach it and starts its own).
+    cmd.envs(realitygap_engine_remote::zygote::handed_down());
     cmd.args(["--parsable", "--job-name=realitygap", "--cpus-per-task=1"])
         .arg(format!("--array={array}"))
         .arg(format!(
