@@ -134,7 +134,14 @@ pub struct ExtraSection {
 /// An extra section; `lead_elsewhere`: its lead sentences already open the
 /// page's verdict, else they open the section (a page with no scenes has
 /// no verdict).
-fn extra_section(h: &mut String, s: &ExtraSection, lead_elsewhere: bool) {
+/// `svg(figure)`: the figure's SVG (its index in `s.figures`), or why it
+/// cannot be drawn.
+fn extra_section(
+    h: &mut String,
+    s: &ExtraSection,
+    lead_elsewhere: bool,
+    svg: &dyn Fn(usize) -> Result<String, String>,
+) {
     let _ = writeln!(
         h,
         "<section id=\"{}\">\n<h2>{}</h2>",
@@ -151,10 +158,10 @@ fn extra_section(h: &mut String, s: &ExtraSection, lead_elsewhere: bool) {
     }
     if !s.figures.is_empty() {
         h.push_str("<div class=\"figures\">\n");
-        for f in &s.figures {
+        for (i, f) in s.figures.iter().enumerate() {
             // A figure that cannot be drawn is named, not left out silently.
-            let svg = f.to_svg().map_or_else(
-                |e| format!("<p>{}</p>", escape(&e.to_string())),
+            let svg = svg(i).map_or_else(
+                |e| format!("<p>{}</p>", escape(&e)),
                 |svg| inline_svg(&svg, &f.title),
             );
             let _ = writeln!(
@@ -187,13 +194,39 @@ fn extra_section(h: &mut String, s: &ExtraSection, lead_elsewhere: bool) {
     h.push_str("</section>\n");
 }
 
-/// [`render_index`] with `extra` sections after the summary.
+/// [`render_index`] with `extra` sections after the summary (their
+/// figures drawn here).
 pub fn render_index_with(
     reports: &[SceneReport],
     figures: &[FigureEntry<'_>],
     provenance: &Provenance,
     downloads: &[(String, String)],
     extra: &[ExtraSection],
+) -> String {
+    render_page(
+        reports,
+        figures,
+        provenance,
+        downloads,
+        extra,
+        &|section, figure| {
+            extra[section].figures[figure]
+                .to_svg()
+                .map_err(|e| e.to_string())
+        },
+    )
+}
+
+/// [`render_index_with`], taking each extra figure's SVG from
+/// `extra_svg(section, figure)` (indices into `extra` and its figures), so
+/// that a report that writes the SVG files draws each figure once.
+pub(crate) fn render_page(
+    reports: &[SceneReport],
+    figures: &[FigureEntry<'_>],
+    provenance: &Provenance,
+    downloads: &[(String, String)],
+    extra: &[ExtraSection],
+    extra_svg: &dyn Fn(usize, usize) -> Result<String, String>,
 ) -> String {
     let mut h = String::new();
     let title = if provenance.title.is_empty() {
@@ -266,8 +299,8 @@ pub fn render_index_with(
             &replay,
         ));
     }
-    for x in extra {
-        extra_section(&mut h, x, scenes);
+    for (i, x) in extra.iter().enumerate() {
+        extra_section(&mut h, x, scenes, &|f| extra_svg(i, f));
     }
     for r in reports {
         let figs: Vec<&FigureEntry<'_>> = figures

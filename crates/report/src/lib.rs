@@ -217,13 +217,32 @@ pub fn write_report_with(
             "capture-frame registration (JSON)".into(),
         ));
     }
-    // The extra sections' figures, as files beside the scenes'.
-    for f in extra.iter().flat_map(|s| &s.figures) {
-        let mut written = f.write(&fig_dir)?.into_iter();
-        files.figures_svg.extend(written.next());
-        files.figures_png.extend(written.next());
+    // The extra sections' figures, as files beside the scenes', each drawn
+    // once: the SVG written is the one the page inlines.
+    let mut extra_svgs: Vec<Vec<String>> = Vec::with_capacity(extra.len());
+    for s in extra {
+        let mut svgs = Vec::with_capacity(s.figures.len());
+        for f in &s.figures {
+            let svg = f.to_svg()?;
+            let png = f.to_png()?;
+            files
+                .figures_svg
+                .push(write(&fig_dir.join(format!("{}.svg", f.stem)), &svg)?);
+            files
+                .figures_png
+                .push(write(&fig_dir.join(format!("{}.png", f.stem)), &png)?);
+            svgs.push(svg);
+        }
+        extra_svgs.push(svgs);
     }
-    let page = html::render_index_with(reports, &entries, provenance, &downloads, extra);
+    let page = html::render_page(
+        reports,
+        &entries,
+        provenance,
+        &downloads,
+        extra,
+        &|section, figure| Ok(extra_svgs[section][figure].clone()),
+    );
     files.index_html = write(&out_dir.join("index.html"), page)?;
     Ok(files)
 }
@@ -265,6 +284,38 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("blocker"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// An extra section's figure is written as SVG and PNG, and the page
+    /// inlines the very SVG written (drawn once).
+    #[test]
+    fn an_extra_sections_figure_is_written_and_inlined() {
+        let dir = std::env::temp_dir().join(format!("rg-report-extra-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let scene = testdata::scene();
+        let mut figure = figures::scene_figures(&scene, &SourceStyles::for_reports(&[]))
+            .into_iter()
+            .next()
+            .unwrap();
+        figure.stem = "extra_figure".into();
+        let title = figure.title.clone();
+        let section = html::ExtraSection {
+            id: "extra".into(),
+            title: "Extra".into(),
+            figures: vec![figure],
+            ..Default::default()
+        };
+        let files = write_report_with(&[], &Provenance::new("t"), &dir, &[section]).unwrap();
+        assert_eq!(files.figures_svg, [dir.join("figures/extra_figure.svg")]);
+        assert_eq!(files.figures_png, [dir.join("figures/extra_figure.png")]);
+        let svg = std::fs::read_to_string(&files.figures_svg[0]).unwrap();
+        let html = std::fs::read_to_string(&files.index_html).unwrap();
+        assert!(
+            html.contains(&html::inline_svg(&svg, &title)),
+            "the written SVG is inlined"
+        );
+        assert!(html.contains("href=\"figures/extra_figure.png\""));
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

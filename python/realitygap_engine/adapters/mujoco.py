@@ -764,8 +764,9 @@ class MujocoSimulation(rge.Simulation):
         self.kinds[i] = kind
 
     def set_commands(self, kinds, values) -> None:
-        if list(kinds) == self.kinds:
-            # The same laws (a replay's every step): the values alone.
+        if kinds == self.kinds:
+            # The same laws (a replay's every step): the values alone. The
+            # SDK hands a list, so this compares without copying it.
             self.d.ctrl[self.ctrl_adr] = values
             return
         for i, (kind, value) in enumerate(zip(kinds, values)):
