@@ -71,13 +71,17 @@ pub fn key(launch: &Launch) -> String {
     h.hex()
 }
 
-/// The zygotes handed down by the process that started this one.
-fn inherited() -> Map<String, Value> {
-    std::env::var(ZYGOTES_ENV)
-        .ok()
-        .and_then(|text| serde_json::from_str::<Value>(&text).ok())
-        .and_then(|v| v.as_object().cloned())
-        .unwrap_or_default()
+/// The zygotes handed down by the process that started this one, read
+/// once (realitygap never changes its own environment).
+fn inherited() -> &'static Map<String, Value> {
+    static INHERITED: OnceLock<Map<String, Value>> = OnceLock::new();
+    INHERITED.get_or_init(|| {
+        std::env::var(ZYGOTES_ENV)
+            .ok()
+            .and_then(|text| serde_json::from_str::<Value>(&text).ok())
+            .and_then(|v| v.as_object().cloned())
+            .unwrap_or_default()
+    })
 }
 
 fn disabled() -> bool {
@@ -115,8 +119,7 @@ pub(crate) fn spawn(launch: &Launch, timeout: Duration) -> Result<Child, String>
     let asked = path.display().to_string();
     match first.call(&json!({"op": "zygote", "socket": asked})) {
         Ok(ok) if ok.get("socket").and_then(Value::as_str) == Some(asked.as_str()) => {
-            states.insert(key.clone(), State::Ready(path.clone(), first));
-            publish(&key, &path);
+            states.insert(key, State::Ready(path.clone(), first));
             drop(states);
             fork_from(&path, timeout).or_else(|_| Child::spawn_process(launch, timeout))
         }
@@ -149,34 +152,20 @@ fn socket_path() -> PathBuf {
     }
 }
 
-/// The zygotes this process started, by launch key.
-fn published() -> &'static Mutex<Map<String, Value>> {
-    static PUBLISHED: OnceLock<Mutex<Map<String, Value>>> = OnceLock::new();
-    PUBLISHED.get_or_init(Default::default)
-}
-
-/// Adds `key`'s socket to what this process hands to the ones it starts
-/// ([`handed_down`]). Kept apart from the process's environment, which a
-/// process with threads must not change (a native library may be reading
-/// it at that moment).
-fn publish(key: &str, path: &Path) {
-    let mut all = published().lock().unwrap_or_else(|e| e.into_inner());
-    all.insert(key.to_string(), Value::String(path.display().to_string()));
-}
-
 /// The environment variable (name and value) that hands this process's
 /// zygotes, and those it inherited, to a process it starts; `None` when it
 /// knows of none. Whoever starts realitygap processes that may run an
-/// engine out of process (the runner's batches) sets it on their command.
+/// engine out of process (the runner's batches) sets it on their command:
+/// kept apart from the process's own environment, which a process with
+/// threads must not change (a native library may be reading it).
 pub fn handed_down() -> Option<(&'static str, String)> {
-    let mut all = inherited();
-    all.extend(
-        published()
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .iter()
-            .map(|(k, v)| (k.clone(), v.clone())),
-    );
+    let mut all = inherited().clone();
+    let states = states().lock().unwrap_or_else(|e| e.into_inner());
+    for (key, state) in states.iter() {
+        if let State::Ready(path, _) = state {
+            all.insert(key.clone(), Value::String(path.display().to_string()));
+        }
+    }
     (!all.is_empty()).then(|| (ZYGOTES_ENV, Value::Object(all).to_string()))
 }
 

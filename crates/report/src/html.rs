@@ -134,13 +134,12 @@ pub struct ExtraSection {
 /// An extra section; `lead_elsewhere`: its lead sentences already open the
 /// page's verdict, else they open the section (a page with no scenes has
 /// no verdict).
-/// `svg(figure)`: the figure's SVG (its index in `s.figures`), or why it
-/// cannot be drawn.
+/// `svgs`: each of its figures' SVG, or why it cannot be drawn.
 fn extra_section(
     h: &mut String,
     s: &ExtraSection,
     lead_elsewhere: bool,
-    svg: &dyn Fn(usize) -> Result<String, String>,
+    svgs: &[Result<String, String>],
 ) {
     let _ = writeln!(
         h,
@@ -158,12 +157,12 @@ fn extra_section(
     }
     if !s.figures.is_empty() {
         h.push_str("<div class=\"figures\">\n");
-        for (i, f) in s.figures.iter().enumerate() {
+        for (f, svg) in s.figures.iter().zip(svgs) {
             // A figure that cannot be drawn is named, not left out silently.
-            let svg = svg(i).map_or_else(
-                |e| format!("<p>{}</p>", escape(&e)),
-                |svg| inline_svg(&svg, &f.title),
-            );
+            let svg = match svg {
+                Ok(svg) => inline_svg(svg, &f.title),
+                Err(e) => format!("<p>{}</p>", escape(e)),
+            };
             let _ = writeln!(
                 h,
                 "<figure id=\"{}\">\n{}\n<figcaption>{} <a href=\"figures/{}.svg\">SVG</a> &middot; <a href=\"figures/{}.png\">PNG</a></figcaption>\n</figure>",
@@ -203,30 +202,28 @@ pub fn render_index_with(
     downloads: &[(String, String)],
     extra: &[ExtraSection],
 ) -> String {
-    render_page(
-        reports,
-        figures,
-        provenance,
-        downloads,
-        extra,
-        &|section, figure| {
-            extra[section].figures[figure]
-                .to_svg()
-                .map_err(|e| e.to_string())
-        },
-    )
+    let svgs: Vec<Vec<Result<String, String>>> = extra
+        .iter()
+        .map(|s| {
+            s.figures
+                .iter()
+                .map(|f| f.to_svg().map_err(|e| e.to_string()))
+                .collect()
+        })
+        .collect();
+    render_page(reports, figures, provenance, downloads, extra, &svgs)
 }
 
-/// [`render_index_with`], taking each extra figure's SVG from
-/// `extra_svg(section, figure)` (indices into `extra` and its figures), so
-/// that a report that writes the SVG files draws each figure once.
+/// [`render_index_with`] with each extra section's figures already drawn
+/// (`extra_svgs[section][figure]`), so that a report that writes the SVG
+/// files draws each figure once.
 pub(crate) fn render_page(
     reports: &[SceneReport],
     figures: &[FigureEntry<'_>],
     provenance: &Provenance,
     downloads: &[(String, String)],
     extra: &[ExtraSection],
-    extra_svg: &dyn Fn(usize, usize) -> Result<String, String>,
+    extra_svgs: &[Vec<Result<String, String>>],
 ) -> String {
     let mut h = String::new();
     let title = if provenance.title.is_empty() {
@@ -299,8 +296,8 @@ pub(crate) fn render_page(
             &replay,
         ));
     }
-    for (i, x) in extra.iter().enumerate() {
-        extra_section(&mut h, x, scenes, &|f| extra_svg(i, f));
+    for (x, svgs) in extra.iter().zip(extra_svgs) {
+        extra_section(&mut h, x, scenes, svgs);
     }
     for r in reports {
         let figs: Vec<&FigureEntry<'_>> = figures

@@ -90,6 +90,25 @@ fn write(path: &Path, bytes: impl AsRef<[u8]>) -> Result<PathBuf, ReportError> {
     Ok(path.to_path_buf())
 }
 
+/// Draws `figure` once, writes it as `fig_dir/<stem>.svg` and `.png` (the
+/// paths go to `files`) and returns its SVG, for the page to inline.
+fn draw_and_write(
+    figure: &Figure,
+    fig_dir: &Path,
+    files: &mut ReportFiles,
+) -> Result<String, ReportError> {
+    let svg = figure.to_svg()?;
+    let png = figure.to_png()?;
+    let stem = &figure.stem;
+    files
+        .figures_svg
+        .push(write(&fig_dir.join(format!("{stem}.svg")), &svg)?);
+    files
+        .figures_png
+        .push(write(&fig_dir.join(format!("{stem}.png")), &png)?);
+    Ok(svg)
+}
+
 /// Writes the figures, tables and `index.html` of `reports` into `out_dir`
 /// (created if missing; files of an earlier report there are replaced).
 pub fn write_report(
@@ -152,14 +171,7 @@ pub fn write_report_with(
     let mut svgs = Vec::with_capacity(figures.len());
     let mut rel = Vec::with_capacity(figures.len());
     for f in &figures {
-        let svg = f.to_svg()?;
-        let png = f.to_png()?;
-        files
-            .figures_svg
-            .push(write(&fig_dir.join(format!("{}.svg", f.stem)), &svg)?);
-        files
-            .figures_png
-            .push(write(&fig_dir.join(format!("{}.png", f.stem)), &png)?);
+        let svg = draw_and_write(f, &fig_dir, &mut files)?;
         rel.push((
             format!("figures/{}.svg", f.stem),
             format!("figures/{}.png", f.stem),
@@ -219,20 +231,13 @@ pub fn write_report_with(
     }
     // The extra sections' figures, as files beside the scenes', each drawn
     // once: the SVG written is the one the page inlines.
-    let mut extra_svgs: Vec<Vec<String>> = Vec::with_capacity(extra.len());
+    let mut extra_svgs = Vec::with_capacity(extra.len());
     for s in extra {
-        let mut svgs = Vec::with_capacity(s.figures.len());
-        for f in &s.figures {
-            let svg = f.to_svg()?;
-            let png = f.to_png()?;
-            files
-                .figures_svg
-                .push(write(&fig_dir.join(format!("{}.svg", f.stem)), &svg)?);
-            files
-                .figures_png
-                .push(write(&fig_dir.join(format!("{}.png", f.stem)), &png)?);
-            svgs.push(svg);
-        }
+        let svgs = s
+            .figures
+            .iter()
+            .map(|f| draw_and_write(f, &fig_dir, &mut files).map(Ok))
+            .collect::<Result<Vec<_>, ReportError>>()?;
         extra_svgs.push(svgs);
     }
     let page = html::render_page(
@@ -241,7 +246,7 @@ pub fn write_report_with(
         provenance,
         &downloads,
         extra,
-        &|section, figure| Ok(extra_svgs[section][figure].clone()),
+        &extra_svgs,
     );
     files.index_html = write(&out_dir.join("index.html"), page)?;
     Ok(files)
