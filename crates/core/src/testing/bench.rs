@@ -41,11 +41,20 @@ pub fn repeats(default: usize) -> usize {
     if std::env::args().any(|a| a == "--quick") {
         return 1;
     }
-    std::env::var("REPEATS")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(default)
-        .max(1)
+    match std::env::var("REPEATS") {
+        Err(_) => default.max(1),
+        Ok(v) => match v.trim().parse::<usize>() {
+            Ok(n) if n > 0 => n,
+            _ => usage(&format!("REPEATS={v:?} is not a positive whole number of rounds")),
+        },
+    }
+}
+
+/// Stops the benchmark with a message naming the bad setting (a mistyped
+/// environment variable is the user's input, not a defect to panic on).
+fn usage(message: &str) -> ! {
+    eprintln!("benchmark: {message}");
+    std::process::exit(2)
 }
 
 /// One benchmark case: a scene with a robot model.
@@ -75,6 +84,29 @@ pub fn cases() -> Vec<Case> {
             .map(String::from)
             .to_vec()
         });
+    let folder = super::workspace().join("assets/scenes");
+    let known = || {
+        let mut names: Vec<String> = std::fs::read_dir(&folder)
+            .into_iter()
+            .flatten()
+            .flatten()
+            .filter_map(|e| {
+                let n = e.file_name().to_string_lossy().into_owned();
+                n.strip_suffix(".toml").map(str::to_string)
+            })
+            .collect();
+        names.sort();
+        names.join(", ")
+    };
+    for name in &names {
+        if !folder.join(format!("{name}.toml")).is_file() {
+            usage(&format!(
+                "SCENES names '{name}', which is not a scene of {} (known: {})",
+                folder.display(),
+                known()
+            ));
+        }
+    }
     let paper = super::paper_data();
     let official = paper.as_deref().map(super::official_robot);
     let mut cases = Vec::new();
