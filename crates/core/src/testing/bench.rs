@@ -45,7 +45,9 @@ pub fn repeats(default: usize) -> usize {
         Err(_) => default.max(1),
         Ok(v) => match v.trim().parse::<usize>() {
             Ok(n) if n > 0 => n,
-            _ => usage(&format!("REPEATS={v:?} is not a positive whole number of rounds")),
+            _ => usage(&format!(
+                "REPEATS={v:?} is not a positive whole number of rounds"
+            )),
         },
     }
 }
