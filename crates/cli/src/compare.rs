@@ -204,7 +204,11 @@ pub fn physics_free_sources(
         if folder == "tuned" && file.is_none() {
             continue;
         }
-        let dir = runs_dir.join(folder);
+        // Absolute: the sources' folders are read relative to the study's
+        // results root (the study file's folder by default), not to where
+        // the command runs.
+        let dir = std::path::absolute(runs_dir.join(folder))
+            .with_context(|| format!("--physics-free: the folder {}", runs_dir.display()))?;
         let spec = realitygap_runner::BatchSpec {
             scenes: scenes.iter().map(|(_, f)| f.clone()).collect(),
             engines: vec![PHYSICS_FREE_ENGINE.to_string()],
