@@ -72,6 +72,7 @@ enum Command {
 }
 
 fn main() -> ExitCode {
+    quiet_on_a_closed_pipe();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Compare(args) => cmd_compare::run(args),
@@ -91,8 +92,29 @@ fn main() -> ExitCode {
         Err(e) => {
             use std::io::Write;
             let mut err = anstream::stderr().lock();
-            let _ = writeln!(err, "{}", realitygap::ui::paint(&format!("error: {e:#}")));
+            let _ = writeln!(
+                err,
+                "{}",
+                realitygap::ui::paint(&format!("error: {}", realitygap::ui::error_text(&e)))
+            );
             ExitCode::FAILURE
         }
     }
+}
+
+/// Output piped into a reader that stops early (`realitygap engines |
+/// head -1`) ends the command quietly, as a closed pipe ends other Unix
+/// tools, with 141 (128 + SIGPIPE), instead of `println!`'s panic and its
+/// backtrace. Rust ignores SIGPIPE, so the write fails with EPIPE and the
+/// print panics; the hook turns that one panic into the exit.
+fn quiet_on_a_closed_pipe() {
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let message = info.payload_as_str().unwrap_or_default();
+        // std's message: "failed printing to stdout: Broken pipe (os error 32)".
+        if message.starts_with("failed printing to stdout") && message.contains("Broken pipe") {
+            std::process::exit(141);
+        }
+        default(info)
+    }));
 }

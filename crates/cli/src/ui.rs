@@ -56,6 +56,25 @@ impl Bar for TerminalBar {
     }
 }
 
+/// An error with its causes, `a: b: c`, as `{:#}` prints it, but without
+/// a cause that the message before it already ends with (an error that
+/// shows its source in its own message, as `thiserror`'s `{source}` does,
+/// and also hands it on as its cause, would otherwise print it twice).
+pub fn error_text(e: &anyhow::Error) -> String {
+    let mut out = String::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        if !out.is_empty() && out.ends_with(&text) {
+            continue;
+        }
+        if !out.is_empty() {
+            out.push_str(": ");
+        }
+        out.push_str(&text);
+    }
+    out
+}
+
 /// Colours a line for a terminal by what it says: warnings and errors,
 /// the closest-source verdicts, the flag kinds, the verdict on the
 /// physics-free model, where the files are. anstream's streams drop the
@@ -142,5 +161,41 @@ impl Ui for Terminal {
             bar
         };
         Box::new(TerminalBar(bar))
+    }
+}
+
+#[cfg(test)]
+mod error_text_tests {
+    use super::error_text;
+
+    /// An error that shows its source in its message and hands it on.
+    #[derive(Debug)]
+    struct Shows {
+        source: std::io::Error,
+    }
+    impl std::fmt::Display for Shows {
+        fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+            write!(f, "cannot read URDF file nope.urdf: {}", self.source)
+        }
+    }
+    impl std::error::Error for Shows {
+        fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+            Some(&self.source)
+        }
+    }
+
+    #[test]
+    fn a_cause_already_in_its_message_is_said_once() {
+        let io = || std::io::Error::from(std::io::ErrorKind::NotFound);
+        let shown = anyhow::Error::new(Shows { source: io() }).context("importing");
+        let text = error_text(&shown);
+        assert_eq!(text.matches(&io().to_string()).count(), 1, "{text}");
+        assert!(
+            text.starts_with("importing: cannot read URDF file nope.urdf: "),
+            "{text}"
+        );
+        // A cause not in the message before it stays.
+        let plain = anyhow::Error::new(io()).context("reading x.toml");
+        assert_eq!(error_text(&plain), format!("reading x.toml: {}", io()));
     }
 }

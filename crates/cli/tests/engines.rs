@@ -213,6 +213,26 @@ fn every_engine_is_listed_with_its_version_and_settings() {
     }
 }
 
+/// A listing piped into a reader that has gone (`engines | head -1`)
+/// ends quietly with 141, as a closed pipe ends other tools: no panic, no
+/// backtrace. The pipe's reading end is closed before the command starts,
+/// so its first write fails whatever the machine's speed.
+#[test]
+fn a_closed_pipe_ends_the_listing_quietly() {
+    let (reader, writer) = std::io::pipe().unwrap();
+    drop(reader);
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_realitygap"))
+        .args(["engines", "--params"])
+        .env("RUST_BACKTRACE", "1")
+        .stdout(writer)
+        .stderr(std::process::Stdio::piped())
+        .output()
+        .unwrap();
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(141), "{stderr}");
+    assert!(stderr.is_empty(), "{stderr}");
+}
+
 /// The three scenes in every engine with `robot_args`; each run as
 /// [`expect`] says, the manifest naming the engine's version.
 fn run_all(label: &str, robot_args: &[&str], suffix: &str) {
