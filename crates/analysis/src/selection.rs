@@ -140,6 +140,22 @@ impl RunSelection {
                     ),
                 });
             }
+            // A run past the last is a mistake, not a request to cut the
+            // range short (the label would name runs that were not used).
+            if let Some(last) = r
+                .ranges
+                .iter()
+                .map(|&(_, b)| b)
+                .max()
+                .filter(|&b| b > count)
+            {
+                return Err(SelectionError {
+                    message: format!(
+                        "{} \"{}\" names run {last}, but scene '{scene}' has {count} runs (numbered 1-{count})",
+                        r.origin, r.text
+                    ),
+                });
+            }
             Ok(v)
         };
         let all: Vec<usize> = (0..count).collect();
@@ -245,6 +261,17 @@ mod tests {
         );
         let e = sel(None, Some("1-20")).select("s", 20).unwrap_err();
         assert!(e.message.contains("--holdout"), "{e}");
+        // Past the last run: not cut short in silence.
+        let e = sel(Some("1-25"), None).select("scene1", 20).unwrap_err();
+        assert_eq!(
+            e.message,
+            "--runs \"1-25\" names run 25, but scene 'scene1' has 20 runs (numbered 1-20)"
+        );
+        let e = sel(None, Some("16-21")).select("s", 20).unwrap_err();
+        assert!(
+            e.message.starts_with("--holdout \"16-21\" names run 21"),
+            "{e}"
+        );
         let e = sel(Some("1-16"), Some("16-20"))
             .select("s", 20)
             .unwrap_err();
