@@ -61,6 +61,13 @@ pub struct Replayed {
 /// `ui`. An error when a replay failed (after everything is written).
 pub fn replay(args: &ReplayOptions, launcher: &Launcher, ui: &dyn Ui) -> Result<Replayed> {
     let params = realitygap_runner::prepare::read_params(args.params.as_deref())?;
+    if let Some(file) = &args.params {
+        realitygap_runner::prepare::check_engine_tables(
+            crate::engines,
+            params.engine_settings.keys(),
+            file,
+        )?;
+    }
     // The physics-free model is the `ideal` row of every replay, computed
     // from its one definition (`kinematic_run`), never stepped as an engine.
     let chosen = select_engines(crate::engines, &args.engines)?;

@@ -468,6 +468,13 @@ fn tune_recordings(args: &TuneRequest, recordings: &Path, ui: &dyn Ui) -> Result
     }
     let engine = find_engine(crate::engines, &args.engine)?;
     let mut known = realitygap_runner::prepare::read_params(args.params.as_deref())?;
+    if let Some(file) = &args.params {
+        realitygap_runner::prepare::check_engine_tables(
+            crate::engines,
+            known.engine_settings.keys(),
+            file,
+        )?;
+    }
     // --settings and --set over the scene's and --params' settings: the
     // replay takes the engine settings of the known parameters.
     let set = settings_over(args, engine.name(), crate::engines)?;

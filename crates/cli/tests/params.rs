@@ -142,6 +142,49 @@ fn unknown_unsupported_and_malformed_keys_are_errors() {
         "{e}"
     );
 
+    // A misspelt [engine.NAME] table, in the parameters file or in the
+    // scene, is an error at its line, not settings ignored in silence.
+    let typo = tmp.path().join("typo.toml");
+    std::fs::write(&typo, "# settings\n[engine.odee]\ntimestep_s = 0.5\n").unwrap();
+    let o = run(&typo, engine);
+    assert!(!o.status.success());
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        e.contains("typo.toml:2: [engine.odee]: \"odee\" is not an engine (engines: ")
+            && e.contains(engine.as_str()),
+        "{e}"
+    );
+    let scene_text = std::fs::read_to_string(&scene).unwrap();
+    assert!(scene_text.contains("\n[engine.mujoco]\n"));
+    let bad_scene = scene
+        .parent()
+        .unwrap()
+        .join(format!("typo-{}.toml", std::process::id()));
+    std::fs::write(
+        &bad_scene,
+        scene_text.replace("\n[engine.mujoco]\n", "\n[engine.mujocoo]\n"),
+    )
+    .unwrap();
+    let o = realitygap(&[
+        "run",
+        bad_scene.to_str().unwrap(),
+        "--engine",
+        engine,
+        "--out",
+        tmp.path().join("out").to_str().unwrap(),
+    ]);
+    std::fs::remove_file(&bad_scene).unwrap();
+    assert!(!o.status.success());
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        e.contains("[engine.mujocoo]: \"mujocoo\" is not an engine"),
+        "{e}"
+    );
+    // A built-in adapter's table is no typo, installed or not.
+    let adapter = tmp.path().join("adapter.toml");
+    std::fs::write(&adapter, "[engine.newton]\nbackend = \"c\"\n").unwrap();
+    assert!(run(&adapter, engine).status.success());
+
     // Every engine that lacks a key says so, naming itself and the key.
     let list = realitygap(&["engines", "--params"]);
     let table = String::from_utf8_lossy(&list.stdout).to_string();

@@ -291,6 +291,28 @@ fn bad_gains_are_refused_with_a_reason() {
         stderr.contains("bad.toml:2:6") && stderr.contains("kp"),
         "{stderr}"
     );
+    // A joint the robot lacks: one error before anything runs (not one
+    // failed replay per episode and engine), and no table written.
+    let typo = dir.join("typo.toml");
+    std::fs::write(&typo, "[joints.lbr_iiwa_joint_9]\nkp = 700.0\n").unwrap();
+    let out = dir.join("t");
+    let run = realitygap(&[
+        "replay",
+        &path(&real),
+        "--params",
+        &path(&typo),
+        "--out",
+        &path(&out),
+    ]);
+    let stderr = text(&run.stderr);
+    assert!(!run.status.success());
+    assert!(
+        stderr.contains("typo.toml:1:9")
+            && stderr.contains("has no joint of that name")
+            && !stderr.contains("failed:"),
+        "{stderr}"
+    );
+    assert!(!out.join("joint_space.md").exists(), "no table is written");
 }
 
 /// An engine's name and the joint angles of its replayed run, rad.

@@ -63,6 +63,62 @@ pub fn find_engine(registry: Registry, name: &str) -> Result<Box<dyn Engine>> {
     }
 }
 
+/// Checks that every `[engine.NAME]` table of `file` (a scene or a
+/// parameters file; `names` its tables' names) names an engine: one of
+/// `registry`, or a built-in adapter that is not installed here (a scene
+/// shared between machines may carry Newton's settings). A misspelt table
+/// would otherwise be ignored in silence, its settings never applied.
+pub fn check_engine_tables<'a>(
+    registry: Registry,
+    names: impl IntoIterator<Item = &'a String>,
+    file: &Path,
+) -> Result<()> {
+    let known = engine_names(registry);
+    let adapters: Vec<&str> = realitygap_engine_remote::registry::ADAPTERS
+        .iter()
+        .map(|a| a.name)
+        .filter(|a| !known.iter().any(|k| k == a))
+        .collect();
+    for name in names {
+        if known.iter().any(|k| k == name)
+            || realitygap_engine_remote::registry::adapter(name).is_some()
+        {
+            continue;
+        }
+        let line = std::fs::read_to_string(file)
+            .ok()
+            .and_then(|text| table_line(&text, name))
+            .map_or(String::new(), |l| format!(":{l}"));
+        let also = if adapters.is_empty() {
+            String::new()
+        } else {
+            format!("; out of process, not installed: {}", adapters.join(", "))
+        };
+        bail!(
+            "{}{line}: [engine.{name}]: \"{name}\" is not an engine (engines: {}{also})",
+            file.display(),
+            known.join(", ")
+        );
+    }
+    Ok(())
+}
+
+/// The line (from 1) where `text`, TOML, opens the table of engine `name`:
+/// `[engine.NAME]`, `[engine."NAME"]` or a dotted `engine.NAME.key = ...`.
+fn table_line(text: &str, name: &str) -> Option<usize> {
+    let heads = [
+        format!("[engine.{name}]"),
+        format!("[engine.\"{name}\"]"),
+        format!("engine.{name}."),
+    ];
+    text.lines()
+        .position(|l| {
+            let l: String = l.chars().filter(|c| !c.is_whitespace()).collect();
+            heads.iter().any(|h| l.starts_with(h.as_str()))
+        })
+        .map(|i| i + 1)
+}
+
 /// The names of the engines in `registry`, in its order.
 pub fn engine_names(registry: Registry) -> Vec<String> {
     registry().iter().map(|e| e.name().to_string()).collect()
@@ -263,6 +319,10 @@ pub fn prepare_with(
 ) -> Result<Prepared> {
     let engine = find_engine(registry, src.engine)?;
     let (scene, robot) = scene_and_robot(src)?;
+    check_engine_tables(registry, scene.engine_settings.keys(), src.scene_file)?;
+    if let Some(file) = src.params_file {
+        check_engine_tables(registry, params.engine_settings.keys(), file)?;
+    }
     let scene_file = src.scene_file;
     let (scene, robot) =
         realitygap_core::controller::prepare(engine.as_ref(), &scene, &robot, &params)

@@ -446,6 +446,9 @@ pub fn prepare_replay(req: &ReplayRequest) -> Result<Prepared> {
         }
         prepared.episodes.push(e);
     }
+    // The parameters' names (joints, links, objects) against this robot
+    // and scene, once, before anything runs: every replay would fail alike.
+    req.params.apply(&prepared.scene, &prepared.robot)?;
     Ok(prepared)
 }
 
