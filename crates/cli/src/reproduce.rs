@@ -221,6 +221,14 @@ pub fn reproduce_keeping_problems(
     } else {
         ui.say(table::summary(&reports).trim_end_matches('\n').to_string());
     }
+    let physics_free = realitygap_core::engine::PHYSICS_FREE_ENGINE;
+    if data.is_some() && !engines.iter().any(|e| e == physics_free) {
+        // The closest source named above is then the closest engine, not
+        // the closest model: say what the table lacks.
+        ui.say(format!(
+            "The physics-free model was not run, so the table has no baseline: add --engine {physics_free} to see whether an engine beats perfect tracking."
+        ));
+    }
     let mut joint_space = None;
     if args.joint_space {
         if data.is_none() {
