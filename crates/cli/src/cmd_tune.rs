@@ -80,9 +80,11 @@ pub struct Args {
     #[arg(long, value_name = "K", conflicts_with_all = ["runs", "holdout", "recordings"])]
     pub folds: Option<usize>,
     /// Evaluations (each simulates every scene of the study, or every toss
-    /// fitted on). Default 600; for a study of tosses, the study file's
-    /// `budget` (96 for contactnets2020).
-    #[arg(long, value_name = "EVALUATIONS")]
+    /// fitted on), at least 1. Default 600; for a study of tosses, the
+    /// study file's `budget` (96 for contactnets2020). A bound each stage
+    /// stops at between its steps: the search finishes the generation
+    /// under way, the polish its round.
+    #[arg(long, value_name = "EVALUATIONS", value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
     pub budget: Option<usize>,
     /// Seed of the search.
     #[arg(long, default_value_t = 1)]

@@ -717,8 +717,22 @@ fn compared(
     Ok(c)
 }
 
-/// The answer in words: does the tuned engine beat the physics-free rows?
-fn verdict_text(engine: &str, c: &Comparison) -> String {
+/// The answer in words (`c`: the held-out runs', else the training
+/// runs' scores), with a caution first when the tune ended worse than it
+/// started on the runs it was fitted on (`training`).
+fn verdict_text(engine: &str, c: &Comparison, training: &Comparison) -> String {
+    let [untuned, tuned] = training.objective_m;
+    let answer = verdict_answer(engine, c);
+    if tuned > untuned {
+        return format!(
+            "Caution: on the runs it was fitted on, the tuned {engine} is worse than its own defaults (objective {tuned:.3} m against {untuned:.3} m untuned): the search did not get past its start (a small --budget) or a pull (--prior-weight) held it back, and the defaults fit these runs better. {answer}"
+        );
+    }
+    answer
+}
+
+/// Does the tuned engine beat the physics-free rows?
+fn verdict_answer(engine: &str, c: &Comparison) -> String {
     let Some(tuned) = &c.total_tuned else {
         return format!("The tuned {engine} could not be scored.");
     };
@@ -855,7 +869,11 @@ pub fn finish(
         check_runs,
         noise_m,
     )?;
-    let verdict = verdict_text(&spec.engine, holdout.as_ref().unwrap_or(&training));
+    let verdict = verdict_text(
+        &spec.engine,
+        holdout.as_ref().unwrap_or(&training),
+        &training,
+    );
     let wall = started.elapsed().as_secs_f64();
     let fresh = end.history.len().saturating_sub(end.replayed);
     let settings: Vec<(String, String)> = params
@@ -1466,6 +1484,38 @@ mod tests {
             baselines: vec![],
             phases: vec![],
         }
+    }
+
+    /// A tune that ended worse than the engine's defaults on its own
+    /// training runs says so first (a budget too small, a pull); one that
+    /// improved gives the answer alone.
+    #[test]
+    fn a_tune_worse_than_its_start_says_so_first() {
+        let mut training = with_push(0.05);
+        training.runs = "1-15".into();
+        training.total_tuned = Some(Scored {
+            value_m: 24.25,
+            interval_m: None,
+        });
+        training.objective_m = [19.863, 24.250];
+        let held = Comparison {
+            runs: "16-20".into(),
+            ..training.clone()
+        };
+        let v = verdict_text("ode", &held, &training);
+        assert!(
+            v.starts_with("Caution: on the runs it was fitted on, the tuned ode is worse than its own defaults (objective 24.250 m against 19.863 m untuned)"),
+            "{v}"
+        );
+        assert!(
+            v.ends_with(
+                "On runs 16-20, the tuned ode scores 24.250 m; no physics-free row was scored."
+            ),
+            "{v}"
+        );
+        training.objective_m = [19.863, 13.5];
+        let v = verdict_text("ode", &held, &training);
+        assert!(v.starts_with("On runs 16-20"), "{v}");
     }
 
     fn check(d: [f64; 3], noise_m: Option<f64>) -> TimestepCheck {
