@@ -584,6 +584,19 @@ fn json_of(v: &SettingValue) -> serde_json::Value {
     }
 }
 
+/// True when two points ran the same simulations: every scene the same
+/// steps and, to the bit, the same deviations (the engines are
+/// deterministic), as a sweep value equal to the scene's own setting does.
+fn same_runs(a: &Point, b: &Point) -> bool {
+    a.scenes.len() == b.scenes.len()
+        && a.scenes.iter().zip(&b.scenes).all(|(x, y)| {
+            x.status == y.status
+                && x.engine_steps == y.engine_steps
+                && x.max_deviation_m.map(f64::to_bits) == y.max_deviation_m.map(f64::to_bits)
+                && x.mean_deviation_m.map(f64::to_bits) == y.mean_deviation_m.map(f64::to_bits)
+        })
+}
+
 /// Runs every scene at one setting, in this process.
 fn measure(cases: &[SceneCase], engine: &dyn Engine, overlay: &Overlay, repeats: u32) -> Point {
     let scenes: Vec<SceneResult> = cases
@@ -1296,10 +1309,17 @@ fn report_recommended(
         p.max_deviation_m.unwrap_or(f64::NAN) * 1e3,
         speedup(&reference.point, p),
         scene_setting
-            .map(|s| format!(
-                ", {:.1}x faster than the scene's own setting",
-                speedup(&points[s], p)
-            ))
+            .filter(|&s| s != i)
+            .map(|s| if same_runs(&points[s], p) {
+                // A sweep value equal to the scene's own: two timings of
+                // one simulation, not a speed-up.
+                ", the same runs as the scene's own setting".to_string()
+            } else {
+                format!(
+                    ", {:.1}x faster than the scene's own setting",
+                    speedup(&points[s], p)
+                )
+            })
             .unwrap_or_default()
     ));
     Ok(())
