@@ -19,7 +19,7 @@ pub struct Args {
     pub engine: String,
     /// A setting and the values to sweep it over, KEY=V1,V2,... (repeatable;
     /// the lists are crossed). Keys: `realitygap engines --settings`.
-    /// Default: the engine's own grid (see the README).
+    /// Default: the engine's own grid (docs/frontier.md, "Default sweeps").
     #[arg(long = "sweep", value_name = "KEY=V1,V2,...")]
     pub sweep: Vec<String>,
     /// Largest deviation from the converged reference a recommended setting

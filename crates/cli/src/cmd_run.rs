@@ -68,8 +68,10 @@ pub struct Args {
     #[arg(long, value_name = "SECONDS")]
     pub timeout_s: Option<f64>,
     /// Physical parameters (TOML: [joints.NAME], [links.NAME],
-    /// [objects.NAME], [contact], [controller], [engine.NAME]; see the
-    /// README). `--set` still overrides its engine settings.
+    /// [objects.NAME], [contact], [controller], [actuator],
+    /// [engine.NAME]; see docs/simulate.md, "Physical parameters", and
+    /// `realitygap engines --params`). `--set` still overrides its engine
+    /// settings.
     #[arg(long, value_name = "FILE")]
     pub params: Option<PathBuf>,
     /// A stitched run: phase i of each scene's schedule in engine Ei,
