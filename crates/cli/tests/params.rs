@@ -180,6 +180,38 @@ fn unknown_unsupported_and_malformed_keys_are_errors() {
         e.contains("[engine.mujocoo]: \"mujocoo\" is not an engine"),
         "{e}"
     );
+    // A misspelt key of the scene's own engine table: at its line.
+    if engines().iter().any(|e| e == "mujoco") {
+        assert!(scene_text.contains("\n[engine.mujoco]\ntimestep_s = "));
+        std::fs::write(
+            &bad_scene,
+            scene_text.replace(
+                "\n[engine.mujoco]\ntimestep_s = ",
+                "\n[engine.mujoco]\ntimestep = ",
+            ),
+        )
+        .unwrap();
+        let o = realitygap(&[
+            "run",
+            bad_scene.to_str().unwrap(),
+            "--engine",
+            "mujoco",
+            "--out",
+            tmp.path().join("out").to_str().unwrap(),
+        ]);
+        std::fs::remove_file(&bad_scene).unwrap();
+        assert!(!o.status.success());
+        let e = String::from_utf8_lossy(&o.stderr);
+        let line = scene_text
+            .lines()
+            .position(|l| l == "[engine.mujoco]")
+            .unwrap()
+            + 2;
+        assert!(
+            e.contains(&format!(".toml:{line}:1: engine.mujoco.timestep: engine mujoco: setting `timestep`: unknown setting")),
+            "{e}"
+        );
+    }
     // A built-in adapter's table is no typo, installed or not.
     let adapter = tmp.path().join("adapter.toml");
     std::fs::write(&adapter, "[engine.newton]\nbackend = \"c\"\n").unwrap();

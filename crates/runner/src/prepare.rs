@@ -328,19 +328,40 @@ pub fn prepare_with(
         realitygap_core::controller::prepare(engine.as_ref(), &scene, &robot, &params)
             .map_err(|e| anyhow!("{e}"))
             .with_context(|| format!("scene {} with --params", scene_file.display()))?;
-    let mut settings = params.settings_over(engine.name(), &scene.settings_for(engine.name()));
-    settings.extend(overrides_for(
-        src.set,
-        engine.name(),
-        &engine_names(registry),
-    )?);
-    let timestep_s = engine.check_settings(&settings).with_context(|| {
-        format!(
-            "scene {} ([engine.{}], --params and --set)",
-            scene_file.display(),
-            engine.name()
-        )
-    })?;
+    let own = scene.settings_for(engine.name());
+    let mut settings = params.settings_over(engine.name(), &own);
+    let overrides = overrides_for(src.set, engine.name(), &engine_names(registry))?;
+    settings.extend(overrides.clone());
+    let timestep_s = match engine.check_settings(&settings) {
+        Ok(t) => t,
+        // A setting the scene's own table gives (neither --params nor
+        // --set replaced it): the error at its line in the scene.
+        Err(realitygap_core::engine::EngineError::Setting {
+            engine: e,
+            key,
+            message,
+        }) if own.contains_key(&key)
+            && !overrides.contains_key(&key)
+            && params
+                .engine_settings
+                .get(engine.name())
+                .is_none_or(|t| !t.contains_key(&key)) =>
+        {
+            return Err(scene
+                .error(
+                    &format!("engine.{e}.{key}"),
+                    format!("engine {e}: setting `{key}`: {message}"),
+                )
+                .into());
+        }
+        Err(e) => {
+            return Err(anyhow::Error::new(e).context(format!(
+                "scene {} ([engine.{}], --params and --set)",
+                scene_file.display(),
+                engine.name()
+            )))
+        }
+    };
     let steps_per_period = scene.steps_per_period(timestep_s)?;
     Ok(Prepared {
         scene,
