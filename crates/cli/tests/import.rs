@@ -221,6 +221,8 @@ fn garbage_file_fails_naming_file_and_line() {
         "{}",
         text(&o.stderr)
     );
+    // No file could be read: no results directory is left behind.
+    assert!(!out2.exists(), "{} was made", out2.display());
     let missing = dir.join("missing.tsv");
     let o = realitygap(&[
         "import",

@@ -53,8 +53,23 @@ pub fn import_files(
         planned.push((f, id));
     }
 
-    let mut store = RunStore::create_or_open(target.out, target.source, target.kind, target.scene)?;
-    store.set_settings(settings)?;
+    // A new store is made at the first file read, so that an import of
+    // which no file could be read leaves no results directory behind; an
+    // existing one is opened (and checked against the source) first.
+    let open = || -> Result<RunStore> {
+        let mut s = RunStore::create_or_open(target.out, target.source, target.kind, target.scene)?;
+        s.set_settings(settings.clone())?;
+        Ok(s)
+    };
+    let mut store: Option<RunStore> = if target
+        .out
+        .join(realitygap_data::runstore::MANIFEST_FILE)
+        .exists()
+    {
+        Some(open()?)
+    } else {
+        None
+    };
     let mut failed = 0usize;
     for (file, id) in planned {
         let run = match import(file) {
@@ -64,6 +79,10 @@ pub fn import_files(
                 failed += 1;
                 continue;
             }
+        };
+        let store = match &mut store {
+            Some(s) => s,
+            None => store.insert(open()?),
         };
         let entry = entry_for(&id, file, &run);
         let status = entry.status;
