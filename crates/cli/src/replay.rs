@@ -63,7 +63,7 @@ pub fn replay(args: &ReplayOptions, launcher: &Launcher, ui: &dyn Ui) -> Result<
     let params = realitygap_runner::prepare::read_params(args.params.as_deref())?;
     if let Some(file) = &args.params {
         realitygap_runner::prepare::check_engine_tables(
-            crate::engines,
+            &realitygap_runner::prepare::engine_names(crate::engines),
             params.engine_settings.keys(),
             file,
         )?;

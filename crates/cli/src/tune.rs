@@ -470,7 +470,7 @@ fn tune_recordings(args: &TuneRequest, recordings: &Path, ui: &dyn Ui) -> Result
     let mut known = realitygap_runner::prepare::read_params(args.params.as_deref())?;
     if let Some(file) = &args.params {
         realitygap_runner::prepare::check_engine_tables(
-            crate::engines,
+            &realitygap_runner::prepare::engine_names(crate::engines),
             known.engine_settings.keys(),
             file,
         )?;

@@ -65,15 +65,15 @@ pub fn find_engine(registry: Registry, name: &str) -> Result<Box<dyn Engine>> {
 
 /// Checks that every `[engine.NAME]` table of `file` (a scene or a
 /// parameters file; `names` its tables' names) names an engine: one of
-/// `registry`, or a built-in adapter that is not installed here (a scene
-/// shared between machines may carry Newton's settings). A misspelt table
-/// would otherwise be ignored in silence, its settings never applied.
+/// `known` (the registry's, [`engine_names`]), or a built-in adapter that
+/// is not installed here (a scene shared between machines may carry
+/// Newton's settings). A misspelt table would otherwise be ignored in
+/// silence, its settings never applied.
 pub fn check_engine_tables<'a>(
-    registry: Registry,
+    known: &[String],
     names: impl IntoIterator<Item = &'a String>,
     file: &Path,
 ) -> Result<()> {
-    let known = engine_names(registry);
     let adapters: Vec<&str> = realitygap_engine_remote::registry::ADAPTERS
         .iter()
         .map(|a| a.name)
@@ -319,9 +319,10 @@ pub fn prepare_with(
 ) -> Result<Prepared> {
     let engine = find_engine(registry, src.engine)?;
     let (scene, robot) = scene_and_robot(src)?;
-    check_engine_tables(registry, scene.engine_settings.keys(), src.scene_file)?;
+    let known = engine_names(registry);
+    check_engine_tables(&known, scene.engine_settings.keys(), src.scene_file)?;
     if let Some(file) = src.params_file {
-        check_engine_tables(registry, params.engine_settings.keys(), file)?;
+        check_engine_tables(&known, params.engine_settings.keys(), file)?;
     }
     let scene_file = src.scene_file;
     let (scene, robot) =
@@ -330,7 +331,7 @@ pub fn prepare_with(
             .with_context(|| format!("scene {} with --params", scene_file.display()))?;
     let own = scene.settings_for(engine.name());
     let mut settings = params.settings_over(engine.name(), &own);
-    let overrides = overrides_for(src.set, engine.name(), &engine_names(registry))?;
+    let overrides = overrides_for(src.set, engine.name(), &known)?;
     settings.extend(overrides.clone());
     let timestep_s = match engine.check_settings(&settings) {
         Ok(t) => t,
