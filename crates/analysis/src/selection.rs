@@ -122,6 +122,25 @@ pub struct SelectedRuns {
 }
 
 impl RunSelection {
+    /// An error when a range names a run past `most`, the most runs any
+    /// scene has: a mistake, not a request to cut the range short (its
+    /// label would name runs that were not used). A scene with fewer runs
+    /// takes those of a range it has.
+    /// `what` names them in the message (`runs`, `episodes`).
+    pub fn check_count(&self, most: usize, what: &str) -> Result<(), SelectionError> {
+        for r in [&self.runs, &self.holdout].into_iter().flatten() {
+            if let Some(last) = r.ranges.iter().map(|&(_, b)| b).max().filter(|&b| b > most) {
+                return Err(SelectionError {
+                    message: format!(
+                        "{} \"{}\" names run {last}, but there are {most} {what} (numbered 1-{most})",
+                        r.origin, r.text
+                    ),
+                });
+            }
+        }
+        Ok(())
+    }
+
     /// True when no run is held out.
     pub fn is_all(&self) -> bool {
         self.runs.is_none() && self.holdout.is_none()
@@ -136,22 +155,6 @@ impl RunSelection {
                 return Err(SelectionError {
                     message: format!(
                         "{} \"{}\" selects no run of scene '{scene}' (it has {count} runs, numbered 1-{count})",
-                        r.origin, r.text
-                    ),
-                });
-            }
-            // A run past the last is a mistake, not a request to cut the
-            // range short (the label would name runs that were not used).
-            if let Some(last) = r
-                .ranges
-                .iter()
-                .map(|&(_, b)| b)
-                .max()
-                .filter(|&b| b > count)
-            {
-                return Err(SelectionError {
-                    message: format!(
-                        "{} \"{}\" names run {last}, but scene '{scene}' has {count} runs (numbered 1-{count})",
                         r.origin, r.text
                     ),
                 });
@@ -262,15 +265,25 @@ mod tests {
         let e = sel(None, Some("1-20")).select("s", 20).unwrap_err();
         assert!(e.message.contains("--holdout"), "{e}");
         // Past the last run: not cut short in silence.
-        let e = sel(Some("1-25"), None).select("scene1", 20).unwrap_err();
+        let e = sel(Some("1-25"), None).check_count(20, "runs").unwrap_err();
         assert_eq!(
             e.message,
-            "--runs \"1-25\" names run 25, but scene 'scene1' has 20 runs (numbered 1-20)"
+            "--runs \"1-25\" names run 25, but there are 20 runs (numbered 1-20)"
         );
-        let e = sel(None, Some("16-21")).select("s", 20).unwrap_err();
+        let e = sel(None, Some("16-21"))
+            .check_count(20, "runs")
+            .unwrap_err();
         assert!(
             e.message.starts_with("--holdout \"16-21\" names run 21"),
             "{e}"
+        );
+        assert!(sel(Some("1-15"), Some("16-20"))
+            .check_count(20, "runs")
+            .is_ok());
+        // A scene with fewer runs than the most takes those it has.
+        assert_eq!(
+            sel(Some("5-20"), None).select("s", 18).unwrap().fit.len(),
+            14
         );
         let e = sel(Some("1-16"), Some("16-20"))
             .select("s", 20)

@@ -75,6 +75,8 @@ pub fn align_references(
     scenes: &[SceneInput<'_>],
     opts: &CompareOptions,
 ) -> Result<AlignedReferences, SelectionError> {
+    let most = scenes.iter().map(|s| s.reference.runs.len()).max();
+    opts.runs.check_count(most.unwrap_or(0), "runs")?;
     let selected = scenes
         .iter()
         .map(|s| opts.runs.select(&s.spec.name, s.reference.runs.len()))

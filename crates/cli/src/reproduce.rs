@@ -222,7 +222,10 @@ pub fn reproduce_keeping_problems(
         ui.say(table::summary(&reports).trim_end_matches('\n').to_string());
     }
     let physics_free = realitygap_core::engine::PHYSICS_FREE_ENGINE;
-    if data.is_some() && !engines.iter().any(|e| e == physics_free) {
+    if data.is_some()
+        && !engines.iter().any(|e| e == physics_free)
+        && !tuned.iter().any(|t| t.engine == physics_free)
+    {
         // The closest source named above is then the closest engine, not
         // the closest model: say what the table lacks.
         ui.say(format!(

@@ -241,6 +241,9 @@ pub fn tune(request: &TuneRequest, launcher: &Launcher, ui: &dyn Ui) -> Result<T
             request.prior_weight
         );
     }
+    if request.budget == Some(0) {
+        anyhow::bail!("--budget 0: a tune needs at least one evaluation");
+    }
     if request.prior_weight > 0.0 && request.recordings.is_some() {
         anyhow::bail!("--prior-weight belongs to a tune against a study's real runs (it pulls toward the physics-free model's fit): leave it out with --recordings");
     }

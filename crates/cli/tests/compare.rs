@@ -489,7 +489,7 @@ fn bad_registration_files_and_run_ranges_name_the_culprit() {
     for (args, expect) in [
         (
             vec!["--runs", "25-30"],
-            "--runs \"25-30\" selects no run of scene 'scene1_single_joint'",
+            "--runs \"25-30\" names run 30, but there are 20 runs (numbered 1-20)",
         ),
         (
             vec!["--holdout", "1-20"],

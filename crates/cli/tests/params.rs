@@ -150,16 +150,19 @@ fn unknown_unsupported_and_malformed_keys_are_errors() {
     assert!(!o.status.success());
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(
-        e.contains("typo.toml:2: [engine.odee]: \"odee\" is not an engine (engines: ")
+        e.contains("typo.toml:2: [engine.odee]: no engine is called \"odee\"; did you mean [engine.ode]? (engines here: ")
             && e.contains(engine.as_str()),
         "{e}"
     );
-    let scene_text = std::fs::read_to_string(&scene).unwrap();
+    // The scene, copied out of the source tree with its robot's path made
+    // absolute.
+    let urdf = scene.parent().unwrap().join("../robots/mico2/mico2.urdf");
+    let scene_text = std::fs::read_to_string(&scene).unwrap().replace(
+        "urdf = \"../robots/mico2/mico2.urdf\"",
+        &format!("urdf = {:?}", urdf.display().to_string()),
+    );
     assert!(scene_text.contains("\n[engine.mujoco]\n"));
-    let bad_scene = scene
-        .parent()
-        .unwrap()
-        .join(format!("typo-{}.toml", std::process::id()));
+    let bad_scene = tmp.path().join("typo-scene.toml");
     std::fs::write(
         &bad_scene,
         scene_text.replace("\n[engine.mujoco]\n", "\n[engine.mujocoo]\n"),
@@ -173,11 +176,12 @@ fn unknown_unsupported_and_malformed_keys_are_errors() {
         "--out",
         tmp.path().join("out").to_str().unwrap(),
     ]);
-    std::fs::remove_file(&bad_scene).unwrap();
     assert!(!o.status.success());
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(
-        e.contains("[engine.mujocoo]: \"mujocoo\" is not an engine"),
+        e.contains(
+            "[engine.mujocoo]: no engine is called \"mujocoo\"; did you mean [engine.mujoco]?"
+        ),
         "{e}"
     );
     // A misspelt key of the scene's own engine table: at its line.
@@ -199,7 +203,6 @@ fn unknown_unsupported_and_malformed_keys_are_errors() {
             "--out",
             tmp.path().join("out").to_str().unwrap(),
         ]);
-        std::fs::remove_file(&bad_scene).unwrap();
         assert!(!o.status.success());
         let e = String::from_utf8_lossy(&o.stderr);
         let line = scene_text
@@ -212,10 +215,16 @@ fn unknown_unsupported_and_malformed_keys_are_errors() {
             "{e}"
         );
     }
-    // A built-in adapter's table is no typo, installed or not.
+    // A built-in adapter's table is no typo, installed or not; nor is an
+    // engine this machine lacks whose name is no near miss.
     let adapter = tmp.path().join("adapter.toml");
-    std::fs::write(&adapter, "[engine.newton]\nbackend = \"c\"\n").unwrap();
-    assert!(run(&adapter, engine).status.success());
+    std::fs::write(
+        &adapter,
+        "[engine.newton]\nbackend = \"c\"\n[engine.vortex]\nsolver = 1\n",
+    )
+    .unwrap();
+    let o = run(&adapter, engine);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
 
     // Every engine that lacks a key says so, naming itself and the key.
     let list = realitygap(&["engines", "--params"]);

@@ -63,39 +63,56 @@ pub fn find_engine(registry: Registry, name: &str) -> Result<Box<dyn Engine>> {
     }
 }
 
-/// Checks that every `[engine.NAME]` table of `file` (a scene or a
-/// parameters file; `names` its tables' names) names an engine: one of
-/// `known` (the registry's, [`engine_names`]), or a built-in adapter that
-/// is not installed here (a scene shared between machines may carry
-/// Newton's settings). A misspelt table would otherwise be ignored in
-/// silence, its settings never applied.
+/// Every engine name realitygap knows, whether or not this build or this
+/// machine has it: the linked engines (each behind a cargo feature) and
+/// the built-in adapters (installed or not).
+fn engine_names_anywhere() -> Vec<&'static str> {
+    let linked = [
+        "mujoco", "ode", "rapier", "bullet", "physx", "dart", "ideal",
+    ];
+    linked
+        .into_iter()
+        .chain(
+            realitygap_engine_remote::registry::ADAPTERS
+                .iter()
+                .map(|a| a.name),
+        )
+        .collect()
+}
+
+/// Checks the `[engine.NAME]` tables of `file` (a scene or a parameters
+/// file; `names` its tables' names) for typos: a name that is no engine
+/// here (`known`, [`engine_names`]) nor anywhere realitygap knows of, but
+/// one or two letters from one (`[engine.mujocoo]`, `[engine.odee]`), is
+/// an error at its line; its settings would otherwise be ignored in
+/// silence. Any other name passes: a scene shared between machines may
+/// carry the settings of an engine this build or machine lacks (a
+/// feature left out, an adapter or a user's engine not installed here).
 pub fn check_engine_tables<'a>(
     known: &[String],
     names: impl IntoIterator<Item = &'a String>,
     file: &Path,
 ) -> Result<()> {
-    let adapters: Vec<&str> = realitygap_engine_remote::registry::ADAPTERS
-        .iter()
-        .map(|a| a.name)
-        .filter(|a| !known.iter().any(|k| k == a))
-        .collect();
+    let anywhere = engine_names_anywhere();
     for name in names {
-        if known.iter().any(|k| k == name)
-            || realitygap_engine_remote::registry::adapter(name).is_some()
-        {
+        if known.iter().any(|k| k == name) || anywhere.contains(&name.as_str()) {
             continue;
         }
+        let Some(meant) = known
+            .iter()
+            .map(String::as_str)
+            .chain(anywhere.iter().copied())
+            .filter(|k| strsim::levenshtein(k, name) <= 2)
+            .min_by_key(|k| strsim::levenshtein(k, name))
+        else {
+            continue;
+        };
         let line = std::fs::read_to_string(file)
             .ok()
             .and_then(|text| table_line(&text, name))
             .map_or(String::new(), |l| format!(":{l}"));
-        let also = if adapters.is_empty() {
-            String::new()
-        } else {
-            format!("; out of process, not installed: {}", adapters.join(", "))
-        };
         bail!(
-            "{}{line}: [engine.{name}]: \"{name}\" is not an engine (engines: {}{also})",
+            "{}{line}: [engine.{name}]: no engine is called \"{name}\"; did you mean [engine.{meant}]? (engines here: {})",
             file.display(),
             known.join(", ")
         );

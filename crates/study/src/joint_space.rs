@@ -245,6 +245,10 @@ pub fn study_tables(
     use anyhow::Context;
     let opts = measure.options(study)?;
     let loaded = study.load(roots)?;
+    let most = loaded.iter().map(|l| l.reference.runs.len()).max();
+    opts.runs
+        .check_count(most.unwrap_or(0), "runs")
+        .map_err(|e| anyhow!("{e}"))?;
     let mut tables = Vec::new();
     for (s, l) in study.scenes.iter().zip(&loaded) {
         let Some(file) = &s.scene else { continue };

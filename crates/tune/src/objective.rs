@@ -209,6 +209,11 @@ impl Target {
             .map(|l| l.reference.runs.len())
             .max()
             .unwrap_or(0);
+        RunSelection {
+            runs: runs.clone(),
+            holdout: holdout.clone(),
+        }
+        .check_count(most, "runs")?;
         let runs = match (&runs, &holdout) {
             (None, Some(h)) => Some(h.complement(most).ok_or_else(|| {
                 anyhow::anyhow!(

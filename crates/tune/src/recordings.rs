@@ -837,6 +837,9 @@ pub(crate) fn split(selection: &RunSelection, count: usize) -> Result<(Vec<usize
         let held = count.div_ceil(4);
         return Ok(((0..count - held).collect(), (count - held..count).collect()));
     }
+    selection
+        .check_count(count, "episodes")
+        .map_err(|e| anyhow!("{}", e.message))?;
     let s = selection
         .select("recordings", count)
         .map_err(|e| anyhow!("{}", e.message))?;
