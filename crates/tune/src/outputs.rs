@@ -717,12 +717,12 @@ fn compared(
     Ok(c)
 }
 
-/// The answer in words (`c`: the held-out runs', else the training
-/// runs' scores), with a caution first when the tune ended worse than it
-/// started on the runs it was fitted on (`training`).
-fn verdict_text(engine: &str, c: &Comparison, training: &Comparison) -> String {
+/// The answer in words, on the held-out runs (else the training runs),
+/// with a caution first when the tune ended worse than it started on the
+/// runs it was fitted on.
+fn verdict_text(engine: &str, holdout: Option<&Comparison>, training: &Comparison) -> String {
     let [untuned, tuned] = training.objective_m;
-    let answer = verdict_answer(engine, c);
+    let answer = verdict_answer(engine, holdout.unwrap_or(training));
     if tuned > untuned {
         return format!(
             "Caution: on the runs it was fitted on, the tuned {engine} is worse than its own defaults (objective {tuned:.3} m against {untuned:.3} m untuned): the search did not get past its start (a small --budget) or a pull (--prior-weight) held it back, and the defaults fit these runs better. {answer}"
@@ -869,11 +869,7 @@ pub fn finish(
         check_runs,
         noise_m,
     )?;
-    let verdict = verdict_text(
-        &spec.engine,
-        holdout.as_ref().unwrap_or(&training),
-        &training,
-    );
+    let verdict = verdict_text(&spec.engine, holdout.as_ref(), &training);
     let wall = started.elapsed().as_secs_f64();
     let fresh = end.history.len().saturating_sub(end.replayed);
     let settings: Vec<(String, String)> = params
@@ -1502,7 +1498,7 @@ mod tests {
             runs: "16-20".into(),
             ..training.clone()
         };
-        let v = verdict_text("ode", &held, &training);
+        let v = verdict_text("ode", Some(&held), &training);
         assert!(
             v.starts_with("Caution: on the runs it was fitted on, the tuned ode is worse than its own defaults (objective 24.250 m against 19.863 m untuned)"),
             "{v}"
@@ -1514,7 +1510,7 @@ mod tests {
             "{v}"
         );
         training.objective_m = [19.863, 13.5];
-        let v = verdict_text("ode", &held, &training);
+        let v = verdict_text("ode", Some(&held), &training);
         assert!(v.starts_with("On runs 16-20"), "{v}");
     }
 
