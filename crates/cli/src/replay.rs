@@ -60,14 +60,8 @@ pub struct Replayed {
 /// Replays the episodes in every engine; says the table and a summary on
 /// `ui`. An error when a replay failed (after everything is written).
 pub fn replay(args: &ReplayOptions, launcher: &Launcher, ui: &dyn Ui) -> Result<Replayed> {
-    let params = realitygap_runner::prepare::read_params(args.params.as_deref())?;
-    if let Some(file) = &args.params {
-        realitygap_runner::prepare::check_engine_tables(
-            &realitygap_runner::prepare::engine_names(crate::engines),
-            params.engine_settings.keys(),
-            file,
-        )?;
-    }
+    let params =
+        realitygap_runner::prepare::read_params_checked(crate::engines, args.params.as_deref())?;
     // The physics-free model is the `ideal` row of every replay, computed
     // from its one definition (`kinematic_run`), never stepped as an engine.
     let chosen = select_engines(crate::engines, &args.engines)?;

@@ -470,14 +470,8 @@ fn tune_recordings(args: &TuneRequest, recordings: &Path, ui: &dyn Ui) -> Result
         anyhow::bail!("--recordings runs on this machine only (--executor local)");
     }
     let engine = find_engine(crate::engines, &args.engine)?;
-    let mut known = realitygap_runner::prepare::read_params(args.params.as_deref())?;
-    if let Some(file) = &args.params {
-        realitygap_runner::prepare::check_engine_tables(
-            &realitygap_runner::prepare::engine_names(crate::engines),
-            known.engine_settings.keys(),
-            file,
-        )?;
-    }
+    let mut known =
+        realitygap_runner::prepare::read_params_checked(crate::engines, args.params.as_deref())?;
     // --settings and --set over the scene's and --params' settings: the
     // replay takes the engine settings of the known parameters.
     let set = settings_over(args, engine.name(), crate::engines)?;

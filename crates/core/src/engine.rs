@@ -36,6 +36,11 @@ use std::fmt;
 /// engines are compared as physics (stitching plans, handovers).
 pub const PHYSICS_FREE_ENGINE: &str = "ideal";
 
+/// The engines linked into realitygap that simulate physics, each behind
+/// a cargo feature of the command (a build may leave some out), in the
+/// order a generated scene lists their settings.
+pub const LINKED_ENGINES: &[&str] = &["mujoco", "bullet", "ode", "rapier", "physx", "dart"];
+
 /// The engine setting every engine has: its fixed step, seconds
 /// (`[engine.NAME] timestep_s`, `--set NAME.timestep_s=...`). `frontier`
 /// sweeps it and `tune` halves it to check a fit.

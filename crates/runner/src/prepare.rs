@@ -64,20 +64,30 @@ pub fn find_engine(registry: Registry, name: &str) -> Result<Box<dyn Engine>> {
 }
 
 /// Every engine name realitygap knows, whether or not this build or this
-/// machine has it: the linked engines (each behind a cargo feature) and
-/// the built-in adapters (installed or not).
-fn engine_names_anywhere() -> Vec<&'static str> {
-    let linked = [
-        "mujoco", "ode", "rapier", "bullet", "physx", "dart", "ideal",
-    ];
-    linked
-        .into_iter()
+/// machine has it: the linked engines (each behind a cargo feature), the
+/// physics-free model and the built-in adapters (installed or not).
+fn engine_names_anywhere() -> impl Iterator<Item = &'static str> {
+    use realitygap_core::engine::{LINKED_ENGINES, PHYSICS_FREE_ENGINE};
+    LINKED_ENGINES
+        .iter()
+        .copied()
+        .chain([PHYSICS_FREE_ENGINE])
         .chain(
             realitygap_engine_remote::registry::ADAPTERS
                 .iter()
                 .map(|a| a.name),
         )
-        .collect()
+}
+
+/// [`read_params`] with its `[engine.NAME]` tables checked for typos
+/// against `registry` ([`check_engine_tables`]), for the commands that
+/// read a parameters file themselves (`replay`, `tune --recordings`).
+pub fn read_params_checked(registry: Registry, path: Option<&Path>) -> Result<PhysicalParams> {
+    let params = read_params(path)?;
+    if let Some(file) = path {
+        check_engine_tables(&engine_names(registry), params.engine_settings.keys(), file)?;
+    }
+    Ok(params)
 }
 
 /// Checks the `[engine.NAME]` tables of `file` (a scene or a parameters
@@ -93,15 +103,13 @@ pub fn check_engine_tables<'a>(
     names: impl IntoIterator<Item = &'a String>,
     file: &Path,
 ) -> Result<()> {
-    let anywhere = engine_names_anywhere();
     for name in names {
-        if known.iter().any(|k| k == name) || anywhere.contains(&name.as_str()) {
+        if known.iter().any(|k| k == name) || engine_names_anywhere().any(|k| k == name) {
             continue;
         }
-        let Some(meant) = known
-            .iter()
-            .map(String::as_str)
-            .chain(anywhere.iter().copied())
+        let Some(meant) = engine_names_anywhere()
+            .map(String::from)
+            .chain(known.iter().cloned())
             .filter(|k| strsim::levenshtein(k, name) <= 2)
             .min_by_key(|k| strsim::levenshtein(k, name))
         else {

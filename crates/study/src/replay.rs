@@ -232,11 +232,14 @@ pub fn scene_toml(
     let _ = writeln!(s, "[[track]]\nrole = \"wrist\"\nlink = {link:?}\n");
     // The linked engines, then every built-in adapter out of process
     // (every engine has `timestep_s`): mujoco4 with MuJoCo's settings.
-    let linked = ["mujoco", "bullet", "ode", "rapier", "physx", "dart"];
     let adapters = realitygap_engine_remote::registry::ADAPTERS
         .iter()
         .map(|a| a.name);
-    for engine in linked.into_iter().chain(adapters) {
+    for engine in realitygap_core::engine::LINKED_ENGINES
+        .iter()
+        .copied()
+        .chain(adapters)
+    {
         let _ = writeln!(s, "[engine.{engine}]\ntimestep_s = {TIMESTEP_S:?}");
         match engine {
             // Implicit servo damping: stiff gains at 1 ms stay stable. The

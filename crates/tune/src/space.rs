@@ -604,7 +604,7 @@ mod tests {
     #[test]
     fn the_shipped_spaces_parse() {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/tuning");
-        for engine in ["mujoco", "bullet", "ode", "rapier", "physx", "dart"] {
+        for &engine in realitygap_core::engine::LINKED_ENGINES {
             let s = Space::from_file(&dir.join(format!("{engine}.toml"))).unwrap();
             assert!(s.dims.len() >= 10, "{engine}");
             assert!(s.settings.contains_key(engine), "{engine}");
