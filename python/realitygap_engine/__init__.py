@@ -418,6 +418,27 @@ class Simulation:
         servo with target 0."""
         raise NotImplementedError
 
+    def run_open_loop(self, steps: int, change_at: np.ndarray, values: np.ndarray,
+                      read_at: np.ndarray) -> np.ndarray | None:
+        """Optional, for speed: ``steps`` (>= 1) steps of a ``run`` (the
+        replay of a recording) in the engine's own loop, the command kinds
+        (laws) in force throughout. Row ``c`` of ``values`` (joint values,
+        actuator order) takes force before step ``change_at[c]`` (ascending,
+        in ``[0, steps]``: at one step the last row holds, at ``steps`` it
+        holds after the call); the commands in force at the call hold
+        before the first. Returns one reading per entry of ``read_at`` (ascending, in
+        ``[0, steps]``): the state before that step (``steps``: at the end),
+        each row ``t, q, qd, poses`` flat (``1 + 2 joints + 7 tracked``
+        numbers), as :meth:`reading` would give it.
+
+        Return ``None``, with the simulation as it was at the call, to have
+        :func:`serve` take the same steps a segment at a time through
+        :meth:`reading`, :meth:`set_commands` and :meth:`step`: the default,
+        and what to do when the engine met something it cannot report from
+        its own loop (an instability: the segment-wise run then finds where
+        and says what). Non-finite rows are checked by :func:`serve`."""
+        return None
+
     def set_joint_angles(self, q: np.ndarray) -> None:
         """Puts the controlled joints at ``q`` (rad or m), at rest (their
         velocities 0), time and everything else unchanged, and recomputes
@@ -498,6 +519,9 @@ class _Session:
         # The last command kinds found valid for this model (a replay
         # sends the same kinds with every step's values).
         self.checked_kinds: list[str] | None = None
+        # The command kinds in force (None: not known here, after a native
+        # state was loaded).
+        self.kinds: list[str] | None = None
 
 
 def _vector(request: Mapping[str, Any], key: str, what: str, n: int | None, error=UsageError) -> np.ndarray:
@@ -520,7 +544,10 @@ def _finite_or_unstable(t: float, label: str, v: np.ndarray, names: Sequence[str
         raise UnstableError(f"non-finite {label} of {which} ({display(v[i])}) at t = {display(t)} s", t)
 
 
-def _reading_json(session: _Session, r: Reading) -> dict:
+def _reading_row(session: _Session, r: Reading) -> np.ndarray:
+    """The reading as one checked vector: the time, q, qd, poses (a replay
+    reads at every recorded sample). A non-finite number is an
+    :class:`UnstableError` saying which; no NaN ever leaves as bits."""
     t = float(r.t)
     q = np.asarray(r.q, dtype=np.float64).ravel()
     qd = np.asarray(r.qd, dtype=np.float64).ravel()
@@ -530,11 +557,8 @@ def _reading_json(session: _Session, r: Reading) -> dict:
                            f"for {session.joints} controlled joints")
     if poses.size != 7 * session.tracked:
         raise RuntimeError(f"the adapter's reading has {poses.size} pose numbers for {session.tracked} tracked frames (7 each)")
-    # One vector, checked and written at once (a replay reads at every
-    # recorded sample): the time, q, qd, poses.
     flat = np.concatenate(((t,), q, qd, poses))
     if not np.isfinite(flat).all():
-        # Say what is not finite: no NaN ever leaves as bits.
         if not math.isfinite(t):
             raise UnstableError(f"non-finite time ({display(t)})", session.last_t)
         _finite_or_unstable(t, "joint angle", q, session.names)
@@ -543,10 +567,20 @@ def _reading_json(session: _Session, r: Reading) -> dict:
         raise UnstableError(f"non-finite pose of tracked frame {i // 7} (component {i % 7}: "
                             f"{display(poses[i])}) at t = {display(t)} s", t)
     session.last_t = t
-    text = bits(flat)
+    return flat
+
+
+def _row_reading(session: _Session, row: np.ndarray) -> Reading:
+    """The :class:`Reading` that a row of :func:`_reading_row` is."""
+    j = session.joints
+    return Reading(float(row[0]), row[1:1 + j], row[1 + j:1 + 2 * j], row[1 + 2 * j:])
+
+
+def _reading_json(session: _Session, r: Reading) -> dict:
+    text = bits(_reading_row(session, r))
     a = 16
-    b = a + 16 * q.size
-    c = b + 16 * qd.size
+    b = a + 16 * session.joints
+    c = b + 16 * session.joints
     return {"t": text[:a], "q": text[a:b], "qd": text[b:c], "poses": text[c:]}
 
 
@@ -627,25 +661,33 @@ def _parse_commands(session: _Session, raw: Any) -> tuple[list[str], np.ndarray]
     if len(kinds) != session.joints or values.size != session.joints:
         raise UsageError(f"{len(kinds)} command kinds and {values.size} values for {session.joints} controlled joints")
 
-    def joint(i: int) -> str:
-        return session.names[i] if i < len(session.names) else str(i)
-
     # The values every time, first (as the linked engines check), the
     # kinds when they change (a replay sends the same kinds at every step).
     if not np.isfinite(values).all():
         i = int(np.flatnonzero(~np.isfinite(values))[0])
-        raise UsageError(f'the {kinds[i]} command of joint "{joint(i)}" is {display(values[i])}')
-    if kinds != session.checked_kinds:
-        known = session.adapter.commands or {k: "" for k in COMMAND_KINDS}
-        for i, k in enumerate(kinds):
-            if k not in known:
-                raise UsageError(f'joint "{joint(i)}": unknown command kind "{k}" (this engine takes: {", ".join(known)})')
-            if k == "position" and i < len(session.kp) and session.kp[i] is None:
-                raise UsageError(
-                    f'joint "{joint(i)}" takes a position command but its actuator has no position gain: '
-                    f"set kp in the scene's [[actuator]] or joints.{joint(i)}.kp in the parameters")
-        session.checked_kinds = list(kinds)
+        raise UsageError(f'the {kinds[i]} command of joint "{_joint(session, i)}" is {display(values[i])}')
+    _check_kinds(session, kinds)
     return list(kinds), values
+
+
+def _joint(session: _Session, i: int) -> str:
+    return session.names[i] if i < len(session.names) else str(i)
+
+
+def _check_kinds(session: _Session, kinds: list[str]) -> None:
+    """Checks command kinds against the engine and the model's gains, when
+    they change (a replay sends the same kinds at every step)."""
+    if kinds == session.checked_kinds:
+        return
+    known = session.adapter.commands or {k: "" for k in COMMAND_KINDS}
+    for i, k in enumerate(kinds):
+        if k not in known:
+            raise UsageError(f'joint "{_joint(session, i)}": unknown command kind "{k}" (this engine takes: {", ".join(known)})')
+        if k == "position" and i < len(session.kp) and session.kp[i] is None:
+            raise UsageError(
+                f'joint "{_joint(session, i)}" takes a position command but its actuator has no position gain: '
+                f"set kp in the scene's [[actuator]] or joints.{_joint(session, i)}.kp in the parameters")
+    session.checked_kinds = list(kinds)
 
 
 def _need_sim(session: _Session) -> Simulation:
@@ -669,6 +711,8 @@ def _handle(session: _Session, request: Mapping[str, Any]) -> dict:
             "settings": [{"key": s.key, "help": s.help} for s in adapter.settings],
             "params": [{"key": p.key, "mapping": p.mapping} for p in adapter.params],
             "commands": [{"kind": k, "mechanism": m} for k, m in adapter.commands.items()],
+            # `run` in columns (below) is understood.
+            "columns": True,
         }
     if op == "check_settings":
         settings = request.get("settings", {})
@@ -692,6 +736,7 @@ def _handle(session: _Session, request: Mapping[str, Any]) -> dict:
         session.names = [str(a.get("joint", i)) for i, a in enumerate(actuators)]
         session.kp = [a.get("kp") for a in actuators]
         session.checked_kinds = None
+        session.kinds = ["velocity"] * session.joints
         session.tracked = len(model.get("tracked") or [])
         session.objects = [o.get("name") for o in (model.get("objects") or [])]
         sim = adapter.load(model)
@@ -713,11 +758,12 @@ def _handle(session: _Session, request: Mapping[str, Any]) -> dict:
         if not isinstance(n, int) or isinstance(n, bool) or n < 1:
             raise UsageError(f"`n` must be a whole number of steps >= 1, found {json.dumps(n)}")
         if request.get("commands") is not None:
-            kinds, values = _parse_commands(session, request["commands"])
-            sim.set_commands(kinds, values)
+            _set_commands(session, sim, *_parse_commands(session, request["commands"]))
         sim.step(n)
         return {"state": _reading_json(session, sim.reading())}
     if op == "run":
+        if "columns" in request:
+            return _run_columns(session, request)
         return _run_segments(session, request)
     if op == "set_joint_angles":
         sim = _need_sim(session)
@@ -738,8 +784,10 @@ def _handle(session: _Session, request: Mapping[str, Any]) -> dict:
         if request.get("commands") is not None:
             commands = _parse_commands(session, request["commands"])
         sim.set_full_state(state)
+        if state.native is not None:
+            session.kinds = None
         if commands is not None:
-            sim.set_commands(*commands)
+            _set_commands(session, sim, *commands)
         return {"state": _reading_json(session, sim.reading())}
     raise UsageError(f"unknown op {json.dumps(op)} (accepted: hello, check_settings, load, step, "
                      "run, set_joint_angles, get_state, set_state)")
@@ -768,7 +816,7 @@ def _run_segments(session: _Session, request: Mapping[str, Any]) -> dict:
             if seg.get("read"):
                 readings.append(_reading_json(session, sim.reading()))
             if seg.get("commands") is not None:
-                sim.set_commands(*_parse_commands(session, seg["commands"]))
+                _set_commands(session, sim, *_parse_commands(session, seg["commands"]))
             if n:
                 sim.step(n)
     except EngineError as e:
@@ -780,6 +828,134 @@ def _run_segments(session: _Session, request: Mapping[str, Any]) -> dict:
         sys.stderr.flush()
         return {"readings": readings, "error": UnstableError(f"{type(e).__name__}: {e}", session.last_t).reply()}
     return {"readings": readings, "state": _reading_json(session, sim.reading())}
+
+
+def _set_commands(session: _Session, sim: Simulation, kinds: list[str], values: np.ndarray) -> None:
+    sim.set_commands(kinds, values)
+    session.kinds = kinds
+
+
+def _int_list(raw: Any, what: str) -> np.ndarray:
+    if not isinstance(raw, list) or not set(map(type, raw)) <= {int}:
+        raise UsageError(f"`columns.{what}` must be a list of whole numbers")
+    return np.asarray(raw, dtype=np.int64)
+
+
+@dataclass
+class _Columns:
+    """A ``run`` schedule as columns: per segment ``steps`` and ``read``;
+    per change of commands its segment (``at``, ascending), its kinds
+    (``laws[law[c]]``) and its values (row ``c`` of ``values``)."""
+
+    steps: np.ndarray
+    read: np.ndarray
+    at: np.ndarray
+    laws: list[list[str]]
+    law: np.ndarray
+    values: np.ndarray
+
+
+def _parse_columns(session: _Session, raw: Any) -> _Columns:
+    if not isinstance(raw, Mapping):
+        raise UsageError("`columns` must be a JSON object")
+    steps = _int_list(raw.get("steps"), "steps")
+    if steps.size and steps.min() < 0:
+        raise UsageError(f"segment {int(np.argmax(steps < 0))}: `steps` must be >= 0")
+    read_text = raw.get("read")
+    if not isinstance(read_text, str) or len(read_text) != steps.size or read_text.strip("01"):
+        raise UsageError(f"`columns.read` must be a text of {steps.size} digits 0 or 1, one per segment")
+    read = np.frombuffer(read_text.encode("ascii"), dtype=np.uint8) == ord("1")
+    at = _int_list(raw.get("at"), "at")
+    if at.size and (at.min() < 0 or at.max() >= steps.size or np.any(np.diff(at) <= 0)):
+        raise UsageError(f"`columns.at` must name segments (0 to {steps.size - 1}) in ascending order, each once")
+    laws = raw.get("laws")
+    if not isinstance(laws, list) or not all(
+            isinstance(k, list) and len(k) == session.joints and all(isinstance(x, str) for x in k) for k in laws):
+        raise UsageError(f"`columns.laws` must be a list of lists of {session.joints} command kinds")
+    for kinds in laws:
+        _check_kinds(session, kinds)
+    law = _int_list(raw.get("law"), "law")
+    if law.size != at.size or (law.size and (law.min() < 0 or law.max() >= len(laws))):
+        raise UsageError(f"`columns.law` must give each of the {at.size} changes a law (0 to {len(laws) - 1})")
+    values = _vector(raw, "values", "columns", at.size * session.joints).reshape(at.size, session.joints)
+    if not np.isfinite(values).all():
+        c, i = (int(x) for x in np.argwhere(~np.isfinite(values))[0])
+        raise UsageError(f'segment {int(at[c])}: the {laws[law[c]][i]} command of joint "{_joint(session, i)}" '
+                         f"is {display(values[c, i])}")
+    return _Columns(steps, read, at, laws, law, values)
+
+
+def _run_columns(session: _Session, request: Mapping[str, Any]) -> dict:
+    """The ``run`` request in columns (``{"columns": {...}}``): the same
+    schedule as ``segments``, its readings back as one vector of rows
+    ``t, q, qd, poses``. Where the command kinds stay (a piece), an adapter
+    with :meth:`Simulation.run_open_loop` takes the piece's steps in its own
+    loop; else, or when it declines, segment by segment."""
+    sim = _need_sim(session)
+    cols = _parse_columns(session, request.get("columns"))
+    width = 1 + 2 * session.joints + 7 * session.tracked
+    out = np.empty((int(cols.read.sum()), width))
+    count = 0
+    native = type(sim).run_open_loop is not Simulation.run_open_loop
+    change = np.full(cols.steps.size, -1, dtype=np.int64)
+    change[cols.at] = np.arange(cols.at.size)
+    # Where the kinds change: the pieces' starts.
+    starts = [0]
+    kinds = session.kinds
+    for c, a in enumerate(cols.at.tolist()):
+        law = cols.laws[cols.law[c]]
+        if law != kinds:
+            if a:
+                starts.append(a)
+            kinds = law
+    starts = sorted(set(starts)) + [cols.steps.size]
+    try:
+        for a, b in zip(starts[:-1], starts[1:]):
+            rows = None
+            if native:
+                cum = np.concatenate(((0,), np.cumsum(cols.steps[a:b])))
+                total = int(cum[-1])
+                if total:
+                    c0 = change[a]
+                    if c0 >= 0:
+                        _set_commands(session, sim, cols.laws[cols.law[c0]], cols.values[c0])
+                    inner = change[a + 1:b]
+                    inner = inner[inner >= 0]
+                    read_at = cum[:-1][cols.read[a:b]]
+                    rows = sim.run_open_loop(total, cum[cols.at[inner] - a], cols.values[inner], read_at)
+            if rows is None:
+                for i in range(a, b):
+                    if cols.read[i]:
+                        out[count] = _reading_row(session, sim.reading())
+                        count += 1
+                    c = change[i]
+                    if c >= 0:
+                        _set_commands(session, sim, cols.laws[cols.law[c]], cols.values[c])
+                    if cols.steps[i]:
+                        sim.step(int(cols.steps[i]))
+                continue
+            rows = np.asarray(rows, dtype=np.float64)
+            if rows.shape != (read_at.size, width):
+                raise RuntimeError(f"the adapter's run_open_loop gave readings of shape {rows.shape}, "
+                                   f"not {(read_at.size, width)}")
+            if not np.isfinite(rows).all():
+                k = int(np.flatnonzero(~np.isfinite(rows).all(axis=1))[0])
+                out[count:count + k] = rows[:k]
+                count += k
+                _reading_row(session, _row_reading(session, rows[k]))
+            out[count:count + rows.shape[0]] = rows
+            count += rows.shape[0]
+            if count:
+                session.last_t = float(out[count - 1, 0])
+    except EngineError as e:
+        if isinstance(e, UnstableError) and e.t_s is None:
+            e.t_s = session.last_t
+        return {"readings": bits(out[:count]), "error": e.reply()}
+    except Exception as e:  # noqa: BLE001 - a failure while stepping is the run's end
+        traceback.print_exc(file=sys.stderr)
+        sys.stderr.flush()
+        return {"readings": bits(out[:count]), "error": UnstableError(f"{type(e).__name__}: {e}", session.last_t).reply()}
+    return {"readings": bits(out[:count]), "state": _reading_json(session, sim.reading())}
 
 
 def _checked_bits(x: float, what: str) -> str:

@@ -437,6 +437,155 @@ def test_stability_issues_are_reported():
     assert issues == [{"joint": "x", "quantity": "kv*dt/m", "value": 2.0, "bound": 2.0, "message": "too stiff"}]
 
 
+# A replay's schedule: segments (read first, then commands, then steps),
+# with laws that change, reads at the end and segments without steps.
+SCHEDULE = [
+    {"read": True, "steps": 3},
+    {"read": True, "commands": {"kinds": ["velocity"], "values": rge.bits([0.5])}, "steps": 4},
+    {"read": False, "commands": {"kinds": ["velocity"], "values": rge.bits([-0.25])}, "steps": 2},
+    {"read": True, "steps": 0},
+    {"read": True, "commands": {"kinds": ["position"], "values": rge.bits([0.1])}, "steps": 5},
+    {"read": False, "commands": {"kinds": ["position"], "values": rge.bits([0.2])}, "steps": 0},
+    {"read": True, "commands": {"kinds": ["position"], "values": rge.bits([0.3])}, "steps": 6},
+    {"read": True, "commands": {"kinds": ["effort"], "values": rge.bits([1.5])}, "steps": 2},
+    {"read": True, "commands": {"kinds": ["effort"], "values": rge.bits([-1.0])}, "steps": 0},
+]
+
+
+def as_columns(segments):
+    """The same schedule in columns (docs/engine-protocol.md)."""
+    laws, law, at, values = [], [], [], ""
+    for i, s in enumerate(segments):
+        c = s.get("commands")
+        if c is not None:
+            if c["kinds"] not in laws:
+                laws.append(c["kinds"])
+            law.append(laws.index(c["kinds"]))
+            at.append(i)
+            values += c["values"]
+    return {"steps": [s["steps"] for s in segments], "read": "".join("1" if s["read"] else "0" for s in segments),
+            "at": at, "laws": laws, "law": law, "values": values}
+
+
+def rows_of(reply):
+    """A `run` reply's readings as rows t, q, qd, poses (either form)."""
+    if isinstance(reply["readings"], str):
+        return rge.floats(reply["readings"]).reshape(-1, 10).tolist()
+    return [np.concatenate([rge.floats(r[k]) for k in ("t", "q", "qd", "poses")]).tolist() for r in reply["readings"]]
+
+
+def kp_model(**extra):
+    return toy_model(actuators=[{"joint": "x", "body": 0, "kv": 4.0, "kp": 3.0, "force_limit": None}], **extra)
+
+
+class OwnLoop(PointMass):
+    """The point mass with run_open_loop: its own loop over a piece's
+    steps, the calls recorded (or declined, or poisoned at a step)."""
+
+    calls: list = []
+    decline = False
+    poison_at = None
+
+    def run_open_loop(self, steps, change_at, values, read_at):
+        OwnLoop.calls.append((self.kind, steps, list(change_at), list(read_at)))
+        if OwnLoop.decline:
+            return None
+        rows, c = [], 0
+        for k in range(steps + 1):
+            while c < len(change_at) and change_at[c] == k:
+                self.value = float(values[c][0])
+                c += 1
+            for _ in range(list(read_at).count(k)):
+                r = self.reading()
+                rows.append(np.concatenate(([r.t], r.q, r.qd, r.poses)))
+            if k < steps:
+                self.step(1)
+                if OwnLoop.poison_at is not None and k + 1 == OwnLoop.poison_at:
+                    self.qd = math.nan
+        return np.array(rows).reshape(len(read_at), 10)
+
+
+class OwnLoopToy(Toy):
+    def load(self, model):
+        sim = super().load(model)
+        own = OwnLoop.__new__(OwnLoop)
+        own.__dict__.update(sim.__dict__)
+        return own
+
+
+def test_run_in_columns_gives_the_segments_readings():
+    """The schedule in columns, served segment by segment (an adapter
+    without run_open_loop) and through run_open_loop in pieces where the
+    laws stay: the same numbers as in segments, the readings as one
+    vector."""
+    segments = serve_lines([{"op": "load", "model": kp_model()}, {"op": "run", "segments": SCHEDULE}])
+    want = ok(segments[1])
+    assert len(want["readings"]) == 7
+    hello, _, columns = serve_lines([{"op": "hello", "protocol": 1}, {"op": "load", "model": kp_model()},
+                                     {"op": "run", "columns": as_columns(SCHEDULE)}])
+    assert ok(hello)["columns"] is True
+    got = ok(columns)
+    assert rows_of(got) == rows_of(want) and got["state"] == want["state"]
+    OwnLoop.calls, OwnLoop.decline, OwnLoop.poison_at = [], False, None
+    _, own = serve_lines([{"op": "load", "model": kp_model()}, {"op": "run", "columns": as_columns(SCHEDULE)}],
+                         OwnLoopToy())
+    assert rows_of(ok(own)) == rows_of(want) and ok(own)["state"] == want["state"]
+    # One piece per law: velocity (its first change after the first
+    # segment's read at step 3, the second at 7, a read at 9), position
+    # (two changes at step 5, the later holding), effort (a change at
+    # the end, holding after the run).
+    assert OwnLoop.calls == [
+        ("velocity", 9, [3, 7], [0, 3, 9]),
+        ("position", 11, [5, 5], [0, 5]),
+        ("effort", 2, [2], [0, 2]),
+    ], OwnLoop.calls
+    # Declined: served segment by segment, the same numbers.
+    OwnLoop.calls, OwnLoop.decline = [], True
+    _, declined = serve_lines([{"op": "load", "model": kp_model()},
+                               {"op": "run", "columns": as_columns(SCHEDULE)}], OwnLoopToy())
+    assert rows_of(ok(declined)) == rows_of(want) and len(OwnLoop.calls) == 3
+
+
+def test_a_failure_in_columns_keeps_the_readings_before_it():
+    # A non-finite reading from run_open_loop: the rows before it, and the
+    # reason, as segment by segment.
+    OwnLoop.calls, OwnLoop.decline, OwnLoop.poison_at = [], False, 6
+    _, own = serve_lines([{"op": "load", "model": kp_model()}, {"op": "run", "columns": as_columns(SCHEDULE)}],
+                         OwnLoopToy())
+    got = ok(own)
+    assert len(rows_of(got)) == 2 and "state" not in got
+    assert got["error"]["kind"] == "unstable"
+    assert got["error"]["message"] == 'non-finite joint angle of joint "x" (NaN) at t = 0.09 s'
+    # An engine failing while stepping, segment by segment.
+    _, failed = serve_lines([{"op": "load", "model": kp_model(fail_step="unstable")},
+                             {"op": "run", "columns": as_columns(SCHEDULE)}])
+    got = ok(failed)
+    assert len(rows_of(got)) == 1 and got["error"]["message"] == "the toy engine blew up"
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"steps": [1, -2]}, "segment 1: `steps` must be >= 0"),
+    ({"steps": [1, True]}, "`columns.steps` must be a list of whole numbers"),
+    ({"read": "12"}, "`columns.read` must be a text of 2 digits 0 or 1, one per segment"),
+    ({"read": "1"}, "`columns.read` must be a text of 2 digits 0 or 1"),
+    ({"at": [1, 1]}, "`columns.at` must name segments (0 to 1) in ascending order, each once"),
+    ({"at": [2]}, "`columns.at` must name segments (0 to 1)"),
+    ({"law": [1]}, "`columns.law` must give each of the 1 changes a law (0 to 0)"),
+    ({"laws": [["sideways"]]}, 'joint "x": unknown command kind "sideways"'),
+    ({"laws": [["position"]]}, 'joint "x" takes a position command but its actuator has no position gain'),
+    ({"laws": [["velocity", "velocity"]]}, "`columns.laws` must be a list of lists of 1 command kinds"),
+    ({"values": rge.bits([math.nan])}, 'segment 0: the velocity command of joint "x" is NaN'),
+    ({"values": rge.bits([1.0, 2.0])}, "columns: `values` has 2 values, the model 1"),
+    ({"values": "zz"}, "columns: `values` is not a bits vector"),
+])
+def test_bad_columns_are_usage_errors(change, message):
+    columns = {"steps": [1, 2], "read": "10", "at": [0], "laws": [["velocity"]], "law": [0],
+               "values": rge.bits([1.0])}
+    columns.update(change)
+    _, reply = serve_lines([{"op": "load", "model": toy_model()}, {"op": "run", "columns": columns}])
+    assert message in err(reply, "usage")["message"], reply
+
+
 def test_native_output_goes_to_stderr_in_a_child_process():
     """Writes to file descriptor 1 (as a C library's printf) and print()
     never reach the protocol's standard output."""
@@ -827,6 +976,53 @@ def test_unstable_settings_are_reported_and_blow_ups_refused(child):
     child.ok({"op": "load", "model": pendulum(kv=10.0, force_limit=None, settings={"timestep_s": 0.01})})
     e = child.call({"op": "step", "n": 500, "commands": {"kinds": ["velocity"], "values": rge.bits([1.0])}})["error"]
     assert e["kind"] == "unstable" and "MuJoCo" in e["message"] and e["t_s"] == 0.0, e
+
+
+def stepwise(child, model, segments):
+    """Loads `model` and takes `segments` with `step` requests (MuJoCo's
+    loop driven from Python): the readings, rows t, q, qd, poses, and the
+    state at the end or the error that ended them."""
+    state = child.ok({"op": "load", "model": model})["state"]
+    rows, pending = [], None
+    for s in segments:
+        if s["read"]:
+            rows.append(np.concatenate([rge.floats(state[k]) for k in ("t", "q", "qd", "poses")]).tolist())
+        pending = s.get("commands", pending)
+        if s["steps"]:
+            reply = child.call({"op": "step", "n": s["steps"], **({"commands": pending} if pending else {})})
+            pending = None
+            if "error" in reply:
+                return rows, reply["error"]
+            state = reply["ok"]["state"]
+    return rows, state
+
+
+def test_a_replay_in_mujocos_own_loop_gives_the_step_by_step_numbers(child):
+    """`run` in columns goes through MuJoCo's rollout (run_open_loop) where
+    the laws stay: bit for bit the numbers of the same steps taken one
+    request at a time; a blow-up part-way is reported as there, with the
+    readings before it."""
+    model = pendulum(gravity=(0, 0, -9.81), kv=2.0)
+    velocity = lambda v: {"kinds": ["velocity"], "values": rge.bits([v])}  # noqa: E731
+    position = lambda v: {"kinds": ["position"], "values": rge.bits([v])}  # noqa: E731
+    segments = ([{"read": True, "steps": 5, "commands": velocity(0.3 * np.sin(k))} for k in range(40)]
+                + [{"read": True, "steps": 7, "commands": position(0.2 * np.cos(k))} for k in range(30)]
+                + [{"read": True, "steps": 3} for _ in range(10)])
+    want, end = stepwise(child, model, segments)
+    child.ok({"op": "load", "model": model})
+    got = child.ok({"op": "run", "columns": as_columns(segments)})
+    assert rge.floats(got["readings"]).reshape(-1, 10).tolist() == want and len(want) == len(segments)
+    assert got["state"] == end
+    # Unstable: kv dt / I = 10 under Euler; stepwise and in columns, the
+    # same readings, then the same error.
+    model = pendulum(kv=10.0, force_limit=None, settings={"timestep_s": 0.01})
+    segments = [{"read": True, "steps": 2, "commands": velocity(1.0)}] + [{"read": True, "steps": 2}] * 200
+    want, error = stepwise(child, model, segments)
+    assert error["kind"] == "unstable" and 3 < len(want) < 200, (error, len(want))
+    child.ok({"op": "load", "model": model})
+    got = child.ok({"op": "run", "columns": as_columns(segments)})
+    assert got["error"] == error and "state" not in got
+    assert rge.floats(got["readings"]).reshape(-1, 10).tolist() == want
 
 
 def test_self_collision_setting_stops_robot_contacts(child):

@@ -101,6 +101,9 @@ pub struct Hello {
     pub params: Vec<ParamSupport>,
     /// Its servo laws.
     pub commands: Vec<CommandSupport>,
+    /// Whether it takes `run` in columns (a replay's schedule as arrays,
+    /// its readings back as one vector), which the SDK's adapters do.
+    pub columns: bool,
 }
 
 fn leak(s: &str) -> &'static str {
@@ -207,6 +210,7 @@ impl Hello {
             settings,
             params,
             commands,
+            columns: reply.value("columns").and_then(Value::as_bool) == Some(true),
         })
     }
 }
@@ -417,6 +421,7 @@ impl Engine for RemoteEngine {
         model::check_held_joint_params(self.inner.name, scene, robot, params)?;
         let (timeout, rest) = self.split_timeout(settings)?;
         let timestep_s = self.check_settings(settings)?;
+        let columns = self.hello().is_ok_and(|h| h.columns);
         let description = model::describe(scene, robot, &rest, variation, params)
             .map_err(|m| self.load_error(m))?;
         let idle = self
@@ -458,6 +463,7 @@ impl Engine for RemoteEngine {
             timestep_s,
             reading,
             issues,
+            columns,
         )))
     }
 }

@@ -108,9 +108,96 @@ fn kind_name(kind: CommandKind) -> &'static str {
 }
 
 fn commands_json(commands: &[ServoCommand]) -> Value {
-    let kinds: Vec<&str> = commands.iter().map(|c| kind_name(c.kind)).collect();
-    let values: Vec<f64> = commands.iter().map(|c| c.value).collect();
+    let (kinds, values) = commands_json_parts(commands);
     json!({"kinds": kinds, "values": bits(&values)})
+}
+
+/// The kinds and values of `commands`, as they travel.
+fn commands_json_parts(commands: &[ServoCommand]) -> (Vec<&'static str>, Vec<f64>) {
+    (
+        commands.iter().map(|c| kind_name(c.kind)).collect(),
+        commands.iter().map(|c| c.value).collect(),
+    )
+}
+
+/// A `run` request as segments (protocol 1's first form): `changes` are
+/// the segments that set commands, with their kinds and values.
+fn segments_request(segments: &[Segment], changes: &[(usize, (Vec<&str>, Vec<f64>))]) -> Value {
+    let mut changes = changes.iter().peekable();
+    let wire: Vec<Value> = segments
+        .iter()
+        .enumerate()
+        .map(|(i, segment)| {
+            let mut w = json!({"read": segment.read, "steps": segment.steps});
+            if let Some((_, (kinds, values))) = changes.next_if(|(at, _)| *at == i) {
+                w["commands"] = json!({"kinds": kinds, "values": bits(values)});
+            }
+            w
+        })
+        .collect();
+    json!({"op": "run", "segments": wire})
+}
+
+/// The same `run` request in columns: per segment its steps and whether
+/// it reads; per change of commands its segment, its kinds (an index into
+/// the distinct kinds sent, `laws`) and its values (one vector for all).
+fn columns_request(segments: &[Segment], changes: &[(usize, (Vec<&str>, Vec<f64>))]) -> Value {
+    let mut laws: Vec<&Vec<&str>> = Vec::new();
+    let mut law = Vec::with_capacity(changes.len());
+    let mut values = Vec::new();
+    for (_, (kinds, v)) in changes {
+        let index = laws.iter().position(|k| *k == kinds).unwrap_or_else(|| {
+            laws.push(kinds);
+            laws.len() - 1
+        });
+        law.push(index);
+        values.extend_from_slice(v);
+    }
+    let steps: Vec<u64> = segments.iter().map(|s| s.steps).collect();
+    let read: String = segments
+        .iter()
+        .map(|s| if s.read { '1' } else { '0' })
+        .collect();
+    let at: Vec<usize> = changes.iter().map(|(i, _)| *i).collect();
+    json!({"op": "run", "columns": {
+        "steps": steps, "read": read, "at": at, "laws": laws, "law": law, "values": bits(&values),
+    }})
+}
+
+/// The readings of a `run` reply in columns: one vector of rows `t, q,
+/// qd, poses`.
+fn reading_rows(reply: &Reply, joints: usize, tracked: usize) -> Result<Vec<Reading>, String> {
+    let width = 1 + 2 * joints + 7 * tracked;
+    let flat = reply.vector("readings", None)?;
+    if flat.len() % width != 0 {
+        return Err(format!(
+            "the reply to \"run\": field \"readings\" has {} numbers, not a whole number of readings of {width} (t, {joints} q, {joints} qd, {tracked} poses)",
+            flat.len()
+        ));
+    }
+    Ok(flat
+        .chunks_exact(width)
+        .map(|row| Reading {
+            t: row[0],
+            q: row[1..1 + joints].to_vec(),
+            qd: row[1 + joints..1 + 2 * joints].to_vec(),
+            poses: row[1 + 2 * joints..].chunks(7).map(pose_of).collect(),
+        })
+        .collect())
+}
+
+/// The readings of a `run` reply as segments: one object per reading.
+fn reading_objects(reply: &Reply, joints: usize, tracked: usize) -> Result<Vec<Reading>, String> {
+    reply
+        .array("readings")?
+        .iter()
+        .map(|v| {
+            let fields = v
+                .as_object()
+                .ok_or("the reply to \"run\": a reading is not an object")?;
+            Reading::of(&Reply { op: "run", fields }, joints, tracked)
+        })
+        .collect()
 }
 
 fn pose_of(v: &[f64]) -> Pose {
@@ -194,6 +281,8 @@ pub struct RemoteSimulation {
     /// Whether `commands` changed since the child last had them.
     pending: bool,
     issues: Vec<StabilityIssue>,
+    /// Whether the child takes `run` in columns.
+    columns: bool,
 }
 
 impl RemoteSimulation {
@@ -205,6 +294,7 @@ impl RemoteSimulation {
         timestep_s: f64,
         reading: Reading,
         issues: Vec<StabilityIssue>,
+        columns: bool,
     ) -> RemoteSimulation {
         RemoteSimulation {
             engine,
@@ -216,6 +306,7 @@ impl RemoteSimulation {
             reading,
             pending: false,
             issues,
+            columns,
         }
     }
 
@@ -365,21 +456,24 @@ impl Simulation for RemoteSimulation {
         // travel with its first segment.
         let mut commands = self.commands.clone();
         let mut pending = self.pending;
-        let mut wire = Vec::with_capacity(segments.len());
-        for segment in segments {
-            let mut w = json!({"read": segment.read, "steps": segment.steps});
+        let mut changes = Vec::new();
+        for (i, segment) in segments.iter().enumerate() {
             if let Some(c) = &segment.commands {
                 check_servo_commands(self.engine, &self.scene, c)?;
                 commands.clone_from(c);
                 pending = true;
             }
             if pending {
-                w["commands"] = commands_json(&commands);
+                changes.push((i, commands_json_parts(&commands)));
                 pending = false;
             }
-            wire.push(w);
         }
-        let fields = self.call(json!({"op": "run", "segments": wire}))?;
+        let request = if self.columns {
+            columns_request(segments, &changes)
+        } else {
+            segments_request(segments, &changes)
+        };
+        let fields = self.call(request)?;
         self.commands = commands;
         self.pending = false;
         let reply = Reply {
@@ -387,19 +481,20 @@ impl Simulation for RemoteSimulation {
             fields: &fields,
         };
         let (joints, tracked) = (self.joint_count(), self.tracked_count());
-        for v in reply.array("readings").map_err(|m| self.unstable(m))? {
-            let fields = v.as_object().ok_or_else(|| {
-                self.unstable("the reply to \"run\": a reading is not an object".into())
-            })?;
-            let r = Reading::of(&Reply { op: "run", fields }, joints, tracked)
-                .map_err(|m| self.unstable(m))?;
-            self.reading.t = r.t;
-            readings.push(SegmentReading {
-                angles_rad: r.q,
-                velocities_rad_s: r.qd,
-                poses: r.poses,
-            });
+        let taken = if self.columns {
+            reading_rows(&reply, joints, tracked)
+        } else {
+            reading_objects(&reply, joints, tracked)
         }
+        .map_err(|m| self.unstable(m))?;
+        if let Some(last) = taken.last() {
+            self.reading.t = last.t;
+        }
+        readings.extend(taken.into_iter().map(|r| SegmentReading {
+            angles_rad: r.q,
+            velocities_rad_s: r.qd,
+            poses: r.poses,
+        }));
         if let Some(error) = reply.value("error") {
             let failure = Failure::from_error(error, "unstable");
             return Err(engine_error(self.engine, failure, |m| self.unstable(m)));
@@ -544,5 +639,92 @@ impl Simulation for RemoteSimulation {
         self.commands = commands;
         self.pending = false;
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::wire::floats;
+
+    fn changes() -> Vec<(usize, (Vec<&'static str>, Vec<f64>))> {
+        vec![
+            (0, (vec!["velocity", "velocity"], vec![0.5, -0.5])),
+            (2, (vec!["position", "velocity"], vec![0.1, 0.0])),
+            (3, (vec!["velocity", "velocity"], vec![1.0, 2.0])),
+        ]
+    }
+
+    fn segments() -> Vec<Segment> {
+        [(true, 5), (false, 3), (true, 0), (true, 2)]
+            .into_iter()
+            .map(|(read, steps)| Segment {
+                read,
+                commands: None,
+                steps,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_schedule_travels_in_columns_with_each_law_once() {
+        let r = columns_request(&segments(), &changes());
+        let c = &r["columns"];
+        assert_eq!(r["op"], "run");
+        assert_eq!(c["steps"], json!([5, 3, 0, 2]));
+        assert_eq!(c["read"], "1011");
+        assert_eq!(c["at"], json!([0, 2, 3]));
+        assert_eq!(
+            c["laws"],
+            json!([["velocity", "velocity"], ["position", "velocity"]])
+        );
+        assert_eq!(c["law"], json!([0, 1, 0]));
+        assert_eq!(
+            floats(c["values"].as_str().unwrap()).unwrap(),
+            [0.5, -0.5, 0.1, 0.0, 1.0, 2.0]
+        );
+        // The same schedule as segments: commands where they change.
+        let s = segments_request(&segments(), &changes());
+        let w = s["segments"].as_array().unwrap();
+        assert_eq!(w.len(), 4);
+        assert!(w[1].get("commands").is_none());
+        assert_eq!(w[2]["commands"]["kinds"], json!(["position", "velocity"]));
+        assert_eq!(w[3]["steps"], 2);
+    }
+
+    #[test]
+    fn readings_in_columns_are_rows_of_a_width() {
+        // 2 joints, 1 tracked frame: rows of 1 + 2 + 2 + 7 numbers.
+        let row = |t: f64| [t, 1.0, 2.0, 3.0, 4.0, 0.1, 0.2, 0.3, 1.0, 0.0, 0.0, 0.0];
+        let flat: Vec<f64> = row(0.0).into_iter().chain(row(0.5)).collect();
+        let fields = json!({"readings": bits(&flat)});
+        let reply = Reply {
+            op: "run",
+            fields: fields.as_object().unwrap(),
+        };
+        let rows = reading_rows(&reply, 2, 1).unwrap();
+        assert_eq!(rows.len(), 2);
+        assert_eq!(
+            (rows[1].t, &rows[1].q, &rows[1].qd),
+            (0.5, &vec![1.0, 2.0], &vec![3.0, 4.0])
+        );
+        assert_eq!(rows[1].poses[0].position_m.z, 0.3);
+        let short = json!({"readings": bits(&flat[..20])});
+        let reply = Reply {
+            op: "run",
+            fields: short.as_object().unwrap(),
+        };
+        assert_eq!(
+            reading_rows(&reply, 2, 1).unwrap_err(),
+            "the reply to \"run\": field \"readings\" has 20 numbers, not a whole number of readings of 12 (t, 2 q, 2 qd, 1 poses)"
+        );
+        let nan = json!({"readings": bits(&[f64::NAN; 12])});
+        let reply = Reply {
+            op: "run",
+            fields: nan.as_object().unwrap(),
+        };
+        assert!(reading_rows(&reply, 2, 1)
+            .unwrap_err()
+            .contains("readings[0] is NaN"));
     }
 }

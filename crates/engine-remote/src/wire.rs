@@ -22,6 +22,18 @@ pub fn bits(values: &[f64]) -> String {
     out
 }
 
+/// The value of each hexadecimal digit, 16 for any other byte.
+const HEX_VALUE: [u8; 256] = {
+    let mut table = [16u8; 256];
+    let mut i = 0;
+    while i < 16 {
+        table[b"0123456789abcdef"[i] as usize] = i as u8;
+        table[b"0123456789ABCDEF"[i] as usize] = i as u8;
+        i += 1;
+    }
+    table
+};
+
 /// The numbers of a [`bits`] text; the message says what is wrong.
 pub fn floats(text: &str) -> Result<Vec<f64>, String> {
     let b = text.as_bytes();
@@ -31,22 +43,25 @@ pub fn floats(text: &str) -> Result<Vec<f64>, String> {
             b.len()
         ));
     }
-    let digit = |c: u8, at: usize| -> Result<u8, String> {
-        match c {
-            b'0'..=b'9' => Ok(c - b'0'),
-            b'a'..=b'f' => Ok(c - b'a' + 10),
-            b'A'..=b'F' => Ok(c - b'A' + 10),
-            _ => Err(format!("'{}' at {at} is not a hex digit", c as char)),
-        }
-    };
+    // A replay's readings come back as one long text: a table lookup a
+    // digit, the offending digit found only when there is one.
     let mut out = Vec::with_capacity(b.len() / 16);
-    for (n, chunk) in b.chunks(16).enumerate() {
+    let mut bad = 0u8;
+    for chunk in b.chunks_exact(16) {
         let mut bytes = [0u8; 8];
-        for (i, byte) in bytes.iter_mut().enumerate() {
-            let at = n * 16 + 2 * i;
-            *byte = digit(chunk[2 * i], at)? << 4 | digit(chunk[2 * i + 1], at + 1)?;
+        for (byte, pair) in bytes.iter_mut().zip(chunk.chunks_exact(2)) {
+            let (hi, lo) = (HEX_VALUE[pair[0] as usize], HEX_VALUE[pair[1] as usize]);
+            bad |= hi | lo;
+            *byte = hi << 4 | (lo & 15);
         }
         out.push(f64::from_le_bytes(bytes));
+    }
+    if bad & 16 != 0 {
+        let at = b
+            .iter()
+            .position(|&c| HEX_VALUE[c as usize] == 16)
+            .expect("a byte that is not a hex digit");
+        return Err(format!("'{}' at {at} is not a hex digit", b[at] as char));
     }
     Ok(out)
 }

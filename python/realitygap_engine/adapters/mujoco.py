@@ -109,6 +109,15 @@ _NATIVE_SPEC = int(mujoco.mjtState.mjSTATE_INTEGRATION)
 _NATIVE_VERSION = 1.0
 _HEADER = 4
 
+#: mj_getState's spec of a rollout's states, and of its controls.
+_FULL = int(mujoco.mjtState.mjSTATE_FULLPHYSICS)
+_CTRL = int(mujoco.mjtState.mjSTATE_CTRL)
+
+try:  # MuJoCo's open-loop rollout (3.1.1 and later): run_open_loop.
+    from mujoco import _rollout
+except ImportError:
+    _rollout = None
+
 #: Whether mj_step takes nstep (MuJoCo >= 3.?; the loop otherwise).
 _HAS_NSTEP = "nstep" in (mujoco.mj_step.__doc__ or "")
 
@@ -221,18 +230,6 @@ def _rotation(q: np.ndarray) -> np.ndarray:
     return m.reshape(3, 3)
 
 
-def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    # Python floats: the same IEEE arithmetic as numpy's scalars, faster.
-    w1, x1, y1, z1 = np.asarray(a, dtype=np.float64).tolist()
-    w2, x2, y2, z2 = np.asarray(b, dtype=np.float64).tolist()
-    return np.array([
-        w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
-        w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-        w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
-        w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
-    ])
-
-
 def damping_ratio_for_restitution(e: float) -> float:
     """The damping ratio of a linear mass-spring-damper contact whose
     coefficient of restitution is ``e`` in ``[0, 1)``:
@@ -266,7 +263,9 @@ class _Built:
         self.kv: list[float] = []
         self.kp: list[float | None] = []
         self.zero_force: list[str] = []
-        self.tracked: list[tuple[str, np.ndarray, np.ndarray]] = []
+        #: Per tracked frame: the site at its offset in a robot body, or an
+        #: object's body; each with a framepos and a framequat sensor.
+        self.tracked: list[tuple[mujoco.mjtObj, str]] = []
         self.objects: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]] = []
 
 
@@ -539,14 +538,20 @@ def build(model, options: dict) -> tuple[mujoco.MjModel, _Built]:
             if not isinstance(b, int) or isinstance(b, bool) or not 0 <= b < len(names):
                 raise rge.LoadError(f"tracked {k}: body {b!r} is not a body index")
             opos, oquat = _pose(t.get("offset", [0, 0, 0, 1, 0, 0, 0]), f"tracked {k}: offset")
-            built.tracked.append((names[b], opos, oquat))
+            spec_bodies[b].add_site(name=f"tracked:{k}", pos=opos, quat=oquat)
+            built.tracked.append((mujoco.mjtObj.mjOBJ_SITE, f"tracked:{k}"))
         elif "object" in t:
             o = t["object"]
             if not isinstance(o, int) or isinstance(o, bool) or not 0 <= o < len(built.objects):
                 raise rge.LoadError(f"tracked {k}: object {o!r} is not an object index")
-            built.tracked.append((OBJECT_PREFIX + built.objects[o][0], None, None))
+            built.tracked.append((mujoco.mjtObj.mjOBJ_XBODY, OBJECT_PREFIX + built.objects[o][0]))
         else:
             raise rge.LoadError(f"tracked {k}: neither a body nor an object")
+    # The tracked poses as sensors too, in the reading's layout (x y z, then
+    # qw qx qy qz): a rollout (run_open_loop) records them at every step.
+    for objtype, objname in built.tracked:
+        for sensor in (mujoco.mjtSensor.mjSENS_FRAMEPOS, mujoco.mjtSensor.mjSENS_FRAMEQUAT):
+            spec.add_sensor(type=sensor, objtype=objtype, objname=objname)
 
     try:
         compiled = spec.compile()
@@ -585,10 +590,19 @@ class MujocoSimulation(rge.Simulation):
         self.bias0 = [m.actuator_biasprm[u].copy() for u in self.ctrl]
         self.ctrllimited0 = [int(m.actuator_ctrllimited[u]) for u in self.ctrl]
         self.kinds = ["velocity"] * len(self.ctrl)
+        # Per tracked frame (site or -1, body): a site's pose is the
+        # framepos and framequat sensors' (site_xpos, and xquat times the
+        # site's quat), bit for bit.
         self.tracked = []
-        for name, opos, oquat in built.tracked:
-            b = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, name)
-            self.tracked.append((b, opos, oquat))
+        for objtype, name in built.tracked:
+            if objtype == mujoco.mjtObj.mjOBJ_SITE:
+                site = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, name)
+                self.tracked.append((site, int(m.site_bodyid[site])))
+            else:
+                self.tracked.append((-1, mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, name)))
+        self._site_xpos, self._site_quat = self.d.site_xpos, m.site_quat
+        self._quat = np.empty(4)
+        self._roller = _rollout.Rollout(nthread=0) if _rollout is not None and self._rollout_fits() else None
         self.objects = []
         for name, _quat, _v, _w in built.objects:
             b = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, OBJECT_PREFIX + name)
@@ -604,7 +618,7 @@ class MujocoSimulation(rge.Simulation):
         self._warnings = self.d.warning.number
         self._warning_kinds = np.array([int(kind) for kind, _ in _INSTABILITY_WARNINGS], dtype=np.intp)
         self._qpos, self._qvel = self.d.qpos, self.d.qvel
-        self._xpos, self._xquat, self._xmat = self.d.xpos, self.d.xquat, self.d.xmat
+        self._xpos, self._xquat = self.d.xpos, self.d.xquat
         # Whether the body poses (mj_kinematics) lag qpos: a step leaves
         # them at the step's start, and a reading brings them up to date.
         self._poses_stale = False
@@ -722,20 +736,80 @@ class MujocoSimulation(rge.Simulation):
 
     # -- reading
 
-    def _body_pose(self, b: int, opos, oquat) -> np.ndarray:
-        p = self._xpos[b]
-        q = self._xquat[b]
-        if opos is None:
-            return np.concatenate([p, q])
-        return np.concatenate([p + self._xmat[b].reshape(3, 3) @ opos, _quat_mul(q, oquat)])
+    def _frame_pose(self, site: int, b: int) -> np.ndarray:
+        if site < 0:
+            return np.concatenate([self._xpos[b], self._xquat[b]])
+        mujoco.mju_mulQuat(self._quat, self._xquat[b], self._site_quat[site])
+        return np.concatenate([self._site_xpos[site], self._quat])
 
     def reading(self) -> rge.Reading:
         d = self.d
         self._poses_now()
-        poses = np.concatenate([self._body_pose(b, p, q) for b, p, q in self.tracked]) if self.tracked \
+        poses = np.concatenate([self._frame_pose(site, b) for site, b in self.tracked]) if self.tracked \
             else np.zeros(0)
         # (Indexing with an array copies.)
         return rge.Reading(float(d.time), self._qpos[self.qpos_adr], self._qvel[self.dof_adr], poses)
+
+    # -- a replay in MuJoCo's own loop
+
+    def _rollout_fits(self) -> bool:
+        """Whether mj_getState's full physics starts with the time, qpos
+        and qvel (read back from a rollout's states) and the sensors are the
+        tracked poses."""
+        m, d = self.m, self.d
+        state = np.empty(mujoco.mj_stateSize(m, _FULL))
+        mujoco.mj_getState(m, d, state, _FULL)
+        return (state[0] == d.time and np.array_equal(state[1:1 + m.nq], d.qpos)
+                and np.array_equal(state[1 + m.nq:1 + m.nq + m.nv], d.qvel)
+                and m.nsensordata == 7 * len(self.tracked))
+
+    def run_open_loop(self, steps, change_at, values, read_at):
+        if self._roller is None:
+            return None
+        m, d = self.m, self.d
+        servos = self.ctrl_adr
+        # Each step's controls: the change in force there (-1: those now).
+        table = np.vstack([d.ctrl[servos][None], values])
+        in_force = np.searchsorted(change_at, np.arange(steps), side="right")
+        control = np.empty((1, steps, m.nu))
+        control[0] = d.ctrl
+        control[0][:, servos] = table[in_force]
+        state0 = np.empty(mujoco.mj_stateSize(m, _FULL))
+        mujoco.mj_getState(m, d, state0, _FULL)
+        warmstart0 = d.qacc_warmstart.copy()
+        ctrl0 = d.ctrl.copy()
+        states = np.empty((1, steps, state0.size))
+        sensors = np.empty((1, steps, m.nsensordata))
+        # (MuJoCo's rollout resets mjData, then loads the state.)
+        self._roller.rollout([m], [d], steps, _CTRL, state0[None], warmstart0[None], control, states, sensors, None)
+        self._poses_stale = True
+        if self._warnings.any():
+            # A rollout stops at its first warning: take the steps again
+            # one segment at a time, which says where and what.
+            mujoco.mj_setState(m, d, state0, _FULL)
+            d.qacc_warmstart[:] = warmstart0
+            d.ctrl[:] = ctrl0
+            self._warnings[:] = 0
+            _MESSAGES.clear()
+            return None
+        if len(change_at) and change_at[-1] == steps:
+            d.ctrl[servos] = values[-1]
+        _MESSAGES.clear()
+        nq, nj = m.nq, len(self.qpos_adr)
+        rows = np.empty((len(read_at), 1 + 2 * nj + 7 * len(self.tracked)))
+        # The state before step k is the state after step k - 1 (the start
+        # for k = 0), its poses the sensors computed in step k.
+        inside = read_at < steps
+        k = read_at[inside]
+        before = np.vstack([state0[None], states[0]])[k]
+        rows[inside, 0] = before[:, 0]
+        rows[inside, 1:1 + nj] = before[:, 1 + self.qpos_adr]
+        rows[inside, 1 + nj:1 + 2 * nj] = before[:, 1 + nq + self.dof_adr]
+        rows[inside, 1 + 2 * nj:] = sensors[0][k]
+        if not inside.all():
+            r = self.reading()
+            rows[~inside] = np.concatenate(((r.t,), r.q, r.qd, r.poses))
+        return rows
 
     # -- commands
 
