@@ -801,7 +801,8 @@ class MujocoSimulation(rge.Simulation):
         # for k = 0), its poses the sensors computed in step k.
         inside = read_at < steps
         k = read_at[inside]
-        before = np.vstack([state0[None], states[0]])[k]
+        before = states[0][np.maximum(k - 1, 0)]
+        before[k == 0] = state0
         rows[inside, 0] = before[:, 0]
         rows[inside, 1:1 + nj] = before[:, 1 + self.qpos_adr]
         rows[inside, 1 + nj:1 + 2 * nj] = before[:, 1 + nq + self.dof_adr]
