@@ -42,7 +42,7 @@ use realitygap_core::params::{ParamKey, ParamSupport, PhysicalParams};
 use realitygap_core::robot::RobotModel;
 use realitygap_core::scene::Scene;
 use serde_json::{json, Value};
-use sim::{engine_error, Reading, RemoteSimulation};
+use sim::{engine_error, Loaded, Reading, RemoteSimulation};
 use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Duration;
 use wire::{Reply, PROTOCOL_VERSION};
@@ -461,9 +461,11 @@ impl Engine for RemoteEngine {
             child,
             Arc::clone(&self.inner.control),
             timestep_s,
-            reading,
-            issues,
-            columns,
+            Loaded {
+                reading,
+                issues,
+                columns,
+            },
         )))
     }
 }

@@ -120,17 +120,24 @@ fn commands_json_parts(commands: &[ServoCommand]) -> (Vec<&'static str>, Vec<f64
     )
 }
 
+/// A schedule's change of commands: its segment, kinds and values.
+struct Change {
+    segment: usize,
+    kinds: Vec<&'static str>,
+    values: Vec<f64>,
+}
+
 /// A `run` request as segments (protocol 1's first form): `changes` are
 /// the segments that set commands, with their kinds and values.
-fn segments_request(segments: &[Segment], changes: &[(usize, (Vec<&str>, Vec<f64>))]) -> Value {
+fn segments_request(segments: &[Segment], changes: &[Change]) -> Value {
     let mut changes = changes.iter().peekable();
     let wire: Vec<Value> = segments
         .iter()
         .enumerate()
         .map(|(i, segment)| {
             let mut w = json!({"read": segment.read, "steps": segment.steps});
-            if let Some((_, (kinds, values))) = changes.next_if(|(at, _)| *at == i) {
-                w["commands"] = json!({"kinds": kinds, "values": bits(values)});
+            if let Some(c) = changes.next_if(|c| c.segment == i) {
+                w["commands"] = json!({"kinds": c.kinds, "values": bits(&c.values)});
             }
             w
         })
@@ -141,24 +148,24 @@ fn segments_request(segments: &[Segment], changes: &[(usize, (Vec<&str>, Vec<f64
 /// The same `run` request in columns: per segment its steps and whether
 /// it reads; per change of commands its segment, its kinds (an index into
 /// the distinct kinds sent, `laws`) and its values (one vector for all).
-fn columns_request(segments: &[Segment], changes: &[(usize, (Vec<&str>, Vec<f64>))]) -> Value {
+fn columns_request(segments: &[Segment], changes: &[Change]) -> Value {
     let mut laws: Vec<&Vec<&str>> = Vec::new();
     let mut law = Vec::with_capacity(changes.len());
     let mut values = Vec::new();
-    for (_, (kinds, v)) in changes {
-        let index = laws.iter().position(|k| *k == kinds).unwrap_or_else(|| {
-            laws.push(kinds);
+    for c in changes {
+        let index = laws.iter().position(|k| **k == c.kinds).unwrap_or_else(|| {
+            laws.push(&c.kinds);
             laws.len() - 1
         });
         law.push(index);
-        values.extend_from_slice(v);
+        values.extend_from_slice(&c.values);
     }
     let steps: Vec<u64> = segments.iter().map(|s| s.steps).collect();
     let read: String = segments
         .iter()
         .map(|s| if s.read { '1' } else { '0' })
         .collect();
-    let at: Vec<usize> = changes.iter().map(|(i, _)| *i).collect();
+    let at: Vec<usize> = changes.iter().map(|c| c.segment).collect();
     json!({"op": "run", "columns": {
         "steps": steps, "read": read, "at": at, "laws": laws, "law": law, "values": bits(&values),
     }})
@@ -267,6 +274,14 @@ pub(crate) fn stability_issues(reply: &Reply) -> Result<Vec<StabilityIssue>, Str
         .collect()
 }
 
+/// What a child's `load` gave: its first reading and stability issues,
+/// and whether it takes `run` in columns (its `hello`).
+pub(crate) struct Loaded {
+    pub reading: Reading,
+    pub issues: Vec<StabilityIssue>,
+    pub columns: bool,
+}
+
 /// A running simulation in an engine child.
 pub struct RemoteSimulation {
     engine: &'static str,
@@ -292,10 +307,13 @@ impl RemoteSimulation {
         child: Child,
         idle: IdleSlot,
         timestep_s: f64,
-        reading: Reading,
-        issues: Vec<StabilityIssue>,
-        columns: bool,
+        loaded: Loaded,
     ) -> RemoteSimulation {
+        let Loaded {
+            reading,
+            issues,
+            columns,
+        } = loaded;
         RemoteSimulation {
             engine,
             commands: vec![ServoCommand::velocity(0.0); scene.actuators.len()],
@@ -464,7 +482,12 @@ impl Simulation for RemoteSimulation {
                 pending = true;
             }
             if pending {
-                changes.push((i, commands_json_parts(&commands)));
+                let (kinds, values) = commands_json_parts(&commands);
+                changes.push(Change {
+                    segment: i,
+                    kinds,
+                    values,
+                });
                 pending = false;
             }
         }
@@ -647,12 +670,19 @@ mod tests {
     use super::*;
     use crate::wire::floats;
 
-    fn changes() -> Vec<(usize, (Vec<&'static str>, Vec<f64>))> {
-        vec![
-            (0, (vec!["velocity", "velocity"], vec![0.5, -0.5])),
-            (2, (vec!["position", "velocity"], vec![0.1, 0.0])),
-            (3, (vec!["velocity", "velocity"], vec![1.0, 2.0])),
+    fn changes() -> Vec<Change> {
+        [
+            (0, ["velocity", "velocity"], [0.5, -0.5]),
+            (2, ["position", "velocity"], [0.1, 0.0]),
+            (3, ["velocity", "velocity"], [1.0, 2.0]),
         ]
+        .into_iter()
+        .map(|(segment, kinds, values)| Change {
+            segment,
+            kinds: kinds.to_vec(),
+            values: values.to_vec(),
+        })
+        .collect()
     }
 
     fn segments() -> Vec<Segment> {
