@@ -819,15 +819,23 @@ def _run_segments(session: _Session, request: Mapping[str, Any]) -> dict:
                 _set_commands(session, sim, *_parse_commands(session, seg["commands"]))
             if n:
                 sim.step(n)
-    except EngineError as e:
+    except Exception as e:  # noqa: BLE001 - a failure while stepping is the run's end
+        return {"readings": readings, "error": _run_error(session, e)}
+    return {"readings": readings, "state": _reading_json(session, sim.reading())}
+
+
+def _run_error(session: _Session, e: Exception) -> dict:
+    """The `error` of a `run` that failed part-way: an engine error as it
+    is (an instability at the last reading's time when it has none), any
+    other exception as an instability, with its traceback on standard
+    error."""
+    if isinstance(e, EngineError):
         if isinstance(e, UnstableError) and e.t_s is None:
             e.t_s = session.last_t
-        return {"readings": readings, "error": e.reply()}
-    except Exception as e:  # noqa: BLE001 - a failure while stepping is the run's end
-        traceback.print_exc(file=sys.stderr)
-        sys.stderr.flush()
-        return {"readings": readings, "error": UnstableError(f"{type(e).__name__}: {e}", session.last_t).reply()}
-    return {"readings": readings, "state": _reading_json(session, sim.reading())}
+        return e.reply()
+    traceback.print_exc(file=sys.stderr)
+    sys.stderr.flush()
+    return UnstableError(f"{type(e).__name__}: {e}", session.last_t).reply()
 
 
 def _set_commands(session: _Session, sim: Simulation, kinds: list[str], values: np.ndarray) -> None:
@@ -899,7 +907,8 @@ def _run_columns(session: _Session, request: Mapping[str, Any]) -> dict:
     native = type(sim).run_open_loop is not Simulation.run_open_loop
     change = np.full(cols.steps.size, -1, dtype=np.int64)
     change[cols.at] = np.arange(cols.at.size)
-    # Where the kinds change: the pieces' starts.
+    # The pieces: from each segment whose change of commands changes the
+    # kinds in force (unknown kinds: the first change), to the next.
     starts = [0]
     kinds = session.kinds
     for c, a in enumerate(cols.at.tolist()):
@@ -908,7 +917,7 @@ def _run_columns(session: _Session, request: Mapping[str, Any]) -> dict:
             if a:
                 starts.append(a)
             kinds = law
-    starts = sorted(set(starts)) + [cols.steps.size]
+    starts.append(cols.steps.size)
     try:
         for a, b in zip(starts[:-1], starts[1:]):
             rows = None
@@ -942,19 +951,14 @@ def _run_columns(session: _Session, request: Mapping[str, Any]) -> dict:
                 k = int(np.flatnonzero(~np.isfinite(rows).all(axis=1))[0])
                 out[count:count + k] = rows[:k]
                 count += k
-                _reading_row(session, _row_reading(session, rows[k]))
+                _reading_row(session, _row_reading(session, rows[k]))  # raises, saying what
+                raise AssertionError("a non-finite row passed the reading's check")
             out[count:count + rows.shape[0]] = rows
             count += rows.shape[0]
             if count:
                 session.last_t = float(out[count - 1, 0])
-    except EngineError as e:
-        if isinstance(e, UnstableError) and e.t_s is None:
-            e.t_s = session.last_t
-        return {"readings": bits(out[:count]), "error": e.reply()}
     except Exception as e:  # noqa: BLE001 - a failure while stepping is the run's end
-        traceback.print_exc(file=sys.stderr)
-        sys.stderr.flush()
-        return {"readings": bits(out[:count]), "error": UnstableError(f"{type(e).__name__}: {e}", session.last_t).reply()}
+        return {"readings": bits(out[:count]), "error": _run_error(session, e)}
     return {"readings": bits(out[:count]), "state": _reading_json(session, sim.reading())}
 
 
