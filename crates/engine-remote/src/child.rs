@@ -13,7 +13,7 @@ use std::process::{Command, Stdio};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 /// How an engine child is started.
 #[derive(Debug, Clone, PartialEq)]
@@ -259,6 +259,11 @@ impl Child {
         let op = request["op"].as_str().unwrap_or("?").to_string();
         let mut line = request.to_string();
         line.push('\n');
+        // The reply must come within the timeout of the request's sending,
+        // whenever this thread looks: a reply already waiting when it is
+        // late (this thread slept) is late too, so a tight timeout fails the
+        // same under any load.
+        let deadline = Instant::now() + self.timeout;
         let written = match self.stdin.as_mut() {
             Some(stdin) => stdin.write_all(line.as_bytes()).and_then(|_| stdin.flush()),
             None => Err(std::io::Error::other("input closed")),
@@ -268,15 +273,19 @@ impl Child {
                 "the engine process stopped reading before \"{op}\" ({e})"
             )));
         }
-        let reply = match self.lines.recv_timeout(self.timeout) {
-            Ok(Ok(text)) => text,
+        let received = self
+            .lines
+            .recv_timeout(deadline.saturating_duration_since(Instant::now()));
+        let late = Instant::now() > deadline;
+        let reply = match received {
+            Ok(Ok(text)) if !late => text,
             Ok(Err(e)) => return Err(self.fail(format!("cannot read the reply to \"{op}\": {e}"))),
             Err(RecvTimeoutError::Disconnected) => {
                 return Err(self.fail(format!(
                     "the engine process exited before replying to \"{op}\""
                 )))
             }
-            Err(RecvTimeoutError::Timeout) => {
+            Ok(Ok(_)) | Err(RecvTimeoutError::Timeout) => {
                 return Err(self.fail(format!(
                     "no reply to \"{op}\" within {} s (timeout_s); the engine process was stopped",
                     self.timeout.as_secs_f64()
