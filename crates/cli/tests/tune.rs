@@ -256,6 +256,52 @@ fn recovers_known_parameters_and_the_tuned_file_reproduces_the_objective() {
     );
 }
 
+/// A search cut short (`--budget 4`: one generation) whose every candidate
+/// scores above the space's start, here the known truth itself, ends at
+/// that start: the polish (none here, `--iterations 0`) starts from the
+/// lower of the two, so a tune never ends above where it started. Before,
+/// `tuned.toml` held the search's best candidate, worse than its start.
+#[test]
+fn a_search_that_ends_above_its_start_falls_back_to_it() {
+    let tmp = synthetic();
+    let d = tmp.path();
+    std::fs::write(
+        d.join("space.toml"),
+        format!(
+            "{SETTINGS}[params]\n\"joints.m1n6s300_joint_2.kv\" = {{ low = 4.0, high = 400.0, scale = \"log\", start = {KNOWN_KV} }}\n\
+             \"controller.delay_s\" = {{ low = 0.0, high = 0.15, start = {KNOWN_DELAY_S} }}\n"
+        ),
+    )
+    .unwrap();
+    let out = d.join("tuned");
+    let mut args = tune_args(d, out.to_str().unwrap(), "4");
+    args.extend(["--iterations".to_string(), "0".to_string()]);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let run = ok(realitygap(&args));
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        stderr.contains("the search ended above its start"),
+        "{stderr}"
+    );
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let kv = param(&s, "joints.m1n6s300_joint_2.kv");
+    let delay = param(&s, "controller.delay_s");
+    assert!((kv - KNOWN_KV).abs() < 1e-9 * KNOWN_KV, "kv {kv}");
+    assert!((delay - KNOWN_DELAY_S).abs() < 1e-12, "delay {delay}");
+    // Every candidate of the search, in its history, scored above the
+    // tune's end.
+    let end = s["best_objective_m"].as_f64().unwrap();
+    let history = std::fs::read_to_string(out.join("history.csv")).unwrap();
+    let searched: Vec<f64> = history
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(2).unwrap().parse().unwrap())
+        .collect();
+    assert!(!searched.is_empty(), "{history}");
+    assert!(searched.iter().all(|&o| o > end), "{end} {searched:?}");
+}
+
 /// After CMA-ES the polish gives intervals that cover the known kv, the
 /// identifiability is checked before the search and at the optimum, both
 /// physics-free rows are scored, and `randomize.toml` drives `run

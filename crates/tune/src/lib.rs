@@ -475,13 +475,36 @@ pub fn fit(
             spec.out.join("history.csv").display()
         )
     })?;
-    let u: Vec<f64> = best.x.iter().map(|x| search::reflect(*x)).collect();
-    let polished = polish::polish(&tuner, &u, best.objective, spec.polish, note)?;
+    let (u, objective) = polish_start(&tuner, best, note);
+    let polished = polish::polish(&tuner, &u, objective, spec.polish, note)?;
     Ok(Fitted {
         end,
         polished,
         before,
     })
+}
+
+/// Where the polish starts: the search's best point, or the space's own
+/// start when that scores lower (a search cut short by a small
+/// `--budget`, or a start already at the optimum): the polish only goes
+/// down from where it starts, so a tune never ends above its start. One
+/// more evaluation, at the start.
+fn polish_start(
+    tuner: &Tuner<'_>,
+    best: &search::Evaluation,
+    note: &(dyn Fn(String) + Sync),
+) -> (Vec<f64>, f64) {
+    let u: Vec<f64> = best.x.iter().map(|x| search::reflect(*x)).collect();
+    let start = tuner.spec.space.start_unit()[..tuner.dims()].to_vec();
+    let at_start = tuner.evaluate(&start);
+    if at_start.failed.is_none() && at_start.objective < best.objective {
+        note(format!(
+            "the search ended above its start ({:.4} m against {:.4} m at the start): the polish starts from the start",
+            best.objective, at_start.objective
+        ));
+        return (start, at_start.objective);
+    }
+    (u, best.objective)
 }
 
 /// Whether a key belongs to the objects or the contact

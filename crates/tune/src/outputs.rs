@@ -718,14 +718,14 @@ fn compared(
 }
 
 /// The answer in words, on the held-out runs (else the training runs),
-/// with a caution first when the tune ended worse than it started on the
-/// runs it was fitted on.
+/// with a caution first when the tune ended worse than the engine's
+/// defaults on the runs it was fitted on.
 fn verdict_text(engine: &str, holdout: Option<&Comparison>, training: &Comparison) -> String {
     let [untuned, tuned] = training.objective_m;
     let answer = verdict_answer(engine, holdout.unwrap_or(training));
     if tuned > untuned {
         return format!(
-            "Caution: on the runs it was fitted on, the tuned {engine} is worse than its own defaults (objective {tuned:.3} m against {untuned:.3} m untuned): the search did not get past its start (a small --budget) or a pull (--prior-weight) held it back, and the defaults fit these runs better. {answer}"
+            "Caution: on the runs it was fitted on, the tuned {engine} is worse than its own defaults (objective {tuned:.3} m against {untuned:.3} m untuned): the fit started away from them (the space's start values, or --start physics-free) and did not get back, or a pull (--prior-weight) held it back, and the defaults fit these runs better. {answer}"
         );
     }
     answer
