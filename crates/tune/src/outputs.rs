@@ -725,7 +725,7 @@ fn verdict_text(engine: &str, holdout: Option<&Comparison>, training: &Compariso
     let answer = verdict_answer(engine, holdout.unwrap_or(training));
     if tuned > untuned {
         return format!(
-            "Caution: on the runs it was fitted on, the tuned {engine} is worse than its own defaults (objective {tuned:.3} m against {untuned:.3} m untuned): the fit started away from them (the space's start values, or --start physics-free) and did not get back, or a pull (--prior-weight) held it back, and the defaults fit these runs better. {answer}"
+            "Caution: on the runs it was fitted on, the tuned {engine} is worse than its own defaults (objective {tuned:.3} m against {untuned:.3} m untuned): the fit started away from them (the space's start values, or --start physics-free) and did not get back (a small --budget), or a pull (--prior-weight) held it back, and the defaults fit these runs better. {answer}"
         );
     }
     answer
