@@ -380,7 +380,7 @@ fn bad_settings_fail_naming_the_setting() {
             ),
             (
                 "timestep_s=0.03".to_string(),
-                "not a whole number of engine timesteps".to_string(),
+                "does not divide the scene's control period".to_string(),
             ),
         ];
         cases.extend(

@@ -214,6 +214,52 @@ fn unknown_unsupported_and_malformed_keys_are_errors() {
             e.contains(&format!(".toml:{line}:1: engine.mujoco.timestep: engine mujoco: setting `timestep`: unknown setting")),
             "{e}"
         );
+        // A timestep that does not divide the control period is blamed on
+        // the timestep where it was given (not on controller.period_s),
+        // with one that fits: the scene's table at its line, or --set.
+        let lines: Vec<String> = scene_text
+            .lines()
+            .enumerate()
+            .map(|(i, l)| {
+                if i + 1 == line {
+                    "timestep_s = 1.0".to_string()
+                } else {
+                    l.to_string()
+                }
+            })
+            .collect();
+        std::fs::write(&bad_scene, lines.join("\n")).unwrap();
+        let out = tmp.path().join("out");
+        let o = realitygap(&[
+            "run",
+            bad_scene.to_str().unwrap(),
+            "--engine",
+            "mujoco",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(!o.status.success());
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            e.contains(&format!(".toml:{line}:1: engine.mujoco.timestep_s: timestep_s = 1 s does not divide the scene's control period (0.05 s, controller.period_s) into whole steps: try 0.05 s (1 step a period)")),
+            "{e}"
+        );
+        let o = realitygap(&[
+            "run",
+            scene1().to_str().unwrap(),
+            "--engine",
+            "mujoco",
+            "--set",
+            "mujoco.timestep_s=0.03",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(!o.status.success());
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            e.contains("--set: timestep_s = 0.03 s does not divide the scene's control period (0.05 s, controller.period_s) into whole steps: try 0.025 s (2 steps a period)"),
+            "{e}"
+        );
     }
     // A built-in adapter's table is no typo, installed or not; nor is an
     // engine this machine lacks whose name is no near miss.

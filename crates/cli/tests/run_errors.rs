@@ -132,7 +132,8 @@ fn bad_options_are_reported() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("out");
 
-    // The control period is not a whole number of timesteps.
+    // The control period is not a whole number of timesteps: blamed on
+    // the --set that gave the timestep.
     let scene = assets().join("scenes/scene1_single_joint.toml");
     fails_with(
         &[
@@ -145,9 +146,9 @@ fn bad_options_are_reported() {
             os(&out),
         ],
         &[
-            "scene1_single_joint.toml",
+            "--set: timestep_s = 0.03 s does not divide the scene's control period",
             "controller.period_s",
-            "not a whole number of engine timesteps",
+            "try 0.025 s (2 steps a period)",
         ],
     );
 

@@ -8,7 +8,7 @@ use realitygap_core::controller::Perturbation;
 use realitygap_core::engine::{Engine, EngineSettings, SettingValue};
 use realitygap_core::params::PhysicalParams;
 use realitygap_core::robot::{PackageResolver, RobotModel};
-use realitygap_core::scene::Scene;
+use realitygap_core::scene::{Scene, SceneError};
 use std::path::{Path, PathBuf};
 
 /// The project's Mico2 description, built in for `--robot mico2`.
@@ -329,6 +329,51 @@ fn scene_and_robot(src: &RunSource<'_>) -> Result<(Scene, RobotModel)> {
     Ok((scene, robot))
 }
 
+/// The engines' timestep setting.
+const TIMESTEP_KEY: &str = "timestep_s";
+
+/// Where a run's `timestep_s` came from, the last given winning: `--set`,
+/// the `--params` file, the scene's own `[engine.NAME]` table.
+struct TimestepFrom<'a> {
+    set: bool,
+    params: Option<&'a Path>,
+    scene: bool,
+}
+
+/// A control period that is not a whole number of engine steps, blamed on
+/// the timestep where the user gave one (`--set`, the `--params` file, or
+/// the scene's engine table at its line), with a timestep that fits;
+/// else `e`, on the scene's `controller.period_s`.
+fn period_error(
+    scene: &Scene,
+    engine: &str,
+    timestep_s: f64,
+    from: &TimestepFrom<'_>,
+    e: SceneError,
+) -> anyhow::Error {
+    if !(timestep_s.is_finite() && timestep_s > 0.0) {
+        return e.into();
+    }
+    let period = scene.controller.period_s;
+    let n = (period / timestep_s).ceil().max(1.0);
+    let what = format!(
+        "{TIMESTEP_KEY} = {timestep_s} s does not divide the scene's control period ({period} s, controller.period_s) into whole steps: try {} s ({n} step{} a period)",
+        period / n,
+        if n == 1.0 { "" } else { "s" }
+    );
+    if from.set {
+        anyhow!("--set: {what}")
+    } else if let Some(file) = from.params {
+        anyhow!("{}: [engine.{engine}] {what}", file.display())
+    } else if from.scene {
+        scene
+            .error(&format!("engine.{engine}.{TIMESTEP_KEY}"), what)
+            .into()
+    } else {
+        e.into()
+    }
+}
+
 /// Checks a run and makes it ready to load: every error a run can find
 /// before simulating.
 pub fn prepare(registry: Registry, src: &RunSource<'_>) -> Result<Prepared> {
@@ -388,7 +433,19 @@ pub fn prepare_with(
             )))
         }
     };
-    let steps_per_period = scene.steps_per_period(timestep_s)?;
+    let steps_per_period = scene.steps_per_period(timestep_s).map_err(|e| {
+        let from = TimestepFrom {
+            set: overrides.contains_key(TIMESTEP_KEY),
+            params: src.params_file.filter(|_| {
+                params
+                    .engine_settings
+                    .get(engine.name())
+                    .is_some_and(|t| t.contains_key(TIMESTEP_KEY))
+            }),
+            scene: own.contains_key(TIMESTEP_KEY),
+        };
+        period_error(&scene, engine.name(), timestep_s, &from, e)
+    })?;
     Ok(Prepared {
         scene,
         robot,
