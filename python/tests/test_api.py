@@ -235,6 +235,20 @@ def test_errors_are_exceptions_with_the_commands_messages(cli, tmp_path):
     assert str(e.value) in p.stderr
     assert "bad.toml" in str(e.value)
 
+    # A system error that its error type prints and also hands on as its
+    # cause: once, as the command prints it.
+    scene = Path(rg.scene_file("scene1"))
+    text = scene.read_text()
+    assert 'urdf = "../robots/mico2/mico2.urdf"' in text
+    no_urdf = tmp_path / "no-urdf.toml"
+    no_urdf.write_text(text.replace('urdf = "../robots/mico2/mico2.urdf"', 'urdf = "nope.urdf"'))
+    with pytest.raises(rg.RealityGapError) as e:
+        rg.run(no_urdf, "mujoco", out=tmp_path / "o4", progress=False)
+    p = cli("run", no_urdf, "--engine", "mujoco", "--out", tmp_path / "o5", check=False)
+    assert p.returncode != 0
+    assert str(e.value).endswith(p.stderr.strip().splitlines()[-1].split("nope.urdf", 1)[1])
+    assert str(e.value).count("No such file or directory") == 1, str(e.value)
+
     with pytest.raises(rg.RealityGapError, match="no-such-engine"):
         rg.run("scene1", "no-such-engine", out=tmp_path / "o3", progress=False)
     with pytest.raises(rg.RealityGapError, match="no shipped scene"):

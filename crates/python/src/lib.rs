@@ -41,9 +41,10 @@ pyo3::create_exception!(
     "An error of realitygap, with the message the command prints."
 );
 
-/// An error of a library crate as Python's exception.
+/// An error of a library crate as Python's exception, with the message
+/// the command prints (its causes, none repeated).
 fn py_err(e: anyhow::Error) -> PyErr {
-    RealityGapError::new_err(format!("{e:#}"))
+    RealityGapError::new_err(realitygap::ui::error_text(&e))
 }
 
 /// What a long call tells its caller's thread.
@@ -530,7 +531,7 @@ fn run<'py>(
                 })
             })
             .collect();
-        let failure = outcome.check().err().map(|e| format!("{e:#}"));
+        let failure = outcome.check().err().map(|e| realitygap::ui::error_text(&e));
         Ok((outcome.summary(), groups, failure))
     })?;
     if let Some(message) = failure {
@@ -800,7 +801,7 @@ fn run_one(py: Python<'_>) -> i32 {
     match py.detach(realitygap::run_one) {
         Ok(()) => 0,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", realitygap::ui::error_text(&e));
             1
         }
     }
