@@ -531,7 +531,10 @@ fn run<'py>(
                 })
             })
             .collect();
-        let failure = outcome.check().err().map(|e| realitygap::ui::error_text(&e));
+        let failure = outcome
+            .check()
+            .err()
+            .map(|e| realitygap::ui::error_text(&e));
         Ok((outcome.summary(), groups, failure))
     })?;
     if let Some(message) = failure {
