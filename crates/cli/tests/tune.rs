@@ -619,6 +619,11 @@ fn bad_spaces_and_unsupported_keys_are_errors_before_anything_runs() {
             "[params]\n\"joints.no_such_joint.damping\" = { low = 0.0, high = 1.0 }\n",
             "no_such_joint",
         ),
+        // The space's timestep, not the scene's own (1e-4 s, at its line).
+        (
+            "[engine.mujoco]\ntimestep_s = 0.03\n[params]\n\"controller.delay_s\" = { low = 0.0, high = 0.1 }\n",
+            "the run's parameters, [engine.mujoco] timestep_s = 0.03 s does not divide the scene's control period (0.05 s, controller.period_s) into whole steps: try 0.025 s (2 steps a period)",
+        ),
     ];
     for (text, want) in cases {
         std::fs::write(d.join("space.toml"), text).unwrap();

@@ -5,7 +5,7 @@
 use crate::Registry;
 use anyhow::{anyhow, bail, Context, Result};
 use realitygap_core::controller::Perturbation;
-use realitygap_core::engine::{Engine, EngineSettings, SettingValue};
+use realitygap_core::engine::{Engine, EngineSettings, SettingValue, TIMESTEP_KEY};
 use realitygap_core::params::PhysicalParams;
 use realitygap_core::robot::{PackageResolver, RobotModel};
 use realitygap_core::scene::{Scene, SceneError};
@@ -329,20 +329,19 @@ fn scene_and_robot(src: &RunSource<'_>) -> Result<(Scene, RobotModel)> {
     Ok((scene, robot))
 }
 
-/// The engines' timestep setting.
-const TIMESTEP_KEY: &str = "timestep_s";
-
 /// Where a run's `timestep_s` came from, the last given winning: `--set`,
-/// the `--params` file, the scene's own `[engine.NAME]` table.
+/// the run's parameters (`--params`, or those a tune or a replay builds),
+/// the scene's own `[engine.NAME]` table.
 struct TimestepFrom<'a> {
     set: bool,
-    params: Option<&'a Path>,
+    /// The parameters give it; from this file, when they were read from one.
+    params: Option<Option<&'a Path>>,
     scene: bool,
 }
 
 /// A control period that is not a whole number of engine steps, blamed on
-/// the timestep where the user gave one (`--set`, the `--params` file, or
-/// the scene's engine table at its line), with a timestep that fits;
+/// the timestep where the user gave one (`--set`, the parameters, or the
+/// scene's engine table at its line), with the nearest timestep that fits;
 /// else `e`, on the scene's `controller.period_s`.
 fn period_error(
     scene: &Scene,
@@ -355,22 +354,25 @@ fn period_error(
         return e.into();
     }
     let period = scene.controller.period_s;
-    let n = (period / timestep_s).ceil().max(1.0);
+    let n = (period / timestep_s).round().max(1.0);
     let what = format!(
         "{TIMESTEP_KEY} = {timestep_s} s does not divide the scene's control period ({period} s, controller.period_s) into whole steps: try {} s ({n} step{} a period)",
         period / n,
         if n == 1.0 { "" } else { "s" }
     );
-    if from.set {
-        anyhow!("--set: {what}")
-    } else if let Some(file) = from.params {
-        anyhow!("{}: [engine.{engine}] {what}", file.display())
-    } else if from.scene {
-        scene
+    match from {
+        TimestepFrom { set: true, .. } => anyhow!("--set: {what}"),
+        TimestepFrom {
+            params: Some(Some(file)),
+            ..
+        } => anyhow!("{}: [engine.{engine}] {what}", file.display()),
+        TimestepFrom {
+            params: Some(None), ..
+        } => anyhow!("the run's parameters, [engine.{engine}] {what}"),
+        TimestepFrom { scene: true, .. } => scene
             .error(&format!("engine.{engine}.{TIMESTEP_KEY}"), what)
-            .into()
-    } else {
-        e.into()
+            .into(),
+        _ => e.into(),
     }
 }
 
@@ -436,12 +438,11 @@ pub fn prepare_with(
     let steps_per_period = scene.steps_per_period(timestep_s).map_err(|e| {
         let from = TimestepFrom {
             set: overrides.contains_key(TIMESTEP_KEY),
-            params: src.params_file.filter(|_| {
-                params
-                    .engine_settings
-                    .get(engine.name())
-                    .is_some_and(|t| t.contains_key(TIMESTEP_KEY))
-            }),
+            params: params
+                .engine_settings
+                .get(engine.name())
+                .is_some_and(|t| t.contains_key(TIMESTEP_KEY))
+                .then_some(src.params_file),
             scene: own.contains_key(TIMESTEP_KEY),
         };
         period_error(&scene, engine.name(), timestep_s, &from, e)

@@ -434,7 +434,8 @@ pub(crate) fn check_resume(spec: &TuneSpec, target: &Target) -> Result<()> {
 pub struct Fitted {
     /// The search.
     pub end: SearchEnd,
-    /// The polish from the search's best point.
+    /// The polish from the search's best point, or from the space's start
+    /// when that scored lower.
     pub polished: polish::Polished,
     /// The identifiability check before the search.
     pub before: Option<polish::IdentifiabilityReport>,
@@ -499,7 +500,7 @@ fn polish_start(
     let at_start = tuner.evaluate(&start);
     if at_start.failed.is_none() && at_start.objective < best.objective {
         note(format!(
-            "the search ended above its start ({:.4} m against {:.4} m at the start): the polish starts from the start",
+            "the search ended above its start ({:.4} m against {:.4} m at the start): the tune goes on from the start",
             best.objective, at_start.objective
         ));
         return (start, at_start.objective);

@@ -155,7 +155,8 @@ pub struct IdentifiabilityReport {
 /// The polish's account, in `summary.json`.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct PolishReport {
-    /// The objective CMA-ES ended at, metres.
+    /// The objective the polish started from, metres: CMA-ES's best, or
+    /// the space's start when that scored lower.
     pub start_objective_m: f64,
     /// The objective after the polish, metres.
     pub objective_m: f64,
@@ -296,7 +297,8 @@ pub(crate) fn widen(d: &Dim, high_side: bool) -> Option<Dim> {
     moved.then_some(w)
 }
 
-/// Polishes the search's best point `u0` (objective `start_objective`):
+/// Polishes from `u0` (objective `start_objective`; the search's best
+/// point, or the space's start when that scored lower):
 /// the fit's rounds ([`stages::fit::polish_rounds`]), then the intervals
 /// and the identifiability at the optimum
 /// ([`stages::intervals::polish`]). `note` hears what the polish is doing.

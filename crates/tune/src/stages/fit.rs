@@ -33,8 +33,8 @@ pub struct Polishing {
 }
 
 impl Polishing {
-    /// At CMA-ES's best point `u0` (objective `start_objective`) in the
-    /// space of `spec`.
+    /// At `u0` (objective `start_objective`; CMA-ES's best point, or the
+    /// space's start when that scored lower) in the space of `spec`.
     pub fn new(spec: &TuneSpec, u0: &[f64], start_objective: f64) -> Polishing {
         Polishing {
             space: spec.space.clone(),
