@@ -230,32 +230,20 @@ fn unknown_unsupported_and_malformed_keys_are_errors() {
             .collect();
         std::fs::write(&bad_scene, lines.join("\n")).unwrap();
         let out = tmp.path().join("out");
-        let o = realitygap(&[
-            "run",
-            bad_scene.to_str().unwrap(),
-            "--engine",
-            "mujoco",
-            "--out",
-            out.to_str().unwrap(),
-        ]);
-        assert!(!o.status.success());
-        let e = String::from_utf8_lossy(&o.stderr);
+        let fails = |scene: &Path, set: &[&str]| {
+            let mut args = vec!["run", scene.to_str().unwrap(), "--engine", "mujoco"];
+            args.extend(set);
+            args.extend(["--out", out.to_str().unwrap()]);
+            let o = realitygap(&args);
+            assert!(!o.status.success());
+            String::from_utf8_lossy(&o.stderr).into_owned()
+        };
+        let e = fails(&bad_scene, &[]);
         assert!(
             e.contains(&format!(".toml:{line}:1: engine.mujoco.timestep_s: timestep_s = 1 s does not divide the scene's control period (0.05 s, controller.period_s) into whole steps: try 0.05 s (1 step a period)")),
             "{e}"
         );
-        let o = realitygap(&[
-            "run",
-            scene1().to_str().unwrap(),
-            "--engine",
-            "mujoco",
-            "--set",
-            "mujoco.timestep_s=0.03",
-            "--out",
-            out.to_str().unwrap(),
-        ]);
-        assert!(!o.status.success());
-        let e = String::from_utf8_lossy(&o.stderr);
+        let e = fails(&scene1(), &["--set", "mujoco.timestep_s=0.03"]);
         assert!(
             e.contains("--set: timestep_s = 0.03 s does not divide the scene's control period (0.05 s, controller.period_s) into whole steps: try 0.025 s (2 steps a period)"),
             "{e}"

@@ -329,14 +329,38 @@ fn scene_and_robot(src: &RunSource<'_>) -> Result<(Scene, RobotModel)> {
     Ok((scene, robot))
 }
 
-/// Where a run's `timestep_s` came from, the last given winning: `--set`,
-/// the run's parameters (`--params`, or those a tune or a replay builds),
-/// the scene's own `[engine.NAME]` table.
-struct TimestepFrom<'a> {
-    set: bool,
-    /// The parameters give it; from this file, when they were read from one.
-    params: Option<Option<&'a Path>>,
-    scene: bool,
+/// Where an engine setting in force came from, the last given winning.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Origin<'a> {
+    /// `--set`.
+    Set,
+    /// The run's parameters: `--params` (the file), or those a tune or a
+    /// replay builds (`None`).
+    Params(Option<&'a Path>),
+    /// The scene's own `[engine.NAME]` table.
+    Scene,
+    /// The engine's default.
+    Default,
+}
+
+/// Where `key` came from, as `settings` is built in [`prepare_with`]: the
+/// scene's table, over it the parameters', over them `--set`.
+fn origin<'a>(
+    key: &str,
+    own: &EngineSettings,
+    params: Option<&EngineSettings>,
+    params_file: Option<&'a Path>,
+    overrides: &EngineSettings,
+) -> Origin<'a> {
+    if overrides.contains_key(key) {
+        Origin::Set
+    } else if params.is_some_and(|t| t.contains_key(key)) {
+        Origin::Params(params_file)
+    } else if own.contains_key(key) {
+        Origin::Scene
+    } else {
+        Origin::Default
+    }
 }
 
 /// A control period that is not a whole number of engine steps, blamed on
@@ -347,7 +371,7 @@ fn period_error(
     scene: &Scene,
     engine: &str,
     timestep_s: f64,
-    from: &TimestepFrom<'_>,
+    from: Origin<'_>,
     e: SceneError,
 ) -> anyhow::Error {
     if !(timestep_s.is_finite() && timestep_s > 0.0) {
@@ -361,18 +385,13 @@ fn period_error(
         if n == 1.0 { "" } else { "s" }
     );
     match from {
-        TimestepFrom { set: true, .. } => anyhow!("--set: {what}"),
-        TimestepFrom {
-            params: Some(Some(file)),
-            ..
-        } => anyhow!("{}: [engine.{engine}] {what}", file.display()),
-        TimestepFrom {
-            params: Some(None), ..
-        } => anyhow!("the run's parameters, [engine.{engine}] {what}"),
-        TimestepFrom { scene: true, .. } => scene
+        Origin::Set => anyhow!("--set: {what}"),
+        Origin::Params(Some(file)) => anyhow!("{}: [engine.{engine}] {what}", file.display()),
+        Origin::Params(None) => anyhow!("the run's parameters, [engine.{engine}] {what}"),
+        Origin::Scene => scene
             .error(&format!("engine.{engine}.{TIMESTEP_KEY}"), what)
             .into(),
-        _ => e.into(),
+        Origin::Default => e.into(),
     }
 }
 
@@ -405,6 +424,15 @@ pub fn prepare_with(
     let mut settings = params.settings_over(engine.name(), &own);
     let overrides = overrides_for(src.set, engine.name(), &known)?;
     settings.extend(overrides.clone());
+    let from = |key: &str| {
+        origin(
+            key,
+            &own,
+            params.engine_settings.get(engine.name()),
+            src.params_file,
+            &overrides,
+        )
+    };
     let timestep_s = match engine.check_settings(&settings) {
         Ok(t) => t,
         // A setting the scene's own table gives (neither --params nor
@@ -413,13 +441,7 @@ pub fn prepare_with(
             engine: e,
             key,
             message,
-        }) if own.contains_key(&key)
-            && !overrides.contains_key(&key)
-            && params
-                .engine_settings
-                .get(engine.name())
-                .is_none_or(|t| !t.contains_key(&key)) =>
-        {
+        }) if from(&key) == Origin::Scene => {
             return Err(scene
                 .error(
                     &format!("engine.{e}.{key}"),
@@ -435,18 +457,9 @@ pub fn prepare_with(
             )))
         }
     };
-    let steps_per_period = scene.steps_per_period(timestep_s).map_err(|e| {
-        let from = TimestepFrom {
-            set: overrides.contains_key(TIMESTEP_KEY),
-            params: params
-                .engine_settings
-                .get(engine.name())
-                .is_some_and(|t| t.contains_key(TIMESTEP_KEY))
-                .then_some(src.params_file),
-            scene: own.contains_key(TIMESTEP_KEY),
-        };
-        period_error(&scene, engine.name(), timestep_s, &from, e)
-    })?;
+    let steps_per_period = scene
+        .steps_per_period(timestep_s)
+        .map_err(|e| period_error(&scene, engine.name(), timestep_s, from(TIMESTEP_KEY), e))?;
     Ok(Prepared {
         scene,
         robot,
