@@ -1025,6 +1025,40 @@ def test_a_replay_in_mujocos_own_loop_gives_the_step_by_step_numbers(child):
     assert rge.floats(got["readings"]).reshape(-1, 10).tolist() == want
 
 
+def test_the_adapters_process_runs_mujoco_without_its_timer():
+    """MuJoCo's Python bindings install a timer (mjcb_time) that reads the
+    clock at every stage of every step; the adapter's process (``main``)
+    turns it off, as a program linking MuJoCo has it, and the physics stays
+    the same to the bit."""
+    code = textwrap.dedent("""
+        import io, sys
+        import mujoco, numpy as np
+        from realitygap_engine.adapters import mujoco as adapter
+        xml = ('<mujoco><worldbody><body><joint type="hinge" axis="0 1 0"/>'
+               '<geom size=".1" pos="0 0 -.3" mass="1"/></body></worldbody></mujoco>')
+        m = mujoco.MjModel.from_xml_string(xml)
+
+        def run():
+            d = mujoco.MjData(m)
+            d.qpos[0] = 0.5
+            mujoco.mj_step(m, d, nstep=200)
+            return d.qpos.tobytes(), d.timer[mujoco.mjtTimer.mjTIMER_STEP]
+
+        q_on, timer = run()
+        assert timer.number == 200 and timer.duration > 0, (timer.number, timer.duration)
+        sys.stdin = io.StringIO("")
+        assert adapter.main() == 0
+        q_off, timer = run()
+        assert timer.number == 200 and timer.duration == 0, (timer.number, timer.duration)
+        assert q_off == q_on
+        print("checked")
+    """)
+    done = subprocess.run([sys.executable, "-c", code], env=child_env(), capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 0 and done.stdout.strip() == "checked", done.stderr
+    assert "timer callback stays on" not in done.stderr
+
+
 def test_self_collision_setting_stops_robot_contacts(child):
     # Two links stacked on the base: the second sweeps through the base's
     # box only when robot-robot contacts are off.

@@ -14,7 +14,10 @@
 //! 3), with the load (model building, and for the adapter the Python
 //! start) apart from the run; the ratio out of process / linked.
 //!
-//!     cargo bench -p realitygap --bench protocol
+//!     cargo bench -p realitygap --bench protocol [-- scene|iiwa]
+//!
+//! An argument keeps the cases whose name holds it (`iiwa`: the replay
+//! alone, for a profiler).
 
 use realitygap_core::controller::{load_prepared, prepare, run_scene, RunOptions};
 use realitygap_core::engine::Engine;
@@ -54,6 +57,12 @@ fn best(repeats: usize, mut f: impl FnMut() -> (f64, f64)) -> (f64, f64) {
 
 fn main() {
     let repeats = realitygap_core::testing::bench::repeats(3);
+    let filters: Vec<String> = std::env::args()
+        .skip(1)
+        .filter(|a| !a.starts_with("--"))
+        .collect();
+    let wanted =
+        |case: &str| filters.is_empty() || filters.iter().any(|f| case.contains(f.as_str()));
     let linked = realitygap_engine_mujoco::MujocoEngine;
     let remote = RemoteEngine::new(
         "mujoco",
@@ -83,6 +92,15 @@ fn main() {
     );
 
     // Scene 2 at the scene's MuJoCo settings.
+    if wanted("scene 2") {
+        scene_2(repeats, &linked, &remote);
+    }
+    if wanted("iiwa replay") {
+        iiwa_replay(repeats, &linked, &remote);
+    }
+}
+
+fn scene_2(repeats: usize, linked: &dyn Engine, remote: &dyn Engine) {
     let scene = testing::scene("scene2_two_joints");
     let robot = testing::mico2();
     let settings = scene.settings_for("mujoco");
@@ -109,15 +127,18 @@ fn main() {
             (load, t0.elapsed().as_secs_f64())
         })
     };
-    let (ll, lr) = time_scene(&linked);
-    let (rl, rr) = time_scene(&remote);
+    let (ll, lr) = time_scene(linked);
+    let (rl, rr) = time_scene(remote);
     println!(
         "{:<26} {ll:>12.4} {lr:>12.4} {rl:>12.4} {rr:>12.4} {:>8.2}",
         "scene 2 (200 000 steps)",
         rr / lr
     );
+}
 
-    // The iiwa replay.
+/// The replay of the first iiwa recording of the independent writer.
+fn iiwa_replay(repeats: usize, linked: &dyn Engine, remote: &dyn Engine) {
+    let params = PhysicalParams::none();
     let tmp = tempfile::tempdir().unwrap();
     let urdf = iiwa_urdf();
     let iiwa = realitygap_core::RobotModel::from_urdf_file(
@@ -176,8 +197,8 @@ fn main() {
             (load, t0.elapsed().as_secs_f64())
         })
     };
-    let (ll, lr) = time_replay(&linked);
-    let (rl, rr) = time_replay(&remote);
+    let (ll, lr) = time_replay(linked);
+    let (rl, rr) = time_replay(remote);
     println!(
         "{:<26} {ll:>12.4} {lr:>12.4} {rl:>12.4} {rr:>12.4} {:>8.2}",
         format!("iiwa replay ({steps} steps)"),

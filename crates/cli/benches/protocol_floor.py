@@ -27,13 +27,24 @@ adapter that steps from Python cannot replay such a recording faster
 than its ratio over the linked engine; one that hands the schedule to
 its engine's own loop can come near 1.
 
+Each case runs twice: with the timer that MuJoCo's Python bindings
+install at import (``mjcb_time``: the clock read at every stage of every
+step, for ``mjData.timer``), then without it, as the SDK's MuJoCo adapter
+and a program linking MuJoCo run (``timers_off`` in
+python/realitygap_engine/adapters/mujoco.py).
+
     ~/.cache/realitygap/fixtures-venv/bin/python crates/cli/benches/protocol_floor.py
 """
+import os
+import sys
 import time
 
 import mujoco
 import numpy as np
 from mujoco import _rollout
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "..", "python"))
+from realitygap_engine.adapters.mujoco import timers_off  # noqa: E402
 
 STEPS = 10_000
 REPEATS = 5
@@ -116,12 +127,17 @@ def main() -> None:
             times.append(time.perf_counter() - t)
         return min(times)
 
-    base = best(rollout)
+    cases = (("rollout", rollout), ("nstep_at_rest", nstep), ("commands", with_commands),
+             ("commands_and_state", with_commands_and_state), ("iiwa_pattern", iiwa_pattern))
     print(f"MuJoCo {mujoco.__version__}, 7-joint arm at 1 ms, {STEPS} steps, best of {REPEATS}")
-    for name, f in (("rollout", rollout), ("nstep_at_rest", nstep), ("commands", with_commands),
-                    ("commands_and_state", with_commands_and_state), ("iiwa_pattern", iiwa_pattern)):
-        b = base if f is rollout else best(f)
-        print(f"{name:>20}: {b * 1e3:7.1f} ms  {b / STEPS * 1e6:5.2f} us/step  {b / base:4.2f}x")
+    for timer in ("on", "off"):
+        if timer == "off" and not timers_off():
+            break
+        print(f"the bindings' timer {timer}:")
+        base = best(rollout)
+        for name, f in cases:
+            b = base if f is rollout else best(f)
+            print(f"{name:>20}: {b * 1e3:7.1f} ms  {b / STEPS * 1e6:5.2f} us/step  {b / base:4.2f}x")
 
 
 if __name__ == "__main__":
