@@ -91,15 +91,20 @@ fn main() {
         "case", "linked load", "linked run", "remote load", "remote run", "ratio"
     );
 
-    // Scene 2 at the scene's MuJoCo settings.
-    if wanted("scene 2") {
+    let cases = ["scene 2", "iiwa replay"];
+    if !cases.iter().any(|c| wanted(c)) {
+        eprintln!("no case matches {filters:?}: the cases are {cases:?}");
+        std::process::exit(2);
+    }
+    if wanted(cases[0]) {
         scene_2(repeats, &linked, &remote);
     }
-    if wanted("iiwa replay") {
+    if wanted(cases[1]) {
         iiwa_replay(repeats, &linked, &remote);
     }
 }
 
+/// Scene 2 at the scene's MuJoCo settings.
 fn scene_2(repeats: usize, linked: &dyn Engine, remote: &dyn Engine) {
     let scene = testing::scene("scene2_two_joints");
     let robot = testing::mico2();

@@ -340,12 +340,12 @@ pub enum TrackTarget {
 #[derive(Debug, thiserror::Error)]
 pub enum SceneError {
     /// The file could not be read.
-    #[error("cannot read scene file {}: {source}", path.display())]
+    #[error("cannot read scene file {}: {reason}", path.display())]
     Io {
         /// The file.
         path: PathBuf,
         /// The operating system's reason.
-        source: std::io::Error,
+        reason: std::io::Error,
     },
     /// The TOML is malformed, or a field is missing, unknown or of the
     /// wrong type.
@@ -1240,9 +1240,9 @@ impl Scene {
     /// against the file's directory. The robot is not loaded: call
     /// [`Scene::validate`] with it.
     pub fn from_file(path: &Path) -> Result<Scene, SceneError> {
-        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
+        let text = std::fs::read_to_string(path).map_err(|reason| SceneError::Io {
             path: path.to_path_buf(),
-            source,
+            reason,
         })?;
         let abs = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
         Scene::from_toml_str(&text, &abs)

@@ -198,15 +198,14 @@ pub struct Manifest {
 #[derive(Debug, thiserror::Error)]
 pub enum StoreError {
     /// A file operation failed.
-    #[error("cannot {action} {}: {source}", path.display())]
+    #[error("cannot {action} {}: {reason}", path.display())]
     Io {
         /// What was being done (`read`, `write`, `create`, ...).
         action: &'static str,
         /// The file or directory.
         path: PathBuf,
         /// The underlying error.
-        #[source]
-        source: io::Error,
+        reason: io::Error,
     },
     /// `manifest.json` is not a valid manifest.
     #[error("{}:{line}:{column}: not a valid realitygap manifest: {message}", path.display())]
@@ -269,10 +268,10 @@ pub enum StoreError {
 }
 
 fn io_err<'a>(action: &'static str, path: &'a Path) -> impl FnOnce(io::Error) -> StoreError + 'a {
-    move |source| StoreError::Io {
+    move |reason| StoreError::Io {
         action,
         path: path.to_path_buf(),
-        source,
+        reason,
     }
 }
 
@@ -636,7 +635,7 @@ fn remove_if_there(path: &Path) -> Result<(), StoreError> {
         Err(e) => Err(StoreError::Io {
             action: "remove",
             path: path.to_path_buf(),
-            source: e,
+            reason: e,
         }),
     }
 }

@@ -7,8 +7,8 @@
 //! with that line.
 //!
 //! The suite runs the kit with `backend = "c"` (the same SolverMuJoCo
-//! model stepped by MuJoCo's C library: 1 700 steps/s against MuJoCo
-//! Warp's 89-111 on this CPU; 40 of 40 in 162 s of test time, grouped,
+//! model stepped by MuJoCo's C library: about 2 100 steps/s on scene 2,
+//! against MuJoCo Warp's 89-111 on this CPU; 40 of 40 in 162 s of test time, grouped,
 //! where MuJoCo Warp, the adapter's default, took 17.6 minutes for 40 of
 //! 40 at the tolerances below, measured on it).
 //!

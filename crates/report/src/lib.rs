@@ -47,15 +47,14 @@ use std::path::{Path, PathBuf};
 #[derive(Debug, thiserror::Error)]
 pub enum ReportError {
     /// A file or folder could not be written.
-    #[error("cannot {action} {}: {source}", path.display())]
+    #[error("cannot {action} {}: {reason}", path.display())]
     Io {
         /// What was being done (`create folder`, `write`).
         action: &'static str,
         /// The file or folder.
         path: PathBuf,
         /// The underlying error.
-        #[source]
-        source: std::io::Error,
+        reason: std::io::Error,
     },
     /// A figure could not be drawn.
     #[error(transparent)]
@@ -82,10 +81,10 @@ pub struct ReportFiles {
 }
 
 fn write(path: &Path, bytes: impl AsRef<[u8]>) -> Result<PathBuf, ReportError> {
-    std::fs::write(path, bytes).map_err(|source| ReportError::Io {
+    std::fs::write(path, bytes).map_err(|reason| ReportError::Io {
         action: "write",
         path: path.to_path_buf(),
-        source,
+        reason,
     })?;
     Ok(path.to_path_buf())
 }
@@ -153,10 +152,10 @@ pub fn write_report_with(
         return Err(ReportError::Empty);
     }
     let fig_dir = out_dir.join("figures");
-    std::fs::create_dir_all(&fig_dir).map_err(|source| ReportError::Io {
+    std::fs::create_dir_all(&fig_dir).map_err(|reason| ReportError::Io {
         action: "create folder",
         path: fig_dir.clone(),
-        source,
+        reason,
     })?;
     let mut files = ReportFiles::default();
 

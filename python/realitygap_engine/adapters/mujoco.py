@@ -157,21 +157,23 @@ def timers_off() -> bool:
     import, so every step reads the clock at each of its stages for
     ``mjData.timer``; ``mujoco.set_mjcb_time(None)`` puts that default
     back. Nothing here reads the timers, and the linked engine runs
-    without them. On this machine they cost MuJoCo 3.17 a fifth to a
-    quarter of a step of the iiwa and of small arms, and 2.6 % of a step of
-    the Mico2 in MuJoCo 4.0.1 (docs/engine-protocol.md). The library's own
+    without them. On this machine they cost a fifth to a quarter of a step
+    of the iiwa and of small arms, and 8-9 % of a step of the Mico2, in
+    MuJoCo 3.17 and 4.0.1 alike (docs/engine-protocol.md). The library's own
     ``mjcb_time`` pointer is set to null, as a program that links MuJoCo
     has it. The physics is the same to the bit."""
+    done = False
     for path in _loaded_libmujoco():
         try:
             pointer = ctypes.c_void_p.in_dll(ctypes.CDLL(path), "mjcb_time")
         except (OSError, ValueError):
             continue
         pointer.value = None
-        return True
-    print("realitygap: MuJoCo's timer callback stays on (no libmujoco with mjcb_time found)",
-          file=sys.stderr, flush=True)
-    return False
+        done = True
+    if not done:
+        print("realitygap: MuJoCo's timer callback stays on (no libmujoco with mjcb_time found)",
+              file=sys.stderr, flush=True)
+    return done
 
 
 def engine_name() -> str:

@@ -296,12 +296,12 @@ impl fmt::Display for LinkRole {
 #[derive(Debug, thiserror::Error)]
 pub enum RobotError {
     /// The URDF file could not be read.
-    #[error("cannot read URDF file {}: {source}", path.display())]
+    #[error("cannot read URDF file {}: {reason}", path.display())]
     Io {
         /// The file.
         path: PathBuf,
         /// The operating system's reason.
-        source: std::io::Error,
+        reason: std::io::Error,
     },
     /// The XML is malformed or does not have the shape URDF requires.
     #[error("{}{}: {message}", source_file.display(), fmt_line_col(*line, *column))]
@@ -488,9 +488,9 @@ impl RobotModel {
     /// file's directory and `package://` URIs through `resolver`; every mesh
     /// must exist.
     pub fn from_urdf_file(path: &Path, resolver: &PackageResolver) -> Result<Self, RobotError> {
-        let xml = std::fs::read_to_string(path).map_err(|source| RobotError::Io {
+        let xml = std::fs::read_to_string(path).map_err(|reason| RobotError::Io {
             path: path.to_path_buf(),
-            source,
+            reason,
         })?;
         let base_dir = match path.parent() {
             Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
@@ -1119,6 +1119,9 @@ mod tests {
                 .starts_with("cannot read URDF file /nonexistent/robot.urdf: "),
             "{e}"
         );
+        // The system's reason is in the message and not also its cause,
+        // which `{:#}` and error chains would print a second time.
+        assert!(std::error::Error::source(&e).is_none());
     }
 
     #[test]

@@ -23,12 +23,12 @@ pub struct TriangleMesh {
 #[derive(Debug, thiserror::Error)]
 pub enum StlError {
     /// The file could not be read.
-    #[error("cannot read mesh file {}: {source}", path.display())]
+    #[error("cannot read mesh file {}: {reason}", path.display())]
     Io {
         /// The file.
         path: PathBuf,
         /// The operating system's reason.
-        source: std::io::Error,
+        reason: std::io::Error,
     },
     /// The content is not a valid mesh of its format.
     #[error("{}{}: {message}", path.display(), line.map(|l| format!(":{l}")).unwrap_or_default())]
@@ -145,9 +145,9 @@ impl TriangleMesh {
     /// Reads a mesh file by its extension: STL (binary or ASCII; also any
     /// extension that is not `.obj` or `.dae`), Wavefront OBJ, COLLADA.
     pub fn read(path: &Path) -> Result<Self, StlError> {
-        let bytes = std::fs::read(path).map_err(|source| StlError::Io {
+        let bytes = std::fs::read(path).map_err(|reason| StlError::Io {
             path: path.to_path_buf(),
-            source,
+            reason,
         })?;
         match mesh_format(path) {
             Some("obj") => Self::parse_obj(&bytes, path),
