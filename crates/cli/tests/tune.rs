@@ -289,6 +289,8 @@ fn a_search_that_ends_above_its_start_falls_back_to_it() {
     let delay = param(&s, "controller.delay_s");
     assert!((kv - KNOWN_KV).abs() < 1e-9 * KNOWN_KV, "kv {kv}");
     assert!((delay - KNOWN_DELAY_S).abs() < 1e-12, "delay {delay}");
+    // The start's one simulation is counted (no polish with --iterations 0).
+    assert_eq!(s["polish"]["evaluations"], 1, "{}", s["polish"]);
     // Every candidate of the search, in its history, scored above the
     // tune's end.
     let end = s["best_objective_m"].as_f64().unwrap();

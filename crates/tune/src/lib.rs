@@ -477,7 +477,9 @@ pub fn fit(
         )
     })?;
     let (u, objective) = polish_start(&tuner, best, note);
-    let polished = polish::polish(&tuner, &u, objective, spec.polish, note)?;
+    let mut polished = polish::polish(&tuner, &u, objective, spec.polish, note)?;
+    // The start's evaluation, in the polish's account.
+    polished.report.evaluations += 1;
     Ok(Fitted {
         end,
         polished,

@@ -160,7 +160,8 @@ pub struct PolishReport {
     pub start_objective_m: f64,
     /// The objective after the polish, metres.
     pub objective_m: f64,
-    /// Simulations of the polish (Jacobians, steps, probes).
+    /// Simulations of the polish: the one at the space's start that picks
+    /// where it starts ([`crate::fit`]), Jacobians, steps, probes.
     pub evaluations: usize,
     /// Levenberg-Marquardt iterations, all rounds.
     pub iterations: usize,
