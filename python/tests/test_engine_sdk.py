@@ -1032,7 +1032,7 @@ def test_the_adapters_process_runs_mujoco_without_its_timer():
     the same to the bit."""
     code = textwrap.dedent("""
         import io, sys
-        import mujoco, numpy as np
+        import mujoco
         from realitygap_engine.adapters import mujoco as adapter
         sys.stdin = io.StringIO("")
         assert adapter.main() == 0

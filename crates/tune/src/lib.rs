@@ -476,10 +476,9 @@ pub fn fit(
             spec.out.join("history.csv").display()
         )
     })?;
-    let (u, objective) = polish_start(&tuner, best, note);
+    let (u, objective, start_evaluations) = polish_start(&tuner, best, note);
     let mut polished = polish::polish(&tuner, &u, objective, spec.polish, note)?;
-    // The start's evaluation, in the polish's account.
-    polished.report.evaluations += 1;
+    polished.report.evaluations += start_evaluations;
     Ok(Fitted {
         end,
         polished,
@@ -490,13 +489,13 @@ pub fn fit(
 /// Where the polish starts: the search's best point, or the space's own
 /// start when that scores lower (a search cut short by a small
 /// `--budget`, or a start already at the optimum): the polish only goes
-/// down from where it starts, so a tune never ends above its start. One
-/// more evaluation, at the start.
+/// down from where it starts, so a tune never ends above its start. With
+/// the evaluations it made (one, at the start), for the polish's account.
 fn polish_start(
     tuner: &Tuner<'_>,
     best: &search::Evaluation,
     note: &(dyn Fn(String) + Sync),
-) -> (Vec<f64>, f64) {
+) -> (Vec<f64>, f64, usize) {
     let u: Vec<f64> = best.x.iter().map(|x| search::reflect(*x)).collect();
     let start = tuner.spec.space.start_unit()[..tuner.dims()].to_vec();
     let at_start = tuner.evaluate(&start);
@@ -505,9 +504,9 @@ fn polish_start(
             "the search ended above its start ({:.4} m against {:.4} m at the start): the tune goes on from the start",
             best.objective, at_start.objective
         ));
-        return (start, at_start.objective);
+        return (start, at_start.objective, 1);
     }
-    (u, best.objective)
+    (u, best.objective, 1)
 }
 
 /// Whether a key belongs to the objects or the contact
